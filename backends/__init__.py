@@ -1,0 +1,1 @@
+"""Backend plugins (relative -> absolute rotations); installed as `eas_vo.backends`."""

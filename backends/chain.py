@@ -1,0 +1,35 @@
+"""The paper's backend: chain relative rotations frame to frame, no optimisation."""
+
+from __future__ import annotations
+
+from typing import Sequence
+
+import numpy as np
+
+from eas_vo.plugins import Backend
+from eas_vo.types import RelativeRotation
+
+
+def chain_rotations(n_frames: int, edges: Sequence[RelativeRotation]) -> np.ndarray:
+    """R_w_ck = R_w_ck-1 @ R_ck-1_ck; a frame without a consecutive edge keeps the previous rotation.
+
+    Edges i->j with j != i + 1 are ignored. Returns (n_frames, 3, 3), frame 0 at the identity.
+    """
+    step = {e.j: e.R_i_j for e in edges if e.j == e.i + 1}
+    R_w_c = np.empty((n_frames, 3, 3))
+    current = np.eye(3)
+    for k in range(n_frames):
+        if k in step:
+            current = current @ step[k]
+        R_w_c[k] = current
+    return R_w_c
+
+
+class ChainBackend(Backend):
+    """Optimisation-free chaining of consecutive relative rotations (the paper)."""
+
+    name = "chain"
+    description = "multiply consecutive relative rotations, no optimisation (the paper)"
+
+    def solve(self, n_frames: int, edges: Sequence[RelativeRotation]) -> np.ndarray:
+        return chain_rotations(n_frames, edges)

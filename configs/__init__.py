@@ -1,0 +1,1 @@
+"""Bundled configurations; `--config NAME` selects `NAME.toml` from here."""

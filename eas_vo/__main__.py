@@ -1,0 +1,3 @@
+from eas_vo.cli import main
+
+raise SystemExit(main())

@@ -1,0 +1,220 @@
+"""Run configuration: TOML files -> frozen dataclasses, with command-line overrides.
+
+Sections: `[run]` (what to run), `[dataset]`, `[frontend]`, `[tracker]`, `[backend]`.
+`[frontend]` and `[backend]` hold the keys of the chosen plugin; per-plugin tables
+such as `[frontend.eas]` apply only when that plugin is chosen, so one file can
+configure every frontend. Precedence: dataclass defaults < file < CLI flags < `--set`.
+"""
+
+from __future__ import annotations
+
+import math
+import tomllib
+from dataclasses import dataclass, fields
+from importlib import resources
+from pathlib import Path
+from typing import Any, get_type_hints
+
+from eas_vo import registry
+from eas_vo.errors import ConfigError
+
+SECTIONS = ("run", "dataset", "frontend", "tracker", "backend")
+
+
+@dataclass(frozen=True)
+class RunConfig:
+    """What to run.
+
+    Attributes:
+        dataset: an Event Camera Dataset folder, or `synthetic:NAME`.
+        frontend, backend: plugin names.
+        start_s, duration_s: processed window, from the sequence's first timestamp [s].
+        time_offset_s: ground truth is sampled at `t_frame + time_offset_s` [s].
+    """
+
+    dataset: str = "synthetic:default"
+    frontend: str = "eas"
+    backend: str = "chain"
+    start_s: float = 0.0
+    duration_s: float = math.inf
+    time_offset_s: float = 0.0
+
+    def validate(self) -> None:
+        check_range(self, "start_s", 0.0, math.inf)
+        if not self.duration_s > 0:
+            raise ConfigError(f"run.duration_s must be > 0, got {self.duration_s}")
+
+
+@dataclass(frozen=True)
+class ResolvedConfig:
+    """Every section, resolved against the chosen plugins."""
+
+    run: RunConfig
+    dataset: Any
+    frontend: Any
+    tracker: Any
+    backend: Any
+
+    def to_toml(self) -> str:
+        """The resolved configuration as TOML; loading it reproduces this object."""
+        lines = []
+        for section in SECTIONS:
+            lines.append(f"[{section}]")
+            for f in fields(getattr(self, section)):
+                lines.append(f"{f.name} = {_toml_value(getattr(getattr(self, section), f.name))}")
+            lines.append("")
+        return "\n".join(lines)
+
+
+def check_range(cfg, key: str, lo: float, hi: float, *, lo_open: bool = False) -> None:
+    """Raise ConfigError unless `lo <= cfg.key <= hi` (`lo < cfg.key` when lo_open)."""
+    value = getattr(cfg, key)
+    ok = (value > lo if lo_open else value >= lo) and value <= hi
+    if not ok:
+        bracket = "(" if lo_open else "["
+        raise ConfigError(f"{key} = {value} is out of range {bracket}{lo}, {hi}]")
+
+
+def _toml_value(value) -> str:
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, float):
+        if math.isinf(value):
+            return "inf" if value > 0 else "-inf"
+        return repr(value)
+    if isinstance(value, int):
+        return str(value)
+    if isinstance(value, (tuple, list)):
+        return "[" + ", ".join(_toml_value(v) for v in value) + "]"
+    return '"' + str(value).replace("\\", "\\\\").replace('"', '\\"') + '"'
+
+
+def build(cls, values: dict, section: str):
+    """Instantiate the frozen dataclass `cls` from `values`, rejecting unknown keys and bad types."""
+    hints = get_type_hints(cls)
+    known = {f.name for f in fields(cls)}
+    unknown = sorted(set(values) - known)
+    if unknown:
+        raise ConfigError(
+            f"unknown key {section}.{unknown[0]}; allowed keys: {', '.join(sorted(known)) or 'none'}"
+        )
+    kwargs = {k: _coerce(v, hints[k], f"{section}.{k}") for k, v in values.items()}
+    try:
+        cfg = cls(**kwargs)
+    except (TypeError, ValueError) as exc:
+        raise ConfigError(f"[{section}]: {exc}") from None
+    validate = getattr(cfg, "validate", None)
+    if validate is not None:
+        try:
+            validate()
+        except ConfigError as exc:
+            raise ConfigError(f"{section}.{exc}") from None
+    return cfg
+
+
+def _coerce(value, hint, key: str):
+    if hint is bool:
+        if isinstance(value, bool):
+            return value
+    elif hint is int:
+        if isinstance(value, int) and not isinstance(value, bool):
+            return value
+    elif hint is float:
+        if isinstance(value, (int, float)) and not isinstance(value, bool):
+            return float(value)
+    elif hint is str:
+        if isinstance(value, str):
+            return value
+    else:
+        return value
+    raise ConfigError(f"{key} must be {hint.__name__}, got {value!r}")
+
+
+def parse_set(assignment: str) -> tuple[list[str], Any]:
+    """`section.key=value` -> (['section', 'key'], value); value parsed as TOML, else a string."""
+    path, sep, text = assignment.partition("=")
+    keys = path.strip().split(".")
+    if not sep or len(keys) < 2 or keys[0] not in SECTIONS or not all(keys):
+        raise ConfigError(
+            f"--set {assignment!r}: expected SECTION.KEY=VALUE with SECTION one of {', '.join(SECTIONS)}"
+        )
+    try:
+        value = tomllib.loads(f"v = {text.strip()}")["v"]
+    except tomllib.TOMLDecodeError:
+        value = text.strip()
+    return keys, value
+
+
+def bundled_configs() -> dict[str, Path]:
+    """Configs shipped with the package (`configs/*.toml`), by stem."""
+    root = resources.files("eas_vo.configs")
+    return {Path(p.name).stem: Path(str(p)) for p in root.iterdir() if p.name.endswith(".toml")}
+
+
+def read_config_file(path: str | Path) -> dict:
+    """Parse a TOML config; a bare name such as `paper` selects a bundled config."""
+    p = Path(path)
+    if not p.exists():
+        bundled = bundled_configs()
+        if str(path) in bundled:
+            p = bundled[str(path)]
+        else:
+            names = ", ".join(sorted(bundled)) or "none"
+            raise ConfigError(f"{path}: config file not found (bundled configs: {names})")
+    try:
+        raw = tomllib.loads(p.read_text())
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+        raise ConfigError(f"{p}: invalid TOML: {exc}") from None
+    unknown = sorted(set(raw) - set(SECTIONS))
+    if unknown:
+        raise ConfigError(f"{p}: unknown section [{unknown[0]}]; allowed: {', '.join(SECTIONS)}")
+    return raw
+
+
+def resolve(
+    config_file: str | Path | None = None,
+    run_overrides: dict | None = None,
+    assignments: list[str] = (),
+) -> ResolvedConfig:
+    """Merge defaults, a config file, CLI flags and `--set` assignments; validate everything."""
+    from eas_vo.tracker import TrackerConfig
+
+    raw: dict = read_config_file(config_file) if config_file else {}
+    raw = {s: dict(raw.get(s, {})) for s in SECTIONS}
+    raw["run"].update({k: v for k, v in (run_overrides or {}).items() if v is not None})
+    for assignment in assignments:
+        keys, value = parse_set(assignment)
+        table = raw[keys[0]]
+        for k in keys[1:-1]:
+            table = table.setdefault(k, {})
+            if not isinstance(table, dict):
+                raise ConfigError(f"--set {assignment!r}: {k} is not a table")
+        table[keys[-1]] = value
+
+    run = build(RunConfig, raw["run"], "run")
+    dataset_cls = registry.get("datasets", dataset_plugin_name(run.dataset))
+    frontend_cls = registry.get("frontends", run.frontend)
+    backend_cls = registry.get("backends", run.backend)
+    return ResolvedConfig(
+        run=run,
+        dataset=build(dataset_cls.Config, _plugin_table(raw["dataset"], dataset_cls.name), "dataset"),
+        frontend=build(frontend_cls.Config, _plugin_table(raw["frontend"], run.frontend), "frontend"),
+        tracker=build(TrackerConfig, raw["tracker"], "tracker"),
+        backend=build(backend_cls.Config, _plugin_table(raw["backend"], run.backend), "backend"),
+    )
+
+
+def _plugin_table(table: dict, name: str) -> dict:
+    """Flat keys of a section, over its `[section.<name>]` table; other plugins' tables dropped."""
+    merged = dict(table.get(name, {})) if isinstance(table.get(name), dict) else {}
+    merged.update({k: v for k, v in table.items() if not isinstance(v, dict)})
+    return merged
+
+
+def dataset_plugin_name(spec: str) -> str:
+    """`synthetic:default` -> 'synthetic'; a path -> 'ecd'."""
+    scheme, sep, _ = spec.partition(":")
+    if sep and len(scheme) > 1 and scheme in registry.available("datasets"):
+        return scheme
+    return "ecd"
+

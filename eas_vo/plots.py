@@ -1,0 +1,44 @@
+"""Figures. Imported lazily: matplotlib is only loaded when a figure is drawn."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from eas_vo.geometry import euler_zyx_deg
+
+
+def plot_rotation(path: str | Path, result, title: str = "") -> None:
+    """Estimated (aligned to ground truth at the first frame) and true roll/pitch/yaw over time,
+    like the paper's Fig. 3. Without ground truth only the estimate is drawn."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    t0 = result.t[0]
+    errors = result.errors
+    fig, axes = plt.subplots(3, 1, sharex=True, figsize=(8, 6.5), constrained_layout=True)
+    if errors is not None and errors.valid.any():
+        t = result.t[errors.valid] - t0
+        est = np.unwrap(euler_zyx_deg(errors.R_w_c_aligned), period=360, axis=0)
+        gt = np.unwrap(euler_zyx_deg(errors.R_w_c_gt), period=360, axis=0)
+    else:
+        t = result.t - t0
+        est = np.unwrap(euler_zyx_deg(result.R_w_c), period=360, axis=0)
+        gt = None
+    for k, (ax, label) in enumerate(zip(axes, ("roll", "pitch", "yaw"))):
+        if gt is not None:
+            ax.plot(t, gt[:, k], color="0.2", lw=1.5, label="ground truth")
+        ax.plot(t, est[:, k], color="tab:red", lw=1.0, label="estimate")
+        ax.set_ylabel(f"{label} [deg]")
+        ax.grid(alpha=0.3)
+    axes[0].legend(loc="best", fontsize="small")
+    axes[-1].set_xlabel("time [s]")
+    m = result.metrics
+    if "ape_mean_rad" in m:
+        title += f"\naverage APE {m['ape_mean_rad']:.4f} rad, average NC {m['nc_mean']:.1f}"
+    fig.suptitle(title, fontsize="medium")
+    fig.savefig(path, dpi=110, format="png")
+    plt.close(fig)

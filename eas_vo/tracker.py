@@ -1,0 +1,155 @@
+"""The paper's tracker: Shi-Tomasi corners, pyramidal LK, five-point essential matrix.
+
+Shared by every frontend; it only ever sees uint8 images.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+from eas_vo.config import check_range
+from eas_vo.errors import ConfigError
+from eas_vo.types import CameraModel, FrameRecord, RelativeRotation
+
+
+@dataclass(frozen=True)
+class TrackerConfig:
+    """Corner detection, optical flow and essential-matrix settings.
+
+    Attributes:
+        max_corners, quality_level, min_distance_px, block_size: Shi-Tomasi detection.
+        lk_win_size, lk_max_level: pyramidal Lucas-Kanade window [px] and pyramid levels.
+        threshold1: with fewer correspondences the previous rotation is kept.
+        threshold2: with fewer correspondences corners are detected again in the frame.
+        ransac_threshold_px: five-point RANSAC inlier threshold [px].
+        ransac_confidence: RANSAC success probability.
+    """
+
+    max_corners: int = 500
+    quality_level: float = 0.01
+    min_distance_px: float = 7.0
+    block_size: int = 7
+    lk_win_size: int = 21
+    lk_max_level: int = 3
+    threshold1: int = 10
+    threshold2: int = 80
+    ransac_threshold_px: float = 1.0
+    ransac_confidence: float = 0.999
+
+    def validate(self) -> None:
+        check_range(self, "max_corners", 1, 100_000)
+        check_range(self, "quality_level", 0.0, 1.0, lo_open=True)
+        check_range(self, "min_distance_px", 0.0, 1000.0)
+        check_range(self, "block_size", 3, 99)
+        check_range(self, "lk_win_size", 3, 201)
+        check_range(self, "lk_max_level", 0, 10)
+        check_range(self, "threshold1", 5, 100_000)
+        check_range(self, "threshold2", 5, 100_000)
+        if self.threshold1 > self.threshold2:
+            raise ConfigError(f"threshold1 ({self.threshold1}) must not exceed threshold2 ({self.threshold2})")
+        check_range(self, "ransac_threshold_px", 0.0, 100.0, lo_open=True)
+        check_range(self, "ransac_confidence", 0.0, 1.0, lo_open=True)
+
+
+def rotation_from_correspondences(
+    pts_prev_n: np.ndarray, pts_cur_n: np.ndarray, threshold: float, confidence: float
+) -> tuple[np.ndarray, int] | None:
+    """Five-point essential matrix (RANSAC) and its decomposition to a rotation.
+
+    Args:
+        pts_prev_n, pts_cur_n: (N, 2) matching normalised image coordinates.
+        threshold: RANSAC threshold in normalised units (pixels / focal length).
+        confidence: RANSAC confidence.
+
+    Returns:
+        (R_prev_cur, inlier count), or None when no essential matrix is found.
+    """
+    E, mask = cv2.findEssentialMat(
+        pts_prev_n, pts_cur_n, np.eye(3), method=cv2.RANSAC, prob=confidence, threshold=threshold
+    )
+    if E is None or E.shape[0] < 3 or mask is None:
+        return None
+    E = E[:3]  # the five-point solver may return several stacked solutions
+    inliers = int(mask.sum())
+    # Cheirality with no distance cut: with a small baseline nearly every point is "far",
+    # and OpenCV's default cut (50 baselines) would leave the choice of the rotation to chance.
+    _, R_cur_prev, _, _, _ = cv2.recoverPose(
+        E, pts_prev_n, pts_cur_n, np.eye(3), distanceThresh=1e12, mask=mask.copy()
+    )
+    return R_cur_prev.T, inliers
+
+
+class Tracker:
+    """Tracks corners frame to frame and measures the relative rotation of each pair.
+
+    Feed frames in order with `process`; it returns what happened and, when a
+    model was estimated, the rotation `R_{k-1}_{k}` between the previous and this frame.
+    """
+
+    def __init__(self, config: TrackerConfig, camera: CameraModel):
+        self.config = config
+        self.camera = camera
+        self._lk_params = dict(
+            winSize=(config.lk_win_size, config.lk_win_size),
+            maxLevel=config.lk_max_level,
+            criteria=(cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 30, 0.01),
+        )
+        self.reset()
+
+    def reset(self) -> None:
+        self._prev_image: np.ndarray | None = None
+        self._prev_pts = np.empty((0, 1, 2), np.float32)
+        self._k = -1
+
+    def detect(self, image: np.ndarray) -> np.ndarray:
+        """Shi-Tomasi corners of `image`, (N, 1, 2) float32 [px]."""
+        c = self.config
+        pts = cv2.goodFeaturesToTrack(
+            image, c.max_corners, c.quality_level, c.min_distance_px, blockSize=c.block_size
+        )
+        return np.empty((0, 1, 2), np.float32) if pts is None else pts.astype(np.float32)
+
+    def track(self, image: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """LK-track the previous corners into `image`: matched (N, 2) previous and current points [px]."""
+        if len(self._prev_pts) == 0:
+            return np.empty((0, 2), np.float32), np.empty((0, 2), np.float32)
+        cur, status, _ = cv2.calcOpticalFlowPyrLK(self._prev_image, image, self._prev_pts, None, **self._lk_params)
+        h, w = image.shape
+        ok = status.ravel() == 1
+        cur = cur.reshape(-1, 2)
+        ok &= (cur[:, 0] >= 0) & (cur[:, 0] <= w - 1) & (cur[:, 1] >= 0) & (cur[:, 1] <= h - 1)
+        return self._prev_pts.reshape(-1, 2)[ok], cur[ok]
+
+    def process(self, image: np.ndarray, t: float) -> tuple[FrameRecord, RelativeRotation | None]:
+        """Track into `image` (uint8, sensor size) taken at `t` [s]."""
+        c = self.config
+        self._k += 1
+        k = self._k
+        if self._prev_image is None:
+            self._prev_image, self._prev_pts = image, self.detect(image)
+            return FrameRecord(k, t, 0, 0, "first", True), None
+
+        prev, cur = self.track(image)
+        nc = len(prev)
+        measurement, inliers, status = None, 0, "few_correspondences"
+        if nc >= c.threshold1:
+            result = rotation_from_correspondences(
+                self.camera.undistort(prev),
+                self.camera.undistort(cur),
+                c.ransac_threshold_px / self.camera.focal_px,
+                c.ransac_confidence,
+            )
+            if result is None:
+                status = "no_model"
+            else:
+                R_prev_cur, inliers = result
+                measurement = RelativeRotation(k - 1, k, R_prev_cur, inliers)
+                status = "ok"
+
+        redetect = nc < c.threshold2
+        self._prev_image = image
+        self._prev_pts = self.detect(image) if redetect else cur.reshape(-1, 1, 2)
+        return FrameRecord(k, t, nc, inliers, status, redetect), measurement

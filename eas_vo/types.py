@@ -1,0 +1,143 @@
+"""Core data types shared by datasets, frontends, the tracker and backends.
+
+Conventions: time in float64 seconds; `R_a_b` maps vectors in frame b into
+frame a; trajectories are camera-to-world (`R_w_c`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import cv2
+import numpy as np
+
+#: Events as a packed structured array (13 bytes/event): time [s], pixel, polarity.
+EVENT_DTYPE = np.dtype([("t", "<f8"), ("x", "<u2"), ("y", "<u2"), ("p", "i1")])
+
+
+def empty_events() -> np.ndarray:
+    return np.empty(0, dtype=EVENT_DTYPE)
+
+
+@dataclass(frozen=True)
+class CameraModel:
+    """Pinhole camera with radial-tangential distortion (OpenCV / ECD calib.txt order).
+
+    Attributes:
+        width, height: sensor size [px].
+        K: 3x3 intrinsic matrix [px].
+        dist: distortion coefficients (k1, k2, p1, p2, k3).
+    """
+
+    width: int
+    height: int
+    K: np.ndarray
+    dist: np.ndarray = field(default_factory=lambda: np.zeros(5))
+
+    @classmethod
+    def from_calib(cls, values, width: int = 240, height: int = 180) -> "CameraModel":
+        """Build from the ECD `calib.txt` values `fx fy cx cy k1 k2 p1 p2 k3`."""
+        fx, fy, cx, cy, *dist = [float(v) for v in values]
+        K = np.array([[fx, 0.0, cx], [0.0, fy, cy], [0.0, 0.0, 1.0]])
+        return cls(width, height, K, np.array((dist + [0.0] * 5)[:5]))
+
+    @property
+    def focal_px(self) -> float:
+        return float(0.5 * (self.K[0, 0] + self.K[1, 1]))
+
+    def undistort(self, pts_px: np.ndarray) -> np.ndarray:
+        """Distorted pixel coordinates (N, 2) -> normalised image coordinates (N, 2)."""
+        pts = np.ascontiguousarray(pts_px, dtype=np.float64).reshape(-1, 1, 2)
+        if len(pts) == 0:
+            return np.empty((0, 2))
+        return cv2.undistortPoints(pts, self.K, self.dist).reshape(-1, 2)
+
+    def calib_values(self) -> list[float]:
+        K = self.K
+        return [K[0, 0], K[1, 1], K[0, 2], K[1, 2], *self.dist]
+
+
+@dataclass(frozen=True)
+class PoseSeries:
+    """Timestamped camera-to-world poses (ground truth).
+
+    Attributes:
+        t: (N,) times [s], increasing.
+        p_w_c: (N, 3) camera positions in the world [m].
+        q_w_c: (N, 4) camera-to-world rotations as quaternions (x, y, z, w).
+    """
+
+    t: np.ndarray
+    p_w_c: np.ndarray
+    q_w_c: np.ndarray
+
+
+@dataclass(frozen=True)
+class ImuSeries:
+    """IMU readings in the IMU frame: t [s], accelerometer [m/s^2], gyro [rad/s]."""
+
+    t: np.ndarray
+    acc: np.ndarray
+    gyro: np.ndarray
+
+
+@dataclass(frozen=True)
+class Sample:
+    """One step of a dataset: a frame (if any), its time and a view of the events.
+
+    Attributes:
+        index: position of the sample in the sequence (0-based).
+        t: timestamp [s].
+        frame: grayscale uint8 APS frame (H, W), or None for event-only streams.
+        events: the whole event stream (a view, never a copy).
+        event_index: index of the first event with `t >= self.t`.
+        prev_event_index: `event_index` of the previous sample (or of the window start).
+    """
+
+    index: int
+    t: float
+    frame: np.ndarray | None
+    events: np.ndarray
+    event_index: int
+    prev_event_index: int
+
+    @property
+    def events_after(self) -> np.ndarray:
+        """Events from the sample time on (what EAS aggregates)."""
+        return self.events[self.event_index :]
+
+    @property
+    def events_since_previous(self) -> np.ndarray:
+        """Events between the previous sample and this one (for incremental frontends)."""
+        return self.events[self.prev_event_index : self.event_index]
+
+
+@dataclass(frozen=True)
+class RelativeRotation:
+    """A measured rotation between frames i and j (j > i): `R_i_j` maps frame-j vectors into frame i."""
+
+    i: int
+    j: int
+    R_i_j: np.ndarray
+    inliers: int = 0
+
+
+@dataclass(frozen=True)
+class FrameRecord:
+    """What the tracker did with one frame.
+
+    Attributes:
+        index, t: frame index and time [s].
+        nc: correspondences tracked from the previous frame (the paper's NC).
+        inliers: five-point RANSAC inliers (0 when no model was estimated).
+        status: `first`, `ok`, `few_correspondences` (< threshold1, previous rotation kept),
+            `no_model` (estimation failed, previous rotation kept).
+        redetected: corners were detected again in this frame (< threshold2).
+    """
+
+    index: int
+    t: float
+    nc: int
+    inliers: int
+    status: str
+    redetected: bool

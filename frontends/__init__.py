@@ -1,0 +1,1 @@
+"""Frontend plugins (image sources); installed as `eas_vo.frontends`."""
