@@ -15,6 +15,15 @@ from eas_vo.errors import ConfigError
 from eas_vo.types import CameraModel, FrameRecord, RelativeRotation
 
 
+#: Robust estimators around the five-point solver, by config name.
+ESSENTIAL_METHODS = {
+    "usac": cv2.USAC_DEFAULT,
+    "ransac": cv2.RANSAC,
+    "magsac": cv2.USAC_MAGSAC,
+    "lmeds": cv2.LMEDS,
+}
+
+
 @dataclass(frozen=True)
 class TrackerConfig:
     """Corner detection, optical flow and essential-matrix settings.
@@ -24,8 +33,10 @@ class TrackerConfig:
         lk_win_size, lk_max_level: pyramidal Lucas-Kanade window [px] and pyramid levels.
         threshold1: with fewer correspondences the previous rotation is kept.
         threshold2: with fewer correspondences corners are detected again in the frame.
-        ransac_threshold_px: five-point RANSAC inlier threshold [px].
-        ransac_confidence: RANSAC success probability.
+        essential_method: robust estimator around OpenCV's five-point solver: `usac`
+            (RANSAC with local optimisation, the default), `ransac` (plain), `magsac`, `lmeds`.
+        ransac_threshold_px: inlier threshold [px].
+        ransac_confidence: success probability.
     """
 
     max_corners: int = 500
@@ -35,7 +46,8 @@ class TrackerConfig:
     lk_win_size: int = 21
     lk_max_level: int = 3
     threshold1: int = 10
-    threshold2: int = 80
+    threshold2: int = 150
+    essential_method: str = "usac"
     ransac_threshold_px: float = 1.0
     ransac_confidence: float = 0.999
 
@@ -50,25 +62,30 @@ class TrackerConfig:
         check_range(self, "threshold2", 5, 100_000)
         if self.threshold1 > self.threshold2:
             raise ConfigError(f"threshold1 ({self.threshold1}) must not exceed threshold2 ({self.threshold2})")
+        if self.essential_method not in ESSENTIAL_METHODS:
+            raise ConfigError(
+                f"essential_method = {self.essential_method!r}; allowed: {', '.join(ESSENTIAL_METHODS)}"
+            )
         check_range(self, "ransac_threshold_px", 0.0, 100.0, lo_open=True)
         check_range(self, "ransac_confidence", 0.0, 1.0, lo_open=True)
 
 
 def rotation_from_correspondences(
-    pts_prev_n: np.ndarray, pts_cur_n: np.ndarray, threshold: float, confidence: float
+    pts_prev_n: np.ndarray, pts_cur_n: np.ndarray, threshold: float, confidence: float, method: str = "usac"
 ) -> tuple[np.ndarray, int] | None:
-    """Five-point essential matrix (RANSAC) and its decomposition to a rotation.
+    """Five-point essential matrix (robustly estimated) and its decomposition to a rotation.
 
     Args:
         pts_prev_n, pts_cur_n: (N, 2) matching normalised image coordinates.
-        threshold: RANSAC threshold in normalised units (pixels / focal length).
-        confidence: RANSAC confidence.
+        threshold: inlier threshold in normalised units (pixels / focal length).
+        confidence: robust estimator confidence.
+        method: a key of ESSENTIAL_METHODS.
 
     Returns:
         (R_prev_cur, inlier count), or None when no essential matrix is found.
     """
     E, mask = cv2.findEssentialMat(
-        pts_prev_n, pts_cur_n, np.eye(3), method=cv2.RANSAC, prob=confidence, threshold=threshold
+        pts_prev_n, pts_cur_n, np.eye(3), method=ESSENTIAL_METHODS[method], prob=confidence, threshold=threshold
     )
     if E is None or E.shape[0] < 3 or mask is None:
         return None
@@ -141,6 +158,7 @@ class Tracker:
                 self.camera.undistort(cur),
                 c.ransac_threshold_px / self.camera.focal_px,
                 c.ransac_confidence,
+                c.essential_method,
             )
             if result is None:
                 status = "no_model"

@@ -129,7 +129,7 @@ class FrameRecord:
     Attributes:
         index, t: frame index and time [s].
         nc: correspondences tracked from the previous frame (the paper's NC).
-        inliers: five-point RANSAC inliers (0 when no model was estimated).
+        inliers: essential-matrix inliers (0 when no model was estimated).
         status: `first`, `ok`, `few_correspondences` (< threshold1, previous rotation kept),
             `no_model` (estimation failed, previous rotation kept).
         redetected: corners were detected again in this frame (< threshold2).
