@@ -1,10 +1,14 @@
-"""Event Camera Dataset folders (Mueggler et al., IJRR 2017), text layout.
+"""Event Camera Dataset sequences (Mueggler et al., IJRR 2017) in the text layout,
+as an extracted folder or as the dataset's `.zip`, read in place.
 
     events.txt       t x y p            (p in {0, 1})
     images.txt       t images/frame_XXXXXXXX.png
     groundtruth.txt  t px py pz qx qy qz qw   (camera-to-world)
     imu.txt          t ax ay az gx gy gz
     calib.txt        fx fy cx cy k1 k2 p1 p2 k3
+
+Without `images.txt` the sequence is an event-only stream, sampled at a fixed
+rate or every N events.
 """
 
 from __future__ import annotations
@@ -17,38 +21,66 @@ import cv2
 import numpy as np
 
 from eas_vo.config import check_range
+from eas_vo.datasets.sources import open_source
 from eas_vo.errors import DataError
-from eas_vo.io import atomic_path, load_events, read_table, write_events_text, write_text_atomic
+from eas_vo.eventfile import DataWarnings, load_event_text, write_events_text
+from eas_vo.io import atomic_path, parse_table, write_text_atomic
 from eas_vo.plugins import Dataset
 from eas_vo.types import CameraModel, ImuSeries, PoseSeries, empty_events
 
 
 @dataclass(frozen=True)
 class EcdConfig:
-    """Sensor size [px] used when the folder has no frames to read it from (DAVIS240C default)."""
+    """How to read a sequence.
+
+    Attributes:
+        width, height: sensor size [px] when there are no frames to read it from (DAVIS240C).
+        lenient: drop malformed lines and out-of-order or out-of-sensor events with counted
+            warnings instead of stopping at the first.
+        time_tolerance_s: event timestamps may step back this much [s] (clamped); more is an error.
+        sample_rate_hz: event-only streams: samples per second...
+        sample_every_events: ...or, when > 0, one sample every this many events.
+    """
 
     width: int = 240
     height: int = 180
+    lenient: bool = False
+    time_tolerance_s: float = 1e-6
+    sample_rate_hz: float = 20.0
+    sample_every_events: int = 0
 
     def validate(self) -> None:
         check_range(self, "width", 1, 65535)
         check_range(self, "height", 1, 65535)
+        check_range(self, "time_tolerance_s", 0.0, 1.0)
+        check_range(self, "sample_rate_hz", 0.0, 1e6, lo_open=True)
+        check_range(self, "sample_every_events", 0, 10**9)
+
+
+def event_sample_times(event_t: np.ndarray, rate_hz: float, every_events: int) -> np.ndarray:
+    """Sample times [s] for an event-only stream: every `every_events` events, else at `rate_hz`."""
+    if len(event_t) == 0:
+        return np.empty(0)
+    if every_events > 0:
+        return np.unique(np.asarray(event_t[::every_events], dtype=float))
+    return np.arange(float(event_t[0]), float(event_t[-1]), 1.0 / rate_hz)
 
 
 class EcdFolderDataset(Dataset):
-    """A folder in the Event Camera Dataset's text layout (frames, events, ground truth, IMU)."""
+    """An Event Camera Dataset sequence: an extracted folder or its `.zip`."""
 
     name = "ecd"
-    description = "Event Camera Dataset folder (events.txt, images.txt, groundtruth.txt, imu.txt, calib.txt)"
+    description = "Event Camera Dataset sequence: folder or .zip (events.txt, images.txt, groundtruth.txt, imu.txt, calib.txt)"
     Config = EcdConfig
 
-    def __init__(self, root: str | Path, config: EcdConfig | None = None):
+    def __init__(self, location: str | Path, config: EcdConfig | None = None):
         self.config = config or EcdConfig()
-        self.root = Path(root)
-        self.description = str(self.root)
-        if not self.root.is_dir():
-            raise DataError(self.root, "dataset folder not found")
-        self._times, self._paths = self._read_image_list()
+        self.source = open_source(location)
+        self.description = self.source.description
+        self.warnings = DataWarnings()
+        self._times, self._frame_names = self._read_image_list()
+        if not self._frame_names and not self.source.exists("events.txt"):
+            raise DataError(self.source.label("images.txt"), "file not found, and there is no events.txt either")
         width, height = self._sensor_size()
         self.camera = self._read_calib(width, height)
         self.ground_truth = self._read_ground_truth()
@@ -58,106 +90,141 @@ class EcdFolderDataset(Dataset):
     # -- plugin protocol ---------------------------------------------------------------
 
     def frame_times(self) -> np.ndarray:
+        if self._times is None:  # event-only: samples from the events
+            c = self.config
+            self._times = event_sample_times(self.events()["t"], c.sample_rate_hz, c.sample_every_events)
         return self._times
 
     def load_frame(self, k: int) -> np.ndarray | None:
-        path = self._paths[k]
-        image = cv2.imread(str(path), cv2.IMREAD_GRAYSCALE)
-        if image is None:
-            raise DataError(path, f"cannot read frame {k} (listed in images.txt line {k + 1})")
+        if not self._frame_names:
+            return None
+        image = self._decode_frame(k)
         if image.shape != (self.camera.height, self.camera.width):
             raise DataError(
-                path,
-                f"frame {k} is {image.shape[1]}x{image.shape[0]}, "
-                f"expected {self.camera.width}x{self.camera.height}",
+                self.source.label(self._frame_names[k]),
+                f"frame {k} is {image.shape[1]}x{image.shape[0]}, expected {self.camera.width}x{self.camera.height}",
             )
         return image
 
     def events(self) -> np.ndarray:
         if self._events is None:
-            path = self.root / "events.txt"
-            if path.exists():
-                self._events = load_events(path, self.camera.width, self.camera.height)
+            if self.source.exists("events.txt"):
+                c = self.config
+                self._events = load_event_text(
+                    lambda: self.source.open("events.txt"),
+                    self.source.identity("events.txt"),
+                    self.source.label("events.txt"),
+                    self.camera.width,
+                    self.camera.height,
+                    c.time_tolerance_s,
+                    c.lenient,
+                    self.warnings,
+                )
             else:
                 self._events = empty_events()
         return self._events
 
     # -- readers -----------------------------------------------------------------------
 
-    def _read_image_list(self) -> tuple[np.ndarray, list[Path]]:
-        listing = self.root / "images.txt"
-        if not listing.exists():
-            raise DataError(listing, "file not found: an Event Camera Dataset folder needs images.txt")
-        times, paths = [], []
-        for lineno, line in enumerate(listing.read_text(errors="replace").splitlines(), start=1):
+    def _read_image_list(self) -> tuple[np.ndarray | None, list[str]]:
+        self._frame_lines: list[int] = []
+        if not self.source.exists("images.txt"):
+            self.no_frames_reason = f"{self.source.label('images.txt')} does not exist (an event-only stream)"
+            return None, []
+        where = self.source.label("images.txt")
+        times, names, lines = [], [], []
+        for lineno, line in enumerate(self.source.read_bytes("images.txt").decode(errors="replace").splitlines(), 1):
             parts = line.split()
             if not parts or parts[0].startswith("#"):
                 continue
-            if len(parts) != 2:
-                raise DataError(listing, f"expected 't path', found {len(parts)} fields", lineno)
-            try:
-                t = float(parts[0])
-            except ValueError:
-                raise DataError(listing, f"timestamp {parts[0]!r} is not a number", lineno) from None
-            if not math.isfinite(t):
-                raise DataError(listing, "timestamp is not finite", lineno)
-            if times and t <= times[-1]:
-                raise DataError(listing, f"timestamp {t:.9f} does not increase (previous {times[-1]:.9f})", lineno)
-            path = self.root / parts[1]
-            if not path.is_file():
-                raise DataError(listing, f"frame file {parts[1]} does not exist", lineno)
-            times.append(t)
-            paths.append(path)
-        return np.array(times, dtype=float), paths
+            problem = self._image_line_problem(parts, times)
+            if problem is None and not self.source.exists(parts[1]):
+                problem = ("missing frame file", f"frame file {parts[1]} does not exist")
+            if problem is not None:
+                if not self.config.lenient:
+                    raise DataError(where, problem[1], lineno)
+                self.warnings.add(where, problem[0], f"line {lineno}")
+                continue
+            times.append(float(parts[0]))
+            names.append(parts[1])
+            lines.append(lineno)
+        self._frame_lines = lines
+        return np.array(times, dtype=float), names
+
+    @staticmethod
+    def _image_line_problem(parts: list[str], times: list[float]) -> tuple[str, str] | None:
+        """(kind, message) of what is wrong with an images.txt line, or None."""
+        if len(parts) != 2:
+            return "malformed line", f"expected 't path', found {len(parts)} fields"
+        try:
+            t = float(parts[0])
+        except ValueError:
+            return "malformed line", f"timestamp {parts[0]!r} is not a number"
+        if not math.isfinite(t):
+            return "malformed line", "timestamp is not finite"
+        if times and t <= times[-1]:
+            return "timestamp not increasing", f"timestamp {t:.9f} does not increase (previous {times[-1]:.9f})"
+        return None
 
     def _sensor_size(self) -> tuple[int, int]:
-        if self._paths:
-            first = cv2.imread(str(self._paths[0]), cv2.IMREAD_GRAYSCALE)
-            if first is None:
-                raise DataError(self._paths[0], "cannot read frame 0 (listed in images.txt line 1)")
+        if self._frame_names:
+            first = self._decode_frame(0)
             return first.shape[1], first.shape[0]
         return self.config.width, self.config.height
 
+    def _decode_frame(self, k: int) -> np.ndarray:
+        name = self._frame_names[k]
+        image = cv2.imdecode(np.frombuffer(self.source.read_bytes(name), np.uint8), cv2.IMREAD_GRAYSCALE)
+        if image is None:
+            raise DataError(self.source.label(name), f"cannot decode frame {k} (images.txt line {self._frame_lines[k]})")
+        return image
+
     def _read_calib(self, width: int, height: int) -> CameraModel:
-        path = self.root / "calib.txt"
-        if not path.exists():
-            raise DataError(path, "file not found: calib.txt holds the intrinsics 'fx fy cx cy k1 k2 p1 p2 k3'")
-        fields = path.read_text(errors="replace").split()
+        where = self.source.label("calib.txt")
+        if not self.source.exists("calib.txt"):
+            raise DataError(where, "file not found: calib.txt holds the intrinsics 'fx fy cx cy k1 k2 p1 p2 k3'")
+        fields = self.source.read_bytes("calib.txt").decode(errors="replace").split()
         try:
             values = [float(v) for v in fields]
         except ValueError:
-            raise DataError(path, "calibration values must be numbers", 1) from None
+            raise DataError(where, "calibration values must be numbers", 1) from None
         if len(values) not in (4, 8, 9) or not all(map(math.isfinite, values)):
-            raise DataError(path, f"expected 4, 8 or 9 finite values (fx fy cx cy k1 k2 p1 p2 k3), found {len(values)}", 1)
+            raise DataError(where, f"expected 4, 8 or 9 finite values (fx fy cx cy k1 k2 p1 p2 k3), found {len(values)}", 1)
         return CameraModel.from_calib(values, width, height)
 
-    def _read_ground_truth(self) -> PoseSeries | None:
-        path = self.root / "groundtruth.txt"
-        if not path.exists():
+    def _read_timed_table(self, name: str, ncols: int, what: str) -> np.ndarray | None:
+        if not self.source.exists(name):
             return None
-        table = read_table(path, 8, "t px py pz qx qy qz qw")
-        _check_increasing(path, table[:, 0])
-        q = table[:, 4:8]
-        norms = np.linalg.norm(q, axis=1)
-        if (np.abs(norms - 1.0) > 1e-2).any():
-            i = int(np.argmax(np.abs(norms - 1.0) > 1e-2))
-            raise DataError(path, f"quaternion norm {norms[i]:.3f} is not 1", i + 1)
-        return PoseSeries(t=table[:, 0], p_w_c=table[:, 1:4], q_w_c=q / norms[:, None])
+        where = self.source.label(name)
+        table = parse_table(self.source.read_bytes(name), where, ncols, what)
+        check_increasing(where, table[:, 0])
+        return table
+
+    def _read_ground_truth(self) -> PoseSeries | None:
+        table = self._read_timed_table("groundtruth.txt", 8, "t px py pz qx qy qz qw")
+        return None if table is None else pose_series(self.source.label("groundtruth.txt"), table)
 
     def _read_imu(self) -> ImuSeries | None:
-        path = self.root / "imu.txt"
-        if not path.exists():
-            return None
-        table = read_table(path, 7, "t ax ay az gx gy gz")
-        _check_increasing(path, table[:, 0])
-        return ImuSeries(t=table[:, 0], acc=table[:, 1:4], gyro=table[:, 4:7])
+        table = self._read_timed_table("imu.txt", 7, "t ax ay az gx gy gz")
+        return None if table is None else ImuSeries(t=table[:, 0], acc=table[:, 1:4], gyro=table[:, 4:7])
 
 
-def _check_increasing(path: Path, t: np.ndarray) -> None:
+def check_increasing(where: str, t: np.ndarray) -> None:
     bad = np.flatnonzero(np.diff(t) <= 0)
     if len(bad):
         i = int(bad[0]) + 1
-        raise DataError(path, f"timestamp {t[i]:.9f} does not increase (previous {t[i - 1]:.9f})", i + 1)
+        raise DataError(where, f"timestamp {t[i]:.9f} does not increase (previous {t[i - 1]:.9f})", i + 1)
+
+
+def pose_series(where: str, table: np.ndarray) -> PoseSeries:
+    """`t px py pz qx qy qz qw` rows -> PoseSeries, checking that quaternions are unit."""
+    q = table[:, 4:8]
+    norms = np.linalg.norm(q, axis=1)
+    off = np.abs(norms - 1.0) > 1e-2
+    if off.any():
+        i = int(np.argmax(off))
+        raise DataError(where, f"quaternion norm {norms[i]:.3f} is not 1", i + 1)
+    return PoseSeries(t=table[:, 0], p_w_c=table[:, 1:4], q_w_c=q / norms[:, None])
 
 
 def write_ecd_folder(
@@ -176,20 +243,18 @@ def write_ecd_folder(
     for k, (t, frame) in enumerate(zip(frame_times, frames)):
         name = f"images/frame_{k:08d}.png"
         with atomic_path(root / name) as tmp:
-            _, buf = cv2.imencode(".png", frame)
-            tmp.write_bytes(buf.tobytes())
+            tmp.write_bytes(cv2.imencode(".png", frame)[1].tobytes())
         lines.append(f"{t:.9f} {name}")
     write_text_atomic(root / "calib.txt", " ".join(f"{v:.12g}" for v in camera.calib_values()) + "\n")
     if ground_truth is not None:
         table = np.column_stack([ground_truth.t, ground_truth.p_w_c, ground_truth.q_w_c])
-        write_text_atomic(root / "groundtruth.txt", _format_rows(table, "%.9f"))
+        write_text_atomic(root / "groundtruth.txt", _format_rows(table))
     if imu is not None:
-        table = np.column_stack([imu.t, imu.acc, imu.gyro])
-        write_text_atomic(root / "imu.txt", _format_rows(table, "%.9f"))
-    write_events_text(root / "events.txt", events)
+        write_text_atomic(root / "imu.txt", _format_rows(np.column_stack([imu.t, imu.acc, imu.gyro])))
+    write_events_text(root / "events.txt", events, camera.width, camera.height)
     # images.txt last: a folder is complete only once its frame list exists.
     write_text_atomic(root / "images.txt", "\n".join(lines) + "\n")
 
 
-def _format_rows(table: np.ndarray, fmt: str) -> str:
-    return "".join(" ".join(fmt % v for v in row) + "\n" for row in table)
+def _format_rows(table: np.ndarray) -> str:
+    return "".join(" ".join(f"{v:.9f}" for v in row) + "\n" for row in table)

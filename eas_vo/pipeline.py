@@ -61,7 +61,7 @@ def run(config: ResolvedConfig, out_dir: str | Path | None = None, progress: boo
             f"holds {n_total} frame(s); at least 2 are needed"
         )
     if frontend_cls.needs_frames and dataset.load_frame(int(dataset.window(rc.start_s, rc.duration_s)[0])) is None:
-        raise EasVoError(f"frontend {rc.frontend!r} needs APS frames, and {dataset.description} has none")
+        raise EasVoError(f"frontend {rc.frontend!r} needs APS frames: {dataset.no_frames_reason}")
 
     out = Path(out_dir) if out_dir is not None else None
     if out is not None:

@@ -33,6 +33,7 @@ class Dataset:
     camera: CameraModel
     ground_truth: PoseSeries | None = None
     imu: ImuSeries | None = None
+    no_frames_reason = "the dataset has no APS frames"
 
     def frame_times(self) -> np.ndarray:
         """(N,) frame timestamps [s], increasing."""

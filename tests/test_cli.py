@@ -79,7 +79,7 @@ def user_error(argv, capsys):
 def test_missing_images_txt_is_one_line(sequence_copy, tmp_path, capsys):
     (sequence_copy / "images.txt").unlink()
     line = user_error(["run", "--dataset", str(sequence_copy), "--out", str(tmp_path / "o")], capsys)
-    assert line.startswith("eas-vo: error: ") and "images.txt: file not found" in line
+    assert line.startswith("eas-vo: error: ") and "needs APS frames" in line and "images.txt does not exist" in line
 
 
 def test_bad_event_line_is_one_line_with_file_and_line(sequence_copy, tmp_path, capsys):

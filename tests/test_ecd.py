@@ -41,9 +41,10 @@ def test_reads_the_real_excerpt():
     assert len(ds.ground_truth.t) == 6010 and ds.imu is None
 
 
-def test_missing_images_txt(sequence_copy):
+def test_missing_images_txt_and_events_txt(sequence_copy):
     (sequence_copy / "images.txt").unlink()
-    with pytest.raises(DataError, match="images.txt: file not found"):
+    (sequence_copy / "events.txt").unlink()
+    with pytest.raises(DataError, match="images.txt: file not found, and there is no events.txt either"):
         EcdFolderDataset(sequence_copy)
 
 
@@ -56,7 +57,7 @@ def test_missing_frame_file_names_images_txt_line(sequence_copy):
 def test_unreadable_frame_is_reported_with_its_index(sequence_copy):
     (sequence_copy / "images" / "frame_00000002.png").write_bytes(b"not a png")
     ds = EcdFolderDataset(sequence_copy)
-    with pytest.raises(DataError, match="cannot read frame 2"):
+    with pytest.raises(DataError, match="cannot decode frame 2"):
         ds.load_frame(2)
 
 

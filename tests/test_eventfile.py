@@ -1,0 +1,157 @@
+"""Event text files: the compiled parser, validation, lenient mode and the binary cache."""
+
+import io
+import os
+
+import numpy as np
+import pytest
+
+from eas_vo.errors import DataError
+from eas_vo.eventfile import (
+    DataWarnings,
+    cache_key,
+    cache_path,
+    convert_text_to_cache,
+    file_identity,
+    format_events,
+    load_event_text,
+    parse_block,
+    write_events_text,
+)
+from eas_vo.types import EVENT_DTYPE
+
+
+def random_events(n, seed=0):
+    rng = np.random.default_rng(seed)
+    ev = np.empty(n, EVENT_DTYPE)
+    ev["t"] = np.sort(rng.uniform(0, 1234.5, n))
+    ev["x"] = rng.integers(0, 240, n)
+    ev["y"] = rng.integers(0, 180, n)
+    ev["p"] = rng.integers(0, 2, n)
+    return ev
+
+
+def load_file(path, lenient=False, warnings=None, width=240, height=180, tolerance_s=1e-6):
+    return load_event_text(lambda: open(path, "rb"), file_identity(path), str(path), width, height, tolerance_s, lenient, warnings)
+
+
+def test_format_events_matches_printf():
+    ev = random_events(500)
+    expected = "".join(f"{e['t']:.9f} {e['x']} {e['y']} {e['p']}\n" for e in ev)
+    assert format_events(ev).decode() == expected
+
+
+def test_compiled_parser_equals_python_float_exactly():
+    rng = np.random.default_rng(3)
+    text = "".join(
+        f"{t:.{d}f} {x} {y} {p}\n"
+        for t, d, x, y, p in zip(rng.uniform(0, 5000, 3000), rng.integers(0, 10, 3000), rng.integers(0, 240, 3000),
+                                 rng.integers(0, 180, 3000), rng.integers(0, 2, 3000))
+    ) + "7 1 2 -1\r\n  \n0.5\t3  4 1"  # integer time, CRLF, -1 polarity, blank line, tabs, no final newline
+    t, x, y, p = parse_block(np.frombuffer(text.encode(), np.uint8))
+    rows = [line.split() for line in text.splitlines() if line.strip()]
+    np.testing.assert_array_equal(t, [float(r[0]) for r in rows])  # bit-exact
+    np.testing.assert_array_equal(np.column_stack([x, y, p]), [[int(v) for v in r[1:]] for r in rows])
+
+
+def test_parser_in_two_threads_equals_one(tmp_path):
+    from concurrent.futures import ThreadPoolExecutor
+
+    buf = np.frombuffer(format_events(random_events(200_000, seed=4)), np.uint8)
+    with ThreadPoolExecutor(2) as pool:
+        two = parse_block(buf, pool)
+    one = parse_block(buf)
+    for a, b in zip(one, two):
+        np.testing.assert_array_equal(a, b)
+
+
+@pytest.mark.parametrize("text", ["1e-3 1 2 1\n", "-0.5 1 2 1\n", "0.1 1 2\n", "0.1 1 2 1 9\n", "0.1 1.5 2 1\n"])
+def test_unusual_lines_leave_the_fast_path(text):
+    assert parse_block(np.frombuffer(text.encode(), np.uint8)) is None
+
+
+def test_round_trip_through_text_and_cache(tmp_path):
+    ev = random_events(50_000, seed=1)
+    path = tmp_path / "events.txt"
+    write_events_text(path, ev, 240, 180)  # primes the cache
+    primed = load_file(path)
+    os.unlink(cache_path(cache_key("text", *file_identity(path), 240, 180, 1e-6)))
+    parsed = load_file(path)  # parsed from text this time
+    assert isinstance(parsed, np.memmap)
+    np.testing.assert_array_equal(parsed, primed)  # the primed cache equals a fresh parse, bit for bit
+    np.testing.assert_array_equal(parsed[["x", "y", "p"]], ev[["x", "y", "p"]])
+    np.testing.assert_allclose(parsed["t"], ev["t"], atol=1e-9)
+
+
+def test_blocks_and_line_numbers_span_block_boundaries():
+    ev = random_events(20_000, seed=2)
+    text = bytearray(format_events(ev))
+    lines = text.split(b"\n")
+    lines[15_000] = b"0.0 1 garbage 1"
+    out = io.BytesIO()
+    with pytest.raises(DataError, match=r"events.txt:15001: not a number"):
+        convert_text_to_cache(io.BytesIO(b"\n".join(lines)), "events.txt", out, 240, 180, block_bytes=50_000)
+    out = io.BytesIO()
+    assert convert_text_to_cache(io.BytesIO(bytes(text)), "events.txt", out, 240, 180, block_bytes=50_000) == 20_000
+    np.testing.assert_array_equal(np.frombuffer(out.getvalue(), EVENT_DTYPE), load_ref(text))
+
+
+def load_ref(text):
+    rows = np.array([line.split() for line in bytes(text).decode().splitlines()], dtype=float)
+    ev = np.empty(len(rows), EVENT_DTYPE)
+    ev["t"], ev["x"], ev["y"], ev["p"] = rows.T
+    return ev
+
+
+def test_cache_is_invalidated_when_the_file_changes(tmp_path):
+    path = tmp_path / "events.txt"
+    path.write_text("0.1 1 2 1\n0.2 3 4 0\n")
+    assert len(load_file(path)) == 2
+    path.write_text("0.1 1 2 1\n0.2 3 4 0\n0.3 5 6 1\n")
+    os.utime(path, ns=(1, 2))
+    assert len(load_file(path)) == 3
+
+
+BAD = [
+    ("0.1 1 2 1\n0.2 3 x 0\n", 2, "not a number"),
+    ("0.1 1 2 1\n0.2 3 4\n", 2, "expected 4 columns"),
+    ("0.1 1 2 1\n0.2 3 4 0\n0.15 1 1 1\n", 3, "timestamp goes backwards"),
+    ("0.1 1 2 1\n0.2 300 4 0\n", 2, "outside the 240x180 sensor"),
+    ("0.1 1 2 1\n0.2 3 4 7\n", 2, "polarity"),
+    ("0.1 1 2 1\n0.2 nan 4 0\n", 2, "not a number|integers"),
+    ("0.1 1 2 1\n0.2 3 4 0\n0.3 5", 3, "expected 4 columns"),  # truncated last line
+]
+
+
+@pytest.mark.parametrize("text,line,message", BAD)
+def test_malformed_events_name_file_and_line(tmp_path, text, line, message):
+    path = tmp_path / "events.txt"
+    path.write_text(text)
+    with pytest.raises(DataError, match=message) as info:
+        load_file(path)
+    assert info.value.line == line and str(info.value).startswith(f"{path}:{line}:")
+
+
+@pytest.mark.parametrize("text,line,message", BAD)
+def test_lenient_drops_and_counts(tmp_path, text, line, message):
+    path = tmp_path / "events.txt"
+    path.write_text(text)
+    warnings = DataWarnings()
+    events = load_file(path, lenient=True, warnings=warnings)
+    assert len(events) == text.count("\n") + (not text.endswith("\n")) - 1
+    (report,) = warnings.lines()
+    assert f"1 dropped" in report and f"(first at line {line})" in report
+    again = DataWarnings()
+    load_file(path, lenient=True, warnings=again)  # from the cache: the warning is reported again
+    assert again.lines() == warnings.lines()
+    with pytest.raises(DataError):
+        load_file(path)  # the lenient cache never serves a strict read
+
+
+def test_small_steps_back_within_tolerance_are_clamped(tmp_path):
+    path = tmp_path / "events.txt"
+    path.write_text("0.1 1 2 1\n0.2000000 3 4 0\n0.1999995 5 6 1\n0.3 1 1 1\n")
+    t = load_file(path)["t"]
+    np.testing.assert_array_equal(t, [0.1, 0.2, 0.2, 0.3])
+    with pytest.raises(DataError, match="goes backwards"):
+        load_file(path, tolerance_s=1e-7)
