@@ -224,7 +224,9 @@ def pose_series(where: str, table: np.ndarray) -> PoseSeries:
     if off.any():
         i = int(np.argmax(off))
         raise DataError(where, f"quaternion norm {norms[i]:.3f} is not 1", i + 1)
-    return PoseSeries(t=table[:, 0], p_w_c=table[:, 1:4], q_w_c=q / norms[:, None])
+    # Normalise only what is not unit already, so that re-reading written poses is exact.
+    q = np.where(np.abs(norms - 1.0)[:, None] > 1e-12, q / norms[:, None], q)
+    return PoseSeries(t=table[:, 0], p_w_c=table[:, 1:4], q_w_c=q)
 
 
 def write_ecd_folder(

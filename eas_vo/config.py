@@ -212,9 +212,15 @@ def _plugin_table(table: dict, name: str) -> dict:
 
 
 def dataset_plugin_name(spec: str) -> str:
-    """`synthetic:default` -> 'synthetic'; a path -> 'ecd'."""
+    """`synthetic:default` -> 'synthetic'; a path whose suffix a plugin claims (`.bag`) -> that
+    plugin; any other path (folder, `.zip`) -> 'ecd'."""
+    plugins = registry.available("datasets")
     scheme, sep, _ = spec.partition(":")
-    if sep and len(scheme) > 1 and scheme in registry.available("datasets"):
+    if sep and len(scheme) > 1 and scheme in plugins:
         return scheme
+    suffix = Path(spec).suffix.lower()
+    for name, cls in plugins.items():
+        if suffix and suffix in getattr(cls, "suffixes", ()):
+            return name
     return "ecd"
 

@@ -180,11 +180,13 @@ def iter_blocks(fh: BinaryIO, block_bytes: int = BLOCK_BYTES) -> Iterator[bytes]
         yield data[:cut]
 
 
-class _Validator:
+class Validator:
     """Checks one block of parsed rows at a time, carrying the last timestamp across blocks."""
 
-    def __init__(self, where: str, width: int, height: int, tolerance_s: float, lenient: bool, warnings: DataWarnings):
-        self.where, self.width, self.height = where, width, height
+    def __init__(
+        self, where: str, width: int, height: int, tolerance_s: float, lenient: bool, warnings: DataWarnings, unit: str = "line"
+    ):
+        self.where, self.width, self.height, self.unit = where, width, height, unit
         self.tolerance_s, self.lenient, self.warnings = tolerance_s, lenient, warnings
         self.last_t = -np.inf
 
@@ -212,7 +214,7 @@ class _Validator:
         i = int(np.argmax(bad))
         if not self.lenient:
             raise DataError(self.where, f"{what}: {describe(i)}", line_of(i))
-        self.warnings.add(self.where, what, f"line {line_of(i)}", int(bad.sum()))
+        self.warnings.add(self.where, what, f"{self.unit} {line_of(i)}", int(bad.sum()))
         return ~bad
 
 
@@ -273,7 +275,7 @@ def convert_text_to_cache(
 ) -> int:
     """Stream event text from `fh` into cache records written to `out`; returns the event count."""
     warnings = warnings if warnings is not None else DataWarnings()
-    validate = _Validator(where, width, height, tolerance_s, lenient, warnings)
+    validate = Validator(where, width, height, tolerance_s, lenient, warnings)
     total, first_line = 0, 1
     with ThreadPoolExecutor(2) as pool:
         for block in iter_blocks(fh, block_bytes):
@@ -405,23 +407,16 @@ def write_cache(path: Path, events: np.ndarray) -> np.ndarray:
     return build_cache(path, fill)
 
 
-def load_event_text(
-    open_text: Callable[[], BinaryIO],
-    identity: tuple,
-    where: str,
-    width: int,
-    height: int,
-    tolerance_s: float = 1e-6,
-    lenient: bool = False,
-    warnings: DataWarnings | None = None,
+def load_cached(
+    key: str, lenient: bool, warnings: DataWarnings, fill: Callable[[BinaryIO, DataWarnings], int], where: str
 ) -> np.ndarray:
-    """Events of a text source, from its cache when valid, else parsed once into the cache.
+    """The event stream cached under `key`, built by `fill(out, warnings)` when absent.
 
-    A clean file has one cache whatever the mode. A lenient parse that dropped lines is
-    cached apart, with its warnings beside it, so they are reported again on every use.
+    A clean stream has one cache whatever the mode. A lenient build that dropped data
+    is cached apart, with its warnings beside it, so they are reported on every use
+    and a strict read never gets it.
     """
-    warnings = warnings if warnings is not None else DataWarnings()
-    strict = cache_path(cache_key("text", *identity, width, height, tolerance_s))
+    strict = cache_path(key)
     tolerant = strict.with_name(strict.stem + "-lenient.ev")
     for path in (strict, tolerant) if lenient else (strict,):
         cached = open_cache(path)
@@ -430,16 +425,10 @@ def load_event_text(
             if side.exists():
                 warnings.merge(DataWarnings.from_json(side.read_text()))
             return cached
-
     local = DataWarnings()
-
-    def fill(out):
-        with open_text() as fh:
-            return convert_text_to_cache(fh, where, out, width, height, tolerance_s, lenient, local)
-
     target = tolerant if lenient else strict
     try:
-        events = build_cache(target, fill)
+        events = build_cache(target, lambda out: fill(out, local))
     except OSError as exc:
         raise DataError(where, f"cannot read or cache events ({exc})") from None
     if local.counts:
@@ -451,6 +440,26 @@ def load_event_text(
         events = open_cache(strict)
     warnings.merge(local)
     return events
+
+
+def load_event_text(
+    open_text: Callable[[], BinaryIO],
+    identity: tuple,
+    where: str,
+    width: int,
+    height: int,
+    tolerance_s: float = 1e-6,
+    lenient: bool = False,
+    warnings: DataWarnings | None = None,
+) -> np.ndarray:
+    """Events of a text source (`t x y p` lines), through the cache."""
+
+    def fill(out, local):
+        with open_text() as fh:
+            return convert_text_to_cache(fh, where, out, width, height, tolerance_s, lenient, local)
+
+    key = cache_key("text", *identity, width, height, tolerance_s)
+    return load_cached(key, lenient, warnings if warnings is not None else DataWarnings(), fill, where)
 
 
 def prime_text_cache(source: Path, events: np.ndarray, width: int, height: int, tolerance_s: float = 1e-6) -> None:

@@ -28,7 +28,7 @@ def open_dataset(spec: str, config=None) -> Dataset:
     """Open `spec`: `synthetic:NAME` (or any `plugin:location`), else an Event Camera Dataset folder."""
     name = dataset_plugin_name(spec)
     cls = registry.get("datasets", name)
-    location = spec.partition(":")[2] if name != "ecd" else spec
+    location = spec[len(name) + 1 :] if spec.startswith(f"{name}:") else spec
     return cls(location, config if config is not None else cls.Config())
 
 
