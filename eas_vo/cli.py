@@ -62,7 +62,14 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--start", type=float, metavar="S", help="skip the first S seconds of the sequence")
     run.add_argument("--duration", type=float, metavar="S", help="process S seconds (default: all)")
     run.add_argument(
-        "--time-offset", type=float, metavar="S", help="ground truth is sampled at frame time + S (default 0)"
+        "--time-offset",
+        metavar="S|auto",
+        help="ground truth is sampled at frame time + S seconds (default 0); 'auto' estimates S from the data",
+    )
+    run.add_argument(
+        "--lenient",
+        action="store_true",
+        help="drop malformed lines, out-of-order or out-of-sensor events and missing frames, with counted warnings",
     )
     run.add_argument("--out", metavar="DIR", help="output folder (default: runs/DATASET_FRONTEND_BACKEND)")
     run.add_argument("--quiet", action="store_true", help="no progress bar")
@@ -101,6 +108,8 @@ def cmd_run(args) -> int:
     from eas_vo import config as config_mod
     from eas_vo import pipeline
 
+    offset, auto = _time_offset(args.time_offset)
+    assignments = args.assignments + (["dataset.lenient=true"] if args.lenient else [])
     config = config_mod.resolve(
         args.config,
         {
@@ -109,21 +118,38 @@ def cmd_run(args) -> int:
             "backend": args.backend,
             "start_s": args.start,
             "duration_s": args.duration,
-            "time_offset_s": args.time_offset,
+            "time_offset_s": offset,
+            "time_offset_auto": auto,
         },
-        args.assignments,
+        assignments,
     )
     rc = config.run
     out = Path(args.out or f"runs/{_slug(rc.dataset)}_{rc.frontend}_{rc.backend}")
     result = pipeline.run(config, out, progress=not args.quiet and sys.stderr.isatty())
     m = result.metrics
+    for line in m["data_warnings"]:
+        print(f"eas-vo: warning: {line}", file=sys.stderr)
     ape = m.get("ape_mean_rad")
     ape_text = f"average APE {ape:.4f} rad ({ape * 57.29577951:.2f} deg)" if ape is not None else "no ground truth"
+    if m["time_offset_estimated"]:
+        ape_text += f" (time offset {m['time_offset_s'] * 1e3:+.1f} ms, estimated)"
     print(
         f"{rc.frontend}+{rc.backend} on {rc.dataset}: {m['frames']} frames, average NC {m['nc_mean']:.1f}, "
         f"{ape_text}, {m['frames_per_s']:.1f} frames/s -> {out}"
     )
     return 0
+
+
+def _time_offset(text: str | None) -> tuple[float | None, bool | None]:
+    """--time-offset value -> (offset_s, auto)."""
+    if text is None:
+        return None, None
+    if text.strip().lower() == "auto":
+        return None, True
+    try:
+        return float(text), False
+    except ValueError:
+        raise EasVoError(f"--time-offset takes seconds or 'auto', got {text!r}") from None
 
 
 def cmd_simulate(args) -> int:

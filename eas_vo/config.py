@@ -30,6 +30,8 @@ class RunConfig:
         frontend, backend: plugin names.
         start_s, duration_s: processed window, from the sequence's first timestamp [s].
         time_offset_s: ground truth is sampled at `t_frame + time_offset_s` [s].
+        time_offset_auto: estimate the offset from the data instead (relative rotations
+            against ground truth); the estimate is reported in metrics.json.
     """
 
     dataset: str = "synthetic:default"
@@ -38,9 +40,11 @@ class RunConfig:
     start_s: float = 0.0
     duration_s: float = math.inf
     time_offset_s: float = 0.0
+    time_offset_auto: bool = False
 
     def validate(self) -> None:
         check_range(self, "start_s", 0.0, math.inf)
+        check_range(self, "time_offset_s", -10.0, 10.0)
         if not self.duration_s > 0:
             raise ConfigError(f"run.duration_s must be > 0, got {self.duration_s}")
 

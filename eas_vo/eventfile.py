@@ -234,8 +234,10 @@ def _row_lines(buf: bytes, first_line: int) -> Callable[[int], int]:
 
 
 def _slow_rows(block: bytes, first_line: int, where: str, lenient: bool, warnings: DataWarnings):
-    """Line-by-line parse of a block the fast parser rejected: names the line, or skips it if lenient."""
-    rows, lines = [], []
+    """Line-by-line parse of a block the fast parser rejected. Lenient: skips and counts bad
+    lines. Strict: stops at the first and returns its error with the rows before it, so that
+    an earlier invalid event can still be reported first."""
+    rows, lines, pending = [], [], None
     for k, raw in enumerate(block.split(b"\n")):
         text = raw.strip()
         if not text:
@@ -253,13 +255,15 @@ def _slow_rows(block: bytes, first_line: int, where: str, lenient: bool, warning
                 problem = f"not a number in {text[:60].decode(errors='replace')!r}"
         if problem:
             if not lenient:
-                raise DataError(where, problem, first_line + k)
+                pending = DataError(where, problem, first_line + k)
+                break
             warnings.add(where, "malformed line", f"line {first_line + k}")
             continue
         rows.append(row)
         lines.append(first_line + k)
     table = np.array(rows, dtype=float).reshape(-1, 4)
-    return table[:, 0], table[:, 1].astype(np.int64), table[:, 2].astype(np.int64), table[:, 3].astype(np.int64), lines
+    columns = table[:, 0], *(table[:, k].astype(np.int64) for k in (1, 2, 3))
+    return columns, lines, pending
 
 
 def convert_text_to_cache(
@@ -280,14 +284,15 @@ def convert_text_to_cache(
     with ThreadPoolExecutor(2) as pool:
         for block in iter_blocks(fh, block_bytes):
             buf = np.frombuffer(block, np.uint8)
-            columns = parse_block(buf, pool)
+            columns, pending = parse_block(buf, pool), None
             if columns is None:
-                *columns, lines = _slow_rows(block, first_line, where, lenient, warnings)
+                columns, lines, pending = _slow_rows(block, first_line, where, lenient, warnings)
                 line_of = lines.__getitem__
             else:
                 line_of = _row_lines(block, first_line)
-            t, x, y, p = columns
-            events = validate(t, x, y, p, line_of)
+            events = validate(*columns, line_of)
+            if pending is not None:
+                raise pending
             out.write(events.tobytes())
             total += len(events)
             first_line += block.count(b"\n")

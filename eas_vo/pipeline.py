@@ -14,7 +14,7 @@ import numpy as np
 from eas_vo import registry
 from eas_vo.config import ResolvedConfig, dataset_plugin_name
 from eas_vo.errors import EasVoError
-from eas_vo.evaluation import RotationErrors, rotation_errors
+from eas_vo.evaluation import RotationErrors, estimate_time_offset, rotation_errors
 from eas_vo.geometry import quats_from_matrices
 from eas_vo.io import atomic_path, write_text_atomic
 from eas_vo.plugins import Dataset
@@ -54,14 +54,14 @@ def run(config: ResolvedConfig, out_dir: str | Path | None = None, progress: boo
     backend = registry.get("backends", rc.backend)(config.backend)
     tracker = Tracker(config.tracker, dataset.camera)
 
+    if frontend_cls.needs_frames and dataset.load_frame(0) is None:
+        raise EasVoError(f"frontend {rc.frontend!r} needs APS frames: {dataset.no_frames_reason}")
     n_total = len(dataset.window(rc.start_s, rc.duration_s))
     if n_total < 2:
         raise EasVoError(
             f"{dataset.description}: the window start={rc.start_s} s, duration={rc.duration_s} s "
-            f"holds {n_total} frame(s); at least 2 are needed"
+            f"holds {n_total} sample(s); at least 2 are needed"
         )
-    if frontend_cls.needs_frames and dataset.load_frame(int(dataset.window(rc.start_s, rc.duration_s)[0])) is None:
-        raise EasVoError(f"frontend {rc.frontend!r} needs APS frames: {dataset.no_frames_reason}")
 
     out = Path(out_dir) if out_dir is not None else None
     if out is not None:
@@ -84,11 +84,17 @@ def run(config: ResolvedConfig, out_dir: str | Path | None = None, progress: boo
 
     t = np.array([r.t for r in records])
     R_w_c = backend.solve(len(records), edges)
-    errors = None
+    errors, offset = None, rc.time_offset_s
     if dataset.ground_truth is not None:
-        errors = rotation_errors(t, R_w_c, dataset.ground_truth, rc.time_offset_s)
+        if rc.time_offset_auto:
+            offset = estimate_time_offset(t, edges, dataset.ground_truth)
+        errors = rotation_errors(t, R_w_c, dataset.ground_truth, offset)
     elapsed = time.perf_counter() - started
     metrics = _metrics(config, dataset, records, errors, elapsed)
+    metrics["time_offset_s"] = offset
+    metrics["time_offset_estimated"] = rc.time_offset_auto and dataset.ground_truth is not None
+    warnings = getattr(dataset, "warnings", None)
+    metrics["data_warnings"] = warnings.lines() if warnings is not None else []
     result = RunResult(t, R_w_c, records, edges, errors, metrics)
     if out is not None:
         write_outputs(out, result, dataset.description)
@@ -121,7 +127,6 @@ def _metrics(config: ResolvedConfig, dataset: Dataset, records, errors, elapsed:
         "inliers_mean": float(np.mean([r.inliers for r in pairs])),
         "status_counts": dict(Counter(r.status for r in records)),
         "redetections": int(sum(r.redetected for r in pairs)),
-        "time_offset_s": config.run.time_offset_s,
         "sequence_s": float(span),
         "elapsed_s": float(elapsed),
         "frames_per_s": len(records) / elapsed,
