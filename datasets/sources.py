@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import zipfile
+import zlib
 from pathlib import Path
 from typing import BinaryIO
 
@@ -75,7 +76,7 @@ class ZipSource:
             return self.zip.read(self.prefix + name)
         except KeyError:
             raise DataError(self.label(name), "entry not found in the archive") from None
-        except (zipfile.BadZipFile, OSError, EOFError) as exc:
+        except (zipfile.BadZipFile, zlib.error, OSError, EOFError) as exc:
             raise DataError(self.label(name), f"damaged archive entry ({exc})") from None
 
     def identity(self, name: str) -> tuple:
@@ -93,7 +94,7 @@ class _ZipMember:
     def read(self, n: int = -1) -> bytes:
         try:
             return self.fh.read(n)
-        except (zipfile.BadZipFile, OSError, EOFError) as exc:
+        except (zipfile.BadZipFile, zlib.error, OSError, EOFError) as exc:
             raise DataError(self.source.label(self.name), f"damaged archive entry ({exc})") from None
 
     def __enter__(self):

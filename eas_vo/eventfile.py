@@ -11,7 +11,9 @@ Cache file: 16-byte header (magic, event count) + packed EVENT_DTYPE records (13
 from __future__ import annotations
 
 import hashlib
+import io
 import json
+import mmap
 import os
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
@@ -67,69 +69,117 @@ class DataWarnings:
 # ----------------------------------------------------------------------------- compiled parser
 
 
-@numba.njit(cache=True, nogil=True)
-def _parse_block(buf, pow10, out_t, out_x, out_y, out_p):
-    """Parse `t x y p` lines of `buf` (uint8) into the output columns. Returns (rows parsed,
-    byte offset of the first line not in that plain form, or -1). A time is the nearest
-    double to its decimal text (an exact integer mantissa over an exact power of ten)."""
+@numba.njit(cache=True, nogil=True, inline="always")
+def _accept(t, x, y, p, last_t, width, height, tolerance_s):
+    """Validate a row against the sensor and the previous time: (ok, t clamped if a small step back)."""
+    if not np.isfinite(t) or x < 0 or x >= width or y < 0 or y >= height or p < -1 or p > 1:
+        return False, t
+    if t < last_t:
+        if t < last_t - tolerance_s:
+            return False, t
+        return True, last_t
+    return True, t
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _pack(out, n, t, x, y, p, scratch):
+    """Write row n as a packed EVENT_DTYPE record (13 bytes, little-endian) into the bytes `out`."""
+    scratch[0] = t
+    t_bytes = scratch.view(np.uint8)
+    o = 13 * n
+    for b in range(8):
+        out[o + b] = t_bytes[b]
+    out[o + 8] = x & 0xFF
+    out[o + 9] = x >> 8
+    out[o + 10] = y & 0xFF
+    out[o + 11] = y >> 8
+    out[o + 12] = 1 if p > 0 else 0
+
+
+@numba.njit(cache=True, nogil=True, error_model="numpy")
+def _parse_and_pack(buf, pow10, width, height, tolerance_s, last_t, out):
+    """Parse, validate and pack `t x y p` lines of `buf` (which ends with a newline: it stops
+    every scan) into EVENT_DTYPE records in the bytes `out`, after a previous time `last_t`.
+
+    Returns (rows, byte offset of the first line that is not in the plain form or not valid,
+    or -1, newlines before it, first time, last time). A time is the nearest double to its
+    decimal text (an exact integer mantissa over an exact power of ten).
+    """
+    scratch = np.empty(1, np.float64)
+    first_t = -np.inf
     n = 0
     i = 0
+    lines = 0
     size = len(buf)
     while i < size:
-        while i < size and (buf[i] == 32 or buf[i] == 9 or buf[i] == 13):
+        c = buf[i]
+        while c == 32 or c == 9 or c == 13:
             i += 1
-        if i >= size:
-            break
-        if buf[i] == 10:
+            c = buf[i]
+        if c == 10:
             i += 1
+            lines += 1
             continue
         start = i
-        mantissa = 0
-        digits = 0
-        while i < size and 48 <= buf[i] <= 57:
-            mantissa = mantissa * 10 + (buf[i] - 48)
-            digits += 1
+        mant = 0
+        nd = 0
+        while 48 <= c <= 57:
+            mant = mant * 10 + (c - 48)
+            nd += 1
             i += 1
-        decimals = 0
-        if i < size and buf[i] == 46:
+            c = buf[i]
+        dec = 0
+        if c == 46:
             i += 1
-            while i < size and 48 <= buf[i] <= 57:
-                mantissa = mantissa * 10 + (buf[i] - 48)
-                digits += 1
-                decimals += 1
+            c = buf[i]
+            while 48 <= c <= 57:
+                mant = mant * 10 + (c - 48)
+                dec += 1
                 i += 1
-        if digits == 0 or digits > 15 or i >= size or not (buf[i] == 32 or buf[i] == 9):
-            return n, start
-        ints = np.zeros(3, np.int64)
-        ok = True
+                c = buf[i]
+        if nd + dec == 0 or nd + dec > 15 or not (c == 32 or c == 9):
+            return n, start, lines, first_t, last_t
+        x = y = p = 0
         for k in range(3):
-            while i < size and (buf[i] == 32 or buf[i] == 9):
+            while c == 32 or c == 9:
                 i += 1
+                c = buf[i]
             negative = False
-            if k == 2 and i < size and buf[i] == 45:
+            if k == 2 and c == 45:
                 negative = True
                 i += 1
-            value = 0
-            count = 0
-            while i < size and 48 <= buf[i] <= 57 and count < 7:
-                value = value * 10 + (buf[i] - 48)
-                count += 1
+                c = buf[i]
+            v = 0
+            m = 0
+            while 48 <= c <= 57:
+                v = v * 10 + (c - 48)
+                m += 1
                 i += 1
-            if count == 0 or count == 7:
-                ok = False
-                break
-            ints[k] = -value if negative else value
-        while i < size and (buf[i] == 32 or buf[i] == 9 or buf[i] == 13):
+                c = buf[i]
+            if m == 0 or m > 6:
+                return n, start, lines, first_t, last_t
+            if k == 0:
+                x = v
+            elif k == 1:
+                y = v
+            else:
+                p = -v if negative else v
+        while c == 32 or c == 9 or c == 13:
             i += 1
-        if not ok or (i < size and buf[i] != 10):
-            return n, start
-        out_t[n] = mantissa / pow10[decimals]
-        out_x[n] = ints[0]
-        out_y[n] = ints[1]
-        out_p[n] = ints[2]
+            c = buf[i]
+        if c != 10:
+            return n, start, lines, first_t, last_t
+        ok, t = _accept(mant / pow10[dec], x, y, p, last_t, width, height, tolerance_s)
+        if not ok:
+            return n, start, lines, first_t, last_t
+        if n == 0:
+            first_t = t
+        last_t = t
+        _pack(out, n, t, x, y, p, scratch)
         n += 1
         i += 1
-    return n, -1
+        lines += 1
+    return n, -1, lines, first_t, last_t
 
 
 def _split_at_newline(buf: np.ndarray, parts: int) -> list[np.ndarray]:
@@ -142,42 +192,127 @@ def _split_at_newline(buf: np.ndarray, parts: int) -> list[np.ndarray]:
     return [buf[a:b] for a, b in zip(bounds, bounds[1:])]
 
 
-def parse_block(buf: np.ndarray, pool: ThreadPoolExecutor | None = None):
-    """Parse the lines of `buf` (in two threads when a pool is given) into (t, x, y, p),
-    or None if any line is not in the plain `t x y p` form (the caller then goes slowly)."""
-    pieces = _split_at_newline(buf, 2 if pool is not None and len(buf) > (1 << 20) else 1)
-
-    def run(piece):
-        n_max = int(np.count_nonzero(piece == 10)) + 1
-        columns = (np.empty(n_max, np.float64), *(np.empty(n_max, np.int64) for _ in range(3)))
-        n, bad = _parse_block(piece, _POW10, *columns)
-        return None if bad >= 0 else [c[:n] for c in columns]
-
-    results = list(pool.map(run, pieces)) if len(pieces) > 1 else [run(pieces[0])]
-    if any(r is None for r in results):
-        return None
-    return [np.concatenate([r[k] for r in results]) for k in range(4)]
+def _terminated(piece: np.ndarray) -> np.ndarray:
+    """The piece, ending with a newline (the compiled scans stop on it)."""
+    if len(piece) and piece[-1] != 10:
+        return np.concatenate([piece, np.array([10], np.uint8)])
+    return piece
 
 
-# ----------------------------------------------------------------------------- streaming conversion
+class BlockParser:
+    """Parses, validates and packs blocks of lines in `threads` pieces at once, each piece as
+    if it started the stream; the caller accepts a piece when its first time is not before
+    the previous piece's last, and takes the sequential path otherwise.
+
+    Packed records live in one of two alternating buffer sets that are reused (fresh ones
+    would cost more in page faults than the parse): valid until the block after next.
+    """
+
+    def __init__(self, width: int, height: int, tolerance_s: float, threads: int = 2):
+        self.limits = (width, height, tolerance_s)
+        self.threads = threads
+        self.pool = ThreadPoolExecutor(threads) if threads > 1 else None
+        self.buffers: dict = {}
+        self.calls = 0
+
+    def close(self) -> None:
+        if self.pool is not None:
+            self.pool.shutdown()
+
+    def _buffer(self, key, rows: int) -> np.ndarray:
+        if key not in self.buffers or len(self.buffers[key]) < rows:
+            self.buffers[key] = np.empty(max(rows, 1024), EVENT_DTYPE)
+        return self.buffers[key]
+
+    def __call__(self, buf: np.ndarray) -> list[tuple]:
+        """Per piece of `buf`, in order: (the piece, and if every line was plain and valid:
+        (records, newlines, first time, last time), else None)."""
+        pieces = [_terminated(p) for p in _split_at_newline(buf, self.threads if len(buf) > (1 << 20) else 1)]
+        parity = self.calls % 2
+        self.calls += 1
+
+        def run(k):
+            piece = pieces[k]
+            out = self._buffer((parity, k), len(piece) // 8 + 1)  # a line has at least 8 bytes
+            n, bad, lines, first_t, last_t = _parse_and_pack(piece, _POW10, *self.limits, -np.inf, out.view(np.uint8))
+            return piece, (None if bad >= 0 else (out[:n], lines, first_t, last_t))
+
+        return list(self.pool.map(run, range(len(pieces)))) if len(pieces) > 1 else [run(0)]
 
 
-def iter_blocks(fh: BinaryIO, block_bytes: int = BLOCK_BYTES) -> Iterator[bytes]:
-    """Blocks of whole lines (the last may lack a final newline)."""
-    carry = b""
-    while True:
-        chunk = fh.read(block_bytes)
-        if not chunk:
-            if carry:
-                yield carry
-            return
-        data = carry + chunk
-        cut = data.rfind(b"\n") + 1
-        if cut == 0:
-            carry = data
-            continue
-        carry = data[cut:]
-        yield data[:cut]
+def parse_block(buf: np.ndarray, width: int = 65535, height: int = 65535, tolerance_s: float = np.inf) -> np.ndarray | None:
+    """Plain, valid `t x y p` lines -> EVENT_DTYPE records (a copy), or None if any line is not."""
+    parser = BlockParser(width, height, tolerance_s, threads=1)
+    try:
+        (_, result), = parser(buf)
+    finally:
+        parser.close()
+    return None if result is None else result[0].copy()
+
+
+def iter_blocks(fh: BinaryIO, block_bytes: int = BLOCK_BYTES) -> Iterator[np.ndarray]:
+    """Blocks of whole lines (the last may lack its newline) as uint8 arrays.
+
+    A regular file is memory-mapped (no copy; each block's pages are released once it is
+    parsed, so a file larger than memory streams through). Other streams (zip members) are
+    read chunk by chunk in the background, the line split by a chunk boundary coming as a
+    small block of its own.
+    """
+    try:
+        fileno = fh.fileno()
+        size = os.fstat(fileno).st_size
+    except (AttributeError, OSError, io.UnsupportedOperation):
+        fileno = None
+    if fileno is not None and size > 0:
+        # Not closed explicitly: blocks handed out may outlive the loop; the mapping goes with them.
+        mapped = mmap.mmap(fileno, 0, access=mmap.ACCESS_READ)
+        mapped.madvise(mmap.MADV_SEQUENTIAL)
+        text = np.frombuffer(mapped, np.uint8)
+        page = mmap.PAGESIZE
+        start = 0
+        while start < size:
+            end = min(start + block_bytes, size)
+            if end < size:
+                newline = mapped.rfind(b"\n", start, end)
+                end = newline + 1 if newline >= start else (mapped.find(b"\n", end) + 1 or size)
+            yield text[start:end]
+            first_page = start - start % page
+            mapped.madvise(mmap.MADV_DONTNEED, first_page, (end - first_page) // page * page)
+            start = end
+        return
+    with ThreadPoolExecutor(1) as reader:
+        future = reader.submit(fh.read, block_bytes)
+        carry = b""
+        while True:
+            chunk = future.result()
+            if not chunk:
+                if carry:
+                    yield np.frombuffer(carry, np.uint8)
+                return
+            future = reader.submit(fh.read, block_bytes)
+            first = chunk.find(b"\n") + 1
+            if first == 0:
+                carry += chunk
+                continue
+            yield np.frombuffer(carry + chunk[:first], np.uint8)
+            last = chunk.rfind(b"\n") + 1
+            if last > first:
+                yield np.frombuffer(chunk, np.uint8, last - first, first)
+            carry = chunk[last:]
+
+
+@numba.njit(cache=True, nogil=True)
+def _check_and_pack(t, x, y, p, last_t, width, height, tolerance_s, out):
+    """Validate parsed rows and pack them into the bytes `out`. Returns (index of the first
+    row with any problem or -1, the last timestamp); rows before a problem are packed."""
+    scratch = np.empty(1, np.float64)
+    for i in range(len(t)):
+        ok, ti = _accept(t[i], x[i], y[i], p[i], last_t, width, height, tolerance_s)
+        if not ok:
+            return i, last_t
+        last_t = ti
+        _pack(out, i, ti, x[i], y[i], p[i], scratch)
+    return -1, last_t
 
 
 class Validator:
@@ -191,6 +326,20 @@ class Validator:
         self.last_t = -np.inf
 
     def __call__(self, t, x, y, p, line_of: Callable[[int], int]) -> np.ndarray:
+        """EVENT_DTYPE records of the valid rows, in order (t may be clamped in place)."""
+        t = np.ascontiguousarray(t, dtype=np.float64)
+        events = np.empty(len(t), EVENT_DTYPE)
+        bad, last_t = _check_and_pack(
+            t, np.ascontiguousarray(x), np.ascontiguousarray(y), np.ascontiguousarray(p),
+            self.last_t, self.width, self.height, self.tolerance_s, events.view(np.uint8),
+        )
+        if bad < 0:  # the common case: every row is valid
+            self.last_t = last_t
+            return events
+        return self._filter(t, x, y, p, line_of)
+
+    def _filter(self, t, x, y, p, line_of) -> np.ndarray:
+        """Row-by-row verdicts: the first problem raises (strict) or every bad row is dropped (lenient)."""
         keep = np.ones(len(t), bool)
         keep &= self._check(~np.isfinite(t), "timestamp is not finite", line_of, lambda i: f"t = {t[i]}")
         outside = (x < 0) | (x >= self.width) | (y < 0) | (y >= self.height)
@@ -216,21 +365,6 @@ class Validator:
             raise DataError(self.where, f"{what}: {describe(i)}", line_of(i))
         self.warnings.add(self.where, what, f"{self.unit} {line_of(i)}", int(bad.sum()))
         return ~bad
-
-
-def _row_lines(buf: bytes, first_line: int) -> Callable[[int], int]:
-    """Row index within a block -> 1-based line number in the file (blank lines skipped)."""
-
-    def line_of(row: int) -> int:
-        count = -1
-        for k, line in enumerate(buf.split(b"\n")):
-            if line.strip():
-                count += 1
-                if count == row:
-                    return first_line + k
-        return first_line
-
-    return line_of
 
 
 def _slow_rows(block: bytes, first_line: int, where: str, lenient: bool, warnings: DataWarnings):
@@ -266,6 +400,31 @@ def _slow_rows(block: bytes, first_line: int, where: str, lenient: bool, warning
     return columns, lines, pending
 
 
+def _sequential_piece(piece, first_line: int, validate: Validator, where: str, lenient: bool, warnings) -> tuple:
+    """A piece the parallel pass could not take whole, in order: the compiled pass over each run
+    of good lines, the line-by-line path (exact error, or counted drop) for each bad line.
+    Returns (records, newlines)."""
+    chunks, i, line = [], 0, first_line
+    out = np.empty(len(piece) // 8 + 1, EVENT_DTYPE)
+    while i < len(piece):
+        rest = piece[i:]
+        n, bad, lines, _, last_t = _parse_and_pack(rest, _POW10, validate.width, validate.height,
+                                                   validate.tolerance_s, validate.last_t, out.view(np.uint8))
+        chunks.append(out[:n].copy())
+        validate.last_t = last_t
+        line += lines
+        if bad < 0:
+            break
+        end = bad + int(np.argmax(rest[bad:] == 10)) + 1
+        columns, lines_of_rows, pending = _slow_rows(rest[bad:end].tobytes(), line, where, lenient, warnings)
+        chunks.append(validate(*columns, lines_of_rows.__getitem__))
+        if pending is not None:
+            raise pending
+        line += 1
+        i += end
+    return np.concatenate(chunks), line - first_line
+
+
 def convert_text_to_cache(
     fh: BinaryIO,
     where: str,
@@ -281,25 +440,29 @@ def convert_text_to_cache(
     warnings = warnings if warnings is not None else DataWarnings()
     validate = Validator(where, width, height, tolerance_s, lenient, warnings)
     total, first_line = 0, 1
-    with ThreadPoolExecutor(2) as pool:
+    parser = BlockParser(width, height, tolerance_s)
+    writer = ThreadPoolExecutor(1)  # writes overlap the parsing of the next block
+    pending_write = None
+    try:
         for block in iter_blocks(fh, block_bytes):
-            buf = np.frombuffer(block, np.uint8)
-            columns, pending = parse_block(buf, pool), None
-            if columns is None:
-                columns, lines, pending = _slow_rows(block, first_line, where, lenient, warnings)
-                line_of = lines.__getitem__
-            else:
-                line_of = _row_lines(block, first_line)
-            events = validate(*columns, line_of)
-            if pending is not None:
-                raise pending
-            out.write(events.tobytes())
-            total += len(events)
-            first_line += block.count(b"\n")
+            records = []
+            for piece, packed in parser(block):
+                if packed is not None and packed[2] >= validate.last_t:  # packed in parallel, still valid
+                    events, newlines, _, validate.last_t = packed
+                else:
+                    events, newlines = _sequential_piece(piece, first_line, validate, where, lenient, warnings)
+                records.append(events.data)
+                total += len(events)
+                first_line += newlines
+            if pending_write is not None:
+                pending_write.result()
+            pending_write = writer.submit(out.writelines, records)
+        if pending_write is not None:
+            pending_write.result()
+    finally:
+        parser.close()
+        writer.shutdown()
     return total
-
-
-# ----------------------------------------------------------------------------- writing
 
 
 def _ascii_digits(values: np.ndarray, width: int, pad: bool) -> np.ndarray:
@@ -350,6 +513,8 @@ def write_events_text(path: str | Path, events: np.ndarray, width: int, height: 
     path = Path(path)
     events = np.array(events, dtype=EVENT_DTYPE)
     events["t"] = np.round(events["t"] * 1e9) / 1e9
+    if (np.diff(events["t"]) < 0).any():
+        raise ValueError("write_events_text needs events sorted by time")
     with atomic_path(path) as tmp:
         with open(tmp, "wb") as fh:
             for start in range(0, len(events), chunk):

@@ -12,7 +12,7 @@ from typing import Iterator, Sequence
 
 import numpy as np
 
-from eas_vo.types import CameraModel, ImuSeries, PoseSeries, RelativeRotation, Sample
+from eas_vo.types import CameraModel, ImuSeries, PoseSeries, RelativeRotation, Sample, search_times
 
 
 @dataclass(frozen=True)
@@ -62,10 +62,9 @@ class Dataset:
             return
         events = self.events()
         times = self.frame_times()
-        event_t = events["t"]
-        starts = np.searchsorted(event_t, times[indices], side="left")
+        starts = search_times(events, times[indices])
         first_k = int(indices[0])
-        prev = int(np.searchsorted(event_t, times[first_k - 1])) if first_k > 0 else 0
+        prev = int(search_times(events, times[first_k - 1])[0]) if first_k > 0 else 0
         for n, (k, first) in enumerate(zip(indices, starts)):
             yield Sample(
                 index=n,

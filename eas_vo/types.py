@@ -19,6 +19,28 @@ def empty_events() -> np.ndarray:
     return np.empty(0, dtype=EVENT_DTYPE)
 
 
+def search_times(events: np.ndarray, times) -> np.ndarray:
+    """Index of the first event with `t >= time`, for each time (np.searchsorted, side='left').
+
+    np.searchsorted would first copy the strided `t` field of a whole (memory-mapped)
+    stream; this bisection reads about 2 log2(N) values per query, so a window of a
+    stream far larger than memory touches only its own pages.
+    """
+    times = np.atleast_1d(np.asarray(times, dtype=float))
+    lo = np.zeros(len(times), np.int64)
+    hi = np.full(len(times), len(events), np.int64)
+    t = events["t"]
+    while True:
+        active = lo < hi
+        if not active.any():
+            return lo
+        mid = (lo + hi) // 2
+        below = np.zeros(len(times), bool)
+        below[active] = t[mid[active]] < times[active]
+        lo = np.where(active & below, mid + 1, lo)
+        hi = np.where(active & ~below, mid, hi)
+
+
 @dataclass(frozen=True)
 class CameraModel:
     """Pinhole camera with radial-tangential distortion (OpenCV / ECD calib.txt order).

@@ -48,21 +48,26 @@ def test_compiled_parser_equals_python_float_exactly():
         for t, d, x, y, p in zip(rng.uniform(0, 5000, 3000), rng.integers(0, 10, 3000), rng.integers(0, 240, 3000),
                                  rng.integers(0, 180, 3000), rng.integers(0, 2, 3000))
     ) + "7 1 2 -1\r\n  \n0.5\t3  4 1"  # integer time, CRLF, -1 polarity, blank line, tabs, no final newline
-    t, x, y, p = parse_block(np.frombuffer(text.encode(), np.uint8))
+    ev = parse_block(np.frombuffer(text.encode(), np.uint8), tolerance_s=np.inf)
     rows = [line.split() for line in text.splitlines() if line.strip()]
-    np.testing.assert_array_equal(t, [float(r[0]) for r in rows])  # bit-exact
-    np.testing.assert_array_equal(np.column_stack([x, y, p]), [[int(v) for v in r[1:]] for r in rows])
+    t = np.maximum.accumulate([float(r[0]) for r in rows])  # steps back are clamped
+    np.testing.assert_array_equal(ev["t"], t)  # bit-exact
+    np.testing.assert_array_equal(ev["x"], [int(r[1]) for r in rows])
+    np.testing.assert_array_equal(ev["y"], [int(r[2]) for r in rows])
+    np.testing.assert_array_equal(ev["p"], [int(r[3]) > 0 for r in rows])
 
 
-def test_parser_in_two_threads_equals_one(tmp_path):
-    from concurrent.futures import ThreadPoolExecutor
+def test_parser_in_two_threads_equals_one():
+    from eas_vo.eventfile import BlockParser
 
-    buf = np.frombuffer(format_events(random_events(200_000, seed=4)), np.uint8)
-    with ThreadPoolExecutor(2) as pool:
-        two = parse_block(buf, pool)
-    one = parse_block(buf)
-    for a, b in zip(one, two):
-        np.testing.assert_array_equal(a, b)
+    ev = random_events(200_000, seed=4)
+    buf = np.frombuffer(format_events(ev), np.uint8)
+    parser = BlockParser(240, 180, 1e-6, threads=2)
+    pieces = parser(buf)
+    parser.close()
+    assert len(pieces) == 2 and all(packed is not None for _, packed in pieces)
+    np.testing.assert_array_equal(np.concatenate([packed[0] for _, packed in pieces]), parse_block(buf))
+    np.testing.assert_allclose(parse_block(buf)["t"], ev["t"], atol=5e-10)
 
 
 @pytest.mark.parametrize("text", ["1e-3 1 2 1\n", "-0.5 1 2 1\n", "0.1 1 2\n", "0.1 1 2 1 9\n", "0.1 1.5 2 1\n"])
@@ -155,3 +160,13 @@ def test_small_steps_back_within_tolerance_are_clamped(tmp_path):
     np.testing.assert_array_equal(t, [0.1, 0.2, 0.2, 0.3])
     with pytest.raises(DataError, match="goes backwards"):
         load_file(path, tolerance_s=1e-7)
+
+
+def test_search_times_equals_searchsorted_without_copying(tmp_path):
+    from eas_vo.types import search_times
+
+    ev = random_events(100_000, seed=9)
+    ev["t"][1000:1010] = ev["t"][1000]  # ties
+    queries = np.concatenate([[-1.0, ev["t"][1000], 1e9], np.random.default_rng(0).uniform(0, 1300, 500)])
+    np.testing.assert_array_equal(search_times(ev, queries), np.searchsorted(ev["t"], queries, side="left"))
+    assert len(search_times(ev[:0], [1.0])) == 1 and search_times(ev[:0], [1.0])[0] == 0

@@ -17,7 +17,7 @@ from eas_vo.datasets.simulator.sensor import ApsModel, DvsModel, EventSimulator,
 from eas_vo.geometry import quats_from_matrices
 from eas_vo.types import EVENT_DTYPE, CameraModel, ImuSeries, PoseSeries
 
-SIMULATOR_VERSION = 1  # bump when the output for a given config changes (invalidates caches)
+SIMULATOR_VERSION = 2  # bump when the output for a given config changes (invalidates caches)
 
 
 @dataclass(frozen=True)

@@ -121,7 +121,7 @@ class EventSimulator:
             level = self.ref[pix] + k * step
             span = log1[pix] - log0[pix]
             frac = np.clip((level - log0[pix]) / np.where(span == 0, 1e-12, span), 0.0, 1.0)
-            t = t0 + frac * (t1 - t0)
+            t = t0 + frac.astype(np.float64) * (t1 - t0)  # float64: a float32 time would be us-coarse
             keep = t - self.last_t[pix] >= self.model.refractory_s
             pix, t, positive = pix[keep], t[keep], positive[keep]
             self.last_t[pix] = t

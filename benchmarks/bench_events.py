@@ -1,0 +1,162 @@
+"""Event loading throughput on a 20-million-event `events.txt` made by the simulator.
+
+Prints, each stage in its own process (so peak memory is its own):
+  - first parse (text -> binary cache) events/s and MB/s, beside pandas.read_csv (C engine)
+    on the same file;
+  - cached load: map the cache and read every event, events/s;
+  - a 1 s window of the cached stream through the pipeline's sample views: bytes touched.
+
+    python benchmarks/bench_events.py [--events 20000000]
+"""
+
+from __future__ import annotations
+
+import argparse
+import io
+import json
+import resource
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+
+def peak_rss_mb() -> float:
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+
+
+def make_file(n_events: int) -> Path:
+    """The first n_events of a simulated sequence long enough to hold them, as events.txt."""
+    from eas_vo.datasets.simulator import SimConfig, simulate
+    from eas_vo.eventfile import write_events_text
+    from eas_vo.io import cache_dir
+    from eas_vo.pipeline import open_dataset
+
+    path = cache_dir() / "bench" / f"events_{n_events}.txt"
+    if path.exists():
+        return path
+    duration = 25.0
+    while True:
+        folder = cache_dir() / "bench" / f"sim_{duration:g}s"
+        if not (folder / "images.txt").exists():
+            print(f"simulating {duration:g} s ...", file=sys.stderr)
+            simulate(SimConfig(duration_s=duration, seed=11), folder)
+        events = open_dataset(str(folder)).events()
+        if len(events) >= n_events:
+            break
+        duration *= 1.2 * n_events / len(events)
+    write_events_text(path, np.asarray(events[:n_events]), 240, 180)
+    return path
+
+
+def timed(fn, repeat: int) -> tuple[float, object]:
+    """Best wall time of `repeat` calls (the machine is shared: the minimum is the signal)."""
+    best, result = float("inf"), None
+    for _ in range(repeat):
+        t0 = time.perf_counter()
+        result = fn()
+        best = min(best, time.perf_counter() - t0)
+    return best, result
+
+
+def stage(name: str, path: Path, repeat: int) -> dict:
+    from eas_vo.eventfile import build_cache, convert_text_to_cache, file_identity, load_event_text
+    from eas_vo.types import search_times
+
+    size_mb = path.stat().st_size / 1e6
+    out = {"stage": name, "size_mb": size_mb}
+    if name == "pandas":
+        import pandas as pd
+
+        def parse():
+            return pd.read_csv(path, sep=" ", header=None, names=["t", "x", "y", "p"], engine="c",
+                               dtype={"t": np.float64, "x": np.uint16, "y": np.uint16, "p": np.int8})
+
+        out["seconds"], frame = timed(parse, repeat)
+        out["events"] = len(frame)
+    elif name in ("parse", "parse_to_cache"):
+        warm = time.perf_counter()
+        with open(path, "rb") as fh:  # load the compiled kernels from numba's cache (once per process)
+            convert_text_to_cache(io.BytesIO(fh.readline()), str(path), io.BytesIO(), 240, 180)
+        out["jit_load_s"] = time.perf_counter() - warm
+
+        class Memory:  # keeps the validated, packed records, as pandas keeps its DataFrame
+            def __init__(self):
+                self.chunks = []
+
+            def writelines(self, records):
+                self.chunks.extend(np.frombuffer(data, np.uint8).copy() for data in records)
+
+        def parse():
+            with open(path, "rb") as fh:
+                return convert_text_to_cache(fh, str(path), Memory(), 240, 180)
+
+        def parse_to_cache():
+            with tempfile.TemporaryDirectory() as tmp, open(path, "rb") as fh:
+                return len(build_cache(Path(tmp) / "e.ev", lambda f: convert_text_to_cache(fh, str(path), f, 240, 180)))
+
+        out["seconds"], out["events"] = timed(parse if name == "parse" else parse_to_cache, repeat)
+    else:
+        def load():
+            return load_event_text(lambda: open(path, "rb"), file_identity(path), str(path), 240, 180)
+
+        load()  # build the cache once
+        rss0 = peak_rss_mb()
+        if name == "cached":
+            def read_all():  # map, then read every record once
+                events = load()
+                return float(events.view(np.uint8).sum(dtype=np.uint64)), len(events)
+
+            out["seconds"], (_, out["events"]) = timed(read_all, repeat)
+        else:
+            def window():  # map, find a 1 s window, read it
+                events = load()
+                start = float(events["t"][0])
+                lo, hi = search_times(events, [start + 1.0, start + 2.0])
+                return float(events[lo:hi]["t"].sum()), int(hi - lo)
+
+            out["seconds"], (_, out["events"]) = timed(window, repeat)
+        out["rss_growth_mb"] = peak_rss_mb() - rss0
+    out["peak_rss_mb"] = peak_rss_mb()
+    return out
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--events", type=int, default=20_000_000)
+    parser.add_argument("--repeat", type=int, default=3, help="runs per stage; the best is reported")
+    parser.add_argument("--stage", help=argparse.SUPPRESS)
+    parser.add_argument("--path", help=argparse.SUPPRESS)
+    args = parser.parse_args()
+    if args.stage:
+        print(json.dumps(stage(args.stage, Path(args.path), args.repeat)))
+        return
+    path = make_file(args.events)
+    results = {}
+    for name in ("pandas", "parse", "parse_to_cache", "cached", "window"):
+        out = subprocess.run([sys.executable, __file__, "--stage", name, "--path", str(path), "--repeat", str(args.repeat)],
+                             capture_output=True, text=True, check=True)
+        results[name] = json.loads(out.stdout.strip().splitlines()[-1])
+    size = results["parse"]["size_mb"]
+    print(f"{path.name}: {results['parse']['events']:,} events, {size:.0f} MB of text")
+    for name, label in (("pandas", "pandas.read_csv (C engine)"), ("parse", "eas-vo parse (validated)"),
+                        ("parse_to_cache", "eas-vo parse + cache write")):
+        r = results[name]
+        print(f"  {label:30s} {r['events'] / r['seconds'] / 1e6:7.1f} M events/s  {size / r['seconds']:7.1f} MB/s  "
+              f"peak RSS {r['peak_rss_mb']:7.0f} MB")
+    for name in ("parse", "parse_to_cache"):
+        print(f"  {name} vs pandas: {results['pandas']['seconds'] / results[name]['seconds']:.2f}x")
+    print(f"  (best of {args.repeat} each; excluded: eas-vo's one-time kernel load {results['parse']['jit_load_s']:.2f} s, pandas' import)")
+    r = results["cached"]
+    print(f"  cached load (map + read all)  {r['events'] / r['seconds'] / 1e6:7.1f} M events/s  "
+          f"RSS growth {r['rss_growth_mb']:.0f} MB = {r['rss_growth_mb'] * 1e6 / r['events']:.1f} B/event")
+    r = results["window"]
+    print(f"  1 s window of the cached stream: {r['events']:,} events in {r['seconds'] * 1e3:.1f} ms, "
+          f"RSS growth {r['rss_growth_mb']:.0f} MB = {r['rss_growth_mb'] * 1e6 / max(r['events'], 1):.1f} B/event in the window")
+
+
+if __name__ == "__main__":
+    main()
