@@ -1,0 +1,179 @@
+"""Time surfaces: TS (Lagorce et al., HOTS, TPAMI 2017) and SITS, the speed-invariant
+time surface (Manderscheid et al., CVPR 2019). Both consume the event stream
+incrementally (each sample adds the events since the previous one) and render the
+surface at the sample time."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numba
+import numpy as np
+
+from eas_vo.config import check_range
+from eas_vo.errors import ConfigError
+from eas_vo.plugins import Frontend
+from eas_vo.types import Sample
+
+POLARITY_MODES = ("merged", "split")
+
+
+def _check_polarity(cfg) -> None:
+    if cfg.polarity not in POLARITY_MODES:
+        raise ConfigError(f"polarity = {cfg.polarity!r}; allowed: {', '.join(POLARITY_MODES)}")
+
+
+def _channels(events: np.ndarray, split: bool) -> np.ndarray:
+    """Surface channel per event: 0, or the polarity (0 OFF, 1 ON) when polarities are split."""
+    return np.ascontiguousarray(events["p"], dtype=np.int64) if split else np.zeros(len(events), np.int64)
+
+
+# ----------------------------------------------------------------------------- TS
+
+
+@numba.njit(cache=True, nogil=True)
+def update_latest_times(latest, t, x, y, channel):
+    """TS state: latest[channel, y, x] = t for each event, in order."""
+    for i in range(len(t)):
+        latest[channel[i], y[i], x[i]] = t[i]
+
+
+def time_surface(latest: np.ndarray, t_s: float, tau_s: float) -> np.ndarray:
+    """exp(-(t_s - T) / tau) per pixel and channel; 0 where no event was seen (T = -inf)."""
+    return np.exp(-(t_s - latest) / tau_s)
+
+
+@dataclass(frozen=True)
+class TsConfig:
+    """tau_s: decay constant [s]; polarity: `merged` (the paper ignores it) or `split`
+    (ON and OFF surfaces, rendered as 128 + 127.5 * (ON - OFF))."""
+
+    tau_s: float = 0.03
+    polarity: str = "merged"
+
+    def validate(self) -> None:
+        check_range(self, "tau_s", 0.0, 1e3, lo_open=True)
+        _check_polarity(self)
+
+
+class TsFrontend(Frontend):
+    """Time surface: per pixel the latest event time, decayed exponentially to the sample time."""
+
+    name = "ts"
+    description = "time surface (HOTS): exp(-(t - T_last(x, y)) / tau), rendered at the sample time"
+    Config = TsConfig
+
+    def __init__(self, config=None, camera=None):
+        super().__init__(config, camera)
+        self.reset()
+
+    def reset(self) -> None:
+        channels = 2 if self.config.polarity == "split" else 1
+        self.latest = np.full((channels, self.camera.height, self.camera.width), -np.inf)
+
+    def consume(self, events: np.ndarray) -> None:
+        split = self.config.polarity == "split"
+        update_latest_times(
+            self.latest,
+            np.ascontiguousarray(events["t"]),
+            np.ascontiguousarray(events["x"]),
+            np.ascontiguousarray(events["y"]),
+            _channels(events, split),
+        )
+
+    def render(self, t_s: float) -> np.ndarray:
+        surface = time_surface(self.latest, t_s, self.config.tau_s)
+        if len(surface) == 2:
+            image = 127.5 + 127.5 * (surface[1] - surface[0])
+        else:
+            image = 255.0 * surface[0]
+        return np.clip(np.rint(image), 0, 255).astype(np.uint8)
+
+    def __call__(self, sample: Sample) -> np.ndarray:
+        self.consume(sample.events_since_previous)
+        return self.render(sample.t)
+
+
+# ----------------------------------------------------------------------------- SITS
+
+
+@numba.njit(cache=True, nogil=True)
+def update_sits(surface, x, y, channel, r, dv_compatible):
+    """SITS state update for each event, in order: in the (2r+1)^2 neighbourhood every value
+    greater than the centre's is decremented, then the centre is set to (2r+1)^2.
+
+    With `dv_compatible`, the neighbourhood is dv-processing's: (2r)^2 pixels from (x-r, y-r)
+    to (x+r-1, y+r-1) when it lies strictly inside the sensor, else the clipped (2r+1)^2.
+    """
+    height, width = surface.shape[1], surface.shape[2]
+    full = (2 * r + 1) ** 2
+    for i in range(len(x)):
+        cx, cy, k = x[i], y[i], channel[i]
+        inside = cx - r > 0 and cy - r > 0 and cx + r < width and cy + r < height
+        if dv_compatible and inside:
+            x0, x1, y0, y1 = cx - r, cx + r - 1, cy - r, cy + r - 1
+        else:
+            x0, x1 = max(cx - r, 0), min(cx + r, width - 1)
+            y0, y1 = max(cy - r, 0), min(cy + r, height - 1)
+        centre = surface[k, cy, cx]
+        for yy in range(y0, y1 + 1):
+            for xx in range(x0, x1 + 1):
+                if surface[k, yy, xx] > centre:
+                    surface[k, yy, xx] -= 1
+        surface[k, cy, cx] = full
+
+
+@dataclass(frozen=True)
+class SitsConfig:
+    """r: neighbourhood radius [px]; polarity: `merged` (rendered min-max normalised, as
+    dv-processing does) or `split` (per-polarity surfaces, rendered as
+    128 + 127.5 * (ON - OFF) / (2r+1)^2); dv_compatible: dv-processing's window."""
+
+    r: int = 4
+    polarity: str = "merged"
+    dv_compatible: bool = False
+
+    def validate(self) -> None:
+        check_range(self, "r", 1, 50)
+        _check_polarity(self)
+
+
+class SitsFrontend(Frontend):
+    """Speed-invariant time surface, updated event by event and rendered at the sample time."""
+
+    name = "sits"
+    description = "speed-invariant time surface (Manderscheid et al. 2019), updated event by event"
+    Config = SitsConfig
+
+    def __init__(self, config=None, camera=None):
+        super().__init__(config, camera)
+        self.reset()
+
+    def reset(self) -> None:
+        channels = 2 if self.config.polarity == "split" else 1
+        self.surface = np.zeros((channels, self.camera.height, self.camera.width), np.int32)
+
+    def consume(self, events: np.ndarray) -> None:
+        c = self.config
+        update_sits(
+            self.surface,
+            np.ascontiguousarray(events["x"], dtype=np.int64),
+            np.ascontiguousarray(events["y"], dtype=np.int64),
+            _channels(events, c.polarity == "split"),
+            c.r,
+            c.dv_compatible,
+        )
+
+    def render(self) -> np.ndarray:
+        full = (2 * self.config.r + 1) ** 2
+        if len(self.surface) == 2:
+            image = 127.5 + 127.5 * (self.surface[1] - self.surface[0]) / full
+            return np.clip(np.rint(image), 0, 255).astype(np.uint8)
+        # Min-max normalisation, exactly as dv-processing renders its frames.
+        values = self.surface[0].astype(np.int64)
+        lo, hi = values.min(), values.max()
+        return ((values - lo) * 255 // max(hi - lo, 1)).astype(np.uint8)
+
+    def __call__(self, sample: Sample) -> np.ndarray:
+        self.consume(sample.events_since_previous)
+        return self.render()
