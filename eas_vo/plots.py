@@ -42,3 +42,32 @@ def plot_rotation(path: str | Path, result, title: str = "") -> None:
     fig.suptitle(title, fontsize="medium")
     fig.savefig(path, dpi=110, format="png")
     plt.close(fig)
+
+
+def plot_gallery(path: str | Path, names: list[str], images: dict, frame_indices: list[int], title: str = "") -> None:
+    """A grid: one row per frame, one column per frontend (the paper's Fig. 1)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    rows, cols = len(frame_indices), len(names)
+    fig, axes = plt.subplots(rows, cols, figsize=(2.4 * cols, 1.9 * rows + 0.4), squeeze=False, constrained_layout=True)
+    for r, k in enumerate(frame_indices):
+        for c, name in enumerate(names):
+            ax = axes[r][c]
+            image = images[(k, name)]
+            if image is None:
+                ax.text(0.5, 0.5, "needs frames", ha="center", va="center", fontsize="small")
+            else:
+                ax.imshow(image, cmap="gray", vmin=0, vmax=255, interpolation="nearest")
+            ax.set_xticks([])
+            ax.set_yticks([])
+            if r == 0:
+                ax.set_title(name, fontsize="medium")
+            if c == 0:
+                ax.set_ylabel(f"frame {k}", fontsize="small")
+    if title:
+        fig.suptitle(title, fontsize="medium")
+    fig.savefig(path, dpi=100, format="png")
+    plt.close(fig)

@@ -5,7 +5,7 @@ import pytest
 
 from conftest import EVENT_WINDOWS, require
 from eas_vo.datasets.ecd import EcdFolderDataset
-from eas_vo.frontends.surfaces import SitsConfig, SitsFrontend, TsConfig, TsFrontend, update_sits
+from eas_vo.frontends.surfaces import SitsConfig, SitsFrontend, TsConfig, TsFrontend
 from eas_vo.types import EVENT_DTYPE, CameraModel, Sample
 
 
