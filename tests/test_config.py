@@ -38,7 +38,7 @@ def test_per_plugin_tables_apply_only_to_their_plugin(tmp_path):
         ("frontend.n=0", "n = 0 is out of range"),
         ("tracker.threshold1=500", "threshold1 .* must not exceed threshold2"),
         ("nosection.x=1", "SECTION.KEY=VALUE"),
-        ("run.frontend=nope", "unknown frontend 'nope'; installed: eas, histeq, original, slice"),
+        ("run.frontend=nope", "unknown frontend 'nope'; installed: eas, histeq, original, sits, slice, ts"),
     ],
 )
 def test_invalid_values_are_rejected_with_the_key(assignment, match):
