@@ -76,10 +76,8 @@ def test_incremental_consumption_equals_one_batch_and_reset_clears():
     assert not frontend.surface.any()
 
 
-dv = pytest.importorskip("dv_processing", reason="dv-processing (test extra) is not installed")
-
-
 def dv_sits(events, width, height):
+    dv = pytest.importorskip("dv_processing", reason="dv-processing (the test extra's peer) is not installed")
     store = dv.EventStore()
     for t, x, y, p in zip((events["t"] * 1e6).astype(np.int64), events["x"], events["y"], events["p"]):
         store.push_back(int(t), int(x), int(y), bool(p))
@@ -112,11 +110,8 @@ def test_sits_dv_compatible_equals_dv_processing_on_real_events(name):
     np.testing.assert_array_equal(ours.surface[0], dv_values(dv_sits(ev, 240, 180), 240, 180))
 
 
-tonic = pytest.importorskip("tonic", reason="tonic (test extra) is not installed")
-
-
 def test_ts_equals_tonic_time_surfaces():
-    import tonic.functional as F
+    F = pytest.importorskip("tonic.functional", reason="tonic (the test extra's peer) is not installed")
 
     width, height, tau_us, dt_us = 30, 20, 20_000.0, 50_000.0
     ev = random_events(3000, width, height, seed=4, t_scale=1.0)
