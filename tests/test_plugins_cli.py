@@ -54,9 +54,13 @@ def test_render_rejects_missing_frames(short_sequence, capsys):
 @pytest.fixture(scope="module")
 def plugin_path(tmp_path_factory):
     """The example plugin package, pip-installed into a private folder (nothing global changes)."""
+    import shutil
+
     target = tmp_path_factory.mktemp("plugin-site")
+    source = tmp_path_factory.mktemp("plugin-src") / "plugin"
+    shutil.copytree(PLUGIN, source)  # pip builds in place: keep the repository clean
     subprocess.run(
-        [sys.executable, "-m", "pip", "install", "--quiet", "--no-deps", "--target", str(target), str(PLUGIN)],
+        [sys.executable, "-m", "pip", "install", "--quiet", "--no-deps", "--target", str(target), str(source)],
         check=True,
         capture_output=True,
     )
