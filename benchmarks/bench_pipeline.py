@@ -44,6 +44,12 @@ def stage_times(cfg) -> dict:
     }
 
 
+def _timed(fn) -> float:
+    t0 = time.perf_counter()
+    fn()
+    return time.perf_counter() - t0
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--dataset", default="synthetic:default")
@@ -67,6 +73,16 @@ def main() -> None:
         print(f"  frontend: {stages['events'] / max(stages['frontend'], 1e-9) / 1e6:.1f} M events/s aggregated "
               f"({stages['events']:,} events in {stages['frames']} slices)")
     print(f"  APE {best.get('ape_mean_rad', np.nan):.4f} rad, NC {best['nc_mean']:.1f}")
+
+    result = pipeline.run(cfg)
+    n = len(result.t)
+    print(f"backends on the same {len(result.edges)} edges ({n} frames):")
+    for name, changes in (("chain", []), ("gtsam", ["backend.mode=batch"]), ("gtsam", ["backend.mode=online"])):
+        bcfg = config.resolve(None, {"dataset": args.dataset, "frontend": args.frontend, "backend": name}, changes)
+        backend = registry.get("backends", name)(bcfg.backend)
+        seconds = min(_timed(lambda: backend.solve(n, result.edges)) for _ in range(args.repeat))
+        label = name + (f" ({changes[0].split('=')[1]})" if changes else "")
+        print(f"  {label:16s} {1e3 * seconds / n:7.3f} ms/frame  (+{100 * seconds / best['elapsed_s']:5.1f} % of the eas+chain run)")
 
 
 if __name__ == "__main__":

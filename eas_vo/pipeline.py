@@ -42,6 +42,7 @@ class RunResult:
     edges: list[RelativeRotation]
     errors: RotationErrors | None
     metrics: dict = field(default_factory=dict)
+    causal_R_w_c: np.ndarray | None = None  # an online backend's estimate of each frame when it arrived
 
 
 def run(config: ResolvedConfig, out_dir: str | Path | None = None, progress: bool = False) -> RunResult:
@@ -95,7 +96,7 @@ def run(config: ResolvedConfig, out_dir: str | Path | None = None, progress: boo
     metrics["time_offset_estimated"] = rc.time_offset_auto and dataset.ground_truth is not None
     warnings = getattr(dataset, "warnings", None)
     metrics["data_warnings"] = warnings.lines() if warnings is not None else []
-    result = RunResult(t, R_w_c, records, edges, errors, metrics)
+    result = RunResult(t, R_w_c, records, edges, errors, metrics, getattr(backend, "causal", None))
     if out is not None:
         write_outputs(out, result, dataset.description)
     return result
@@ -141,6 +142,8 @@ def write_outputs(out: Path, result: RunResult, description: str) -> None:
     """trajectory.tum, groundtruth.tum, metrics.json and rotation.png (each written atomically)."""
     zeros = np.zeros((len(result.t), 3))
     write_text_atomic(out / "trajectory.tum", format_tum(result.t, zeros, result.R_w_c))
+    if result.causal_R_w_c is not None:
+        write_text_atomic(out / "trajectory_causal.tum", format_tum(result.t, zeros, result.causal_R_w_c))
     errors = result.errors
     if errors is not None and errors.valid.any():
         write_text_atomic(out / "groundtruth.tum", format_tum(result.t[errors.valid], errors.p_w_c_gt, errors.R_w_c_gt))

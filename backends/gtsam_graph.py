@@ -1,0 +1,137 @@
+"""Rotation-only pose graph with GTSAM: one Rot3 per frame, a prior on the first,
+a BetweenFactorRot3 per measured relative rotation (consecutive or skip edges)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Sequence
+
+import numpy as np
+
+from eas_vo.config import check_range
+from eas_vo.errors import ConfigError
+from eas_vo.plugins import Backend
+from eas_vo.types import RelativeRotation
+
+MODES = ("batch", "online")
+ROBUST = ("none", "huber", "cauchy")
+
+
+@dataclass(frozen=True)
+class GtsamConfig:
+    """Attributes:
+        mode: `batch` (Levenberg-Marquardt over all frames) or `online` (iSAM2, frame by frame:
+            `causal` holds each frame's estimate as it was when that frame arrived).
+        sigma_rad: noise of an edge measured with `reference_inliers` inliers; an edge with m
+            inliers gets sigma_rad * sqrt(reference_inliers / m).
+        reference_inliers: see sigma_rad.
+        gap_sigma_rad: a frame without a measurement is tied to the previous one by an
+            identity edge this loose (the chain's "keep the previous rotation").
+        robust, robust_k: robust kernel (`none`, `huber`, `cauchy`) and its threshold in sigmas.
+        iterations: Levenberg-Marquardt iterations (batch) or extra iSAM2 updates at the end.
+    """
+
+    mode: str = "batch"
+    sigma_rad: float = 0.005
+    reference_inliers: int = 100
+    gap_sigma_rad: float = 1.0
+    robust: str = "none"
+    robust_k: float = 2.0
+    iterations: int = 50
+
+    def validate(self) -> None:
+        if self.mode not in MODES:
+            raise ConfigError(f"mode = {self.mode!r}; allowed: {', '.join(MODES)}")
+        if self.robust not in ROBUST:
+            raise ConfigError(f"robust = {self.robust!r}; allowed: {', '.join(ROBUST)}")
+        check_range(self, "sigma_rad", 0.0, 10.0, lo_open=True)
+        check_range(self, "reference_inliers", 1, 10**6)
+        check_range(self, "gap_sigma_rad", 0.0, 1e3, lo_open=True)
+        check_range(self, "robust_k", 0.0, 1e3, lo_open=True)
+        check_range(self, "iterations", 1, 10_000)
+
+
+class GtsamBackend(Backend):
+    """Smooths the chained rotations with a rotation-only pose graph (GTSAM)."""
+
+    name = "gtsam"
+    description = "rotation-only pose graph (GTSAM Rot3): batch Levenberg-Marquardt or online iSAM2"
+    Config = GtsamConfig
+
+    def __init__(self, config=None):
+        super().__init__(config)
+        self.causal: np.ndarray | None = None
+
+    def _noise(self, gtsam, sigma: float):
+        c = self.config
+        base = gtsam.noiseModel.Isotropic.Sigma(3, sigma)
+        if c.robust == "none":
+            return base
+        estimator = gtsam.noiseModel.mEstimator.Huber if c.robust == "huber" else gtsam.noiseModel.mEstimator.Cauchy
+        return gtsam.noiseModel.Robust.Create(estimator.Create(c.robust_k), base)
+
+    def _factors(self, gtsam, n_frames: int, edges: Sequence[RelativeRotation]) -> dict[int, list]:
+        """Factors grouped by the newest frame they involve (what an online solver gets when)."""
+        c = self.config
+        by_frame: dict[int, list] = {k: [] for k in range(n_frames)}
+        by_frame[0].append(gtsam.PriorFactorRot3(0, gtsam.Rot3(), gtsam.noiseModel.Isotropic.Sigma(3, 1e-9)))
+        measured = set()
+        for e in edges:
+            sigma = c.sigma_rad * np.sqrt(c.reference_inliers / max(e.inliers, 1))
+            by_frame[e.j].append(gtsam.BetweenFactorRot3(e.i, e.j, gtsam.Rot3(e.R_i_j), self._noise(gtsam, sigma)))
+            measured.add(e.j)
+        gap = gtsam.noiseModel.Isotropic.Sigma(3, c.gap_sigma_rad)
+        for k in range(1, n_frames):
+            if k not in measured:
+                by_frame[k].append(gtsam.BetweenFactorRot3(k - 1, k, gtsam.Rot3(), gap))
+        return by_frame
+
+    def solve(self, n_frames: int, edges: Sequence[RelativeRotation]) -> np.ndarray:
+        import gtsam
+
+        from eas_vo.backends.chain import chain_rotations
+
+        initial_R = chain_rotations(n_frames, edges)
+        by_frame = self._factors(gtsam, n_frames, edges)
+        if self.config.mode == "batch":
+            return self._batch(gtsam, n_frames, by_frame, initial_R)
+        return self._online(gtsam, n_frames, by_frame, initial_R)
+
+    def _batch(self, gtsam, n_frames, by_frame, initial_R) -> np.ndarray:
+        graph = gtsam.NonlinearFactorGraph()
+        initial = gtsam.Values()
+        for k in range(n_frames):
+            for factor in by_frame[k]:
+                graph.add(factor)
+            initial.insert(k, gtsam.Rot3(initial_R[k]))
+        params = gtsam.LevenbergMarquardtParams()
+        params.setMaxIterations(self.config.iterations)
+        params.setRelativeErrorTol(1e-12)
+        params.setAbsoluteErrorTol(1e-15)
+        result = gtsam.LevenbergMarquardtOptimizer(graph, initial, params).optimize()
+        return np.stack([result.atRot3(k).matrix() for k in range(n_frames)])
+
+    def _online(self, gtsam, n_frames, by_frame, initial_R) -> np.ndarray:
+        params = gtsam.ISAM2Params()
+        params.setRelinearizeThreshold(1e-6)
+        params.relinearizeSkip = 1
+        isam = gtsam.ISAM2(params)
+        causal = np.empty((n_frames, 3, 3))
+        previous = np.eye(3)
+        for k in range(n_frames):
+            graph = gtsam.NonlinearFactorGraph()
+            for factor in by_frame[k]:
+                graph.add(factor)
+            values = gtsam.Values()
+            # the new frame starts where the chain puts it relative to the current estimate of k-1
+            step = initial_R[k - 1].T @ initial_R[k] if k else np.eye(3)
+            values.insert(k, gtsam.Rot3(previous @ step))
+            isam.update(graph, values)
+            estimate = isam.calculateEstimate()
+            causal[k] = estimate.atRot3(k).matrix()
+            previous = causal[k]
+        for _ in range(self.config.iterations):
+            isam.update()
+        self.causal = causal
+        estimate = isam.calculateEstimate()
+        return np.stack([estimate.atRot3(k).matrix() for k in range(n_frames)])
