@@ -11,6 +11,14 @@ import cv2
 import numpy as np
 
 from eas_vo.config import check_range
+from eas_vo.rotation_geometry import (
+    angular_residuals,
+    bearings,
+    essential_rotation,
+    gric,
+    rotation_ransac,
+    sampson_residuals,
+)
 from eas_vo.errors import ConfigError
 from eas_vo.types import CameraModel, FrameRecord, RelativeRotation
 
@@ -33,6 +41,7 @@ class TrackerConfig:
         lk_win_size, lk_max_level: pyramidal Lucas-Kanade window [px] and pyramid levels.
         threshold1: with fewer correspondences the previous rotation is kept.
         threshold2: with fewer correspondences corners are detected again in the frame.
+        geometry: `essential` (the paper), `rotation` or `auto` (see rotation_from_correspondences).
         essential_method: robust estimator around OpenCV's five-point solver: `usac`
             (RANSAC with local optimisation, the default), `ransac` (plain), `magsac`, `lmeds`.
         ransac_threshold_px: inlier threshold [px].
@@ -47,6 +56,7 @@ class TrackerConfig:
     lk_max_level: int = 3
     threshold1: int = 10
     threshold2: int = 150
+    geometry: str = "essential"
     essential_method: str = "usac"
     ransac_threshold_px: float = 1.0
     ransac_confidence: float = 0.999
@@ -62,6 +72,8 @@ class TrackerConfig:
         check_range(self, "threshold2", 5, 100_000)
         if self.threshold1 > self.threshold2:
             raise ConfigError(f"threshold1 ({self.threshold1}) must not exceed threshold2 ({self.threshold2})")
+        if self.geometry not in GEOMETRIES:
+            raise ConfigError(f"geometry = {self.geometry!r}; allowed: {', '.join(GEOMETRIES)}")
         if self.essential_method not in ESSENTIAL_METHODS:
             raise ConfigError(
                 f"essential_method = {self.essential_method!r}; allowed: {', '.join(ESSENTIAL_METHODS)}"
@@ -70,33 +82,52 @@ class TrackerConfig:
         check_range(self, "ransac_confidence", 0.0, 1.0, lo_open=True)
 
 
+GEOMETRIES = ("essential", "rotation", "auto")
+
+
 def rotation_from_correspondences(
-    pts_prev_n: np.ndarray, pts_cur_n: np.ndarray, threshold: float, confidence: float, method: str = "usac"
-) -> tuple[np.ndarray, int] | None:
-    """Five-point essential matrix (robustly estimated) and its decomposition to a rotation.
+    pts_prev_n: np.ndarray,
+    pts_cur_n: np.ndarray,
+    threshold: float,
+    confidence: float,
+    method: str = "usac",
+    geometry: str = "essential",
+) -> tuple[np.ndarray, int, str] | None:
+    """The relative rotation of two views from matched normalised image points.
 
     Args:
         pts_prev_n, pts_cur_n: (N, 2) matching normalised image coordinates.
         threshold: inlier threshold in normalised units (pixels / focal length).
         confidence: robust estimator confidence.
-        method: a key of ESSENTIAL_METHODS.
+        method: a key of ESSENTIAL_METHODS (the five-point estimator's robust loop).
+        geometry: `essential` (the paper: five-point essential matrix, rotation by cheirality),
+            `rotation` (rotation-only: 2-point RANSAC and least squares on bearings), or `auto`
+            (both, the better by GRIC; the essential matrix's rotation is then the candidate
+            closest to the rotation-only one, so a cheirality flip cannot get through).
 
     Returns:
-        (R_prev_cur, inlier count), or None when no essential matrix is found.
+        (R_prev_cur, inlier count, model used), or None when no model is found.
     """
-    E, mask = cv2.findEssentialMat(
-        pts_prev_n, pts_cur_n, np.eye(3), method=ESSENTIAL_METHODS[method], prob=confidence, threshold=threshold
-    )
-    if E is None or E.shape[0] < 3 or mask is None:
+    if geometry == "essential":
+        found = essential_rotation(pts_prev_n, pts_cur_n, threshold, confidence, ESSENTIAL_METHODS[method])
+        return None if found is None else (found[1].T, int(found[2].sum()), "essential")
+    f_prev, f_cur = bearings(pts_prev_n), bearings(pts_cur_n)
+    rotation = rotation_ransac(f_prev, f_cur, threshold)
+    if rotation is None:
         return None
-    E = E[:3]  # the five-point solver may return several stacked solutions
-    inliers = int(mask.sum())
-    # Cheirality with no distance cut: with a small baseline nearly every point is "far",
-    # and OpenCV's default cut (50 baselines) would leave the choice of the rotation to chance.
-    _, R_cur_prev, _, _, _ = cv2.recoverPose(
-        E, pts_prev_n, pts_cur_n, np.eye(3), distanceThresh=1e12, mask=mask.copy()
-    )
-    return R_cur_prev.T, inliers
+    R_rot, rot_mask = rotation
+    if geometry == "rotation":
+        return R_rot.T, int(rot_mask.sum()), "rotation"
+    found = essential_rotation(pts_prev_n, pts_cur_n, threshold, confidence, ESSENTIAL_METHODS[method], R_hint=R_rot)
+    if found is None:
+        return R_rot.T, int(rot_mask.sum()), "rotation"
+    E, R_ess, ess_mask = found
+    sigma = threshold / 2.0
+    gric_rot = gric(angular_residuals(R_rot, f_prev, f_cur), sigma, model_dim=2, params=3)
+    gric_ess = gric(sampson_residuals(E, pts_prev_n, pts_cur_n), sigma, model_dim=3, params=5)
+    if gric_rot <= gric_ess:
+        return R_rot.T, int(rot_mask.sum()), "rotation"
+    return R_ess.T, int(ess_mask.sum()), "essential"
 
 
 class Tracker:
@@ -159,11 +190,12 @@ class Tracker:
                 c.ransac_threshold_px / self.camera.focal_px,
                 c.ransac_confidence,
                 c.essential_method,
+                c.geometry,
             )
             if result is None:
                 status = "no_model"
             else:
-                R_prev_cur, inliers = result
+                R_prev_cur, inliers, _ = result
                 measurement = RelativeRotation(k - 1, k, R_prev_cur, inliers)
                 status = "ok"
 

@@ -95,8 +95,8 @@ def test_distortion_is_removed_before_geometry():
     X1 = X @ R_c1_c0.T + t_c1
     px0 = cv2.projectPoints(X, np.zeros(3), np.zeros(3), K, dist)[0].reshape(-1, 2)
     px1 = cv2.projectPoints(X1, np.zeros(3), np.zeros(3), K, dist)[0].reshape(-1, 2)
-    R, _ = rotation_from_correspondences(camera.undistort(px0), camera.undistort(px1), 1e-3, 0.999)
+    R, _, _ = rotation_from_correspondences(camera.undistort(px0), camera.undistort(px1), 1e-3, 0.999)
     assert_rotations_close(R, R_c1_c0.T, 1e-5)
     naive = CameraModel(240, 180, K)
-    R_naive, _ = rotation_from_correspondences(naive.undistort(px0), naive.undistort(px1), 1e-3, 0.999)
+    R_naive, _, _ = rotation_from_correspondences(naive.undistort(px0), naive.undistort(px1), 1e-3, 0.999)
     assert np.degrees(float(np.arccos((np.trace(R_naive.T @ R_c1_c0.T) - 1) / 2))) > 0.05
