@@ -28,7 +28,7 @@ def stage_times(cfg) -> dict:
     images = [frontend(s) for s in samples]
     t2 = time.perf_counter()
     tracker = Tracker(cfg.tracker, dataset.camera)
-    edges = [e for img, s in zip(images, samples) if (e := tracker.process(img, s.t)[1]) is not None]
+    edges = [e for img, s in zip(images, samples) for e in tracker.process(img, s.t)[1]]
     t3 = time.perf_counter()
     registry.get("backends", rc.backend)(cfg.backend).solve(len(samples), edges)
     t4 = time.perf_counter()

@@ -74,10 +74,9 @@ def run(config: ResolvedConfig, out_dir: str | Path | None = None, progress: boo
         for sample in dataset.samples(rc.start_s, rc.duration_s):
             image = frontend(sample)
             _check_image(image, dataset.camera, rc.frontend, sample)
-            record, edge = tracker.process(image, sample.t)
+            record, measured = tracker.process(image, sample.t)
             records.append(record)
-            if edge is not None:
-                edges.append(edge)
+            edges.extend(measured)
             log.write(record)
             bar.update(1)
             if record.index % 10 == 0:

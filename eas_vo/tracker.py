@@ -41,6 +41,9 @@ class TrackerConfig:
         lk_win_size, lk_max_level: pyramidal Lucas-Kanade window [px] and pyramid levels.
         threshold1: with fewer correspondences the previous rotation is kept.
         threshold2: with fewer correspondences corners are detected again in the frame.
+        keyframe_interval: 0 (the paper) or N: also measure the rotation from a keyframe to
+            each frame with the corners tracked since it, a new keyframe every N frames and
+            at each redetection (multi-frame edges i -> j for the gtsam backend).
         geometry: `essential` (the paper), `rotation` or `auto` (see rotation_from_correspondences).
         essential_method: robust estimator around OpenCV's five-point solver: `usac`
             (RANSAC with local optimisation, the default), `ransac` (plain), `magsac`, `lmeds`.
@@ -56,6 +59,7 @@ class TrackerConfig:
     lk_max_level: int = 3
     threshold1: int = 10
     threshold2: int = 150
+    keyframe_interval: int = 0
     geometry: str = "essential"
     essential_method: str = "usac"
     ransac_threshold_px: float = 1.0
@@ -70,6 +74,7 @@ class TrackerConfig:
         check_range(self, "lk_max_level", 0, 10)
         check_range(self, "threshold1", 5, 100_000)
         check_range(self, "threshold2", 5, 100_000)
+        check_range(self, "keyframe_interval", 0, 100_000)
         if self.threshold1 > self.threshold2:
             raise ConfigError(f"threshold1 ({self.threshold1}) must not exceed threshold2 ({self.threshold2})")
         if self.geometry not in GEOMETRIES:
@@ -133,8 +138,9 @@ def rotation_from_correspondences(
 class Tracker:
     """Tracks corners frame to frame and measures the relative rotation of each pair.
 
-    Feed frames in order with `process`; it returns what happened and, when a
-    model was estimated, the rotation `R_{k-1}_{k}` between the previous and this frame.
+    Feed frames in order with `process`; it returns what happened and the measured
+    rotations: `R_{k-1}_{k}` between the previous and this frame (the paper) and, with
+    `keyframe_interval` > 0, `R_{kf}_{k}` from the corners tracked since the keyframe kf.
     """
 
     def __init__(self, config: TrackerConfig, camera: CameraModel):
@@ -149,57 +155,75 @@ class Tracker:
 
     def reset(self) -> None:
         self._prev_image: np.ndarray | None = None
-        self._prev_pts = np.empty((0, 1, 2), np.float32)
+        self._prev_pts = np.empty((0, 2), np.float32)
+        self._kf_pts = np.empty((0, 2), np.float32)  # where each tracked corner was in the keyframe
+        self._kf_index = 0
         self._k = -1
 
     def detect(self, image: np.ndarray) -> np.ndarray:
-        """Shi-Tomasi corners of `image`, (N, 1, 2) float32 [px]."""
+        """Shi-Tomasi corners of `image`, (N, 2) float32 [px]."""
         c = self.config
         pts = cv2.goodFeaturesToTrack(
             image, c.max_corners, c.quality_level, c.min_distance_px, blockSize=c.block_size
         )
-        return np.empty((0, 1, 2), np.float32) if pts is None else pts.astype(np.float32)
+        return np.empty((0, 2), np.float32) if pts is None else pts.reshape(-1, 2).astype(np.float32)
 
-    def track(self, image: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """LK-track the previous corners into `image`: matched (N, 2) previous and current points [px]."""
+    def track(self, image: np.ndarray) -> np.ndarray:
+        """LK-track the previous corners into `image`: (N, 2) positions [px] and a mask of the tracked ones."""
         if len(self._prev_pts) == 0:
-            return np.empty((0, 2), np.float32), np.empty((0, 2), np.float32)
-        cur, status, _ = cv2.calcOpticalFlowPyrLK(self._prev_image, image, self._prev_pts, None, **self._lk_params)
+            return np.empty((0, 2), np.float32), np.zeros(0, bool)
+        cur, status, _ = cv2.calcOpticalFlowPyrLK(
+            self._prev_image, image, self._prev_pts.reshape(-1, 1, 2), None, **self._lk_params
+        )
         h, w = image.shape
-        ok = status.ravel() == 1
         cur = cur.reshape(-1, 2)
-        ok &= (cur[:, 0] >= 0) & (cur[:, 0] <= w - 1) & (cur[:, 1] >= 0) & (cur[:, 1] <= h - 1)
-        return self._prev_pts.reshape(-1, 2)[ok], cur[ok]
+        ok = (status.ravel() == 1) & (cur[:, 0] >= 0) & (cur[:, 0] <= w - 1) & (cur[:, 1] >= 0) & (cur[:, 1] <= h - 1)
+        return cur, ok
 
-    def process(self, image: np.ndarray, t: float) -> tuple[FrameRecord, RelativeRotation | None]:
+    def _measure(self, pts_from: np.ndarray, pts_to: np.ndarray, i: int, j: int) -> RelativeRotation | None:
+        c = self.config
+        result = rotation_from_correspondences(
+            self.camera.undistort(pts_from),
+            self.camera.undistort(pts_to),
+            c.ransac_threshold_px / self.camera.focal_px,
+            c.ransac_confidence,
+            c.essential_method,
+            c.geometry,
+        )
+        return None if result is None else RelativeRotation(i, j, result[0], result[1])
+
+    def process(self, image: np.ndarray, t: float) -> tuple[FrameRecord, list[RelativeRotation]]:
         """Track into `image` (uint8, sensor size) taken at `t` [s]."""
         c = self.config
         self._k += 1
         k = self._k
         if self._prev_image is None:
-            self._prev_image, self._prev_pts = image, self.detect(image)
-            return FrameRecord(k, t, 0, 0, "first", True), None
+            self._start_keyframe(image, self.detect(image))
+            return FrameRecord(k, t, 0, 0, "first", True), []
 
-        prev, cur = self.track(image)
-        nc = len(prev)
-        measurement, inliers, status = None, 0, "few_correspondences"
+        cur, ok = self.track(image)
+        nc = int(ok.sum())
+        edges, inliers, status = [], 0, "few_correspondences"
         if nc >= c.threshold1:
-            result = rotation_from_correspondences(
-                self.camera.undistort(prev),
-                self.camera.undistort(cur),
-                c.ransac_threshold_px / self.camera.focal_px,
-                c.ransac_confidence,
-                c.essential_method,
-                c.geometry,
-            )
-            if result is None:
+            step = self._measure(self._prev_pts[ok], cur[ok], k - 1, k)
+            if step is None:
                 status = "no_model"
             else:
-                R_prev_cur, inliers, _ = result
-                measurement = RelativeRotation(k - 1, k, R_prev_cur, inliers)
-                status = "ok"
+                edges.append(step)
+                inliers, status = step.inliers, "ok"
+                if c.keyframe_interval > 0 and k - self._kf_index >= 2:
+                    skip = self._measure(self._kf_pts[ok], cur[ok], self._kf_index, k)
+                    if skip is not None:
+                        edges.append(skip)
 
         redetect = nc < c.threshold2
-        self._prev_image = image
-        self._prev_pts = self.detect(image) if redetect else cur.reshape(-1, 1, 2)
-        return FrameRecord(k, t, nc, inliers, status, redetect), measurement
+        if redetect:
+            self._start_keyframe(image, self.detect(image))
+        else:
+            self._prev_image, self._prev_pts, self._kf_pts = image, cur[ok], self._kf_pts[ok]
+            if c.keyframe_interval > 0 and k - self._kf_index >= c.keyframe_interval:
+                self._kf_index, self._kf_pts = k, cur[ok]
+        return FrameRecord(k, t, nc, inliers, status, redetect), edges
+
+    def _start_keyframe(self, image: np.ndarray, pts: np.ndarray) -> None:
+        self._prev_image, self._prev_pts, self._kf_pts, self._kf_index = image, pts, pts, self._k

@@ -46,8 +46,9 @@ def test_recovers_known_rotations_to_0_2_degrees_per_frame(seed):
         step = Rotation.from_rotvec(rng.normal(0, 0.012, 3)).as_matrix()  # ~1 degree per frame
         R_c0_ck = R_c0_ck @ step
         image = warp_by_rotation(base, R_c0_ck.T)
-        record, edge = tracker.process(image, k * 0.05)
-        assert record.status == "ok" and edge is not None, record
+        record, edges = tracker.process(image, k * 0.05)
+        assert record.status == "ok" and len(edges) == 1, record
+        (edge,) = edges
         assert (edge.i, edge.j) == (k - 1, k)
         assert_rotations_close(edge.R_i_j, step, np.radians(0.2))
         assert record.inliers <= record.nc
@@ -56,10 +57,10 @@ def test_recovers_known_rotations_to_0_2_degrees_per_frame(seed):
 
 def test_featureless_frames_keep_the_previous_rotation_and_trigger_redetection():
     tracker = Tracker(TrackerConfig(threshold1=10, threshold2=50), CAMERA)
-    record, edge = tracker.process(np.zeros((180, 240), np.uint8), 0.0)
-    assert record.status == "first" and edge is None
-    record, edge = tracker.process(np.zeros((180, 240), np.uint8), 0.05)
-    assert (record.status, record.nc, edge, record.redetected) == ("few_correspondences", 0, None, True)
+    record, edges = tracker.process(np.zeros((180, 240), np.uint8), 0.0)
+    assert record.status == "first" and edges == []
+    record, edges = tracker.process(np.zeros((180, 240), np.uint8), 0.05)
+    assert (record.status, record.nc, edges, record.redetected) == ("few_correspondences", 0, [], True)
 
 
 def test_threshold2_controls_redetection():
@@ -77,8 +78,8 @@ def test_threshold1_above_nc_keeps_the_previous_rotation():
     shifted = warp_by_rotation(base, Rotation.from_rotvec([0.01, 0, 0]).as_matrix())
     tracker = Tracker(TrackerConfig(threshold1=100_000, threshold2=100_000), CAMERA)
     tracker.process(base, 0.0)
-    record, edge = tracker.process(shifted, 0.05)
-    assert record.nc > 20 and record.status == "few_correspondences" and edge is None
+    record, edges = tracker.process(shifted, 0.05)
+    assert record.nc > 20 and record.status == "few_correspondences" and edges == []
 
 
 def test_distortion_is_removed_before_geometry():
@@ -100,3 +101,20 @@ def test_distortion_is_removed_before_geometry():
     naive = CameraModel(240, 180, K)
     R_naive, _, _ = rotation_from_correspondences(naive.undistort(px0), naive.undistort(px1), 1e-3, 0.999)
     assert np.degrees(float(np.arccos((np.trace(R_naive.T @ R_c1_c0.T) - 1) / 2))) > 0.05
+
+
+def test_keyframe_edges_measure_rotation_across_several_frames():
+    rng = np.random.default_rng(7)
+    base = textured_image(3)
+    tracker = Tracker(TrackerConfig(keyframe_interval=3, threshold2=10), CAMERA)
+    tracker.process(base, 0.0)
+    R_c0 = [np.eye(3)]
+    spans = []
+    for k in range(1, 8):
+        R_c0.append(R_c0[-1] @ Rotation.from_rotvec(rng.normal(0, 0.01, 3)).as_matrix())
+        _, edges = tracker.process(warp_by_rotation(base, R_c0[k].T), k * 0.05)
+        for e in edges:
+            assert_rotations_close(e.R_i_j, R_c0[e.i].T @ R_c0[e.j], np.radians(0.2))
+            spans.append((e.i, e.j))
+    assert (0, 2) in spans and (0, 3) in spans and (3, 5) in spans and (3, 6) in spans
+    assert all(j - i <= 3 for i, j in spans)
