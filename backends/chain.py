@@ -31,5 +31,5 @@ class ChainBackend(Backend):
     name = "chain"
     description = "multiply consecutive relative rotations, no optimisation (the paper)"
 
-    def solve(self, n_frames: int, edges: Sequence[RelativeRotation]) -> np.ndarray:
+    def solve(self, n_frames: int, edges: Sequence[RelativeRotation], times=None, imu=None) -> np.ndarray:
         return chain_rotations(n_frames, edges)

@@ -10,6 +10,7 @@ import numpy as np
 
 from eas_vo.config import check_range
 from eas_vo.errors import ConfigError
+from eas_vo.geometry import rotvec_to_matrix
 from eas_vo.plugins import Backend
 from eas_vo.types import RelativeRotation
 
@@ -29,6 +30,12 @@ class GtsamConfig:
             identity edge this loose (the chain's "keep the previous rotation").
         robust, robust_k: robust kernel (`none`, `huber`, `cauchy`) and its threshold in sigmas.
         iterations: Levenberg-Marquardt iterations (batch) or extra iSAM2 updates at the end.
+        gyro: fuse the dataset's gyro (when it has an IMU): readings preintegrated between
+            frames (PreintegratedAhrsMeasurements) in AHRSFactors sharing one bias variable.
+        gyro_noise: gyro white-noise density [rad/s/sqrt(Hz)].
+        gyro_bias_sigma: prior on the gyro bias [rad/s].
+        imu_rotvec_cam: rotation from the camera to the IMU frame, R_imu_cam as a rotation vector [rad].
+        imu_time_offset_s: IMU time = frame time + this [s].
     """
 
     mode: str = "batch"
@@ -38,8 +45,17 @@ class GtsamConfig:
     robust: str = "none"
     robust_k: float = 2.0
     iterations: int = 50
+    gyro: bool = False
+    gyro_noise: float = 0.003
+    gyro_bias_sigma: float = 0.05
+    imu_rotvec_cam: tuple = (0.0, 0.0, 0.0)
+    imu_time_offset_s: float = 0.0
 
     def validate(self) -> None:
+        if len(self.imu_rotvec_cam) != 3 or not all(isinstance(v, (int, float)) for v in self.imu_rotvec_cam):
+            raise ConfigError(f"imu_rotvec_cam = {self.imu_rotvec_cam!r}; expected three numbers [rad]")
+        check_range(self, "gyro_noise", 0.0, 10.0, lo_open=True)
+        check_range(self, "gyro_bias_sigma", 0.0, 10.0, lo_open=True)
         if self.mode not in MODES:
             raise ConfigError(f"mode = {self.mode!r}; allowed: {', '.join(MODES)}")
         if self.robust not in ROBUST:
@@ -86,13 +102,40 @@ class GtsamBackend(Backend):
                 by_frame[k].append(gtsam.BetweenFactorRot3(k - 1, k, gtsam.Rot3(), gap))
         return by_frame
 
-    def solve(self, n_frames: int, edges: Sequence[RelativeRotation]) -> np.ndarray:
+    def _gyro_factors(self, gtsam, by_frame: dict, times: np.ndarray, imu) -> None:
+        """AHRSFactors between consecutive frames (gyro held constant over each IMU interval)."""
+        c = self.config
+        params = gtsam.PreintegratedRotationParams()
+        params.setGyroscopeCovariance(c.gyro_noise**2 * np.eye(3))
+        R_imu_cam = rotvec_to_matrix(np.asarray(c.imu_rotvec_cam, float))
+        params.setBodyPSensor(gtsam.Pose3(gtsam.Rot3(R_imu_cam.T), np.zeros(3)))
+        t_imu = imu.t - c.imu_time_offset_s
+        bias = gtsam.symbol("b", 0)
+        by_frame[0].append(gtsam.PriorFactorVector(bias, np.zeros(3), gtsam.noiseModel.Isotropic.Sigma(3, c.gyro_bias_sigma)))
+        for k in range(1, len(times)):
+            a, b = times[k - 1], times[k]
+            if a < t_imu[0] or b > t_imu[-1] + 0.1:
+                continue  # no gyro over this interval
+            pim = gtsam.PreintegratedAhrsMeasurements(params, np.zeros(3))
+            first = max(int(np.searchsorted(t_imu, a, side="right")) - 1, 0)
+            for s in range(first, len(t_imu)):
+                start, end = max(t_imu[s], a), min(t_imu[s + 1] if s + 1 < len(t_imu) else b, b)
+                if start >= b:
+                    break
+                if end > start:
+                    pim.integrateMeasurement(imu.gyro[s], end - start)
+            by_frame[k].append(gtsam.AHRSFactor(k - 1, k, bias, pim))
+
+    def solve(self, n_frames: int, edges: Sequence[RelativeRotation], times=None, imu=None) -> np.ndarray:
         import gtsam
 
         from eas_vo.backends.chain import chain_rotations
 
         initial_R = chain_rotations(n_frames, edges)
         by_frame = self._factors(gtsam, n_frames, edges)
+        self._with_bias = self.config.gyro and imu is not None and times is not None
+        if self._with_bias:
+            self._gyro_factors(gtsam, by_frame, np.asarray(times), imu)
         if self.config.mode == "batch":
             return self._batch(gtsam, n_frames, by_frame, initial_R)
         return self._online(gtsam, n_frames, by_frame, initial_R)
@@ -104,6 +147,8 @@ class GtsamBackend(Backend):
             for factor in by_frame[k]:
                 graph.add(factor)
             initial.insert(k, gtsam.Rot3(initial_R[k]))
+        if self._with_bias:
+            initial.insert(gtsam.symbol("b", 0), np.zeros(3))
         params = gtsam.LevenbergMarquardtParams()
         params.setMaxIterations(self.config.iterations)
         params.setRelativeErrorTol(1e-12)
@@ -126,6 +171,8 @@ class GtsamBackend(Backend):
             # the new frame starts where the chain puts it relative to the current estimate of k-1
             step = initial_R[k - 1].T @ initial_R[k] if k else np.eye(3)
             values.insert(k, gtsam.Rot3(previous @ step))
+            if k == 0 and self._with_bias:
+                values.insert(gtsam.symbol("b", 0), np.zeros(3))
             isam.update(graph, values)
             estimate = isam.calculateEstimate()
             causal[k] = estimate.atRot3(k).matrix()

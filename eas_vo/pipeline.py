@@ -83,7 +83,7 @@ def run(config: ResolvedConfig, out_dir: str | Path | None = None, progress: boo
                 bar.set_postfix(nc=record.nc, refresh=False)
 
     t = np.array([r.t for r in records])
-    R_w_c = backend.solve(len(records), edges)
+    R_w_c = backend.solve(len(records), edges, t, dataset.imu)
     errors, offset = None, rc.time_offset_s
     if dataset.ground_truth is not None:
         if rc.time_offset_auto:

@@ -110,6 +110,7 @@ class Backend:
     def __init__(self, config=None):
         self.config = config if config is not None else self.Config()
 
-    def solve(self, n_frames: int, edges: Sequence[RelativeRotation]) -> np.ndarray:
-        """(n_frames, 3, 3) rotations R_w_c with frame 0 at the identity."""
+    def solve(self, n_frames: int, edges: Sequence[RelativeRotation], times=None, imu: ImuSeries | None = None) -> np.ndarray:
+        """(n_frames, 3, 3) rotations R_w_c with frame 0 at the identity, from the measured
+        edges and, where useful, the frame times [s] and the dataset's IMU."""
         raise NotImplementedError
