@@ -123,20 +123,22 @@ def sits_kernel(r: int):
             base = (records[e + 12] > 0) * height * width if split else 0
             centre = flat[base + cy * width + cx]
             inside = cx - r > 0 and cy - r > 0 and cx + r < width and cy + r < height
-            if inside and dv_compatible:  # constant trip counts: unrolled and vectorised
-                o = base + (cy - r) * width + cx - r
+            # Unsigned indices spare numba's negative-index checks; constant trip counts let
+            # the window loops unroll and vectorise.
+            if inside and dv_compatible:
+                o = np.uint64(base + (cy - r) * width + cx - r)
                 for _ in range(side - 1):
-                    for xx in range(side - 1):
+                    for xx in range(np.uint64(side - 1)):
                         v = flat[o + xx]
                         flat[o + xx] = v - (v > centre)
-                    o += width
+                    o += np.uint64(width)
             elif inside:
-                o = base + (cy - r) * width + cx - r
+                o = np.uint64(base + (cy - r) * width + cx - r)
                 for _ in range(side):
-                    for xx in range(side):
+                    for xx in range(np.uint64(side)):
                         v = flat[o + xx]
                         flat[o + xx] = v - (v > centre)
-                    o += width
+                    o += np.uint64(width)
             else:
                 x0, x1 = max(cx - r, 0), min(cx + r, width - 1)
                 for yy in range(max(cy - r, 0), min(cy + r, height - 1) + 1):
