@@ -108,16 +108,17 @@ def _parse_and_pack(buf, pow10, width, height, tolerance_s, last_t, out):
     scratch = np.empty(1, np.float64)
     first_t = -np.inf
     n = 0
-    i = 0
+    i = np.uint64(0)
+    one = np.uint64(1)
     lines = 0
-    size = len(buf)
+    size = np.uint64(len(buf))
     while i < size:
         c = buf[i]
         while c == 32 or c == 9 or c == 13:
-            i += 1
+            i += one
             c = buf[i]
         if c == 10:
-            i += 1
+            i += one
             lines += 1
             continue
         start = i
@@ -126,38 +127,38 @@ def _parse_and_pack(buf, pow10, width, height, tolerance_s, last_t, out):
         while 48 <= c <= 57:
             mant = mant * 10 + (c - 48)
             nd += 1
-            i += 1
+            i += one
             c = buf[i]
         dec = 0
         if c == 46:
-            i += 1
+            i += one
             c = buf[i]
             while 48 <= c <= 57:
                 mant = mant * 10 + (c - 48)
                 dec += 1
-                i += 1
+                i += one
                 c = buf[i]
         if nd + dec == 0 or nd + dec > 15 or not (c == 32 or c == 9):
-            return n, start, lines, first_t, last_t
+            return n, np.int64(start), lines, first_t, last_t
         x = y = p = 0
         for k in range(3):
             while c == 32 or c == 9:
-                i += 1
+                i += one
                 c = buf[i]
             negative = False
             if k == 2 and c == 45:
                 negative = True
-                i += 1
+                i += one
                 c = buf[i]
             v = 0
             m = 0
             while 48 <= c <= 57:
                 v = v * 10 + (c - 48)
                 m += 1
-                i += 1
+                i += one
                 c = buf[i]
             if m == 0 or m > 6:
-                return n, start, lines, first_t, last_t
+                return n, np.int64(start), lines, first_t, last_t
             if k == 0:
                 x = v
             elif k == 1:
@@ -165,19 +166,19 @@ def _parse_and_pack(buf, pow10, width, height, tolerance_s, last_t, out):
             else:
                 p = -v if negative else v
         while c == 32 or c == 9 or c == 13:
-            i += 1
+            i += one
             c = buf[i]
         if c != 10:
-            return n, start, lines, first_t, last_t
+            return n, np.int64(start), lines, first_t, last_t
         ok, t = _accept(mant / pow10[dec], x, y, p, last_t, width, height, tolerance_s)
         if not ok:
-            return n, start, lines, first_t, last_t
+            return n, np.int64(start), lines, first_t, last_t
         if n == 0:
             first_t = t
         last_t = t
         _pack(out, n, t, x, y, p, scratch)
         n += 1
-        i += 1
+        i += one
         lines += 1
     return n, -1, lines, first_t, last_t
 
