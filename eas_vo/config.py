@@ -32,6 +32,8 @@ class RunConfig:
         time_offset_s: ground truth is sampled at `t_frame + time_offset_s` [s].
         time_offset_auto: estimate the offset from the data instead (relative rotations
             against ground truth); the estimate is reported in metrics.json.
+        orb_stats: also count ORB keypoints per image and matches between adjacent images
+            (the paper's Table 2), reported in metrics.json.
     """
 
     dataset: str = "synthetic:default"
@@ -41,6 +43,7 @@ class RunConfig:
     duration_s: float = math.inf
     time_offset_s: float = 0.0
     time_offset_auto: bool = False
+    orb_stats: bool = False
 
     def validate(self) -> None:
         check_range(self, "start_s", 0.0, math.inf)

@@ -17,6 +17,7 @@ from eas_vo.errors import EasVoError
 from eas_vo.evaluation import RotationErrors, estimate_time_offset, rotation_errors
 from eas_vo.geometry import quats_from_matrices
 from eas_vo.io import atomic_path, write_text_atomic
+from eas_vo.orb import OrbStats
 from eas_vo.plugins import Dataset
 from eas_vo.tracker import Tracker
 from eas_vo.types import FrameRecord, RelativeRotation
@@ -70,10 +71,13 @@ def run(config: ResolvedConfig, out_dir: str | Path | None = None, progress: boo
         write_text_atomic(out / "config.toml", config.to_toml())
     records: list[FrameRecord] = []
     edges: list[RelativeRotation] = []
+    orb = OrbStats() if rc.orb_stats else None
     with _FrameLog(out / "frames.csv" if out else None) as log, _progress(n_total, progress, rc) as bar:
         for sample in dataset.samples(rc.start_s, rc.duration_s):
             image = frontend(sample)
             _check_image(image, dataset.camera, rc.frontend, sample)
+            if orb is not None:
+                orb.add(image)
             record, measured = tracker.process(image, sample.t)
             records.append(record)
             edges.extend(measured)
@@ -95,6 +99,8 @@ def run(config: ResolvedConfig, out_dir: str | Path | None = None, progress: boo
     metrics["time_offset_estimated"] = rc.time_offset_auto and dataset.ground_truth is not None
     warnings = getattr(dataset, "warnings", None)
     metrics["data_warnings"] = warnings.lines() if warnings is not None else []
+    if orb is not None:
+        metrics.update(orb.summary())
     result = RunResult(t, R_w_c, records, edges, errors, metrics, getattr(backend, "causal", None))
     if out is not None:
         write_outputs(out, result, dataset.description)

@@ -71,3 +71,55 @@ def plot_gallery(path: str | Path, names: list[str], images: dict, frame_indices
         fig.suptitle(title, fontsize="medium")
     fig.savefig(path, dpi=100, format="png")
     plt.close(fig)
+
+
+def plot_ape_bars(path: str | Path, rows: list[dict]) -> None:
+    """Average APE per source type (bars) and backend (colours), one panel per dataset."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    ok = [r for r in rows if r["status"] == "ok" and r["ape_mean_rad"] is not None]
+    datasets = list(dict.fromkeys(r["dataset"] for r in rows))
+    backends = list(dict.fromkeys(r["backend"] for r in rows))
+    sources = list(dict.fromkeys(r["frontend"] + (f"\n{r['sweep']}" if r["sweep"] else "") for r in rows))
+    fig, axes = plt.subplots(1, len(datasets), figsize=(max(5, 1.0 * len(sources) * len(backends) + 2) * len(datasets) / max(1, len(datasets) / 1.5), 3.8), squeeze=False, constrained_layout=True)
+    width = 0.8 / max(1, len(backends))
+    for ax, dataset in zip(axes[0], datasets):
+        for b, backend in enumerate(backends):
+            values = []
+            for source in sources:
+                match = [r for r in ok if r["dataset"] == dataset and r["backend"] == backend
+                         and r["frontend"] + (f"\n{r['sweep']}" if r["sweep"] else "") == source]
+                values.append(match[0]["ape_mean_rad"] if match else np.nan)
+            ax.bar(np.arange(len(sources)) + b * width, values, width, label=backend)
+        ax.set_xticks(np.arange(len(sources)) + width * (len(backends) - 1) / 2, sources, fontsize="small")
+        ax.set_ylabel("average APE [rad]")
+        ax.set_title(Path(dataset.rstrip("/")).name or dataset, fontsize="medium")
+        ax.grid(axis="y", alpha=0.3)
+    axes[0][0].legend(fontsize="small")
+    fig.savefig(path, dpi=110, format="png")
+    plt.close(fig)
+
+
+def plot_ape_time(path: str | Path, series: dict) -> None:
+    """APE over time: {(dataset, label): (t, ape)}, one panel per dataset, a line per label."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    datasets = list(dict.fromkeys(d for d, _ in series))
+    fig, axes = plt.subplots(len(datasets), 1, figsize=(8, 3 * max(1, len(datasets))), squeeze=False, constrained_layout=True)
+    for ax, dataset in zip(axes[:, 0], datasets):
+        for (d, label), (t, ape) in series.items():
+            if d == dataset:
+                ax.plot(t, ape, lw=1.0, label=label)
+        ax.set_title(Path(dataset.rstrip("/")).name or dataset, fontsize="medium")
+        ax.set_ylabel("APE [rad]")
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize="small", ncol=3)
+    axes[-1, 0].set_xlabel("time [s]")
+    fig.savefig(path, dpi=110, format="png")
+    plt.close(fig)

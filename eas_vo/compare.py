@@ -1,0 +1,218 @@
+"""Experiments: every cell of dataset x frontend x backend x sweep point, run as `eas-vo run`
+would, in parallel processes, resumable, summarised as the paper's Table 1."""
+
+from __future__ import annotations
+
+import csv
+import io
+import itertools
+import json
+import re
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+
+from eas_vo.config import parse_set
+from eas_vo.errors import EasVoError
+from eas_vo.io import write_text_atomic
+
+
+@dataclass(frozen=True)
+class Cell:
+    """One run of the grid; `folder` is relative to the experiment's output folder."""
+
+    dataset: str
+    frontend: str
+    backend: str
+    sweep: tuple  # ((key, value text), ...)
+
+    @property
+    def sweep_label(self) -> str:
+        return " ".join(f"{k}={v}" for k, v in self.sweep)
+
+    @property
+    def folder(self) -> str:
+        parts = [f"{self.frontend}_{self.backend}"] + [f"{k.split('.')[-1]}-{v}" for k, v in self.sweep]
+        return f"{_slug(self.dataset)}/{_slug('_'.join(parts))}"
+
+
+def _slug(text: str) -> str:
+    return re.sub(r"[^A-Za-z0-9._=-]+", "-", Path(text.rstrip("/")).name or text).strip("-")
+
+
+def parse_sweeps(sweeps: list[str]) -> list[tuple[str, list[str]]]:
+    """`frontend.n=2000,4000` -> [('frontend.n', ['2000', '4000'])], keys validated."""
+    out = []
+    for sweep in sweeps:
+        key, sep, values = sweep.partition("=")
+        parse_set(f"{key}=0")  # the key's form
+        items = [v.strip() for v in values.split(",") if v.strip()]
+        if not sep or not items:
+            raise EasVoError(f"--sweep {sweep!r}: expected SECTION.KEY=V1,V2,...")
+        out.append((key.strip(), items))
+    return out
+
+
+def plan(datasets: list[str], frontends: list[str], backends: list[str], sweeps: list[str]) -> list[Cell]:
+    """The cartesian grid of cells."""
+    parsed = parse_sweeps(sweeps)
+    points = [tuple(zip([k for k, _ in parsed], combo)) for combo in itertools.product(*[v for _, v in parsed])]
+    return [
+        Cell(d, f, b, point)
+        for d, f, b, point in itertools.product(datasets, frontends, backends, points or [()])
+    ]
+
+
+def run_cell(cell: Cell, out_root: str, config_file, assignments: list[str], run_overrides: dict) -> dict:
+    """Run one cell into its folder (in a worker process). A user error is reported, not raised."""
+    from eas_vo import config, pipeline
+
+    folder = Path(out_root) / cell.folder
+    try:
+        cfg = config.resolve(
+            config_file,
+            {**run_overrides, "dataset": cell.dataset, "frontend": cell.frontend, "backend": cell.backend},
+            list(assignments) + [f"{k}={v}" for k, v in cell.sweep],
+        )
+        metrics = pipeline.run(cfg, folder).metrics
+        return {"status": "ok", **metrics}
+    except EasVoError as exc:
+        message = str(exc).splitlines()[0]
+        folder.mkdir(parents=True, exist_ok=True)
+        write_text_atomic(folder / "error.txt", message + "\n")
+        return {"status": "failed", "error": message}
+
+
+def completed(out_root: Path, cell: Cell) -> dict | None:
+    """The metrics of a cell that already finished (resuming), else None."""
+    path = out_root / cell.folder / "metrics.json"
+    try:
+        return {"status": "ok", **json.loads(path.read_text())}
+    except (OSError, ValueError):
+        return None
+
+
+def run_grid(cells: list[Cell], out_root: Path, config_file, assignments, run_overrides, jobs: int, progress: bool):
+    """Run the cells not yet complete, `jobs` processes at a time; returns {cell: result} and the count run."""
+    from tqdm import tqdm
+
+    results = {cell: completed(out_root, cell) for cell in cells}
+    todo = [cell for cell in cells if results[cell] is None]
+    with tqdm(total=len(cells), initial=len(cells) - len(todo), disable=not progress, unit="cell", desc="compare") as bar:
+        if jobs <= 1:
+            for cell in todo:
+                results[cell] = run_cell(cell, str(out_root), config_file, assignments, run_overrides)
+                bar.update(1)
+        else:
+            with ProcessPoolExecutor(jobs) as pool:
+                futures = {pool.submit(run_cell, cell, str(out_root), config_file, assignments, run_overrides): cell for cell in todo}
+                for future in as_completed(futures):
+                    results[futures[future]] = future.result()
+                    bar.update(1)
+    return results, len(todo)
+
+
+# ----------------------------------------------------------------------------- tables
+
+
+def table_rows(cells: list[Cell], results: dict) -> list[dict]:
+    return [
+        {
+            **asdict(cell),
+            "sweep": cell.sweep_label,
+            "folder": cell.folder,
+            "status": results[cell]["status"],
+            "error": results[cell].get("error", ""),
+            "nc_mean": results[cell].get("nc_mean"),
+            "ape_mean_rad": results[cell].get("ape_mean_rad"),
+            "orb_keypoints_mean": results[cell].get("orb_keypoints_mean"),
+            "orb_matches_mean": results[cell].get("orb_matches_mean"),
+        }
+        for cell in cells
+    ]
+
+
+def _best(rows: list[dict], key: str, lower: bool) -> dict:
+    """Per (dataset, backend) column: the best value of `key`."""
+    best = {}
+    for r in rows:
+        v = r[key]
+        if v is None or v != v:
+            continue
+        col = (r["dataset"], r["backend"])
+        if col not in best or (v < best[col] if lower else v > best[col]):
+            best[col] = v
+    return best
+
+
+def table_markdown(rows: list[dict]) -> str:
+    """The paper's Table 1: a row per source type (and sweep point), per sequence and backend
+    the average NC and average APE [rad]; the best of each column in bold."""
+    datasets = list(dict.fromkeys(r["dataset"] for r in rows))
+    backends = list(dict.fromkeys(r["backend"] for r in rows))
+    sources = list(dict.fromkeys((r["frontend"], r["sweep"]) for r in rows))
+    by_key = {(r["dataset"], r["backend"], r["frontend"], r["sweep"]): r for r in rows}
+    best_nc, best_ape = _best(rows, "nc_mean", lower=False), _best(rows, "ape_mean_rad", lower=True)
+    head1 = ["Sequence"] + [f"{_slug(d)} ({b})" for d in datasets for b in backends for _ in (0, 1)]
+    head2 = ["Source type"] + ["average NC", "average APE"] * (len(datasets) * len(backends))
+    lines = ["| " + " | ".join(head1) + " |", "|" + "---|" * len(head1), "| " + " | ".join(head2) + " |"]
+    for frontend, sweep in sources:
+        cells = [frontend + (f" ({sweep})" if sweep else "")]
+        for d in datasets:
+            for b in backends:
+                r = by_key.get((d, b, frontend, sweep))
+                if r is None or r["status"] != "ok":
+                    cells += ["failed" if r else "", (r or {}).get("error", "")[:60]]
+                    continue
+                nc, ape = r["nc_mean"], r["ape_mean_rad"]
+                nc_text = f"{nc:.0f}"
+                ape_text = f"{ape:.3f}" if ape == ape else "n/a"
+                if nc == best_nc.get((d, b)):
+                    nc_text = f"**{nc_text}**"
+                if ape == best_ape.get((d, b)):
+                    ape_text = f"**{ape_text}**"
+                cells += [nc_text, ape_text]
+        lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines) + "\n"
+
+
+def table_csv(rows: list[dict]) -> str:
+    fields = ["dataset", "frontend", "backend", "sweep", "status", "nc_mean", "ape_mean_rad",
+              "orb_keypoints_mean", "orb_matches_mean", "best_nc", "best_ape", "folder", "error"]
+    best_nc, best_ape = _best(rows, "nc_mean", lower=False), _best(rows, "ape_mean_rad", lower=True)
+    buffer = io.StringIO()
+    writer = csv.DictWriter(buffer, fieldnames=fields, extrasaction="ignore")
+    writer.writeheader()
+    for r in rows:
+        col = (r["dataset"], r["backend"])
+        writer.writerow({**r, "best_nc": int(r["nc_mean"] is not None and r["nc_mean"] == best_nc.get(col)),
+                         "best_ape": int(r["ape_mean_rad"] is not None and r["ape_mean_rad"] == best_ape.get(col))})
+    return buffer.getvalue()
+
+
+def write_tables(out_root: Path, rows: list[dict]) -> None:
+    write_text_atomic(out_root / "table.md", table_markdown(rows))
+    write_text_atomic(out_root / "table.csv", table_csv(rows))
+    write_text_atomic(out_root / "table.json", json.dumps(rows, indent=2) + "\n")
+
+
+# ----------------------------------------------------------------------------- figures
+
+
+def per_frame_ape(folder: Path) -> tuple[np.ndarray, np.ndarray] | None:
+    """(t - t0, APE per frame [rad]) of a cell from its TUM files, aligned at the first frame."""
+    from eas_vo.geometry import geodesic_angle, matrices_from_quats
+
+    try:
+        est = np.loadtxt(folder / "trajectory.tum", ndmin=2)
+        gt = np.loadtxt(folder / "groundtruth.tum", ndmin=2)
+    except (OSError, ValueError):
+        return None
+    common, i_est, i_gt = np.intersect1d(est[:, 0], gt[:, 0], return_indices=True)
+    if len(common) == 0:
+        return None
+    R_est, R_gt = matrices_from_quats(est[i_est, 4:8]), matrices_from_quats(gt[i_gt, 4:8])
+    aligned = R_gt[0] @ R_est[0].T @ R_est
+    return common - common[0], geodesic_angle(R_gt, aligned)

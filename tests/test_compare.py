@@ -1,0 +1,78 @@
+"""`eas-vo compare`: the grid, its Table 1, resuming, failing cells, sweeps, parallel runs."""
+
+import json
+
+import pytest
+
+from eas_vo.cli import main
+from eas_vo.compare import Cell, plan, table_markdown
+
+
+@pytest.fixture(scope="module")
+def grid(short_sequence, tmp_path_factory):
+    out = tmp_path_factory.mktemp("cmp") / "grid"
+    argv = ["compare", "--dataset", str(short_sequence), "--frontends", "original,eas", "--backends", "chain,gtsam",
+            "--out", str(out), "--jobs", "2", "--quiet"]
+    assert main(argv) == 0
+    return out, argv
+
+
+def test_table_equals_each_cells_metrics(grid):
+    out, _ = grid
+    rows = json.loads((out / "table.json").read_text())
+    assert len(rows) == 4 and {r["status"] for r in rows} == {"ok"}
+    for r in rows:
+        metrics = json.loads((out / r["folder"] / "metrics.json").read_text())
+        assert r["nc_mean"] == metrics["nc_mean"] and r["ape_mean_rad"] == metrics["ape_mean_rad"]
+        assert (out / r["folder"] / "rotation.png").exists()
+    md = (out / "table.md").read_text()
+    assert "| Source type | average NC | average APE |" in md and md.count("**") >= 4
+    csv_lines = (out / "table.csv").read_text().splitlines()
+    assert len(csv_lines) == 5 and csv_lines[0].startswith("dataset,frontend,backend")
+    assert (out / "ape_bars.png").exists() and (out / "ape_time.png").exists()
+
+
+def test_a_second_invocation_runs_nothing(grid, capsys):
+    out, argv = grid
+    before = {p: p.stat().st_mtime_ns for p in out.rglob("metrics.json")}
+    assert main(argv) == 0
+    assert "4 cells (0 run, 4 already complete, 0 failed)" in capsys.readouterr().out
+    assert {p: p.stat().st_mtime_ns for p in out.rglob("metrics.json")} == before
+
+
+def test_a_failing_cell_is_reported_and_the_rest_complete(short_sequence, tmp_path, capsys):
+    out = tmp_path / "sweep"
+    argv = ["compare", "--dataset", str(short_sequence), "--frontends", "slice", "--sweep", "frontend.n=0,2000",
+            "--out", str(out), "--jobs", "1", "--quiet"]
+    assert main(argv) == 0
+    captured = capsys.readouterr()
+    assert "2 cells (2 run, 0 already complete, 1 failed)" in captured.out
+    assert "n = 0 is out of range" in captured.err
+    rows = {r["sweep"]: r for r in json.loads((out / "table.json").read_text())}
+    assert rows["frontend.n=0"]["status"] == "failed" and rows["frontend.n=2000"]["status"] == "ok"
+    assert "slice (frontend.n=2000)" in (out / "table.md").read_text()
+
+
+def test_one_and_two_jobs_give_the_same_table(grid, short_sequence, tmp_path):
+    out, argv = grid
+    serial = tmp_path / "serial"
+    argv = [a if a != str(out) else str(serial) for a in argv]
+    argv[argv.index("--jobs") + 1] = "1"
+    assert main(argv) == 0
+    strip = lambda rows: [{k: v for k, v in r.items() if k != "folder"} for r in rows]  # noqa: E731
+    assert strip(json.loads((serial / "table.json").read_text())) == strip(json.loads((out / "table.json").read_text()))
+
+
+def test_plan_is_the_cartesian_product():
+    cells = plan(["a", "b"], ["x"], ["chain", "gtsam"], ["frontend.n=1,2", "frontend.beta=3,4,5"])
+    assert len(cells) == 2 * 2 * 2 * 3
+    assert Cell("a", "x", "chain", (("frontend.n", "1"), ("frontend.beta", "3"))) in cells
+
+
+def test_markdown_marks_the_best_of_each_column():
+    rows = [
+        {"dataset": "d", "backend": "chain", "frontend": f, "sweep": "", "status": "ok", "nc_mean": nc, "ape_mean_rad": ape}
+        for f, nc, ape in (("original", 20.0, 0.6), ("eas", 60.0, 0.2))
+    ]
+    md = table_markdown(rows)
+    assert "| original | 20 | 0.600 |" in md and "| eas | **60** | **0.200** |" in md
