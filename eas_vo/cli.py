@@ -97,6 +97,9 @@ def build_parser() -> argparse.ArgumentParser:
     compare.add_argument("--time-offset", type=float, metavar="S")
     compare.add_argument("--orb", action="store_true", help="also ORB keypoints and matches per source (Table 2)")
     compare.add_argument("--jobs", type=int, default=os.cpu_count() or 1, help="parallel processes (default: all cores)")
+    compare.add_argument("--executor", choices=("local", "dask"), default="local",
+                         help="local process pool (default), or an existing Dask distributed cluster")
+    compare.add_argument("--scheduler", metavar="ADDRESS", help="the Dask scheduler, e.g. tcp://10.0.0.5:8786")
     compare.add_argument("--out", required=True, metavar="DIR")
     compare.add_argument("--quiet", action="store_true", help="no progress bar")
     compare.set_defaults(func=cmd_compare)
@@ -209,8 +212,11 @@ def cmd_compare(args) -> int:
             open_dataset(dataset).events()
         except EasVoError:
             pass  # its cells will report the error
+    if args.executor == "dask" and not args.scheduler:
+        raise EasVoError("--executor dask needs --scheduler ADDRESS")
     results, n_run = compare.run_grid(cells, out, args.config, args.assignments, overrides, args.jobs,
-                                      progress=not args.quiet and sys.stderr.isatty())
+                                      progress=not args.quiet and sys.stderr.isatty(),
+                                      scheduler=args.scheduler if args.executor == "dask" else None)
     rows = compare.table_rows(cells, results)
     compare.write_tables(out, rows)
     with atomic_path(out / "ape_bars.png") as tmp:

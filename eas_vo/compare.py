@@ -94,20 +94,35 @@ def completed(out_root: Path, cell: Cell) -> dict | None:
         return None
 
 
-def run_grid(cells: list[Cell], out_root: Path, config_file, assignments, run_overrides, jobs: int, progress: bool):
-    """Run the cells not yet complete, `jobs` processes at a time; returns {cell: result} and the count run."""
+def run_grid(
+    cells: list[Cell], out_root: Path, config_file, assignments, run_overrides, jobs: int, progress: bool,
+    scheduler: str | None = None,
+):
+    """Run the cells not yet complete, `jobs` processes at a time, or on the Dask cluster at
+    `scheduler` (its workers must see `out_root`); returns {cell: result} and the count run."""
     from tqdm import tqdm
 
     results = {cell: completed(out_root, cell) for cell in cells}
     todo = [cell for cell in cells if results[cell] is None]
+    args = (str(out_root), config_file, list(assignments), run_overrides)
     with tqdm(total=len(cells), initial=len(cells) - len(todo), disable=not progress, unit="cell", desc="compare") as bar:
-        if jobs <= 1:
+        if scheduler is not None:
+            try:
+                from distributed import Client, as_completed as dask_completed
+            except ImportError:
+                raise EasVoError("--executor dask needs the 'distributed' extra: pip install 'eas-vo[distributed]'") from None
+            with Client(scheduler) as client:
+                futures = {client.submit(run_cell, cell, *args, pure=False): cell for cell in todo}
+                for future in dask_completed(futures):
+                    results[futures[future]] = future.result()
+                    bar.update(1)
+        elif jobs <= 1:
             for cell in todo:
-                results[cell] = run_cell(cell, str(out_root), config_file, assignments, run_overrides)
+                results[cell] = run_cell(cell, *args)
                 bar.update(1)
         else:
             with ProcessPoolExecutor(jobs) as pool:
-                futures = {pool.submit(run_cell, cell, str(out_root), config_file, assignments, run_overrides): cell for cell in todo}
+                futures = {pool.submit(run_cell, cell, *args): cell for cell in todo}
                 for future in as_completed(futures):
                     results[futures[future]] = future.result()
                     bar.update(1)

@@ -76,3 +76,14 @@ def test_markdown_marks_the_best_of_each_column():
     ]
     md = table_markdown(rows)
     assert "| original | 20 | 0.600 |" in md and "| eas | **60** | **0.200** |" in md
+
+
+def test_dask_executor_gives_the_same_table(grid, tmp_path):
+    distributed = pytest.importorskip("distributed", reason="the 'distributed' extra is not installed")
+    out, argv = grid
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as cluster:
+        target = tmp_path / "dask"
+        argv = [a if a != str(out) else str(target) for a in argv] + ["--executor", "dask", "--scheduler", cluster.scheduler_address]
+        assert main(argv) == 0
+    strip = lambda rows: [{k: v for k, v in r.items() if k != "folder"} for r in rows]  # noqa: E731
+    assert strip(json.loads((target / "table.json").read_text())) == strip(json.loads((out / "table.json").read_text()))
