@@ -84,7 +84,8 @@ def plot_ape_bars(path: str | Path, rows: list[dict]) -> None:
     datasets = list(dict.fromkeys(r["dataset"] for r in rows))
     backends = list(dict.fromkeys(r["backend"] for r in rows))
     sources = list(dict.fromkeys(r["frontend"] + (f"\n{r['sweep']}" if r["sweep"] else "") for r in rows))
-    fig, axes = plt.subplots(1, len(datasets), figsize=(max(5, 1.0 * len(sources) * len(backends) + 2) * len(datasets) / max(1, len(datasets) / 1.5), 3.8), squeeze=False, constrained_layout=True)
+    panel_width = max(5.0, 0.8 * len(sources) * len(backends) + 2.0)
+    fig, axes = plt.subplots(1, len(datasets), figsize=(panel_width * len(datasets), 3.8), squeeze=False, constrained_layout=True)
     width = 0.8 / max(1, len(backends))
     for ax, dataset in zip(axes[0], datasets):
         for b, backend in enumerate(backends):
