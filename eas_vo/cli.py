@@ -72,7 +72,8 @@ def build_parser() -> argparse.ArgumentParser:
         action="store_true",
         help="drop malformed lines, out-of-order or out-of-sensor events and missing frames, with counted warnings",
     )
-    run.add_argument("--out", metavar="DIR", help="output folder (default: runs/DATASET_FRONTEND_BACKEND)")
+    run.add_argument("--out", metavar="DIR", help="output folder (default: runs/DATASET_FRONTEND_BACKEND_TIME)")
+    run.add_argument("--overwrite", action="store_true", help="write into --out even if it holds results")
     run.add_argument("--quiet", action="store_true", help="no progress bar")
     run.set_defaults(func=cmd_run)
 
@@ -146,9 +147,11 @@ def main(argv: list[str] | None = None) -> int:
     except EasVoError as exc:
         print(f"eas-vo: error: {exc}", file=sys.stderr)
         return 2
-    except KeyboardInterrupt:
-        print("eas-vo: interrupted", file=sys.stderr)
-        return 130
+    except KeyboardInterrupt as exc:
+        from eas_vo.pipeline import Terminated
+
+        print("eas-vo: interrupted; the frames processed so far were written (metrics.json: partial)", file=sys.stderr)
+        return 143 if isinstance(exc, Terminated) else 130
 
 
 def _slug(text: str) -> str:
@@ -175,7 +178,14 @@ def cmd_run(args) -> int:
         assignments,
     )
     rc = config.run
-    out = Path(args.out or f"runs/{_slug(rc.dataset)}_{rc.frontend}_{rc.backend}")
+    if args.out:
+        out = Path(args.out)
+        if not args.overwrite and any((out / name).exists() for name in ("metrics.json", "frames.csv")):
+            raise EasVoError(f"{out} already holds results; choose another --out or add --overwrite")
+    else:
+        import time
+
+        out = Path(f"runs/{_slug(rc.dataset)}_{rc.frontend}_{rc.backend}_{time.strftime('%Y%m%d-%H%M%S')}")
     result = pipeline.run(config, out, progress=not args.quiet and sys.stderr.isatty())
     m = result.metrics
     for line in m["data_warnings"]:

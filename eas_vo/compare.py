@@ -89,9 +89,10 @@ def completed(out_root: Path, cell: Cell) -> dict | None:
     """The metrics of a cell that already finished (resuming), else None."""
     path = out_root / cell.folder / "metrics.json"
     try:
-        return {"status": "ok", **json.loads(path.read_text())}
+        metrics = json.loads(path.read_text())
     except (OSError, ValueError):
         return None
+    return None if metrics.get("partial") else {"status": "ok", **metrics}
 
 
 def run_grid(

@@ -4,8 +4,11 @@ from __future__ import annotations
 
 import csv
 import json
+import signal
+import threading
 import time
 from collections import Counter
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -72,19 +75,17 @@ def run(config: ResolvedConfig, out_dir: str | Path | None = None, progress: boo
     records: list[FrameRecord] = []
     edges: list[RelativeRotation] = []
     orb = OrbStats() if rc.orb_stats else None
-    with _FrameLog(out / "frames.csv" if out else None) as log, _progress(n_total, progress, rc) as bar:
-        for sample in dataset.samples(rc.start_s, rc.duration_s):
-            image = frontend(sample)
-            _check_image(image, dataset.camera, rc.frontend, sample)
-            if orb is not None:
-                orb.add(image)
-            record, measured = tracker.process(image, sample.t)
-            records.append(record)
-            edges.extend(measured)
-            log.write(record)
-            bar.update(1)
-            if record.index % 10 == 0:
-                bar.set_postfix(nc=record.nc, refresh=False)
+    interrupted: BaseException | None = None
+    with _FrameLog(out / "frames.csv" if out else None) as log, _progress(n_total, progress, rc) as bar, _terminate_as_interrupt():
+        try:
+            _track_all(dataset, rc, frontend, tracker, orb, records, edges, log, bar)
+        except KeyboardInterrupt as exc:  # SIGINT, or SIGTERM: keep what was processed
+            interrupted = exc
+    if len(records) < 2:
+        if interrupted is not None:
+            raise interrupted
+        raise EasVoError(f"{dataset.description}: fewer than 2 samples were processed")
+
 
     t = np.array([r.t for r in records])
     R_w_c = backend.solve(len(records), edges, t, dataset.imu)
@@ -99,12 +100,52 @@ def run(config: ResolvedConfig, out_dir: str | Path | None = None, progress: boo
     metrics["time_offset_estimated"] = rc.time_offset_auto and dataset.ground_truth is not None
     warnings = getattr(dataset, "warnings", None)
     metrics["data_warnings"] = warnings.lines() if warnings is not None else []
+    metrics["partial"] = interrupted is not None
     if orb is not None:
         metrics.update(orb.summary())
     result = RunResult(t, R_w_c, records, edges, errors, metrics, getattr(backend, "causal", None))
     if out is not None:
         write_outputs(out, result, dataset.description)
+    if interrupted is not None:
+        raise interrupted
     return result
+
+
+def _track_all(dataset, rc, frontend, tracker, orb, records, edges, log, bar) -> None:
+    """The per-frame loop: frontend, tracker, and the frame's row in frames.csv."""
+    for sample in dataset.samples(rc.start_s, rc.duration_s):
+        image = frontend(sample)
+        _check_image(image, dataset.camera, rc.frontend, sample)
+        if orb is not None:
+            orb.add(image)
+        record, measured = tracker.process(image, sample.t)
+        records.append(record)
+        edges.extend(measured)
+        log.write(record)
+        bar.update(1)
+        if record.index % 10 == 0:
+            bar.set_postfix(nc=record.nc, refresh=False)
+
+
+class Terminated(KeyboardInterrupt):
+    """SIGTERM, handled like Ctrl-C: the frames processed so far are written."""
+
+
+@contextmanager
+def _terminate_as_interrupt():
+    """Within the block, SIGTERM raises Terminated (main thread only; elsewhere a no-op)."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def handler(signum, frame):
+        raise Terminated()
+
+    previous = signal.signal(signal.SIGTERM, handler)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)
 
 
 def _check_image(image, camera, frontend: str, sample) -> None:

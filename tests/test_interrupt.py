@@ -1,0 +1,58 @@
+"""Interrupted runs keep every processed frame; existing results are not overwritten by accident."""
+
+import json
+import os
+import signal
+
+import numpy as np
+import pytest
+
+from eas_vo.cli import main
+from eas_vo.frontends.intensity import OriginalFrontend
+
+
+@pytest.mark.parametrize("how,code", [("sigint", 130), ("sigterm", 143)])
+def test_signal_mid_run_leaves_valid_partial_outputs(short_sequence, tmp_path, monkeypatch, capsys, how, code):
+    original_call = OriginalFrontend.__call__
+
+    def interrupting(self, sample):
+        if sample.index == 12:
+            if how == "sigint":
+                raise KeyboardInterrupt
+            os.kill(os.getpid(), signal.SIGTERM)
+        return original_call(self, sample)
+
+    monkeypatch.setattr(OriginalFrontend, "__call__", interrupting)
+    out = tmp_path / "run"
+    assert main(["run", "--dataset", str(short_sequence), "--frontend", "original", "--out", str(out), "--quiet"]) == code
+    assert "interrupted" in capsys.readouterr().err
+    metrics = json.loads((out / "metrics.json").read_text())
+    assert metrics["partial"] is True and metrics["frames"] == 12
+    assert len((out / "trajectory.tum").read_text().splitlines()) == 12
+    assert len((out / "frames.csv").read_text().splitlines()) == 13  # header + 12 frames
+    assert np.isfinite(metrics["ape_mean_rad"])
+    assert not list(out.glob(".*.tmp"))  # no half-written file left behind
+    assert signal.getsignal(signal.SIGTERM) is signal.SIG_DFL  # the handler is restored
+
+
+def test_existing_results_need_overwrite(short_sequence, tmp_path, capsys):
+    out = tmp_path / "run"
+    argv = ["run", "--dataset", str(short_sequence), "--frontend", "original", "--out", str(out), "--quiet"]
+    assert main(argv) == 0
+    assert main(argv) == 2
+    assert "already holds results; choose another --out or add --overwrite" in capsys.readouterr().err
+    assert main(argv + ["--overwrite"]) == 0
+
+
+def test_compare_reruns_a_partial_cell(short_sequence, tmp_path, capsys):
+    out = tmp_path / "cmp"
+    argv = ["compare", "--dataset", str(short_sequence), "--frontends", "original", "--out", str(out), "--jobs", "1", "--quiet"]
+    assert main(argv) == 0
+    (metrics_path,) = out.rglob("metrics.json")
+    metrics = json.loads(metrics_path.read_text())
+    metrics["partial"] = True
+    metrics_path.write_text(json.dumps(metrics))
+    capsys.readouterr()
+    assert main(argv) == 0
+    assert "1 cells (1 run, 0 already complete" in capsys.readouterr().out
+    assert json.loads(metrics_path.read_text())["partial"] is False
