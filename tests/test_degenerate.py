@@ -1,0 +1,85 @@
+"""Degenerate scenes through the whole pipeline: the run completes, the paper's threshold
+logic decides, every frame is marked in frames.csv, and no NaN reaches an output."""
+
+import csv
+import json
+
+import cv2
+import numpy as np
+import pytest
+
+from eas_vo.cli import main
+
+FRONTENDS = ("original", "histeq", "slice", "ts", "sits", "eas")
+
+
+def run_all(folder, tmp_path, extra=()):
+    results = {}
+    for frontend in FRONTENDS:
+        out = tmp_path / f"out_{frontend}"
+        assert main(["run", "--dataset", str(folder), "--frontend", frontend, "--out", str(out), "--quiet", *extra]) == 0
+        metrics = json.loads((out / "metrics.json").read_text())
+        rows = list(csv.DictReader(open(out / "frames.csv")))
+        assert len(rows) == metrics["frames"] and all(r["status"] for r in rows)
+        trajectory = np.loadtxt(out / "trajectory.tum", ndmin=2)
+        assert np.isfinite(trajectory).all() and np.isfinite(metrics["ape_mean_rad"])
+        results[frontend] = metrics
+    return results
+
+
+def rewrite_frames(folder, fn):
+    for path in sorted((folder / "images").glob("*.png")):
+        cv2.imwrite(str(path), fn(cv2.imread(str(path), cv2.IMREAD_GRAYSCALE)))
+
+
+def test_all_black_frames(sequence_copy, tmp_path):
+    rewrite_frames(sequence_copy, np.zeros_like)
+    results = run_all(sequence_copy, tmp_path)
+    assert results["original"]["status_counts"].get("ok", 0) == 0  # no corner: the previous rotation is kept
+    assert results["eas"]["status_counts"]["ok"] > 0  # EAS still sees the events' edges
+
+
+def test_saturated_frames(sequence_copy, tmp_path):
+    rewrite_frames(sequence_copy, lambda im: np.full_like(im, 255))
+    results = run_all(sequence_copy, tmp_path)
+    assert results["eas"]["status_counts"].get("ok", 0) == 0  # I >= beta everywhere: nothing superimposed (Eq. 2)
+    assert results["slice"]["status_counts"]["ok"] > 0
+
+
+def test_a_camera_that_does_not_move(sequence_copy, tmp_path):
+    first = cv2.imread(str(sequence_copy / "images" / "frame_00000000.png"), cv2.IMREAD_GRAYSCALE)
+    rewrite_frames(sequence_copy, lambda im: first)
+    (sequence_copy / "events.txt").write_text("")  # a still camera sees no events
+    results = run_all(sequence_copy, tmp_path)
+    assert results["slice"]["status_counts"].get("ok", 0) == 0
+
+
+def test_an_event_burst_and_slices_longer_than_the_events_left(sequence_copy, tmp_path):
+    lines = (sequence_copy / "events.txt").read_text().splitlines()
+    t_burst = float(lines[len(lines) // 2].split()[0])
+    rng = np.random.default_rng(0)
+    burst = [f"{t_burst:.9f} {x} {y} {p}" for x, y, p in zip(rng.integers(0, 240, 300_000), rng.integers(0, 180, 300_000), rng.integers(0, 2, 300_000))]
+    (sequence_copy / "events.txt").write_text("\n".join(lines[: len(lines) // 2] + burst + lines[len(lines) // 2 :]) + "\n")
+    run_all(sequence_copy, tmp_path)
+    out = tmp_path / "big_slice"
+    assert main(["run", "--dataset", str(sequence_copy), "--frontend", "slice", "--set", "frontend.n=100000000", "--out", str(out), "--quiet"]) == 0
+
+
+def test_gaps_in_ground_truth(sequence_copy, tmp_path):
+    path = sequence_copy / "groundtruth.txt"
+    lines = path.read_text().splitlines()
+    path.write_text("\n".join(lines[:100] + lines[250:]) + "\n")  # 0.75 s without poses
+    results = run_all(sequence_copy, tmp_path)
+    assert results["eas"]["frames_evaluated"] == results["eas"]["frames"]
+
+
+def test_identical_frame_timestamps(sequence_copy, tmp_path, capsys):
+    path = sequence_copy / "images.txt"
+    lines = path.read_text().splitlines()
+    lines[5] = lines[4].split()[0] + " " + lines[5].split()[1]
+    path.write_text("\n".join(lines) + "\n")
+    assert main(["run", "--dataset", str(sequence_copy), "--out", str(tmp_path / "strict"), "--quiet"]) == 2
+    assert "images.txt:6: timestamp" in capsys.readouterr().err
+    assert main(["run", "--dataset", str(sequence_copy), "--out", str(tmp_path / "lenient"), "--quiet", "--lenient"]) == 0
+    metrics = json.loads((tmp_path / "lenient" / "metrics.json").read_text())
+    assert "1 dropped: timestamp not increasing (first at line 6)" in metrics["data_warnings"][0]
