@@ -162,8 +162,8 @@ class EcdFolderDataset(Dataset):
             return "malformed line", f"timestamp {parts[0]!r} is not a number"
         if not math.isfinite(t):
             return "malformed line", "timestamp is not finite"
-        if times and t <= times[-1]:
-            return "timestamp not increasing", f"timestamp {t:.9f} does not increase (previous {times[-1]:.9f})"
+        if times and t < times[-1]:
+            return "timestamp going back", f"timestamp {t:.9f} goes back (previous {times[-1]:.9f})"
         return None
 
     def _sensor_size(self) -> tuple[int, int]:

@@ -133,10 +133,10 @@ class RosbagDataset(Dataset):
             image = image.reshape(msg.height, msg.step)[:, : msg.width * channels].reshape(msg.height, msg.width, channels)
             image = cv2.cvtColor(image, cv2.COLOR_RGB2GRAY if msg.encoding == "rgb8" else cv2.COLOR_BGR2GRAY) if channels == 3 else image[..., 0]
             t = float(stamp_seconds(msg.header.stamp.sec, msg.header.stamp.nanosec))
-            if times and t <= times[-1]:
+            if times and t < times[-1]:
                 if not self.config.lenient:
-                    raise DataError(where, f"timestamp {t:.9f} does not increase (previous {times[-1]:.9f})", index)
-                self.warnings.add(where, "timestamp not increasing", f"message {index}")
+                    raise DataError(where, f"timestamp {t:.9f} goes back (previous {times[-1]:.9f})", index)
+                self.warnings.add(where, "timestamp going back", f"message {index}")
                 continue
             times.append(t)
             frames.append(np.ascontiguousarray(image))

@@ -199,7 +199,11 @@ class Tracker:
         k = self._k
         if self._prev_image is None:
             self._start_keyframe(image, self.detect(image))
+            self._prev_t = t
             return FrameRecord(k, t, 0, 0, "first", True), []
+        if t <= self._prev_t:  # no time between the two: nothing to measure, the rotation is kept
+            return FrameRecord(k, t, 0, 0, "same_time", False), []
+        self._prev_t = t
 
         cur, ok = self.track(image)
         nc = int(ok.sum())

@@ -153,7 +153,8 @@ class FrameRecord:
         nc: correspondences tracked from the previous frame (the paper's NC).
         inliers: essential-matrix inliers (0 when no model was estimated).
         status: `first`, `ok`, `few_correspondences` (< threshold1, previous rotation kept),
-            `no_model` (estimation failed, previous rotation kept).
+            `no_model` (estimation failed, previous rotation kept), `same_time` (the frame has
+            the previous frame's timestamp: previous rotation kept, frame skipped).
         redetected: corners were detected again in this frame (< threshold2).
     """
 

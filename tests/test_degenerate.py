@@ -73,13 +73,25 @@ def test_gaps_in_ground_truth(sequence_copy, tmp_path):
     assert results["eas"]["frames_evaluated"] == results["eas"]["frames"]
 
 
-def test_identical_frame_timestamps(sequence_copy, tmp_path, capsys):
+def test_identical_frame_timestamps(sequence_copy, tmp_path):
     path = sequence_copy / "images.txt"
     lines = path.read_text().splitlines()
     lines[5] = lines[4].split()[0] + " " + lines[5].split()[1]
     path.write_text("\n".join(lines) + "\n")
+    results = run_all(sequence_copy, tmp_path)
+    for frontend in FRONTENDS:
+        rows = list(csv.DictReader(open(tmp_path / f"out_{frontend}" / "frames.csv")))
+        assert rows[5]["status"] == "same_time" and rows[6]["status"] != "same_time"
+    assert results["eas"]["status_counts"]["same_time"] == 1
+
+
+def test_frame_timestamps_going_back(sequence_copy, tmp_path, capsys):
+    path = sequence_copy / "images.txt"
+    lines = path.read_text().splitlines()
+    lines[5] = "0.0 " + lines[5].split()[1]
+    path.write_text("\n".join(lines) + "\n")
     assert main(["run", "--dataset", str(sequence_copy), "--out", str(tmp_path / "strict"), "--quiet"]) == 2
-    assert "images.txt:6: timestamp" in capsys.readouterr().err
+    assert "images.txt:6: timestamp 0.000000000 goes back" in capsys.readouterr().err
     assert main(["run", "--dataset", str(sequence_copy), "--out", str(tmp_path / "lenient"), "--quiet", "--lenient"]) == 0
     metrics = json.loads((tmp_path / "lenient" / "metrics.json").read_text())
-    assert "1 dropped: timestamp not increasing (first at line 6)" in metrics["data_warnings"][0]
+    assert "1 dropped: timestamp going back (first at line 6)" in metrics["data_warnings"][0]
