@@ -92,10 +92,10 @@ def test_truncated_or_garbage_zip(tmp_path_factory, short_sequence, data, cut):
 
 @SETTINGS
 @given(st.lists(st.lists(number, max_size=9).map(" ".join), max_size=8).map("\n".join))
-def test_ground_truth_and_calib(sequence_copy, tmp_path_factory, content):
+def test_ground_truth_calib_imu_and_image_list(sequence_copy, tmp_path_factory, content):
     from eas_vo.datasets.ecd import EcdFolderDataset
 
-    for name in ("groundtruth.txt", "calib.txt", "imu.txt"):
+    for name in ("groundtruth.txt", "calib.txt", "imu.txt", "images.txt"):
         original = (sequence_copy / name).read_bytes()
         (sequence_copy / name).write_text(content)
         try:
