@@ -119,6 +119,7 @@ class EcdFolderDataset(Dataset):
                     c.time_tolerance_s,
                     c.lenient,
                     self.warnings,
+                    self.source.size("events.txt"),
                 )
             else:
                 self._events = empty_events()

@@ -41,6 +41,9 @@ class FolderSource:
     def identity(self, name: str) -> tuple:
         return file_identity(self.root / name)
 
+    def size(self, name: str) -> int:
+        return (self.root / name).stat().st_size
+
 
 class ZipSource:
     """Members of a `.zip` archive, read in place (the sequence may sit in one top-level folder)."""
@@ -82,6 +85,9 @@ class ZipSource:
     def identity(self, name: str) -> tuple:
         info = self.zip.getinfo(self.prefix + name)
         return (*file_identity(self.path), info.filename, info.CRC, info.file_size)
+
+    def size(self, name: str) -> int:
+        return self.zip.getinfo(self.prefix + name).file_size
 
 
 class _ZipMember:

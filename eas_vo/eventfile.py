@@ -340,16 +340,32 @@ class Validator:
         return self._filter(t, x, y, p, line_of)
 
     def _filter(self, t, x, y, p, line_of) -> np.ndarray:
-        """Row-by-row verdicts: the first problem raises (strict) or every bad row is dropped (lenient)."""
-        keep = np.ones(len(t), bool)
-        keep &= self._check(~np.isfinite(t), "timestamp is not finite", line_of, lambda i: f"t = {t[i]}")
-        outside = (x < 0) | (x >= self.width) | (y < 0) | (y >= self.height)
-        keep &= self._check(outside, f"pixel outside the {self.width}x{self.height} sensor", line_of, lambda i: f"({x[i]}, {y[i]})")
-        keep &= self._check(~np.isin(p, (0, 1, -1)), "polarity not 0/1 (or -1/1)", line_of, lambda i: f"p = {p[i]}")
-        # Small steps back in time (within the tolerance) are clamped; larger ones are errors.
+        """Row-by-row verdicts. Strict: the earliest bad row raises, naming its first problem.
+        Lenient: every bad row is dropped and counted once, under its first problem."""
+        problems = [
+            (~np.isfinite(t), "timestamp is not finite", lambda i: f"t = {t[i]}"),
+            ((x < 0) | (x >= self.width) | (y < 0) | (y >= self.height),
+             f"pixel outside the {self.width}x{self.height} sensor", lambda i: f"({x[i]}, {y[i]})"),
+            (~np.isin(p, (0, 1, -1)), "polarity not 0/1 (or -1/1)", lambda i: f"p = {p[i]}"),
+        ]
+        keep = ~np.logical_or.reduce([bad for bad, _, _ in problems])
+        # Small steps back in time (within the tolerance) are clamped; larger ones are problems.
         running = np.maximum.accumulate(np.concatenate([[self.last_t], np.where(keep, t, -np.inf)]))[:-1]
-        back = keep & (t < running - self.tolerance_s)
-        keep &= self._check(back, "timestamp goes backwards", line_of, lambda i: f"{t[i]:.9f} after {running[i]:.9f}")
+        problems.append((keep & (t < running - self.tolerance_s), "timestamp goes backwards",
+                         lambda i: f"{t[i]:.9f} after {running[i]:.9f}"))
+        first_problem = np.full(len(t), -1)
+        for k in range(len(problems) - 1, -1, -1):
+            first_problem[problems[k][0]] = k
+        bad_rows = np.flatnonzero(first_problem >= 0)
+        if len(bad_rows) and not self.lenient:
+            i = int(bad_rows[0])
+            _, what, describe = problems[first_problem[i]]
+            raise DataError(self.where, f"{what}: {describe(i)}", line_of(i))
+        for k, (_, what, _) in enumerate(problems):
+            rows = np.flatnonzero(first_problem == k)
+            if len(rows):
+                self.warnings.add(self.where, what, f"{self.unit} {line_of(int(rows[0]))}", len(rows))
+        keep = first_problem < 0
         t = np.maximum.accumulate(np.concatenate([[self.last_t], t[keep]]))[1:]
         if len(t):
             self.last_t = t[-1]
@@ -357,15 +373,6 @@ class Validator:
         events["t"], events["x"], events["y"], events["p"] = t, x[keep], y[keep], p[keep] > 0
         return events
 
-    def _check(self, bad, what: str, line_of, describe) -> np.ndarray:
-        """`~bad`, after a DataError (strict) or a counted warning (lenient) for any bad row."""
-        if not bad.any():
-            return ~bad
-        i = int(np.argmax(bad))
-        if not self.lenient:
-            raise DataError(self.where, f"{what}: {describe(i)}", line_of(i))
-        self.warnings.add(self.where, what, f"{self.unit} {line_of(i)}", int(bad.sum()))
-        return ~bad
 
 
 def _slow_rows(block: bytes, first_line: int, where: str, lenient: bool, warnings: DataWarnings):
@@ -557,12 +564,22 @@ def open_cache(path: Path) -> np.ndarray | None:
     return np.memmap(path, dtype=EVENT_DTYPE, mode="r", offset=HEADER_BYTES, shape=(count,))
 
 
-def build_cache(path: Path, fill: Callable[[BinaryIO], int]) -> np.ndarray:
-    """Write a cache file atomically: `fill(fh)` writes the records and returns their count."""
+def build_cache(path: Path, fill: Callable[[BinaryIO], int], max_events: int = 0) -> np.ndarray:
+    """Write a cache file atomically: `fill(fh)` writes the records and returns their count.
+
+    `max_events` > 0 reserves the file's blocks up front (fewer, faster writes on most file
+    systems); the file is cut to its real size at the end.
+    """
     with atomic_path(path) as tmp:
         with open(tmp, "wb") as fh:
+            if max_events > 0 and hasattr(os, "posix_fallocate"):
+                try:
+                    os.posix_fallocate(fh.fileno(), 0, HEADER_BYTES + max_events * EVENT_DTYPE.itemsize)
+                except OSError:
+                    pass  # no space to reserve (or no support): plain writes still work
             fh.write(CACHE_MAGIC + bytes(8))
             count = fill(fh)
+            fh.truncate(HEADER_BYTES + count * EVENT_DTYPE.itemsize)
             fh.seek(8)
             fh.write(np.uint64(count).tobytes())
     return open_cache(path)
@@ -579,7 +596,8 @@ def write_cache(path: Path, events: np.ndarray) -> np.ndarray:
 
 
 def load_cached(
-    key: str, lenient: bool, warnings: DataWarnings, fill: Callable[[BinaryIO, DataWarnings], int], where: str
+    key: str, lenient: bool, warnings: DataWarnings, fill: Callable[[BinaryIO, DataWarnings], int], where: str,
+    max_events: int = 0,
 ) -> np.ndarray:
     """The event stream cached under `key`, built by `fill(out, warnings)` when absent.
 
@@ -599,7 +617,7 @@ def load_cached(
     local = DataWarnings()
     target = tolerant if lenient else strict
     try:
-        events = build_cache(target, lambda out: fill(out, local))
+        events = build_cache(target, lambda out: fill(out, local), max_events)
     except OSError as exc:
         raise DataError(where, f"cannot read or cache events ({exc})") from None
     if local.counts:
@@ -622,15 +640,17 @@ def load_event_text(
     tolerance_s: float = 1e-6,
     lenient: bool = False,
     warnings: DataWarnings | None = None,
+    text_size: int | None = None,
 ) -> np.ndarray:
-    """Events of a text source (`t x y p` lines), through the cache."""
+    """Events of a text source (`t x y p` lines, `text_size` bytes if known), through the cache."""
 
     def fill(out, local):
         with open_text() as fh:
             return convert_text_to_cache(fh, where, out, width, height, tolerance_s, lenient, local)
 
     key = cache_key("text", *identity, width, height, tolerance_s)
-    return load_cached(key, lenient, warnings if warnings is not None else DataWarnings(), fill, where)
+    size = text_size or 0  # a line is at least 8 bytes: at most size // 8 events
+    return load_cached(key, lenient, warnings if warnings is not None else DataWarnings(), fill, where, size // 8 + 1 if size else 0)
 
 
 def prime_text_cache(source: Path, events: np.ndarray, width: int, height: int, tolerance_s: float = 1e-6) -> None:

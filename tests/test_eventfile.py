@@ -170,3 +170,17 @@ def test_search_times_equals_searchsorted_without_copying(tmp_path):
     queries = np.concatenate([[-1.0, ev["t"][1000], 1e9], np.random.default_rng(0).uniform(0, 1300, 500)])
     np.testing.assert_array_equal(search_times(ev, queries), np.searchsorted(ev["t"], queries, side="left"))
     assert len(search_times(ev[:0], [1.0])) == 1 and search_times(ev[:0], [1.0])[0] == 0
+
+
+def test_strict_reports_the_earliest_bad_line_whatever_its_problem(tmp_path):
+    path = tmp_path / "events.txt"
+    path.write_text("0.1 1 2 1\n0.2 3 4 5\n0.3 999 4 1\n")  # line 2: polarity, line 3: off the sensor
+    with pytest.raises(DataError, match="polarity") as info:
+        load_file(path)
+    assert info.value.line == 2
+    warnings = DataWarnings()
+    assert len(load_file(path, lenient=True, warnings=warnings)) == 1
+    assert sorted(warnings.lines()) == sorted([
+        f"{path}: 1 dropped: polarity not 0/1 (or -1/1) (first at line 2)",
+        f"{path}: 1 dropped: pixel outside the 240x180 sensor (first at line 3)",
+    ])
