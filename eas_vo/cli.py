@@ -224,9 +224,15 @@ def cmd_compare(args) -> int:
             pass  # its cells will report the error
     if args.executor == "dask" and not args.scheduler:
         raise EasVoError("--executor dask needs --scheduler ADDRESS")
-    results, n_run = compare.run_grid(cells, out, args.config, args.assignments, overrides, args.jobs,
-                                      progress=not args.quiet and sys.stderr.isatty(),
-                                      scheduler=args.scheduler if args.executor == "dask" else None)
+    results = {}
+    interrupted = None
+    try:
+        results, n_run = compare.run_grid(cells, out, args.config, args.assignments, overrides, args.jobs,
+                                          progress=not args.quiet and sys.stderr.isatty(),
+                                          scheduler=args.scheduler if args.executor == "dask" else None,
+                                          results=results)
+    except KeyboardInterrupt as exc:  # write the table of what finished; a new invocation resumes
+        interrupted, n_run = exc, sum(r["status"] != "not run" for r in results.values())
     rows = compare.table_rows(cells, results)
     compare.write_tables(out, rows)
     with atomic_path(out / "ape_bars.png") as tmp:
@@ -240,6 +246,8 @@ def cmd_compare(args) -> int:
     if series:
         with atomic_path(out / "ape_time.png") as tmp:
             plot_ape_time(tmp, series)
+    if interrupted is not None:
+        raise interrupted
     failed = [r for r in rows if r["status"] != "ok"]
     for r in failed:
         print(f"eas-vo: cell {r['folder']} failed: {r['error']}", file=sys.stderr)

@@ -98,13 +98,18 @@ def completed(out_root: Path, cell: Cell) -> dict | None:
 def run_grid(
     cells: list[Cell], out_root: Path, config_file, assignments, run_overrides, jobs: int, progress: bool,
     scheduler: str | None = None,
+    results: dict | None = None,
 ):
     """Run the cells not yet complete, `jobs` processes at a time, or on the Dask cluster at
-    `scheduler` (its workers must see `out_root`); returns {cell: result} and the count run."""
+    `scheduler` (its workers must see `out_root`); returns {cell: result} and the count run.
+    `results`, if given, is filled in place as cells finish (what an interrupted caller keeps)."""
     from tqdm import tqdm
 
-    results = {cell: completed(out_root, cell) for cell in cells}
+    results = results if results is not None else {}
+    results.update({cell: completed(out_root, cell) for cell in cells})
     todo = [cell for cell in cells if results[cell] is None]
+    for cell in todo:
+        results[cell] = {"status": "not run", "error": "interrupted before this cell ran"}
     args = (str(out_root), config_file, list(assignments), run_overrides)
     with tqdm(total=len(cells), initial=len(cells) - len(todo), disable=not progress, unit="cell", desc="compare") as bar:
         if scheduler is not None:
@@ -139,12 +144,12 @@ def table_rows(cells: list[Cell], results: dict) -> list[dict]:
             **asdict(cell),
             "sweep": cell.sweep_label,
             "folder": cell.folder,
-            "status": results[cell]["status"],
-            "error": results[cell].get("error", ""),
-            "nc_mean": results[cell].get("nc_mean"),
-            "ape_mean_rad": results[cell].get("ape_mean_rad"),
-            "orb_keypoints_mean": results[cell].get("orb_keypoints_mean"),
-            "orb_matches_mean": results[cell].get("orb_matches_mean"),
+            "status": results.get(cell, {}).get("status", "not run"),
+            "error": results.get(cell, {}).get("error", ""),
+            "nc_mean": results.get(cell, {}).get("nc_mean"),
+            "ape_mean_rad": results.get(cell, {}).get("ape_mean_rad"),
+            "orb_keypoints_mean": results.get(cell, {}).get("orb_keypoints_mean"),
+            "orb_matches_mean": results.get(cell, {}).get("orb_matches_mean"),
         }
         for cell in cells
     ]

@@ -56,3 +56,27 @@ def test_compare_reruns_a_partial_cell(short_sequence, tmp_path, capsys):
     assert main(argv) == 0
     assert "1 cells (1 run, 0 already complete" in capsys.readouterr().out
     assert json.loads(metrics_path.read_text())["partial"] is False
+
+
+def test_compare_interrupted_writes_its_table_and_resumes(short_sequence, tmp_path, monkeypatch, capsys):
+    from eas_vo import compare
+
+    real_run_cell = compare.run_cell
+    calls = []
+
+    def interrupting(cell, *args):
+        calls.append(cell)
+        if len(calls) == 2:
+            raise KeyboardInterrupt
+        return real_run_cell(cell, *args)
+
+    monkeypatch.setattr(compare, "run_cell", interrupting)
+    out = tmp_path / "cmp"
+    argv = ["compare", "--dataset", str(short_sequence), "--frontends", "original,slice,eas", "--out", str(out), "--jobs", "1", "--quiet"]
+    assert main(argv) == 130
+    rows = json.loads((out / "table.json").read_text())
+    assert [r["status"] for r in rows] == ["ok", "not run", "not run"]
+    monkeypatch.setattr(compare, "run_cell", real_run_cell)
+    capsys.readouterr()
+    assert main(argv) == 0
+    assert "3 cells (2 run, 1 already complete, 0 failed)" in capsys.readouterr().out
