@@ -49,24 +49,10 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="SPEC",
         help="an Event Camera Dataset folder, or synthetic:NAME (default: synthetic:default, simulated once)",
     )
-    run.add_argument("--frontend", metavar="NAME", help="image source: original, histeq, slice, eas (default: eas)")
-    run.add_argument("--backend", metavar="NAME", help="relative -> absolute rotations: chain (default: chain)")
-    run.add_argument("--config", metavar="FILE", help="TOML config file, or the name of a bundled one (e.g. paper)")
-    run.add_argument(
-        "--set",
-        dest="assignments",
-        action="append",
-        default=[],
-        metavar="SECTION.KEY=VALUE",
-        help="override one config value, e.g. frontend.n=8000 (repeatable)",
-    )
-    run.add_argument("--start", type=float, metavar="S", help="skip the first S seconds of the sequence")
-    run.add_argument("--duration", type=float, metavar="S", help="process S seconds (default: all)")
-    run.add_argument(
-        "--time-offset",
-        metavar="S|auto",
-        help="ground truth is sampled at frame time + S seconds (default 0); 'auto' estimates S from the data",
-    )
+    run.add_argument("--frontend", metavar="NAME",
+                     help="image source: original, histeq, slice, ts, sits, eas or a plugin's (eas-vo list; default eas)")
+    run.add_argument("--backend", metavar="NAME", help="relative -> absolute rotations: chain or gtsam (default chain)")
+    _add_common_options(run)
     run.add_argument(
         "--lenient",
         action="store_true",
@@ -74,7 +60,6 @@ def build_parser() -> argparse.ArgumentParser:
     )
     run.add_argument("--out", metavar="DIR", help="output folder (default: runs/DATASET_FRONTEND_BACKEND_TIME)")
     run.add_argument("--overwrite", action="store_true", help="write into --out even if it holds results")
-    run.add_argument("--quiet", action="store_true", help="no progress bar")
     run.set_defaults(func=cmd_run)
 
     compare = sub.add_parser(
@@ -89,20 +74,15 @@ def build_parser() -> argparse.ArgumentParser:
                          help="a dataset (repeatable; default synthetic:default)")
     compare.add_argument("--frontends", default="original,histeq,slice,ts,sits,eas", metavar="A,B,...")
     compare.add_argument("--backends", default="chain", metavar="A,B,...")
-    compare.add_argument("--config", metavar="FILE")
-    compare.add_argument("--set", dest="assignments", action="append", default=[], metavar="SECTION.KEY=VALUE")
+    _add_common_options(compare)
     compare.add_argument("--sweep", dest="sweeps", action="append", default=[], metavar="SECTION.KEY=V1,V2",
                          help="values to try (repeatable: the cartesian product is run)")
-    compare.add_argument("--start", type=float, metavar="S")
-    compare.add_argument("--duration", type=float, metavar="S")
-    compare.add_argument("--time-offset", type=float, metavar="S")
     compare.add_argument("--orb", action="store_true", help="also ORB keypoints and matches per source (Table 2)")
     compare.add_argument("--jobs", type=int, default=os.cpu_count() or 1, help="parallel processes (default: all cores)")
     compare.add_argument("--executor", choices=("local", "dask"), default="local",
                          help="local process pool (default), or an existing Dask distributed cluster")
     compare.add_argument("--scheduler", metavar="ADDRESS", help="the Dask scheduler, e.g. tcp://10.0.0.5:8786")
     compare.add_argument("--out", required=True, metavar="DIR")
-    compare.add_argument("--quiet", action="store_true", help="no progress bar")
     compare.set_defaults(func=cmd_compare)
 
     lister = sub.add_parser(
@@ -140,6 +120,24 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _add_common_options(parser) -> None:
+    """Options `run` and `compare` share: configuration, window, time offset, progress."""
+    parser.add_argument("--config", metavar="FILE", help="TOML config file, or the name of a bundled one (e.g. paper)")
+    parser.add_argument("--set", dest="assignments", action="append", default=[], metavar="SECTION.KEY=VALUE",
+                        help="override one config value, e.g. frontend.n=8000 (repeatable)")
+    parser.add_argument("--start", type=float, metavar="S", help="skip the first S seconds of the sequence")
+    parser.add_argument("--duration", type=float, metavar="S", help="process S seconds (default: all)")
+    parser.add_argument("--time-offset", metavar="S|auto",
+                        help="ground truth is sampled at frame time + S seconds (default 0); 'auto' estimates S from the data")
+    parser.add_argument("--quiet", action="store_true", help="no progress bar")
+
+
+def _window_overrides(args) -> dict:
+    """The [run] values given by the shared options."""
+    offset, auto = _time_offset(args.time_offset)
+    return {"start_s": args.start, "duration_s": args.duration, "time_offset_s": offset, "time_offset_auto": auto}
+
+
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     try:
@@ -162,19 +160,10 @@ def cmd_run(args) -> int:
     from eas_vo import config as config_mod
     from eas_vo import pipeline
 
-    offset, auto = _time_offset(args.time_offset)
     assignments = args.assignments + (["dataset.lenient=true"] if args.lenient else [])
     config = config_mod.resolve(
         args.config,
-        {
-            "dataset": args.dataset,
-            "frontend": args.frontend,
-            "backend": args.backend,
-            "start_s": args.start,
-            "duration_s": args.duration,
-            "time_offset_s": offset,
-            "time_offset_auto": auto,
-        },
+        {"dataset": args.dataset, "frontend": args.frontend, "backend": args.backend, **_window_overrides(args)},
         assignments,
     )
     rc = config.run
@@ -213,8 +202,7 @@ def cmd_compare(args) -> int:
         [v.strip() for v in args.backends.split(",") if v.strip()],
         args.sweeps,
     )
-    overrides = {"start_s": args.start, "duration_s": args.duration, "time_offset_s": args.time_offset,
-                 "orb_stats": True if args.orb else None}
+    overrides = {**_window_overrides(args), "orb_stats": True if args.orb else None}
     for dataset in dict.fromkeys(c.dataset for c in cells):  # simulate or cache once, not once per process
         from eas_vo.pipeline import open_dataset
 
