@@ -29,6 +29,24 @@ def _channels(events: np.ndarray, split: bool) -> np.ndarray:
     return np.ascontiguousarray(events["p"], dtype=np.int32) if split else np.zeros(len(events), np.int32)
 
 
+class _SurfaceFrontend(Frontend):
+    """A surface updated by the events since the previous sample, then rendered at its time."""
+
+    def __init__(self, config=None, camera=None):
+        super().__init__(config, camera)
+        self.reset()
+
+    def consume(self, events: np.ndarray) -> None:
+        raise NotImplementedError
+
+    def render(self, t_s: float) -> np.ndarray:
+        raise NotImplementedError
+
+    def __call__(self, sample: Sample) -> np.ndarray:
+        self.consume(sample.events_since_previous)
+        return self.render(sample.t)
+
+
 # ----------------------------------------------------------------------------- TS
 
 
@@ -57,16 +75,12 @@ class TsConfig:
         _check_polarity(self)
 
 
-class TsFrontend(Frontend):
+class TsFrontend(_SurfaceFrontend):
     """Time surface: per pixel the latest event time, decayed exponentially to the sample time."""
 
     name = "ts"
     description = "time surface (HOTS): exp(-(t - T_last(x, y)) / tau), rendered at the sample time"
     Config = TsConfig
-
-    def __init__(self, config=None, camera=None):
-        super().__init__(config, camera)
-        self.reset()
 
     def reset(self) -> None:
         channels = 2 if self.config.polarity == "split" else 1
@@ -89,10 +103,6 @@ class TsFrontend(Frontend):
         else:
             image = 255.0 * surface[0]
         return np.clip(np.rint(image), 0, 255).astype(np.uint8)
-
-    def __call__(self, sample: Sample) -> np.ndarray:
-        self.consume(sample.events_since_previous)
-        return self.render(sample.t)
 
 
 # ----------------------------------------------------------------------------- SITS
@@ -166,16 +176,12 @@ class SitsConfig:
         _check_polarity(self)
 
 
-class SitsFrontend(Frontend):
+class SitsFrontend(_SurfaceFrontend):
     """Speed-invariant time surface, updated event by event and rendered at the sample time."""
 
     name = "sits"
     description = "speed-invariant time surface (Manderscheid et al. 2019), updated event by event"
     Config = SitsConfig
-
-    def __init__(self, config=None, camera=None):
-        super().__init__(config, camera)
-        self.reset()
 
     def reset(self) -> None:
         channels = 2 if self.config.polarity == "split" else 1
@@ -187,7 +193,8 @@ class SitsFrontend(Frontend):
         records = np.ascontiguousarray(events, dtype=EVENT_DTYPE).view(np.uint8)
         sits_kernel(c.r)(self.surface, records, c.polarity == "split", c.dv_compatible)
 
-    def render(self) -> np.ndarray:
+    def render(self, t_s: float = 0.0) -> np.ndarray:
+        """The surface as uint8 (SITS holds no time: `t_s` is unused)."""
         full = (2 * self.config.r + 1) ** 2
         if len(self.surface) == 2:
             image = 127.5 + 127.5 * (self.surface[1].astype(float) - self.surface[0]) / full
@@ -196,7 +203,3 @@ class SitsFrontend(Frontend):
         values = self.surface[0].astype(np.int64)
         lo, hi = values.min(), values.max()
         return ((values - lo) * 255 // max(hi - lo, 1)).astype(np.uint8)
-
-    def __call__(self, sample: Sample) -> np.ndarray:
-        self.consume(sample.events_since_previous)
-        return self.render()

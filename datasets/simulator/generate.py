@@ -7,7 +7,6 @@ import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
-import cv2
 import numpy as np
 
 from eas_vo.config import check_range
@@ -116,8 +115,3 @@ def _simulate_events(config, camera, motion, render, rng, progress) -> np.ndarra
             bar.update(round(t1 - t, 6))
             t = t1
     return np.concatenate(chunks) if chunks else np.empty(0, EVENT_DTYPE)
-
-
-def preview(frame: np.ndarray) -> np.ndarray:
-    """A gamma-brightened copy of a dim frame, for looking at it."""
-    return cv2.LUT(frame, np.clip(255 * (np.arange(256) / 255) ** 0.3, 0, 255).astype(np.uint8))
