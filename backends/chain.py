@@ -7,7 +7,7 @@ from typing import Sequence
 import numpy as np
 
 from eas_vo.plugins import Backend
-from eas_vo.types import RelativeRotation
+from eas_vo.types import ImuSeries, RelativeRotation
 
 
 def chain_rotations(n_frames: int, edges: Sequence[RelativeRotation]) -> np.ndarray:
@@ -31,5 +31,7 @@ class ChainBackend(Backend):
     name = "chain"
     description = "multiply consecutive relative rotations, no optimisation (the paper)"
 
-    def solve(self, n_frames: int, edges: Sequence[RelativeRotation], times=None, imu=None) -> np.ndarray:
+    def solve(
+        self, n_frames: int, edges: Sequence[RelativeRotation], *, times: np.ndarray | None = None, imu: ImuSeries | None = None
+    ) -> np.ndarray:
         return chain_rotations(n_frames, edges)

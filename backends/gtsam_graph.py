@@ -8,11 +8,10 @@ from typing import Sequence
 
 import numpy as np
 
-from eas_vo.config import check_range
-from eas_vo.errors import ConfigError
-from eas_vo.geometry import rotvec_to_matrix
+from eas_vo.geometry.rotations import rotvec_to_matrix
 from eas_vo.plugins import Backend
-from eas_vo.types import RelativeRotation
+from eas_vo.types import ImuSeries, RelativeRotation
+from eas_vo.validation import check_choice, check_range, check_vector
 
 MODES = ("batch", "online")
 ROBUST = ("none", "huber", "cauchy")
@@ -22,7 +21,7 @@ ROBUST = ("none", "huber", "cauchy")
 class GtsamConfig:
     """Attributes:
         mode: `batch` (Levenberg-Marquardt over all frames) or `online` (iSAM2, frame by frame:
-            `causal` holds each frame's estimate as it was when that frame arrived).
+            `causal_R_w_c` holds each frame's estimate as it was when that frame arrived).
         sigma_rad: noise of an edge measured with `reference_inliers` inliers; an edge with m
             inliers gets sigma_rad * sqrt(reference_inliers / m).
         reference_inliers: see sigma_rad.
@@ -52,14 +51,11 @@ class GtsamConfig:
     imu_time_offset_s: float = 0.0
 
     def validate(self) -> None:
-        if len(self.imu_rotvec_cam) != 3 or not all(isinstance(v, (int, float)) for v in self.imu_rotvec_cam):
-            raise ConfigError(f"imu_rotvec_cam = {self.imu_rotvec_cam!r}; expected three numbers [rad]")
+        check_vector(self, "imu_rotvec_cam", 3, "rad")
         check_range(self, "gyro_noise", 0.0, 10.0, lo_open=True)
         check_range(self, "gyro_bias_sigma", 0.0, 10.0, lo_open=True)
-        if self.mode not in MODES:
-            raise ConfigError(f"mode = {self.mode!r}; allowed: {', '.join(MODES)}")
-        if self.robust not in ROBUST:
-            raise ConfigError(f"robust = {self.robust!r}; allowed: {', '.join(ROBUST)}")
+        check_choice(self, "mode", MODES)
+        check_choice(self, "robust", ROBUST)
         check_range(self, "sigma_rad", 0.0, 10.0, lo_open=True)
         check_range(self, "reference_inliers", 1, 10**6)
         check_range(self, "gap_sigma_rad", 0.0, 1e3, lo_open=True)
@@ -73,10 +69,6 @@ class GtsamBackend(Backend):
     name = "gtsam"
     description = "rotation-only pose graph (GTSAM Rot3): batch Levenberg-Marquardt or online iSAM2"
     Config = GtsamConfig
-
-    def __init__(self, config=None):
-        super().__init__(config)
-        self.causal: np.ndarray | None = None
 
     def _noise(self, gtsam, sigma: float):
         c = self.config
@@ -126,14 +118,18 @@ class GtsamBackend(Backend):
                     pim.integrateMeasurement(imu.gyro[s], end - start)
             by_frame[k].append(gtsam.AHRSFactor(k - 1, k, bias, pim))
 
-    def solve(self, n_frames: int, edges: Sequence[RelativeRotation], times=None, imu=None) -> np.ndarray:
+    def solve(
+        self, n_frames: int, edges: Sequence[RelativeRotation], *, times: np.ndarray | None = None, imu: ImuSeries | None = None
+    ) -> np.ndarray:
         import gtsam
 
         from eas_vo.backends.chain import chain_rotations
 
         initial_R = chain_rotations(n_frames, edges)
         by_frame = self._factors(gtsam, n_frames, edges)
-        self._with_bias = self.config.gyro and imu is not None and times is not None
+        if self.config.gyro and imu is not None and times is None:
+            raise ValueError("gyro fusion needs the frame times")
+        self._with_bias = self.config.gyro and imu is not None
         if self._with_bias:
             self._gyro_factors(gtsam, by_frame, np.asarray(times), imu)
         if self.config.mode == "batch":
@@ -179,6 +175,6 @@ class GtsamBackend(Backend):
             previous = causal[k]
         for _ in range(self.config.iterations):
             isam.update()
-        self.causal = causal
+        self.causal_R_w_c = causal
         estimate = isam.calculateEstimate()
         return np.stack([estimate.atRot3(k).matrix() for k in range(n_frames)])

@@ -33,7 +33,7 @@ def make_file(n_events: int) -> Path:
     from eas_vo.datasets.simulator import SimConfig, simulate
     from eas_vo.eventfile import write_events_text
     from eas_vo.io import cache_dir
-    from eas_vo.pipeline import open_dataset
+    from eas_vo.registry import open_dataset
 
     path = cache_dir() / "bench" / f"events_{n_events}.txt"
     if path.exists():

@@ -18,7 +18,7 @@ import numpy as np
 from eas_vo import config
 from eas_vo.frontends.events import EasFrontend, event_slice
 from eas_vo.frontends.surfaces import SitsConfig, SitsFrontend, TsFrontend
-from eas_vo.pipeline import open_dataset
+from eas_vo.registry import open_dataset
 
 
 def best_of(fn, repeat: int) -> float:

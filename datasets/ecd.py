@@ -20,50 +20,28 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from eas_vo.config import check_range
+from eas_vo.datasets.recording import StreamConfig, check_increasing, event_sample_times, pose_series
 from eas_vo.datasets.sources import open_source
-from eas_vo.errors import DataError
-from eas_vo.eventfile import DataWarnings, load_event_text, write_events_text
+from eas_vo.errors import DataError, DataWarnings
+from eas_vo.eventfile import load_event_text, write_events_text
 from eas_vo.io import atomic_path, parse_table, write_text_atomic
 from eas_vo.plugins import Dataset
 from eas_vo.types import CameraModel, ImuSeries, PoseSeries, empty_events
+from eas_vo.validation import check_range
 
 
 @dataclass(frozen=True)
-class EcdConfig:
-    """How to read a sequence.
-
-    Attributes:
-        width, height: sensor size [px] when there are no frames to read it from (DAVIS240C).
-        lenient: drop malformed lines and out-of-order or out-of-sensor events with counted
-            warnings instead of stopping at the first.
-        time_tolerance_s: event timestamps may step back this much [s] (clamped); more is an error.
-        sample_rate_hz: event-only streams: samples per second...
-        sample_every_events: ...or, when > 0, one sample every this many events.
-    """
+class EcdConfig(StreamConfig):
+    """StreamConfig plus the sensor size [px] for sequences without frames to read it from
+    (default: DAVIS240C)."""
 
     width: int = 240
     height: int = 180
-    lenient: bool = False
-    time_tolerance_s: float = 1e-6
-    sample_rate_hz: float = 20.0
-    sample_every_events: int = 0
 
     def validate(self) -> None:
+        super().validate()
         check_range(self, "width", 1, 65535)
         check_range(self, "height", 1, 65535)
-        check_range(self, "time_tolerance_s", 0.0, 1.0)
-        check_range(self, "sample_rate_hz", 0.0, 1e6, lo_open=True)
-        check_range(self, "sample_every_events", 0, 10**9)
-
-
-def event_sample_times(event_t: np.ndarray, rate_hz: float, every_events: int) -> np.ndarray:
-    """Sample times [s] for an event-only stream: every `every_events` events, else at `rate_hz`."""
-    if len(event_t) == 0:
-        return np.empty(0)
-    if every_events > 0:
-        return np.unique(np.asarray(event_t[::every_events], dtype=float))
-    return np.arange(float(event_t[0]), float(event_t[-1]), 1.0 / rate_hz)
 
 
 class EcdFolderDataset(Dataset):
@@ -76,7 +54,7 @@ class EcdFolderDataset(Dataset):
     def __init__(self, location: str | Path, config: EcdConfig | None = None):
         self.config = config or EcdConfig()
         self.source = open_source(location)
-        self.description = self.source.description
+        self.label = self.source.location
         self.warnings = DataWarnings()
         self._times, self._frame_names = self._read_image_list()
         if not self._frame_names and not self.source.exists("events.txt"):
@@ -87,7 +65,16 @@ class EcdFolderDataset(Dataset):
         self.imu = self._read_imu()
         self._events: np.ndarray | None = None
 
-    # -- plugin protocol ---------------------------------------------------------------
+    # -- plugin contract ---------------------------------------------------------------
+
+    @classmethod
+    def can_open(cls, location: str) -> bool:
+        """A folder, or a path ending in `.zip`."""
+        path = Path(location)
+        return path.suffix.lower() == ".zip" or path.is_dir()
+
+    def data_warnings(self) -> list[str]:
+        return self.warnings.lines()
 
     def frame_times(self) -> np.ndarray:
         if self._times is None:  # event-only: samples from the events
@@ -208,26 +195,6 @@ class EcdFolderDataset(Dataset):
     def _read_imu(self) -> ImuSeries | None:
         table = self._read_timed_table("imu.txt", 7, "t ax ay az gx gy gz")
         return None if table is None else ImuSeries(t=table[:, 0], acc=table[:, 1:4], gyro=table[:, 4:7])
-
-
-def check_increasing(where: str, t: np.ndarray) -> None:
-    bad = np.flatnonzero(np.diff(t) <= 0)
-    if len(bad):
-        i = int(bad[0]) + 1
-        raise DataError(where, f"timestamp {t[i]:.9f} does not increase (previous {t[i - 1]:.9f})", i + 1)
-
-
-def pose_series(where: str, table: np.ndarray) -> PoseSeries:
-    """`t px py pz qx qy qz qw` rows -> PoseSeries, checking that quaternions are unit."""
-    q = table[:, 4:8]
-    norms = np.linalg.norm(q, axis=1)
-    off = np.abs(norms - 1.0) > 1e-2
-    if off.any():
-        i = int(np.argmax(off))
-        raise DataError(where, f"quaternion norm {norms[i]:.3f} is not 1", i + 1)
-    # Normalise only what is not unit already, so that re-reading written poses is exact.
-    q = np.where(np.abs(norms - 1.0)[:, None] > 1e-12, q / norms[:, None], q)
-    return PoseSeries(t=table[:, 0], p_w_c=table[:, 1:4], q_w_c=q)
 
 
 def write_ecd_folder(

@@ -15,9 +15,9 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from eas_vo.datasets.ecd import EcdConfig, check_increasing, event_sample_times, pose_series
-from eas_vo.errors import DataError
-from eas_vo.eventfile import DataWarnings, Validator, cache_key, file_identity, load_cached
+from eas_vo.datasets.recording import StreamConfig, check_increasing, event_sample_times, pose_series
+from eas_vo.errors import DataError, DataWarnings
+from eas_vo.eventfile import Validator, cache_key, file_identity, load_cached
 from eas_vo.plugins import Dataset
 from eas_vo.types import CameraModel, ImuSeries, empty_events
 
@@ -64,8 +64,8 @@ def decode_event_array(raw: bytes) -> np.ndarray:
 
 
 @dataclass(frozen=True)
-class BagConfig(EcdConfig):
-    """EcdConfig plus the topic names."""
+class BagConfig(StreamConfig):
+    """StreamConfig plus the topic names (the sensor size comes from camera_info)."""
 
     events_topic: str = "/dvs/events"
     image_topic: str = "/dvs/image_raw"
@@ -79,7 +79,6 @@ class RosbagDataset(Dataset):
 
     name = "rosbag"
     description = "ROS1 .bag (dvs_msgs events, sensor_msgs images/IMU/camera_info, mocap poses)"
-    suffixes = (".bag",)
     Config = BagConfig
 
     def __init__(self, location: str | Path, config: BagConfig | None = None):
@@ -87,7 +86,7 @@ class RosbagDataset(Dataset):
 
         self.config = c = config or BagConfig()
         self.path = Path(location)
-        self.description = str(self.path)
+        self.label = str(self.path)
         self.warnings = DataWarnings()
         if not self.path.is_file():
             raise DataError(self.path, "bag file not found")
@@ -177,7 +176,15 @@ class RosbagDataset(Dataset):
         check_increasing(f"{self.path}:{topic}", table[:, 0])
         return ImuSeries(table[:, 0], table[:, 1:4], table[:, 4:7])
 
-    # -- plugin protocol ---------------------------------------------------------------
+    # -- plugin contract ---------------------------------------------------------------
+
+    @classmethod
+    def can_open(cls, location: str) -> bool:
+        """A path ending in `.bag`."""
+        return Path(location).suffix.lower() == ".bag"
+
+    def data_warnings(self) -> list[str]:
+        return self.warnings.lines()
 
     def frame_times(self) -> np.ndarray:
         if self._times is None:

@@ -19,7 +19,7 @@ class FolderSource:
 
     def __init__(self, root: Path):
         self.root = root
-        self.description = str(root)
+        self.location = str(root)
         if not root.is_dir():
             raise DataError(root, "dataset folder not found")
 
@@ -50,7 +50,7 @@ class ZipSource:
 
     def __init__(self, path: Path):
         self.path = path
-        self.description = str(path)
+        self.location = str(path)
         if not path.is_file():
             raise DataError(path, "archive not found")
         try:

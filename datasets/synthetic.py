@@ -49,6 +49,11 @@ class SyntheticDataset(EcdFolderDataset):
     description = f"simulated dim-scene DAVIS sequence: synthetic:NAME, NAME in {', '.join(PRESETS)}"
     Config = NoConfig
 
+    @classmethod
+    def can_open(cls, location: str) -> bool:
+        """Never by guessing: a synthetic sequence is named explicitly, `synthetic:NAME`."""
+        return False
+
     def __init__(self, name: str = "default", config=None):
         super().__init__(sequence_folder(name or "default", progress=sys.stderr.isatty()))
-        self.description = f"synthetic:{name or 'default'}"
+        self.label = f"synthetic:{name or 'default'}"

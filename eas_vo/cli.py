@@ -1,6 +1,7 @@
-"""Command-line interface: `eas-vo run`, `eas-vo simulate`.
+"""Command-line interface: `eas-vo run | compare | list | render | simulate`.
 
 User errors (bad data, bad config) end in one line on stderr and exit code 2.
+Ctrl-C and SIGTERM end in one line saying what was kept, and exit code 130 / 143.
 Heavy modules are imported inside the commands, so `--help` is instant.
 """
 
@@ -8,11 +9,13 @@ from __future__ import annotations
 
 import argparse
 import os
-import re
+import signal
 import sys
+import threading
+from contextlib import contextmanager
 from pathlib import Path
 
-from eas_vo.errors import EasVoError
+from eas_vo.errors import EasVoError, Interrupted
 
 EPILOG_RUN = """\
 outputs (in --out):
@@ -47,7 +50,8 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument(
         "--dataset",
         metavar="SPEC",
-        help="an Event Camera Dataset folder, or synthetic:NAME (default: synthetic:default, simulated once)",
+        help="a recording (Event Camera Dataset folder or .zip, ROS1 .bag, or what a dataset plugin "
+        "opens), PLUGIN:LOCATION, or synthetic:NAME (default: synthetic:default, simulated once)",
     )
     run.add_argument("--frontend", metavar="NAME",
                      help="image source: original, histeq, slice, ts, sits, eas or a plugin's (eas-vo list; default eas)")
@@ -87,9 +91,9 @@ def build_parser() -> argparse.ArgumentParser:
 
     lister = sub.add_parser(
         "list",
-        help="list the installed frontends, backends and datasets with their config keys",
-        description="Every plugin found through the entry-point groups eas_vo.frontends, "
-        "eas_vo.backends and eas_vo.datasets: name, description, config keys with defaults.",
+        help="list the installed datasets, frontends, trackers and backends with their config keys",
+        description="Every plugin found through the entry-point groups eas_vo.datasets, eas_vo.frontends, "
+        "eas_vo.trackers and eas_vo.backends: name, description, config keys with defaults.",
     )
     lister.set_defaults(func=cmd_list)
 
@@ -121,7 +125,8 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def _add_common_options(parser) -> None:
-    """Options `run` and `compare` share: configuration, window, time offset, progress."""
+    """Options `run` and `compare` share: tracker, configuration, window, time offset, progress."""
+    parser.add_argument("--tracker", metavar="NAME", help="relative rotations from images: klt (the paper; default) or a plugin's")
     parser.add_argument("--config", metavar="FILE", help="TOML config file, or the name of a bundled one (e.g. paper)")
     parser.add_argument("--set", dest="assignments", action="append", default=[], metavar="SECTION.KEY=VALUE",
                         help="override one config value, e.g. frontend.n=8000 (repeatable)")
@@ -132,38 +137,54 @@ def _add_common_options(parser) -> None:
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
 
 
-def _window_overrides(args) -> dict:
+def _shared_overrides(args) -> dict:
     """The [run] values given by the shared options."""
     offset, auto = _time_offset(args.time_offset)
-    return {"start_s": args.start, "duration_s": args.duration, "time_offset_s": offset, "time_offset_auto": auto}
+    return {"tracker": args.tracker, "start_s": args.start, "duration_s": args.duration,
+            "time_offset_s": offset, "time_offset_auto": auto}
 
 
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     try:
-        return args.func(args)
+        with _sigterm_as_interrupt():
+            return args.func(args)
     except EasVoError as exc:
         print(f"eas-vo: error: {exc}", file=sys.stderr)
         return 2
-    except KeyboardInterrupt as exc:
-        from eas_vo.pipeline import Terminated
+    except KeyboardInterrupt as exc:  # the one place: a command says what it kept in Interrupted
+        kept = exc.kept if isinstance(exc, Interrupted) and exc.kept else "nothing was written"
+        print(f"eas-vo {args.command}: interrupted; {kept}", file=sys.stderr)
+        return 143 if isinstance(exc, Interrupted) and exc.sigterm else 130
 
-        print("eas-vo: interrupted; the frames processed so far were written (metrics.json: partial)", file=sys.stderr)
-        return 143 if isinstance(exc, Terminated) else 130
 
+@contextmanager
+def _sigterm_as_interrupt():
+    """Within the block, SIGTERM raises Interrupted(sigterm=True), handled like Ctrl-C
+    (main thread only; elsewhere a no-op). The previous handler is restored after."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
 
-def _slug(text: str) -> str:
-    return re.sub(r"[^A-Za-z0-9.-]+", "-", Path(text.rstrip("/")).name or text).strip("-")
+    def handler(signum, frame):
+        raise Interrupted(sigterm=True)
+
+    previous = signal.signal(signal.SIGTERM, handler)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)
 
 
 def cmd_run(args) -> int:
     from eas_vo import config as config_mod
     from eas_vo import pipeline
+    from eas_vo.io import slug
 
     assignments = args.assignments + (["dataset.lenient=true"] if args.lenient else [])
     config = config_mod.resolve(
         args.config,
-        {"dataset": args.dataset, "frontend": args.frontend, "backend": args.backend, **_window_overrides(args)},
+        {"dataset": args.dataset, "frontend": args.frontend, "backend": args.backend, **_shared_overrides(args)},
         assignments,
     )
     rc = config.run
@@ -174,7 +195,7 @@ def cmd_run(args) -> int:
     else:
         import time
 
-        out = Path(f"runs/{_slug(rc.dataset)}_{rc.frontend}_{rc.backend}_{time.strftime('%Y%m%d-%H%M%S')}")
+        out = Path(f"runs/{slug(rc.dataset)}_{rc.frontend}_{rc.tracker}_{rc.backend}_{time.strftime('%Y%m%d-%H%M%S')}")
     result = pipeline.run(config, out, progress=not args.quiet and sys.stderr.isatty())
     m = result.metrics
     for line in m["data_warnings"]:
@@ -184,7 +205,7 @@ def cmd_run(args) -> int:
     if m["time_offset_estimated"]:
         ape_text += f" (time offset {m['time_offset_s'] * 1e3:+.1f} ms, estimated)"
     print(
-        f"{rc.frontend}+{rc.backend} on {rc.dataset}: {m['frames']} frames, average NC {m['nc_mean']:.1f}, "
+        f"{rc.frontend}+{rc.tracker}+{rc.backend} on {rc.dataset}: {m['frames']} frames, average NC {m['nc_mean']:.1f}, "
         f"{ape_text}, {m['frames_per_s']:.1f} frames/s -> {out}"
     )
     return 0
@@ -192,8 +213,10 @@ def cmd_run(args) -> int:
 
 def cmd_compare(args) -> int:
     from eas_vo import compare
+    from eas_vo.evaluation import tum_rotation_errors
     from eas_vo.io import atomic_path
     from eas_vo.plots import plot_ape_bars, plot_ape_time
+    from eas_vo.registry import open_dataset
 
     out = Path(args.out)
     cells = compare.plan(
@@ -202,10 +225,8 @@ def cmd_compare(args) -> int:
         [v.strip() for v in args.backends.split(",") if v.strip()],
         args.sweeps,
     )
-    overrides = {**_window_overrides(args), "orb_stats": True if args.orb else None}
+    overrides = {**_shared_overrides(args), "orb_stats": True if args.orb else None}
     for dataset in dict.fromkeys(c.dataset for c in cells):  # simulate or cache once, not once per process
-        from eas_vo.pipeline import open_dataset
-
         try:
             open_dataset(dataset).events()
         except EasVoError:
@@ -228,14 +249,15 @@ def cmd_compare(args) -> int:
     series = {}
     for cell in cells:
         if results[cell]["status"] == "ok":
-            curve = compare.per_frame_ape(out / cell.folder)
+            curve = tum_rotation_errors(out / cell.folder / "trajectory.tum", out / cell.folder / "groundtruth.tum")
             if curve is not None:
                 series[(cell.dataset, " ".join(filter(None, [cell.frontend, cell.backend, cell.sweep_label])))] = curve
     if series:
         with atomic_path(out / "ape_time.png") as tmp:
             plot_ape_time(tmp, series)
     if interrupted is not None:
-        raise interrupted
+        kept = f"the table of the {n_run} finished cells was written to {out}; the same command resumes the rest"
+        raise Interrupted.keeping(interrupted, kept) from None
     failed = [r for r in rows if r["status"] != "ok"]
     for r in failed:
         print(f"eas-vo: cell {r['folder']} failed: {r['error']}", file=sys.stderr)
@@ -250,6 +272,8 @@ def cmd_list(args) -> int:
     from eas_vo import registry
 
     for kind in registry.KINDS:
+        for name, why in registry.broken_builtins(kind).items():
+            print(f"eas-vo: warning: built-in {kind[:-1]} {name!r} failed to import: {why}", file=sys.stderr)
         print(f"{kind} (entry-point group eas_vo.{kind}):")
         for name, cls in registry.available(kind).items():
             print(f"  {name:10s} {cls.description}")

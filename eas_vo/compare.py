@@ -7,16 +7,14 @@ import csv
 import io
 import itertools
 import json
-import re
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
-import numpy as np
 
 from eas_vo.config import parse_set
 from eas_vo.errors import EasVoError
-from eas_vo.io import write_text_atomic
+from eas_vo.io import slug, write_text_atomic
 
 
 @dataclass(frozen=True)
@@ -35,11 +33,7 @@ class Cell:
     @property
     def folder(self) -> str:
         parts = [f"{self.frontend}_{self.backend}"] + [f"{k.split('.')[-1]}-{v}" for k, v in self.sweep]
-        return f"{_slug(self.dataset)}/{_slug('_'.join(parts))}"
-
-
-def _slug(text: str) -> str:
-    return re.sub(r"[^A-Za-z0-9._=-]+", "-", Path(text.rstrip("/")).name or text).strip("-")
+        return f"{slug(self.dataset)}/{slug('_'.join(parts))}"
 
 
 def parse_sweeps(sweeps: list[str]) -> list[tuple[str, list[str]]]:
@@ -176,7 +170,7 @@ def table_markdown(rows: list[dict]) -> str:
     sources = list(dict.fromkeys((r["frontend"], r["sweep"]) for r in rows))
     by_key = {(r["dataset"], r["backend"], r["frontend"], r["sweep"]): r for r in rows}
     best_nc, best_ape = _best(rows, "nc_mean", lower=False), _best(rows, "ape_mean_rad", lower=True)
-    head1 = ["Sequence"] + [f"{_slug(d)} ({b})" for d in datasets for b in backends for _ in (0, 1)]
+    head1 = ["Sequence"] + [f"{slug(d)} ({b})" for d in datasets for b in backends for _ in (0, 1)]
     head2 = ["Source type"] + ["average NC", "average APE"] * (len(datasets) * len(backends))
     lines = ["| " + " | ".join(head1) + " |", "|" + "---|" * len(head1), "| " + " | ".join(head2) + " |"]
     for frontend, sweep in sources:
@@ -219,21 +213,3 @@ def write_tables(out_root: Path, rows: list[dict]) -> None:
     write_text_atomic(out_root / "table.json", json.dumps(rows, indent=2) + "\n")
 
 
-# ----------------------------------------------------------------------------- figures
-
-
-def per_frame_ape(folder: Path) -> tuple[np.ndarray, np.ndarray] | None:
-    """(t - t0, APE per frame [rad]) of a cell from its TUM files, aligned at the first frame."""
-    from eas_vo.geometry import geodesic_angle, matrices_from_quats
-
-    try:
-        est = np.loadtxt(folder / "trajectory.tum", ndmin=2)
-        gt = np.loadtxt(folder / "groundtruth.tum", ndmin=2)
-    except (OSError, ValueError):
-        return None
-    common, i_est, i_gt = np.intersect1d(est[:, 0], gt[:, 0], return_indices=True)
-    if len(common) == 0:
-        return None
-    R_est, R_gt = matrices_from_quats(est[i_est, 4:8]), matrices_from_quats(gt[i_gt, 4:8])
-    aligned = R_gt[0] @ R_est[0].T @ R_est
-    return common - common[0], geodesic_angle(R_gt, aligned)

@@ -1,9 +1,9 @@
 """Run configuration: TOML files -> frozen dataclasses, with command-line overrides.
 
 Sections: `[run]` (what to run), `[dataset]`, `[frontend]`, `[tracker]`, `[backend]`.
-`[frontend]` and `[backend]` hold the keys of the chosen plugin; per-plugin tables
-such as `[frontend.eas]` apply only when that plugin is chosen, so one file can
-configure every frontend. Precedence: dataclass defaults < file < CLI flags < `--set`.
+Each plugin section holds the keys of the chosen plugin; per-plugin tables such as
+`[frontend.eas]` apply only when that plugin is chosen, so one file can configure
+every frontend. Precedence: dataclass defaults < file < CLI flags < `--set`.
 """
 
 from __future__ import annotations
@@ -17,6 +17,7 @@ from typing import Any, get_type_hints
 
 from eas_vo import registry
 from eas_vo.errors import ConfigError
+from eas_vo.validation import check_range
 
 SECTIONS = ("run", "dataset", "frontend", "tracker", "backend")
 
@@ -26,8 +27,9 @@ class RunConfig:
     """What to run.
 
     Attributes:
-        dataset: an Event Camera Dataset folder, or `synthetic:NAME`.
-        frontend, backend: plugin names.
+        dataset: `PLUGIN:LOCATION`, or a location one dataset plugin recognises (a folder,
+            a `.zip`, a `.bag`); default the embedded `synthetic:default`.
+        frontend, tracker, backend: plugin names.
         start_s, duration_s: processed window, from the sequence's first timestamp [s].
         time_offset_s: ground truth is sampled at `t_frame + time_offset_s` [s].
         time_offset_auto: estimate the offset from the data instead (relative rotations
@@ -38,6 +40,7 @@ class RunConfig:
 
     dataset: str = "synthetic:default"
     frontend: str = "eas"
+    tracker: str = "klt"
     backend: str = "chain"
     start_s: float = 0.0
     duration_s: float = math.inf
@@ -48,8 +51,7 @@ class RunConfig:
     def validate(self) -> None:
         check_range(self, "start_s", 0.0, math.inf)
         check_range(self, "time_offset_s", -10.0, 10.0)
-        if not self.duration_s > 0:
-            raise ConfigError(f"run.duration_s must be > 0, got {self.duration_s}")
+        check_range(self, "duration_s", 0.0, math.inf, lo_open=True)
 
 
 @dataclass(frozen=True)
@@ -71,15 +73,6 @@ class ResolvedConfig:
                 lines.append(f"{f.name} = {_toml_value(getattr(getattr(self, section), f.name))}")
             lines.append("")
         return "\n".join(lines)
-
-
-def check_range(cfg, key: str, lo: float, hi: float, *, lo_open: bool = False) -> None:
-    """Raise ConfigError unless `lo <= cfg.key <= hi` (`lo < cfg.key` when lo_open)."""
-    value = getattr(cfg, key)
-    ok = (value > lo if lo_open else value >= lo) and value <= hi
-    if not ok:
-        bracket = "(" if lo_open else "["
-        raise ConfigError(f"{key} = {value} is out of range {bracket}{lo}, {hi}]")
 
 
 def _toml_value(value) -> str:
@@ -184,8 +177,6 @@ def resolve(
     assignments: list[str] = (),
 ) -> ResolvedConfig:
     """Merge defaults, a config file, CLI flags and `--set` assignments; validate everything."""
-    from eas_vo.tracker import TrackerConfig
-
     raw: dict = read_config_file(config_file) if config_file else {}
     raw = {s: dict(raw.get(s, {})) for s in SECTIONS}
     raw["run"].update({k: v for k, v in (run_overrides or {}).items() if v is not None})
@@ -199,35 +190,29 @@ def resolve(
         table[keys[-1]] = value
 
     run = build(RunConfig, raw["run"], "run")
-    dataset_cls = registry.get("datasets", dataset_plugin_name(run.dataset))
-    frontend_cls = registry.get("frontends", run.frontend)
-    backend_cls = registry.get("backends", run.backend)
-    return ResolvedConfig(
-        run=run,
-        dataset=build(dataset_cls.Config, _plugin_table(raw["dataset"], dataset_cls.name), "dataset"),
-        frontend=build(frontend_cls.Config, _plugin_table(raw["frontend"], run.frontend), "frontend"),
-        tracker=build(TrackerConfig, raw["tracker"], "tracker"),
-        backend=build(backend_cls.Config, _plugin_table(raw["backend"], run.backend), "backend"),
-    )
+    dataset_cls, _ = registry.resolve_dataset(run.dataset)
+    chosen = {
+        "dataset": dataset_cls,
+        "frontend": registry.get("frontends", run.frontend),
+        "tracker": registry.get("trackers", run.tracker),
+        "backend": registry.get("backends", run.backend),
+    }
+    sections = {name: build(cls.Config, _plugin_table(raw[name], name, cls.name), name) for name, cls in chosen.items()}
+    return ResolvedConfig(run=run, **sections)
 
 
-def _plugin_table(table: dict, name: str) -> dict:
-    """Flat keys of a section, over its `[section.<name>]` table; other plugins' tables dropped."""
+def _plugin_table(table: dict, section: str, name: str) -> dict:
+    """Flat keys of a section, over its `[section.<name>]` table; other plugins' tables dropped.
+
+    A table must be named after an installed plugin of the section's kind, so that a typo
+    (`[frontend.eass]`) is an error rather than silently ignored.
+    """
+    installed = registry.available(f"{section}s")
+    for key, value in table.items():
+        if isinstance(value, dict) and key not in installed:
+            raise ConfigError(
+                f"unknown table {section}.{key}: not an installed {section} plugin ({', '.join(installed) or 'none'})"
+            )
     merged = dict(table.get(name, {})) if isinstance(table.get(name), dict) else {}
     merged.update({k: v for k, v in table.items() if not isinstance(v, dict)})
     return merged
-
-
-def dataset_plugin_name(spec: str) -> str:
-    """`synthetic:default` -> 'synthetic'; a path whose suffix a plugin claims (`.bag`) -> that
-    plugin; any other path (folder, `.zip`) -> 'ecd'."""
-    plugins = registry.available("datasets")
-    scheme, sep, _ = spec.partition(":")
-    if sep and len(scheme) > 1 and scheme in plugins:
-        return scheme
-    suffix = Path(spec).suffix.lower()
-    for name, cls in plugins.items():
-        if suffix and suffix in getattr(cls, "suffixes", ()):
-            return name
-    return "ecd"
-

@@ -1,4 +1,10 @@
-"""User-facing errors: the CLI prints them as one line, without a traceback."""
+"""User-facing errors (the CLI prints them as one line, without a traceback) and the
+warnings of data problems tolerated under `--lenient`."""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
 
 
 class EasVoError(Exception):
@@ -17,3 +23,47 @@ class DataError(EasVoError):
 
 class ConfigError(EasVoError):
     """An invalid configuration key or value."""
+
+
+@dataclass
+class DataWarnings:
+    """Problems tolerated under `--lenient`, counted per file and kind, with the first place."""
+
+    counts: dict = field(default_factory=dict)
+    first: dict = field(default_factory=dict)
+
+    def add(self, where: str, what: str, first_at, n: int = 1) -> None:
+        key = (where, what)
+        self.counts[key] = self.counts.get(key, 0) + n
+        self.first.setdefault(key, first_at)
+
+    def merge(self, other: "DataWarnings") -> None:
+        for (where, what), n in other.counts.items():
+            self.add(where, what, other.first[(where, what)], n)
+
+    def lines(self) -> list[str]:
+        return [f"{where}: {n} dropped: {what} (first at {self.first[(where, what)]})" for (where, what), n in self.counts.items()]
+
+    def to_json(self) -> str:
+        return json.dumps([[w, k, self.first[(w, k)], n] for (w, k), n in self.counts.items()])
+
+    @classmethod
+    def from_json(cls, text: str) -> "DataWarnings":
+        out = cls()
+        for where, what, first_at, n in json.loads(text):
+            out.add(where, what, first_at, n)
+        return out
+
+
+class Interrupted(KeyboardInterrupt):
+    """Ctrl-C or SIGTERM (`sigterm`), with a note of what was saved before stopping (`kept`)."""
+
+    def __init__(self, kept: str = "", sigterm: bool = False):
+        super().__init__(kept)
+        self.kept = kept
+        self.sigterm = sigterm
+
+    @classmethod
+    def keeping(cls, cause: KeyboardInterrupt, kept: str) -> "Interrupted":
+        """The interrupt `cause`, re-raised once `kept` was saved."""
+        return cls(kept, sigterm=isinstance(cause, Interrupted) and cause.sigterm)

@@ -3,10 +3,11 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
-from eas_vo.geometry import geodesic_angle, interpolate_poses
+from eas_vo.geometry.rotations import geodesic_angle, interpolate_poses, matrices_from_quats
 from eas_vo.types import PoseSeries
 
 
@@ -49,12 +50,36 @@ def rotation_errors(
     The alignment is evo's `--align_origin`: R_aligned_k = R_gt_0 R_est_0^T R_est_k.
     """
     valid, R_gt, p_gt = interpolate_poses(ground_truth, np.asarray(t) + time_offset_s)
-    R_est = np.asarray(R_w_c)[valid]
-    if len(R_est) == 0:
-        empty = np.empty((0, 3, 3))
-        return RotationErrors(valid, empty, np.empty((0, 3)), empty, np.empty(0))
-    R_aligned = R_gt[0] @ R_est[0].T @ R_est
-    return RotationErrors(valid, R_gt, p_gt, R_aligned, geodesic_angle(R_gt, R_aligned))
+    R_aligned, ape = aligned_errors(R_gt, np.asarray(R_w_c)[valid])
+    return RotationErrors(valid, R_gt, p_gt if len(ape) else np.empty((0, 3)), R_aligned, ape)
+
+
+def aligned_errors(R_w_c_gt: np.ndarray, R_w_c_est: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The estimate aligned at the first frame (evo's `--align_origin`), and Eq. 3's error per
+    frame [rad]: R_aligned_k = R_gt_0 R_est_0^T R_est_k, ape_k = ||log(R_gt_k^-1 R_aligned_k)||.
+
+    Both stacks (N, 3, 3) hold the same frames in the same order."""
+    if len(R_w_c_est) == 0:
+        return np.empty((0, 3, 3)), np.empty(0)
+    R_aligned = R_w_c_gt[0] @ R_w_c_est[0].T @ R_w_c_est
+    return R_aligned, geodesic_angle(R_w_c_gt, R_aligned)
+
+
+def tum_rotation_errors(estimate_tum: Path, groundtruth_tum: Path) -> tuple[np.ndarray, np.ndarray] | None:
+    """(t - t0 [s], error per frame [rad]) of two TUM files over their common timestamps,
+    aligned at the first (as `rotation_errors`); None if either is unreadable or they share none."""
+    from eas_vo.io import read_tum
+
+    try:
+        t_est, _, q_est = read_tum(estimate_tum)
+        t_gt, _, q_gt = read_tum(groundtruth_tum)
+    except (OSError, ValueError):
+        return None
+    common, i_est, i_gt = np.intersect1d(t_est, t_gt, return_indices=True)
+    if len(common) == 0:
+        return None
+    _, ape = aligned_errors(matrices_from_quats(q_gt[i_gt]), matrices_from_quats(q_est[i_est]))
+    return common - common[0], ape
 
 
 def estimate_time_offset(t: np.ndarray, edges, ground_truth: PoseSeries, search_s: float = 0.1) -> float:

@@ -7,7 +7,6 @@ import numpy as np
 from eas_vo import config as config_mod
 from eas_vo import registry
 from eas_vo.errors import EasVoError
-from eas_vo.pipeline import open_dataset
 
 #: The paper's order of image sources (Fig. 1, Table 1); other frontends follow by name.
 PAPER_ORDER = ("original", "histeq", "slice", "ts", "sits", "eas")
@@ -29,11 +28,11 @@ def frontend_images(
         registry.available("frontends"), key=lambda n: (PAPER_ORDER.index(n) if n in PAPER_ORDER else len(PAPER_ORDER), n)
     )
     base = config_mod.resolve(config_file, {"dataset": dataset_spec}, assignments)
-    dataset = open_dataset(base.run.dataset, base.dataset)
+    dataset = registry.open_dataset(base.run.dataset, base.dataset)
     n_samples = len(dataset.frame_times())
     bad = [k for k in frame_indices if not 0 <= k < n_samples]
     if bad:
-        raise EasVoError(f"{dataset.description}: frame {bad[0]} does not exist (it has {n_samples})")
+        raise EasVoError(f"{dataset.label}: frame {bad[0]} does not exist (it has {n_samples})")
     built = {}
     for name in names:
         cfg = config_mod.resolve(config_file, {"dataset": dataset_spec, "frontend": name}, assignments)

@@ -1,8 +1,10 @@
-"""File I/O shared by datasets and the pipeline: numeric text tables and atomic writes."""
+"""File I/O shared by datasets and the pipeline: numeric text tables, TUM trajectories,
+atomic writes, folder names."""
 
 from __future__ import annotations
 
 import os
+import re
 import tempfile
 from contextlib import contextmanager
 from pathlib import Path
@@ -10,6 +12,7 @@ from pathlib import Path
 import numpy as np
 
 from eas_vo.errors import DataError
+
 
 def cache_dir() -> Path:
     """User cache folder: $EAS_VO_CACHE_DIR, else $XDG_CACHE_HOME/eas-vo, else ~/.cache/eas-vo."""
@@ -44,7 +47,21 @@ def write_text_atomic(path: str | Path, text: str) -> None:
 
 
 
+def slug(text: str) -> str:
+    """A file-name-safe name for a dataset spec, path or label: its last path component with
+    every run of characters other than letters, digits and `._=-` replaced by `-`."""
+    return re.sub(r"[^A-Za-z0-9._=-]+", "-", Path(text.rstrip("/")).name or text).strip("-")
+
+
 # ----------------------------------------------------------------------------- text tables
+
+
+def read_tum(path: str | Path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A TUM trajectory `t tx ty tz qx qy qz qw` -> (t [s], p [m] (N, 3), q_xyzw (N, 4))."""
+    rows = np.loadtxt(path, ndmin=2)
+    if rows.shape[1] != 8:
+        raise ValueError(f"{path}: expected 8 columns, found {rows.shape[1]}")
+    return rows[:, 0], rows[:, 1:4], rows[:, 4:8]
 
 
 def read_table(path: str | Path, ncols: int, what: str) -> np.ndarray:

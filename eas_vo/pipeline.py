@@ -1,39 +1,55 @@
-"""One run: dataset -> frontend -> tracker -> backend -> evaluation -> files."""
+"""One run, as its data flows: open -> track -> solve -> evaluate -> write.
+
+dataset --Sample--> frontend --uint8 image--> tracker --records, edges--> backend
+--R_w_c--> evaluation --> files. Each step is a function below; `run` strings them.
+"""
 
 from __future__ import annotations
 
 import csv
 import json
-import signal
-import threading
 import time
 from collections import Counter
-from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
 from eas_vo import registry
-from eas_vo.config import ResolvedConfig, dataset_plugin_name
-from eas_vo.errors import EasVoError
+from eas_vo.config import ResolvedConfig
+from eas_vo.errors import EasVoError, Interrupted
 from eas_vo.evaluation import RotationErrors, estimate_time_offset, rotation_errors
-from eas_vo.geometry import quats_from_matrices
+from eas_vo.geometry.rotations import quats_from_matrices
 from eas_vo.io import atomic_path, write_text_atomic
 from eas_vo.orb import OrbStats
-from eas_vo.plugins import Dataset
-from eas_vo.tracker import Tracker
+from eas_vo.plugins import Backend, Dataset, Frontend, Tracker
 from eas_vo.types import FrameRecord, RelativeRotation
 
 FRAMES_CSV_FIELDS = ("index", "t", "nc", "inliers", "status", "redetected")
 
 
-def open_dataset(spec: str, config=None) -> Dataset:
-    """Open `spec`: `synthetic:NAME` (or any `plugin:location`), else an Event Camera Dataset folder."""
-    name = dataset_plugin_name(spec)
-    cls = registry.get("datasets", name)
-    location = spec[len(name) + 1 :] if spec.startswith(f"{name}:") else spec
-    return cls(location, config if config is not None else cls.Config())
+@dataclass
+class Pipeline:
+    """The opened dataset and the plugins built for it."""
+
+    dataset: Dataset
+    frontend: Frontend
+    tracker: Tracker
+    backend: Backend
+
+
+@dataclass
+class Tracked:
+    """What tracking produced: a record per frame, the measured edges, and whether it was cut short."""
+
+    records: list[FrameRecord] = field(default_factory=list)
+    edges: list[RelativeRotation] = field(default_factory=list)
+    orb: OrbStats | None = None  # ORB statistics of the images (run.orb_stats)
+    interrupted: KeyboardInterrupt | None = None
+
+    @property
+    def times(self) -> np.ndarray:
+        return np.array([r.t for r in self.records])
 
 
 @dataclass
@@ -50,104 +66,156 @@ class RunResult:
 
 
 def run(config: ResolvedConfig, out_dir: str | Path | None = None, progress: bool = False) -> RunResult:
-    """Run the configured pipeline; with `out_dir`, write every output file there."""
+    """Run the configured pipeline; with `out_dir`, write every output file there.
+
+    Ctrl-C (or SIGTERM turned into KeyboardInterrupt by the caller) during tracking
+    keeps the frames processed so far: they are solved, evaluated and written, with
+    `"partial": true`, and `Interrupted` is raised.
+    """
     started = time.perf_counter()
-    rc = config.run
-    dataset = open_dataset(rc.dataset, config.dataset)
-    frontend_cls = registry.get("frontends", rc.frontend)
-    frontend = frontend_cls(config.frontend, dataset.camera)
-    backend = registry.get("backends", rc.backend)(config.backend)
-    tracker = Tracker(config.tracker, dataset.camera)
-
-    if frontend_cls.needs_frames and dataset.load_frame(0) is None:
-        raise EasVoError(f"frontend {rc.frontend!r} needs APS frames: {dataset.no_frames_reason}")
-    n_total = len(dataset.window(rc.start_s, rc.duration_s))
-    dataset.events()  # the first read of a stream parses it into the cache
-    loaded = time.perf_counter()  # opening (and the first time simulating or caching) ends here
-    if n_total < 2:
-        raise EasVoError(
-            f"{dataset.description}: the window start={rc.start_s} s, duration={rc.duration_s} s "
-            f"holds {n_total} sample(s); at least 2 are needed"
-        )
-
+    parts = open_pipeline(config)
+    load_s = time.perf_counter() - started  # opening (and the first time simulating or caching)
     out = Path(out_dir) if out_dir is not None else None
     if out is not None:
         out.mkdir(parents=True, exist_ok=True)
         write_text_atomic(out / "config.toml", config.to_toml())
-    records: list[FrameRecord] = []
-    edges: list[RelativeRotation] = []
-    orb = OrbStats() if rc.orb_stats else None
-    interrupted: BaseException | None = None
-    with _FrameLog(out / "frames.csv" if out else None) as log, _progress(n_total, progress, rc) as bar, _terminate_as_interrupt():
-        try:
-            _track_all(dataset, rc, frontend, tracker, orb, records, edges, log, bar)
-        except KeyboardInterrupt as exc:  # SIGINT, or SIGTERM: keep what was processed
-            interrupted = exc
-    if len(records) < 2:
-        if interrupted is not None:
-            raise interrupted
-        raise EasVoError(f"{dataset.description}: fewer than 2 samples were processed")
-
-
-    t = np.array([r.t for r in records])
-    R_w_c = backend.solve(len(records), edges, t, dataset.imu)
-    errors, offset = None, rc.time_offset_s
-    if dataset.ground_truth is not None:
-        if rc.time_offset_auto:
-            offset = estimate_time_offset(t, edges, dataset.ground_truth)
-        errors = rotation_errors(t, R_w_c, dataset.ground_truth, offset)
-    elapsed = time.perf_counter() - started
-    metrics = _metrics(config, dataset, records, errors, elapsed, loaded - started)
-    metrics["time_offset_s"] = offset
-    metrics["time_offset_estimated"] = rc.time_offset_auto and dataset.ground_truth is not None
-    warnings = getattr(dataset, "warnings", None)
-    metrics["data_warnings"] = warnings.lines() if warnings is not None else []
-    metrics["partial"] = interrupted is not None
-    if orb is not None:
-        metrics.update(orb.summary())
-    result = RunResult(t, R_w_c, records, edges, errors, metrics, getattr(backend, "causal", None))
+    tracked = track(parts, config, out / "frames.csv" if out else None, progress)
+    t = tracked.times
+    R_w_c = parts.backend.solve(len(t), tracked.edges, times=t, imu=parts.dataset.imu)
+    errors, offset = evaluate(config, parts.dataset, t, R_w_c, tracked.edges)
+    metrics = summarise(config, parts.dataset, tracked, errors, offset, time.perf_counter() - started, load_s)
+    result = RunResult(t, R_w_c, tracked.records, tracked.edges, errors, metrics, parts.backend.causal_R_w_c)
     if out is not None:
-        write_outputs(out, result, dataset.description)
-    if interrupted is not None:
-        raise interrupted
+        write_outputs(out, result, parts.dataset.label)
+    if tracked.interrupted is not None:
+        kept = f"the {len(t)} frames processed so far were written to {out} (metrics.json: partial)" if out else ""
+        raise Interrupted.keeping(tracked.interrupted, kept) from None
     return result
 
 
-def _track_all(dataset, rc, frontend, tracker, orb, records, edges, log, bar) -> None:
-    """The per-frame loop: frontend, tracker, and the frame's row in frames.csv."""
-    for sample in dataset.samples(rc.start_s, rc.duration_s):
-        image = frontend(sample)
-        _check_image(image, dataset.camera, rc.frontend, sample)
-        if orb is not None:
-            orb.add(image)
-        record, measured = tracker.process(image, sample.t)
-        records.append(record)
-        edges.extend(measured)
-        log.write(record)
-        bar.update(1)
-        if record.index % 10 == 0:
-            bar.set_postfix(nc=record.nc, refresh=False)
+def open_pipeline(config: ResolvedConfig) -> Pipeline:
+    """Open the dataset, build the plugins, check the window, and read the event stream once
+    (its first read parses it into the cache)."""
+    rc = config.run
+    dataset = registry.open_dataset(rc.dataset, config.dataset)
+    frontend_cls = registry.get("frontends", rc.frontend)
+    if frontend_cls.needs_frames and dataset.load_frame(0) is None:
+        raise EasVoError(f"frontend {rc.frontend!r} needs APS frames: {dataset.no_frames_reason}")
+    n_window = len(dataset.window(rc.start_s, rc.duration_s))
+    if n_window < 2:
+        raise EasVoError(
+            f"{dataset.label}: the window start={rc.start_s} s, duration={rc.duration_s} s "
+            f"holds {n_window} sample(s); at least 2 are needed"
+        )
+    dataset.events()
+    return Pipeline(
+        dataset=dataset,
+        frontend=frontend_cls(config.frontend, dataset.camera),
+        tracker=registry.get("trackers", rc.tracker)(config.tracker, dataset.camera, imu=dataset.imu),
+        backend=registry.get("backends", rc.backend)(config.backend),
+    )
 
 
-class Terminated(KeyboardInterrupt):
-    """SIGTERM, handled like Ctrl-C: the frames processed so far are written."""
+def track(parts: Pipeline, config: ResolvedConfig, frames_csv: Path | None = None, progress: bool = False) -> Tracked:
+    """The per-frame loop: frontend, tracker, and the frame's row in frames.csv (written as it goes).
+
+    An interrupt stops the loop and is kept in the result; with fewer than 2 frames it is re-raised.
+    """
+    rc = config.run
+    tracked = Tracked(orb=OrbStats() if rc.orb_stats else None)
+    n_window = len(parts.dataset.window(rc.start_s, rc.duration_s))
+    with _FrameLog(frames_csv) as log, _progress(n_window, progress, rc) as bar:
+        try:
+            for sample in parts.dataset.samples(rc.start_s, rc.duration_s):
+                image = parts.frontend(sample)
+                _check_image(image, parts.dataset.camera, rc.frontend, sample)
+                if tracked.orb is not None:
+                    tracked.orb.add(image)
+                record, edges = parts.tracker.process(image, sample.t)
+                tracked.records.append(record)
+                tracked.edges.extend(edges)
+                log.write(record)
+                bar.update(1)
+                if record.index % 10 == 0:
+                    bar.set_postfix(nc=record.nc, refresh=False)
+        except KeyboardInterrupt as exc:  # Ctrl-C or SIGTERM: keep what was processed
+            tracked.interrupted = exc
+    if len(tracked.records) < 2:
+        if tracked.interrupted is not None:
+            raise tracked.interrupted
+        raise EasVoError(f"{parts.dataset.label}: fewer than 2 samples were processed")
+    return tracked
 
 
-@contextmanager
-def _terminate_as_interrupt():
-    """Within the block, SIGTERM raises Terminated (main thread only; elsewhere a no-op)."""
-    if threading.current_thread() is not threading.main_thread():
-        yield
-        return
+def evaluate(config: ResolvedConfig, dataset: Dataset, t: np.ndarray, R_w_c: np.ndarray, edges) -> tuple[RotationErrors | None, float]:
+    """Per-frame rotation errors against the dataset's ground truth (None without it), and the
+    time offset [s] used: the configured one, or the one estimated from the edges."""
+    rc = config.run
+    if dataset.ground_truth is None:
+        return None, rc.time_offset_s
+    offset = estimate_time_offset(t, edges, dataset.ground_truth) if rc.time_offset_auto else rc.time_offset_s
+    return rotation_errors(t, R_w_c, dataset.ground_truth, offset), offset
 
-    def handler(signum, frame):
-        raise Terminated()
 
-    previous = signal.signal(signal.SIGTERM, handler)
-    try:
-        yield
-    finally:
-        signal.signal(signal.SIGTERM, previous)
+def summarise(config: ResolvedConfig, dataset: Dataset, tracked: Tracked, errors, offset: float, elapsed: float, load_s: float) -> dict:
+    """metrics.json: accuracy, tracking and speed figures; speed is measured over the
+    processing, after the dataset was opened."""
+    records = tracked.records
+    pairs = records[1:]
+    span = records[-1].t - records[0].t
+    processing = max(elapsed - load_s, 1e-9)
+    metrics = {
+        "dataset": config.run.dataset,
+        "frontend": config.run.frontend,
+        "tracker": config.run.tracker,
+        "backend": config.run.backend,
+        "frames": len(records),
+        "frames_evaluated": int(errors.valid.sum()) if errors is not None else 0,
+        "nc_mean": float(np.mean([r.nc for r in pairs])),
+        "inliers_mean": float(np.mean([r.inliers for r in pairs])),
+        "status_counts": dict(Counter(r.status for r in records)),
+        "redetections": int(sum(r.redetected for r in pairs)),
+        "sequence_s": float(span),
+        "elapsed_s": float(elapsed),
+        "load_s": float(load_s),
+        "frames_per_s": len(records) / processing,
+        "realtime_factor": float(span / processing),
+    }
+    if errors is not None:
+        metrics.update(errors.summary())
+    metrics["time_offset_s"] = offset
+    metrics["time_offset_estimated"] = config.run.time_offset_auto and dataset.ground_truth is not None
+    metrics["data_warnings"] = dataset.data_warnings()
+    metrics["partial"] = tracked.interrupted is not None
+    if tracked.orb is not None:
+        metrics.update(tracked.orb.summary())
+    return metrics
+
+
+def write_outputs(out: Path, result: RunResult, label: str) -> None:
+    """trajectory.tum, groundtruth.tum, metrics.json and rotation.png (each written atomically)."""
+    zeros = np.zeros((len(result.t), 3))
+    write_text_atomic(out / "trajectory.tum", format_tum(result.t, zeros, result.R_w_c))
+    if result.causal_R_w_c is not None:
+        write_text_atomic(out / "trajectory_causal.tum", format_tum(result.t, zeros, result.causal_R_w_c))
+    errors = result.errors
+    if errors is not None and errors.valid.any():
+        write_text_atomic(out / "groundtruth.tum", format_tum(result.t[errors.valid], errors.p_w_c_gt, errors.R_w_c_gt))
+    write_text_atomic(out / "metrics.json", json.dumps(result.metrics, indent=2, allow_nan=True) + "\n")
+    from eas_vo.plots import plot_rotation
+
+    with atomic_path(out / "rotation.png") as tmp:
+        plot_rotation(tmp, result, title=f"{result.metrics['frontend']} + {result.metrics['backend']}: {label}")
+
+
+def format_tum(t: np.ndarray, p: np.ndarray, R: np.ndarray) -> str:
+    """TUM lines `t tx ty tz qx qy qz qw` (camera-to-world)."""
+    q = quats_from_matrices(R) if len(R) else np.empty((0, 4))
+    rows = np.column_stack([t, p, q])
+    return "".join(
+        f"{r[0]:.9f} {r[1]:.9f} {r[2]:.9f} {r[3]:.9f} {r[4]:.12f} {r[5]:.12f} {r[6]:.12f} {r[7]:.12f}\n"
+        for r in rows
+    )
 
 
 def _check_image(image, camera, frontend: str, sample) -> None:
@@ -163,57 +231,6 @@ def _check_image(image, camera, frontend: str, sample) -> None:
         )
 
 
-def _metrics(config: ResolvedConfig, dataset: Dataset, records, errors, elapsed: float, load_s: float) -> dict:
-    """Summary figures; speed is measured over the processing, after the dataset was opened."""
-    pairs = records[1:]
-    span = records[-1].t - records[0].t
-    metrics = {
-        "dataset": config.run.dataset,
-        "frontend": config.run.frontend,
-        "backend": config.run.backend,
-        "frames": len(records),
-        "frames_evaluated": int(errors.valid.sum()) if errors is not None else 0,
-        "nc_mean": float(np.mean([r.nc for r in pairs])),
-        "inliers_mean": float(np.mean([r.inliers for r in pairs])),
-        "status_counts": dict(Counter(r.status for r in records)),
-        "redetections": int(sum(r.redetected for r in pairs)),
-        "sequence_s": float(span),
-        "elapsed_s": float(elapsed),
-        "load_s": float(load_s),
-        "frames_per_s": len(records) / max(elapsed - load_s, 1e-9),
-        "realtime_factor": float(span / max(elapsed - load_s, 1e-9)),
-    }
-    if errors is not None:
-        metrics.update(errors.summary())
-    return metrics
-
-
-def write_outputs(out: Path, result: RunResult, description: str) -> None:
-    """trajectory.tum, groundtruth.tum, metrics.json and rotation.png (each written atomically)."""
-    zeros = np.zeros((len(result.t), 3))
-    write_text_atomic(out / "trajectory.tum", format_tum(result.t, zeros, result.R_w_c))
-    if result.causal_R_w_c is not None:
-        write_text_atomic(out / "trajectory_causal.tum", format_tum(result.t, zeros, result.causal_R_w_c))
-    errors = result.errors
-    if errors is not None and errors.valid.any():
-        write_text_atomic(out / "groundtruth.tum", format_tum(result.t[errors.valid], errors.p_w_c_gt, errors.R_w_c_gt))
-    write_text_atomic(out / "metrics.json", json.dumps(result.metrics, indent=2, allow_nan=True) + "\n")
-    from eas_vo.plots import plot_rotation
-
-    with atomic_path(out / "rotation.png") as tmp:
-        plot_rotation(tmp, result, title=f"{result.metrics['frontend']} + {result.metrics['backend']}: {description}")
-
-
-def format_tum(t: np.ndarray, p: np.ndarray, R: np.ndarray) -> str:
-    """TUM lines `t tx ty tz qx qy qz qw` (camera-to-world)."""
-    q = quats_from_matrices(R) if len(R) else np.empty((0, 4))
-    rows = np.column_stack([t, p, q])
-    return "".join(
-        f"{r[0]:.9f} {r[1]:.9f} {r[2]:.9f} {r[3]:.9f} {r[4]:.12f} {r[5]:.12f} {r[6]:.12f} {r[7]:.12f}\n"
-        for r in rows
-    )
-
-
 class _FrameLog:
     """frames.csv, one row per frame, flushed as it goes so an interrupted run keeps its rows."""
 
@@ -223,7 +240,7 @@ class _FrameLog:
     def __enter__(self):
         self._fh = open(self.path, "w", newline="") if self.path else None
         if self._fh:
-            self._writer = csv.writer(self._fh)
+            self._writer = csv.writer(self._fh, lineterminator="\n")
             self._writer.writerow(FRAMES_CSV_FIELDS)
         return self
 
@@ -244,7 +261,7 @@ def _progress(total: int, enabled: bool, rc):
     return tqdm(
         total=total,
         disable=not enabled,
-        desc=f"{rc.frontend}+{rc.backend}",
+        desc=f"{rc.frontend}+{rc.tracker}+{rc.backend}",
         unit="frame",
         leave=False,
         dynamic_ncols=True,

@@ -1,4 +1,9 @@
-"""Figures. Imported lazily: matplotlib is only loaded when a figure is drawn."""
+"""Figures, drawn on matplotlib `Figure` objects rendered by the Agg canvas.
+
+No pyplot: the process's matplotlib backend (a library user's interactive one, say)
+is never changed, and no figure is left registered anywhere. Imported lazily:
+matplotlib is only loaded when a figure is drawn.
+"""
 
 from __future__ import annotations
 
@@ -6,20 +11,26 @@ from pathlib import Path
 
 import numpy as np
 
-from eas_vo.geometry import euler_zyx_deg
+from eas_vo.geometry.rotations import euler_zyx_deg
+
+
+def _figure(**kwargs):
+    """A new figure on its own Agg canvas (PNG output whatever the process's backend)."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    fig = Figure(**kwargs)
+    FigureCanvasAgg(fig)
+    return fig
 
 
 def plot_rotation(path: str | Path, result, title: str = "") -> None:
     """Estimated (aligned to ground truth at the first frame) and true roll/pitch/yaw over time,
     like the paper's Fig. 3. Without ground truth only the estimate is drawn."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
     t0 = result.t[0]
     errors = result.errors
-    fig, axes = plt.subplots(3, 1, sharex=True, figsize=(8, 6.5), constrained_layout=True)
+    fig = _figure(figsize=(8, 6.5), layout="constrained")
+    axes = fig.subplots(3, 1, sharex=True)
     if errors is not None and errors.valid.any():
         t = result.t[errors.valid] - t0
         est = np.unwrap(euler_zyx_deg(errors.R_w_c_aligned), period=360, axis=0)
@@ -41,18 +52,13 @@ def plot_rotation(path: str | Path, result, title: str = "") -> None:
         title += f"\naverage APE {m['ape_mean_rad']:.4f} rad, average NC {m['nc_mean']:.1f}"
     fig.suptitle(title, fontsize="medium")
     fig.savefig(path, dpi=110, format="png")
-    plt.close(fig)
 
 
 def plot_gallery(path: str | Path, names: list[str], images: dict, frame_indices: list[int], title: str = "") -> None:
     """A grid: one row per frame, one column per frontend (the paper's Fig. 1)."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
     rows, cols = len(frame_indices), len(names)
-    fig, axes = plt.subplots(rows, cols, figsize=(2.4 * cols, 1.9 * rows + 0.4), squeeze=False, constrained_layout=True)
+    fig = _figure(figsize=(2.4 * cols, 1.9 * rows + 0.4), layout="constrained")
+    axes = fig.subplots(rows, cols, squeeze=False)
     for r, k in enumerate(frame_indices):
         for c, name in enumerate(names):
             ax = axes[r][c]
@@ -70,22 +76,17 @@ def plot_gallery(path: str | Path, names: list[str], images: dict, frame_indices
     if title:
         fig.suptitle(title, fontsize="medium")
     fig.savefig(path, dpi=100, format="png")
-    plt.close(fig)
 
 
 def plot_ape_bars(path: str | Path, rows: list[dict]) -> None:
     """Average APE per source type (bars) and backend (colours), one panel per dataset."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
     ok = [r for r in rows if r["status"] == "ok" and r["ape_mean_rad"] is not None]
     datasets = list(dict.fromkeys(r["dataset"] for r in rows))
     backends = list(dict.fromkeys(r["backend"] for r in rows))
     sources = list(dict.fromkeys(r["frontend"] + (f"\n{r['sweep']}" if r["sweep"] else "") for r in rows))
     panel_width = max(5.0, 0.8 * len(sources) * len(backends) + 2.0)
-    fig, axes = plt.subplots(1, len(datasets), figsize=(panel_width * len(datasets), 3.8), squeeze=False, constrained_layout=True)
+    fig = _figure(figsize=(panel_width * len(datasets), 3.8), layout="constrained")
+    axes = fig.subplots(1, len(datasets), squeeze=False)
     width = 0.8 / max(1, len(backends))
     for ax, dataset in zip(axes[0], datasets):
         for b, backend in enumerate(backends):
@@ -101,18 +102,13 @@ def plot_ape_bars(path: str | Path, rows: list[dict]) -> None:
         ax.grid(axis="y", alpha=0.3)
     axes[0][0].legend(fontsize="small")
     fig.savefig(path, dpi=110, format="png")
-    plt.close(fig)
 
 
 def plot_ape_time(path: str | Path, series: dict) -> None:
     """APE over time: {(dataset, label): (t, ape)}, one panel per dataset, a line per label."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
     datasets = list(dict.fromkeys(d for d, _ in series))
-    fig, axes = plt.subplots(len(datasets), 1, figsize=(8, 3 * max(1, len(datasets))), squeeze=False, constrained_layout=True)
+    fig = _figure(figsize=(8, 3 * max(1, len(datasets))), layout="constrained")
+    axes = fig.subplots(len(datasets), 1, squeeze=False)
     for ax, dataset in zip(axes[:, 0], datasets):
         for (d, label), (t, ape) in series.items():
             if d == dataset:
@@ -123,4 +119,3 @@ def plot_ape_time(path: str | Path, series: dict) -> None:
         ax.legend(fontsize="small", ncol=3)
     axes[-1, 0].set_xlabel("time [s]")
     fig.savefig(path, dpi=110, format="png")
-    plt.close(fig)

@@ -1,18 +1,29 @@
-"""The plugin protocols: what a dataset, a frontend and a backend provide.
+"""The plugin contracts: what a dataset, a frontend, a tracker and a backend provide.
 
-A plugin class has a `name`, a one-line `description`, a frozen dataclass
-`Config`, and is built from that config. Register it under the entry-point
-group `eas_vo.datasets`, `eas_vo.frontends` or `eas_vo.backends`.
+Every plugin class has three class attributes:
+
+    name: str            the name users type (`--frontend NAME`); equal to its entry-point name
+    description: str     one line, shown by `eas-vo list`
+    Config: type         a frozen dataclass; its fields are the plugin's config keys (defaults
+                         required); an optional `validate()` method raises ConfigError
+
+and is registered under the entry-point group `eas_vo.datasets`, `eas_vo.frontends`,
+`eas_vo.trackers` or `eas_vo.backends`. The pipeline calls only what is declared
+here; members marked optional have the default given. Signatures that may grow take
+keyword arguments after `*`.
+
+Data flow: Dataset --Sample--> Frontend --uint8 image--> Tracker --FrameRecord, edges-->
+Backend --R_w_c per frame--> evaluation.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Iterator, Sequence
+from typing import ClassVar, Iterator, Sequence
 
 import numpy as np
 
-from eas_vo.types import CameraModel, ImuSeries, PoseSeries, RelativeRotation, Sample, search_times
+from eas_vo.types import CameraModel, FrameRecord, ImuSeries, PoseSeries, RelativeRotation, Sample, search_times
 
 
 @dataclass(frozen=True)
@@ -21,31 +32,57 @@ class NoConfig:
 
 
 class Dataset:
-    """A recording: frames and events in time order, camera model, optional ground truth and IMU.
+    """A recording: frames and events in time order, the camera, optional ground truth and IMU.
 
-    Subclasses set `camera`, `ground_truth`, `imu`, `description` and implement
-    `frame_times()`, `load_frame(k)` and `events()`.
+    Required: `__init__(location, config)` setting `camera` (and `ground_truth`, `imu`
+    when the recording has them); `frame_times()`, `load_frame(k)`, `events()`.
+    Optional (defaults here): `can_open`, `label`, `no_frames_reason`, `data_warnings`,
+    `window`, `samples`.
     """
 
-    name = "dataset"
-    description = ""
-    Config = NoConfig
+    name: ClassVar[str] = "dataset"
+    description: ClassVar[str] = ""
+    Config: ClassVar[type] = NoConfig
+
+    #: Intrinsics, distortion and sensor size.
     camera: CameraModel
+    #: Camera-to-world poses, or None.
     ground_truth: PoseSeries | None = None
+    #: Gyro and accelerometer readings (IMU frame), or None.
     imu: ImuSeries | None = None
-    no_frames_reason = "the dataset has no APS frames"
+    #: What the user opened, for messages and plots (e.g. the folder path).
+    label: str = ""
+    #: Why `load_frame` returns None, for the error a frame-based frontend gives.
+    no_frames_reason: str = "the dataset has no APS frames"
+
+    def __init__(self, location: str, config=None):
+        """Open `location` (the part of `--dataset` after `NAME:`, or the whole of it)."""
+        raise NotImplementedError
+
+    @classmethod
+    def can_open(cls, location: str) -> bool:
+        """Whether this plugin recognises `location` (a path, a name) without `NAME:` in front.
+
+        Must be cheap and never raise (like xarray's `guess_can_open`); the registry asks
+        every dataset plugin and needs exactly one yes. Default: no (explicit form only).
+        """
+        return False
 
     def frame_times(self) -> np.ndarray:
-        """(N,) frame timestamps [s], increasing."""
+        """(N,) sample timestamps [s], non-decreasing."""
         raise NotImplementedError
 
     def load_frame(self, k: int) -> np.ndarray | None:
-        """Grayscale uint8 frame k, or None for an event-only stream."""
+        """Grayscale uint8 APS frame k (H, W), or None for an event-only stream."""
         raise NotImplementedError
 
     def events(self) -> np.ndarray:
         """The whole event stream as EVENT_DTYPE (possibly memory-mapped), sorted by time."""
         raise NotImplementedError
+
+    def data_warnings(self) -> list[str]:
+        """One line per kind of problem tolerated while reading (`--lenient`). Default: none."""
+        return []
 
     def window(self, start_s: float = 0.0, duration_s: float = np.inf) -> np.ndarray:
         """Indices of the frames in [t0 + start_s, t0 + start_s + duration_s), t0 the first frame time."""
@@ -78,16 +115,18 @@ class Dataset:
 
 
 class Frontend:
-    """Turns a Sample into one grayscale uint8 image of sensor size.
+    """Turns a Sample into one grayscale uint8 image of sensor size (height, width).
 
-    Stateful frontends consume `sample.events_since_previous` incrementally;
-    `reset()` clears their state.
+    Required: `__call__(sample)`. Optional: `needs_frames` (default False: the frontend
+    reads only events), `reset()` (default: nothing to forget). Stateful frontends
+    consume `sample.events_since_previous` incrementally.
     """
 
-    name = "frontend"
-    description = ""
-    Config = NoConfig
-    needs_frames = False
+    name: ClassVar[str] = "frontend"
+    description: ClassVar[str] = ""
+    Config: ClassVar[type] = NoConfig
+    #: True if `__call__` reads `sample.frame` (the run refuses event-only datasets).
+    needs_frames: ClassVar[bool] = False
 
     def __init__(self, config=None, camera: CameraModel | None = None):
         self.config = config if config is not None else self.Config()
@@ -97,20 +136,67 @@ class Frontend:
         """Forget any state accumulated from earlier samples."""
 
     def __call__(self, sample: Sample) -> np.ndarray:
+        """The image of `sample`: uint8, (camera.height, camera.width)."""
+        raise NotImplementedError
+
+
+class Tracker:
+    """Measures relative rotations between the images of one sequence, fed in time order.
+
+    Required: `process(image, t)`. Optional: `reset()`, which `__init__` calls last, so a
+    tracker sets up its per-sequence state there. It never knows which frontend made the
+    images. Frame indices count the images given since construction (or reset), from 0.
+    """
+
+    name: ClassVar[str] = "tracker"
+    description: ClassVar[str] = ""
+    Config: ClassVar[type] = NoConfig
+
+    def __init__(self, config=None, camera: CameraModel | None = None, *, imu: ImuSeries | None = None):
+        """`camera`: the images' intrinsics and distortion; `imu`: the dataset's, when it has one."""
+        self.config = config if config is not None else self.Config()
+        self.camera = camera
+        self.imu = imu
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget every image seen (called by `__init__`)."""
+
+    def process(self, image: np.ndarray, t: float) -> tuple[FrameRecord, list[RelativeRotation]]:
+        """Take the next image (uint8, sensor size) taken at `t` [s].
+
+        Returns the frame's record (its `index` is this image's frame index) and the
+        relative rotations measured now, each `R_i_j` with j this frame and i < j.
+        """
         raise NotImplementedError
 
 
 class Backend:
-    """Turns relative rotations into absolute camera-to-world rotations (R_w_c per frame)."""
+    """Turns relative rotations into absolute camera-to-world rotations, one per frame.
 
-    name = "backend"
-    description = ""
-    Config = NoConfig
+    Required: `solve(n_frames, edges, *, times, imu)`. Optional: `causal_R_w_c`.
+    """
+
+    name: ClassVar[str] = "backend"
+    description: ClassVar[str] = ""
+    Config: ClassVar[type] = NoConfig
+
+    #: Set by `solve` in an online backend: each frame's rotation as estimated when that
+    #: frame arrived, (n_frames, 3, 3). None (the default) for a batch backend.
+    causal_R_w_c: np.ndarray | None = None
 
     def __init__(self, config=None):
         self.config = config if config is not None else self.Config()
 
-    def solve(self, n_frames: int, edges: Sequence[RelativeRotation], times=None, imu: ImuSeries | None = None) -> np.ndarray:
-        """(n_frames, 3, 3) rotations R_w_c with frame 0 at the identity, from the measured
-        edges and, where useful, the frame times [s] and the dataset's IMU."""
+    def solve(
+        self,
+        n_frames: int,
+        edges: Sequence[RelativeRotation],
+        *,
+        times: np.ndarray | None = None,
+        imu: ImuSeries | None = None,
+    ) -> np.ndarray:
+        """(n_frames, 3, 3) rotations R_w_c, frame 0 at the identity, from the edges and, where
+        the backend uses them, the frame times [s] (the pipeline always gives them) and the
+        dataset's IMU (None when it has none)."""
         raise NotImplementedError

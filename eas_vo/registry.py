@@ -1,8 +1,11 @@
 """Plugin discovery through entry points, in the style of xarray's backend loader.
 
-Groups: `eas_vo.frontends`, `eas_vo.backends`, `eas_vo.datasets`. Built-ins
-register exactly like third-party plugins. Discovery is cached; a plugin that
-fails to import, or a duplicate name, gives a warning instead of a crash.
+Groups: `eas_vo.datasets`, `eas_vo.frontends`, `eas_vo.trackers`, `eas_vo.backends`.
+Built-ins register exactly like third-party plugins. Discovery is cached; a
+third-party plugin that fails to import, or a duplicate name, gives a warning
+instead of a crash; a built-in that fails to import is a broken installation and
+every lookup says so. `resolve_dataset` is the one place that decides what a
+`--dataset` string means.
 """
 
 from __future__ import annotations
@@ -10,10 +13,12 @@ from __future__ import annotations
 import functools
 import warnings
 from importlib.metadata import entry_points
+from pathlib import Path
 
 from eas_vo.errors import EasVoError
 
-KINDS = ("frontends", "backends", "datasets")
+KINDS = ("datasets", "frontends", "trackers", "backends")
+_BUILTIN_PREFIX = "eas_vo."
 
 
 @functools.cache
@@ -33,21 +38,44 @@ def _entry_points(kind: str) -> dict:
 
 
 @functools.cache
-def available(kind: str) -> dict[str, type]:
-    """Every importable plugin of `kind` ('frontends', 'backends' or 'datasets'), by name."""
+def _load(kind: str) -> tuple[dict[str, type], dict[str, str]]:
+    """({name: plugin class}, {name: why it failed to load}) for `kind`."""
     if kind not in KINDS:
         raise ValueError(f"unknown plugin kind {kind!r}")
-    loaded = {}
+    loaded, failed = {}, {}
     for name, ep in sorted(_entry_points(kind).items()):
         try:
             loaded[name] = ep.load()
         except Exception as exc:  # a broken third-party plugin must not break the tool
-            warnings.warn(
-                f"eas-vo: {kind[:-1]} plugin {name!r} ({ep.value}) failed to load: {exc}",
-                RuntimeWarning,
-                stacklevel=2,
-            )
-    return loaded
+            failed[name] = f"{ep.value}: {type(exc).__name__}: {exc}"
+            if not ep.value.startswith(_BUILTIN_PREFIX):
+                warnings.warn(f"eas-vo: {kind[:-1]} plugin {name!r} failed to load ({failed[name]})",
+                              RuntimeWarning, stacklevel=2)
+    return loaded, failed
+
+
+def available(kind: str) -> dict[str, type]:
+    """Every importable plugin of `kind` (one of KINDS), by name."""
+    return _load(kind)[0]
+
+
+def broken_builtins(kind: str) -> dict[str, str]:
+    """Built-in plugins of `kind` that failed to import, with the reason: a broken installation."""
+    return {name: why for name, why in _load(kind)[1].items() if why.startswith(_BUILTIN_PREFIX)}
+
+
+def _installation_problem(kind: str) -> str:
+    broken = broken_builtins(kind)
+    if not broken:
+        return ""
+    import eas_vo
+
+    name, why = next(iter(broken.items()))
+    return (
+        f"; the built-in {kind[:-1]} plugin {name!r} failed to import ({why}); eas_vo was imported from "
+        f"{Path(eas_vo.__file__).parent}: if that is a source checkout shadowing the installed package, "
+        "run from another folder or install with `pip install -e .`"
+    )
 
 
 def get(kind: str, name: str) -> type:
@@ -55,5 +83,44 @@ def get(kind: str, name: str) -> type:
     plugins = available(kind)
     if name not in plugins:
         installed = ", ".join(plugins) or "none"
-        raise EasVoError(f"unknown {kind[:-1]} {name!r}; installed: {installed}")
+        raise EasVoError(f"unknown {kind[:-1]} {name!r}; installed: {installed}{_installation_problem(kind)}")
     return plugins[name]
+
+
+def resolve_dataset(spec: str) -> tuple[type, str]:
+    """(dataset plugin class, location) for a `--dataset` value.
+
+    `NAME:LOCATION` with NAME an installed dataset plugin is explicit. Otherwise every
+    dataset plugin is asked, in name order, whether it `can_open` the spec; exactly one
+    must say yes.
+    """
+    plugins = available("datasets")
+    scheme, sep, location = spec.partition(":")
+    if sep and len(scheme) > 1 and scheme in plugins:  # (a one-letter scheme is a drive letter)
+        return plugins[scheme], location
+    claims = [cls for _, cls in sorted(plugins.items()) if _claims(cls, spec)]
+    if len(claims) == 1:
+        return claims[0], spec
+    if len(claims) > 1:
+        names = ", ".join(cls.name for cls in claims)
+        raise EasVoError(f"{spec}: several dataset plugins can open it ({names}); write NAME:{spec} to choose")
+    if not Path(spec).exists():
+        raise EasVoError(f"{spec}: dataset not found (no such file or folder, and no dataset plugin "
+                         f"recognises it; installed: {', '.join(plugins) or 'none'}){_installation_problem('datasets')}")
+    raise EasVoError(f"{spec}: no installed dataset plugin can open it (installed: {', '.join(plugins) or 'none'}; "
+                     f"write NAME:{spec} to force one){_installation_problem('datasets')}")
+
+
+def _claims(cls: type, location: str) -> bool:
+    try:
+        return bool(cls.can_open(location))
+    except Exception as exc:  # can_open must never raise; a plugin that does is skipped, loudly
+        warnings.warn(f"eas-vo: dataset plugin {cls.name!r}: can_open raised {type(exc).__name__}: {exc}",
+                      RuntimeWarning, stacklevel=3)
+        return False
+
+
+def open_dataset(spec: str, config=None):
+    """Open a `--dataset` value with its plugin (and that plugin's config, default if None)."""
+    cls, location = resolve_dataset(spec)
+    return cls(location, config if config is not None else cls.Config())

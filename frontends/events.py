@@ -8,7 +8,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from eas_vo.config import check_range
+from eas_vo.validation import check_range
 from eas_vo.plugins import Frontend
 from eas_vo.types import Sample
 

@@ -11,17 +11,11 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
-from eas_vo.config import check_range
-from eas_vo.errors import ConfigError
 from eas_vo.plugins import Frontend
 from eas_vo.types import EVENT_DTYPE, Sample
+from eas_vo.validation import check_choice, check_range
 
 POLARITY_MODES = ("merged", "split")
-
-
-def _check_polarity(cfg) -> None:
-    if cfg.polarity not in POLARITY_MODES:
-        raise ConfigError(f"polarity = {cfg.polarity!r}; allowed: {', '.join(POLARITY_MODES)}")
 
 
 def _channels(events: np.ndarray, split: bool) -> np.ndarray:
@@ -72,7 +66,7 @@ class TsConfig:
 
     def validate(self) -> None:
         check_range(self, "tau_s", 0.0, 1e3, lo_open=True)
-        _check_polarity(self)
+        check_choice(self, "polarity", POLARITY_MODES)
 
 
 class TsFrontend(_SurfaceFrontend):
@@ -173,7 +167,7 @@ class SitsConfig:
 
     def validate(self) -> None:
         check_range(self, "r", 1, 50)
-        _check_polarity(self)
+        check_choice(self, "polarity", POLARITY_MODES)
 
 
 class SitsFrontend(_SurfaceFrontend):

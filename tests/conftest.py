@@ -1,35 +1,29 @@
-"""Shared fixtures: an isolated cache, a short simulated sequence, the real ECD excerpts."""
+"""Shared fixtures: an isolated cache and a short simulated sequence.
+
+The suite tests the *installed* eas-vo (editable or not): the repository root is taken
+off `sys.path` first, so that `python -m pytest` run from the root (which puts the
+current folder on the path) never imports the source folder `eas_vo/` in place of the
+installed package, whose plugins live in `eas_vo.frontends` etc.
+"""
 
 from __future__ import annotations
 
 import os
+import sys
 import tempfile
 from pathlib import Path
 
-import numpy as np
 import pytest
+
+_ROOT = Path(__file__).resolve().parents[1]
+sys.path[:] = [p for p in sys.path if Path(p or os.curdir).resolve() != _ROOT]
+try:
+    import eas_vo  # noqa: F401
+except ImportError:
+    raise pytest.UsageError("eas-vo is not installed in this Python: pip install -e '.[test]' (see README)") from None
 
 # Keep the user's cache out of the tests (and the tests' sequences out of the user's cache).
 os.environ.setdefault("EAS_VO_CACHE_DIR", tempfile.mkdtemp(prefix="eas-vo-test-cache-"))
-
-SHARED_DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
-SHAPES_ROTATION = SHARED_DATA / "ecd" / "shapes_rotation_0-30s"
-EVENT_WINDOWS = SHARED_DATA / "ecd" / "event_windows"
-
-
-def require(path: Path) -> Path:
-    """Skip the test, saying why, when a real-data folder is absent."""
-    if not path.exists():
-        pytest.skip(f"real data not available: {path} is absent (it lives in ../shared/data beside the repository)")
-    return path
-
-
-def assert_rotations_close(R_a, R_b, tol_rad: float) -> None:
-    """Manifold-aware comparison of rotation stacks: every geodesic angle below tol_rad."""
-    from eas_vo.geometry import geodesic_angle
-
-    angles = np.atleast_1d(geodesic_angle(np.asarray(R_a), np.asarray(R_b)))
-    assert angles.max() <= tol_rad, f"largest rotation difference {angles.max():.3g} rad > {tol_rad:.3g} rad"
 
 
 @pytest.fixture(scope="session")

@@ -9,11 +9,11 @@ from pathlib import Path
 
 import numpy as np
 
-from eas_vo.config import check_range
+from eas_vo.validation import check_range
 from eas_vo.datasets.simulator.motion import HandHeldMotion
 from eas_vo.datasets.simulator.scene import Scene
 from eas_vo.datasets.simulator.sensor import ApsModel, DvsModel, EventSimulator, ImuModel
-from eas_vo.geometry import quats_from_matrices
+from eas_vo.geometry.rotations import quats_from_matrices
 from eas_vo.types import EVENT_DTYPE, CameraModel, ImuSeries, PoseSeries
 
 SIMULATOR_VERSION = 2  # bump when the output for a given config changes (invalidates caches)
@@ -92,7 +92,7 @@ def simulate(config: SimConfig, out_dir: str | Path, progress: bool = False) -> 
     gt_t = np.arange(0.0, config.duration_s, 1.0 / config.gt_rate_hz)
     R_w_c, p_w_c = motion.pose(gt_t)
     ground_truth = PoseSeries(gt_t, p_w_c, quats_from_matrices(R_w_c))
-    acc, gyro = config.imu.measure(R_w_c, motion.angular_velocity(gt_t), motion.acceleration(gt_t), imu_rng)
+    acc, gyro = config.imu.measure(R_w_c, motion.angular_velocity(gt_t), motion.acceleration(gt_t), config.gt_rate_hz, imu_rng)
     write_ecd_folder(out_dir, camera, frame_times, frames, events, ground_truth, ImuSeries(gt_t, acc, gyro))
 
 

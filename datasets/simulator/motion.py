@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from eas_vo.geometry import rotvec_to_matrix
+from eas_vo.geometry.rotations import rotvec_to_matrix
 
 # (amplitude [rad], frequency [Hz]) per rotation axis (camera x = pitch, y = yaw, z = roll).
 ROTATION_TERMS = (

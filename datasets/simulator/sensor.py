@@ -147,17 +147,17 @@ class EventSimulator:
 class ImuModel:
     """Continuous-time white-noise densities and bias scales (MPU-6150-like, as on the DAVIS)."""
 
-    rate_hz: float = 200.0
     gyro_noise: float = 0.003  # rad/s/sqrt(Hz)
     acc_noise: float = 0.02  # m/s^2/sqrt(Hz)
     gyro_bias: float = 0.01  # rad/s, std of the constant bias
     acc_bias: float = 0.05  # m/s^2
     gravity_w: tuple = (0.0, 9.81, 0.0)  # world y points down
 
-    def measure(self, R_w_c, omega_c, acc_w, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
-        """Accelerometer (specific force) and gyro readings in the camera frame, with bias and noise."""
+    def measure(self, R_w_c, omega_c, acc_w, rate_hz: float, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+        """Accelerometer (specific force) and gyro readings in the camera frame, with bias and
+        noise, for readings taken at `rate_hz` [Hz] (the discrete noise std is density * sqrt(rate))."""
         n = len(omega_c)
-        sqrt_rate = np.sqrt(self.rate_hz)
+        sqrt_rate = np.sqrt(rate_hz)
         gyro = omega_c + rng.normal(0, self.gyro_bias, 3) + rng.normal(0, self.gyro_noise * sqrt_rate, (n, 3))
         specific_w = acc_w - np.asarray(self.gravity_w)
         acc = np.einsum("nji,nj->ni", R_w_c, specific_w)

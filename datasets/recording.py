@@ -1,0 +1,65 @@
+"""What the recording readers (`ecd`, `rosbag`) share: their reading options, checks of
+timed tables, and the sampling of event-only streams. Not a plugin."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from eas_vo.errors import DataError
+from eas_vo.types import PoseSeries
+from eas_vo.validation import check_range
+
+
+@dataclass(frozen=True)
+class StreamConfig:
+    """How to read a recording.
+
+    Attributes:
+        lenient: drop malformed lines and out-of-order or out-of-sensor events with counted
+            warnings instead of stopping at the first.
+        time_tolerance_s: event timestamps may step back this much [s] (clamped); more is an error.
+        sample_rate_hz: event-only streams: samples per second...
+        sample_every_events: ...or, when > 0, one sample every this many events.
+    """
+
+    lenient: bool = False
+    time_tolerance_s: float = 1e-6
+    sample_rate_hz: float = 20.0
+    sample_every_events: int = 0
+
+    def validate(self) -> None:
+        check_range(self, "time_tolerance_s", 0.0, 1.0)
+        check_range(self, "sample_rate_hz", 0.0, 1e6, lo_open=True)
+        check_range(self, "sample_every_events", 0, 10**9)
+
+
+def event_sample_times(event_t: np.ndarray, rate_hz: float, every_events: int) -> np.ndarray:
+    """Sample times [s] for an event-only stream: every `every_events` events, else at `rate_hz`."""
+    if len(event_t) == 0:
+        return np.empty(0)
+    if every_events > 0:
+        return np.unique(np.asarray(event_t[::every_events], dtype=float))
+    return np.arange(float(event_t[0]), float(event_t[-1]), 1.0 / rate_hz)
+
+
+def check_increasing(where: str, t: np.ndarray) -> None:
+    """Raise DataError naming the first row whose time [s] does not increase."""
+    bad = np.flatnonzero(np.diff(t) <= 0)
+    if len(bad):
+        i = int(bad[0]) + 1
+        raise DataError(where, f"timestamp {t[i]:.9f} does not increase (previous {t[i - 1]:.9f})", i + 1)
+
+
+def pose_series(where: str, table: np.ndarray) -> PoseSeries:
+    """`t px py pz qx qy qz qw` rows -> PoseSeries, checking that quaternions are unit."""
+    q = table[:, 4:8]
+    norms = np.linalg.norm(q, axis=1)
+    off = np.abs(norms - 1.0) > 1e-2
+    if off.any():
+        i = int(np.argmax(off))
+        raise DataError(where, f"quaternion norm {norms[i]:.3f} is not 1", i + 1)
+    # Normalise only what is not unit already, so that re-reading written poses is exact.
+    q = np.where(np.abs(norms - 1.0)[:, None] > 1e-12, q / norms[:, None], q)
+    return PoseSeries(t=table[:, 0], p_w_c=table[:, 1:4], q_w_c=q)

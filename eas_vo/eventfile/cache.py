@@ -1,0 +1,148 @@
+"""The binary event cache and its use.
+
+Cache file: 16-byte header (8-byte magic, uint64 event count) + packed EVENT_DTYPE records
+(13 B/event), named by a hash of what identifies the source (for a file: device, inode, size
+in bytes, modification time in ns). Written atomically, read by memory-mapping it.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+from pathlib import Path
+from typing import BinaryIO, Callable
+
+import numpy as np
+
+from eas_vo.errors import DataError, DataWarnings
+from eas_vo.eventfile.convert import convert_text_to_cache
+from eas_vo.io import atomic_path, cache_dir
+from eas_vo.types import EVENT_DTYPE
+
+CACHE_MAGIC = b"EASVOEV1"
+HEADER_BYTES = 16
+
+
+def cache_key(*parts) -> str:
+    return hashlib.sha1("|".join(map(str, parts)).encode()).hexdigest()
+
+
+def file_identity(path: Path) -> tuple:
+    """What makes a file's content unique for the cache: device, inode, size, modification time."""
+    st = path.stat()
+    return (st.st_dev, st.st_ino, st.st_size, st.st_mtime_ns)
+
+
+def cache_path(key: str) -> Path:
+    return cache_dir() / "events" / f"{key}.ev"
+
+
+def open_cache(path: Path) -> np.ndarray | None:
+    """Memory-map a cache file; None if it is absent or damaged."""
+    try:
+        with open(path, "rb") as fh:
+            header = fh.read(HEADER_BYTES)
+        if len(header) != HEADER_BYTES or header[:8] != CACHE_MAGIC:
+            return None
+        count = int(np.frombuffer(header[8:], np.uint64)[0])
+        if path.stat().st_size != HEADER_BYTES + count * EVENT_DTYPE.itemsize:
+            return None
+    except OSError:
+        return None
+    if count == 0:
+        return np.empty(0, EVENT_DTYPE)
+    return np.memmap(path, dtype=EVENT_DTYPE, mode="r", offset=HEADER_BYTES, shape=(count,))
+
+
+def build_cache(path: Path, fill: Callable[[BinaryIO], int], max_events: int = 0) -> np.ndarray:
+    """Write a cache file atomically: `fill(fh)` writes the records and returns their count.
+
+    `max_events` > 0 reserves the file's blocks up front (fewer, faster writes on most file
+    systems); the file is cut to its real size at the end.
+    """
+    with atomic_path(path) as tmp:
+        with open(tmp, "wb") as fh:
+            if max_events > 0 and hasattr(os, "posix_fallocate"):
+                try:
+                    os.posix_fallocate(fh.fileno(), 0, HEADER_BYTES + max_events * EVENT_DTYPE.itemsize)
+                except OSError:
+                    pass  # no space to reserve (or no support): plain writes still work
+            fh.write(CACHE_MAGIC + bytes(8))
+            count = fill(fh)
+            fh.truncate(HEADER_BYTES + count * EVENT_DTYPE.itemsize)
+            fh.seek(8)
+            fh.write(np.uint64(count).tobytes())
+    return open_cache(path)
+
+
+def write_cache(path: Path, events: np.ndarray) -> np.ndarray:
+    """Cache an in-memory event array (e.g. decoded from a bag)."""
+
+    def fill(fh):
+        fh.write(np.ascontiguousarray(events, dtype=EVENT_DTYPE).tobytes())
+        return len(events)
+
+    return build_cache(path, fill)
+
+
+def load_cached(
+    key: str, lenient: bool, warnings: DataWarnings, fill: Callable[[BinaryIO, DataWarnings], int], where: str,
+    max_events: int = 0,
+) -> np.ndarray:
+    """The event stream cached under `key`, built by `fill(out, warnings)` when absent.
+
+    A clean stream has one cache whatever the mode. A lenient build that dropped data
+    is cached apart, with its warnings beside it, so they are reported on every use
+    and a strict read never gets it.
+    """
+    strict = cache_path(key)
+    tolerant = strict.with_name(strict.stem + "-lenient.ev")
+    for path in (strict, tolerant) if lenient else (strict,):
+        cached = open_cache(path)
+        if cached is not None:
+            side = path.with_suffix(".warnings")
+            if side.exists():
+                warnings.merge(DataWarnings.from_json(side.read_text()))
+            return cached
+    local = DataWarnings()
+    target = tolerant if lenient else strict
+    try:
+        events = build_cache(target, lambda out: fill(out, local), max_events)
+    except OSError as exc:
+        raise DataError(where, f"cannot read or cache events ({exc})") from None
+    if local.counts:
+        from eas_vo.io import write_text_atomic
+
+        write_text_atomic(target.with_suffix(".warnings"), local.to_json())
+    elif target is tolerant:
+        os.replace(tolerant, strict)
+        events = open_cache(strict)
+    warnings.merge(local)
+    return events
+
+
+def load_event_text(
+    open_text: Callable[[], BinaryIO],
+    identity: tuple,
+    where: str,
+    width: int,
+    height: int,
+    tolerance_s: float = 1e-6,
+    lenient: bool = False,
+    warnings: DataWarnings | None = None,
+    text_size: int | None = None,
+) -> np.ndarray:
+    """Events of a text source (`t x y p` lines, `text_size` bytes if known), through the cache."""
+
+    def fill(out, local):
+        with open_text() as fh:
+            return convert_text_to_cache(fh, where, out, width, height, tolerance_s, lenient, local)
+
+    key = cache_key("text", *identity, width, height, tolerance_s)
+    size = text_size or 0  # a line is at least 8 bytes: at most size // 8 events
+    return load_cached(key, lenient, warnings if warnings is not None else DataWarnings(), fill, where, size // 8 + 1 if size else 0)
+
+
+def prime_text_cache(source: Path, events: np.ndarray, width: int, height: int, tolerance_s: float = 1e-6) -> None:
+    """Store events already in memory as the cache of text file `source` (they must equal its parse)."""
+    write_cache(cache_path(cache_key("text", *file_identity(source), width, height, tolerance_s)), events)

@@ -1,0 +1,7 @@
+"""Geometry kernels (bottom layer: numpy, scipy, OpenCV; no I/O, no plugins).
+
+- `rotations`: SO(3) helpers: quaternion <-> matrix (the one place), geodesic angle,
+  slerp of a ground-truth series, Euler angles for plots.
+- `two_view`: the relative rotation of two views from point correspondences: the
+  five-point essential matrix, a rotation-only solver, GRIC to choose between them.
+"""

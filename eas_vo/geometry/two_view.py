@@ -1,0 +1,164 @@
+"""Relative rotation from bearing correspondences: a rotation-only solver (2-point RANSAC,
+then least squares), the five-point essential matrix, and GRIC to choose between them.
+
+Conventions: `f_prev`, `f_cur` are (N, 3) unit bearings; the models map previous-frame
+bearings into the current frame: f_cur ~ R_cur_prev f_prev (+ translation for E).
+"""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+
+
+def bearings(pts_n: np.ndarray) -> np.ndarray:
+    """Normalised image coordinates (N, 2) -> unit bearing vectors (N, 3)."""
+    f = np.column_stack([pts_n, np.ones(len(pts_n))])
+    return f / np.linalg.norm(f, axis=1, keepdims=True)
+
+
+def kabsch(a: np.ndarray, b: np.ndarray, weights=None) -> np.ndarray:
+    """The rotation R minimising sum w |b_i - R a_i|^2 (Wahba's problem); works on stacks
+    (..., N, 3) -> (..., 3, 3)."""
+    if weights is not None:
+        a = a * weights[..., None]
+    H = np.swapaxes(a, -1, -2) @ b
+    U, _, Vt = np.linalg.svd(H)
+    d = np.sign(np.linalg.det(np.swapaxes(Vt, -1, -2) @ np.swapaxes(U, -1, -2)))
+    D = np.zeros(H.shape)
+    D[..., 0, 0] = D[..., 1, 1] = 1.0
+    D[..., 2, 2] = d
+    return np.swapaxes(Vt, -1, -2) @ D @ np.swapaxes(U, -1, -2)
+
+
+def angular_residuals(R_cur_prev: np.ndarray, f_prev: np.ndarray, f_cur: np.ndarray) -> np.ndarray:
+    """Angle [rad] between R f_prev and f_cur; stacks of R give (K, N)."""
+    rotated = f_prev @ np.swapaxes(R_cur_prev, -1, -2)
+    cos = np.clip(np.sum(rotated * f_cur, axis=-1), -1.0, 1.0)
+    return np.arccos(cos)
+
+
+def rotation_ransac(
+    f_prev: np.ndarray, f_cur: np.ndarray, threshold_rad: float, hypotheses: int = 256, seed: int = 0
+) -> tuple[np.ndarray, np.ndarray] | None:
+    """Pure-rotation model: 2-point minimal sets scored in one batch, then least squares on the
+    inliers (twice). Returns (R_cur_prev, inlier mask) or None with fewer than 2 points."""
+    n = len(f_prev)
+    if n < 2:
+        return None
+    rng = np.random.default_rng(seed)
+    pairs = rng.integers(0, n, (hypotheses, 2))
+    pairs = pairs[pairs[:, 0] != pairs[:, 1]]
+    R = kabsch(f_prev[pairs], f_cur[pairs])
+    inliers = angular_residuals(R, f_prev, f_cur) < threshold_rad
+    best = int(np.argmax(inliers.sum(axis=1)))
+    R_best, mask = R[best], inliers[best]
+    for _ in range(2):
+        if mask.sum() < 2:
+            break
+        R_best = kabsch(f_prev[mask], f_cur[mask])
+        mask = angular_residuals(R_best, f_prev, f_cur) < threshold_rad
+    return R_best, mask
+
+
+def sampson_residuals(E: np.ndarray, x_prev: np.ndarray, x_cur: np.ndarray) -> np.ndarray:
+    """First-order geometric error of x_cur^T E x_prev = 0 (normalised image units)."""
+    a = np.column_stack([x_prev, np.ones(len(x_prev))])
+    b = np.column_stack([x_cur, np.ones(len(x_cur))])
+    Ea = a @ E.T
+    Etb = b @ E
+    num = np.sum(b * Ea, axis=1) ** 2
+    den = Ea[:, 0] ** 2 + Ea[:, 1] ** 2 + Etb[:, 0] ** 2 + Etb[:, 1] ** 2
+    return np.sqrt(num / np.maximum(den, 1e-300))
+
+
+def gric(residuals: np.ndarray, sigma: float, model_dim: int, params: int, data_dim: int = 4) -> float:
+    """Torr's Geometric Robust Information Criterion (lower is better).
+
+    rho(e) = min(e^2 / sigma^2, 2 (r - d)); GRIC = sum rho + log(r) d n + log(r n) k,
+    with r the data dimension (4: two image points), d the model manifold dimension
+    (2 for a rotation, 3 for an essential matrix) and k its parameters (3, 5).
+    """
+    n = len(residuals)
+    rho = np.minimum((residuals / sigma) ** 2, 2.0 * (data_dim - model_dim))
+    return float(rho.sum() + np.log(data_dim) * model_dim * n + np.log(data_dim * n) * params)
+
+
+def essential_rotation(
+    x_prev: np.ndarray, x_cur: np.ndarray, threshold: float, confidence: float, method: int, R_hint: np.ndarray | None = None
+) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+    """Five-point essential matrix and its rotation: (E, R_cur_prev, inlier mask) or None.
+
+    The decomposition's two rotations differ by a half turn about the baseline; cheirality
+    decides (no distance cut: with a small baseline every point is "far"). With `R_hint`
+    (e.g. the rotation-only estimate) the candidate closest to it is taken instead, which
+    keeps a cheirality flip out of the trajectory.
+    """
+    E, mask = cv2.findEssentialMat(x_prev, x_cur, np.eye(3), method=method, prob=confidence, threshold=threshold)
+    if E is None or E.shape[0] < 3 or mask is None:
+        return None
+    E = E[:3]
+    mask = mask.ravel().astype(bool)
+    if R_hint is None:
+        _, R, _, _, _ = cv2.recoverPose(E, x_prev, x_cur, np.eye(3), distanceThresh=1e12, mask=mask.astype(np.uint8).copy())
+    else:
+        R1, R2, _ = cv2.decomposeEssentialMat(E)
+        R = min((R1, R2), key=lambda c: np.arccos(np.clip((np.trace(c.T @ R_hint) - 1) / 2, -1, 1)))
+    return E, R, mask
+
+
+#: Robust estimators around the five-point solver, by config name.
+ESSENTIAL_METHODS = {
+    "usac": cv2.USAC_DEFAULT,
+    "ransac": cv2.RANSAC,
+    "magsac": cv2.USAC_MAGSAC,
+    "lmeds": cv2.LMEDS,
+}
+
+#: How the rotation of a frame pair is measured (see rotation_from_correspondences).
+GEOMETRIES = ("essential", "rotation", "auto")
+
+
+def rotation_from_correspondences(
+    pts_prev_n: np.ndarray,
+    pts_cur_n: np.ndarray,
+    threshold: float,
+    confidence: float,
+    method: str = "usac",
+    geometry: str = "essential",
+) -> tuple[np.ndarray, int, str] | None:
+    """The relative rotation of two views from matched normalised image points.
+
+    Args:
+        pts_prev_n, pts_cur_n: (N, 2) matching normalised image coordinates.
+        threshold: inlier threshold in normalised units (pixels / focal length).
+        confidence: robust estimator confidence.
+        method: a key of ESSENTIAL_METHODS (the five-point estimator's robust loop).
+        geometry: `essential` (the paper: five-point essential matrix, rotation by cheirality),
+            `rotation` (rotation-only: 2-point RANSAC and least squares on bearings), or `auto`
+            (both, the better by GRIC; the essential matrix's rotation is then the candidate
+            closest to the rotation-only one, so a cheirality flip cannot get through).
+
+    Returns:
+        (R_prev_cur, inlier count, model used), or None when no model is found.
+    """
+    if geometry == "essential":
+        found = essential_rotation(pts_prev_n, pts_cur_n, threshold, confidence, ESSENTIAL_METHODS[method])
+        return None if found is None else (found[1].T, int(found[2].sum()), "essential")
+    f_prev, f_cur = bearings(pts_prev_n), bearings(pts_cur_n)
+    rotation = rotation_ransac(f_prev, f_cur, threshold)
+    if rotation is None:
+        return None
+    R_rot, rot_mask = rotation
+    if geometry == "rotation":
+        return R_rot.T, int(rot_mask.sum()), "rotation"
+    found = essential_rotation(pts_prev_n, pts_cur_n, threshold, confidence, ESSENTIAL_METHODS[method], R_hint=R_rot)
+    if found is None:
+        return R_rot.T, int(rot_mask.sum()), "rotation"
+    E, R_ess, ess_mask = found
+    sigma = threshold / 2.0
+    gric_rot = gric(angular_residuals(R_rot, f_prev, f_cur), sigma, model_dim=2, params=3)
+    gric_ess = gric(sampson_residuals(E, pts_prev_n, pts_cur_n), sigma, model_dim=3, params=5)
+    if gric_rot <= gric_ess:
+        return R_rot.T, int(rot_mask.sum()), "rotation"
+    return R_ess.T, int(ess_mask.sum()), "essential"

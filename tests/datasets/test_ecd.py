@@ -1,0 +1,108 @@
+"""The Event Camera Dataset folder reader, on simulator output and on the real excerpt."""
+
+import numpy as np
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+
+from eas_vo.datasets.ecd import EcdFolderDataset
+from eas_vo.errors import DataError
+from eas_vo.types import EVENT_DTYPE
+from helpers import SHAPES_ROTATION, hostile_number, hostile_settings, numeric_rows, require
+
+
+def test_reads_a_simulated_sequence(short_sequence):
+    ds = EcdFolderDataset(short_sequence)
+    times = ds.frame_times()
+    assert 35 <= len(times) <= 41 and np.allclose(np.diff(times), 0.05)
+    frame = ds.load_frame(0)
+    assert frame.dtype == np.uint8 and frame.shape == (180, 240)
+    ev = ds.events()
+    assert ev.dtype == EVENT_DTYPE and len(ev) > 100_000 and (np.diff(ev["t"]) >= 0).all()
+    assert ds.ground_truth.t[1] - ds.ground_truth.t[0] == pytest.approx(0.005)
+    assert ds.imu is not None and len(ds.imu.t) == len(ds.ground_truth.t)
+    assert ds.camera.dist[0] != 0  # the simulated lens distorts
+
+
+def test_samples_give_views_of_the_events(short_sequence):
+    ds = EcdFolderDataset(short_sequence)
+    samples = list(ds.samples(start_s=0.5, duration_s=0.5))
+    assert len(samples) == 10 and samples[0].t == pytest.approx(ds.frame_times()[0] + 0.5)
+    for s in samples:
+        assert s.events_after["t"][0] >= s.t and (s.event_index == 0 or s.events["t"][s.event_index - 1] < s.t)
+        assert np.shares_memory(s.events_after, ds.events())
+    for a, b in zip(samples, samples[1:]):
+        assert b.prev_event_index == a.event_index
+
+
+def test_reads_the_real_excerpt():
+    ds = EcdFolderDataset(require(SHAPES_ROTATION))
+    assert len(ds.frame_times()) == 681 and ds.load_frame(680).shape == (180, 240)
+    assert ds.camera.K[0, 0] == pytest.approx(199.092366542) and ds.camera.dist[0] == pytest.approx(-0.368436311798)
+    assert len(ds.events()) == 9058 and ds.events()["t"][-1] < 0.5
+    assert len(ds.ground_truth.t) == 6010 and ds.imu is None
+
+
+def test_missing_images_txt_and_events_txt(sequence_copy):
+    (sequence_copy / "images.txt").unlink()
+    (sequence_copy / "events.txt").unlink()
+    with pytest.raises(DataError, match="images.txt: file not found, and there is no events.txt either"):
+        EcdFolderDataset(sequence_copy)
+
+
+def test_missing_frame_file_names_images_txt_line(sequence_copy):
+    (sequence_copy / "images" / "frame_00000003.png").unlink()
+    with pytest.raises(DataError, match=r"images.txt:4: frame file images/frame_00000003.png does not exist"):
+        EcdFolderDataset(sequence_copy)
+
+
+def test_unreadable_frame_is_reported_with_its_index(sequence_copy):
+    (sequence_copy / "images" / "frame_00000002.png").write_bytes(b"not a png")
+    ds = EcdFolderDataset(sequence_copy)
+    with pytest.raises(DataError, match="cannot decode frame 2"):
+        ds.load_frame(2)
+
+
+def test_bad_ground_truth_line(sequence_copy):
+    path = sequence_copy / "groundtruth.txt"
+    lines = path.read_text().splitlines()
+    lines[9] = lines[9] + " 7"
+    path.write_text("\n".join(lines) + "\n")
+    with pytest.raises(DataError, match=r"groundtruth.txt:10: expected 8 columns"):
+        EcdFolderDataset(sequence_copy)
+
+
+def test_bad_calibration(sequence_copy):
+    (sequence_copy / "calib.txt").write_text("200 200 120\n")
+    with pytest.raises(DataError, match="calib.txt:1: expected 4, 8 or 9"):
+        EcdFolderDataset(sequence_copy)
+
+
+@hostile_settings()
+@given(st.lists(st.lists(hostile_number(), max_size=9).map(" ".join), max_size=8).map("\n".join))
+def test_hostile_tables_are_named_errors_or_read_exactly(sequence_copy, content):
+    """groundtruth.txt, calib.txt, imu.txt, images.txt replaced by number-like junk: a one-line
+    error naming the file, or (accepted) exactly the values the file holds."""
+    for name in ("groundtruth.txt", "calib.txt", "imu.txt", "images.txt"):
+        original = (sequence_copy / name).read_bytes()
+        (sequence_copy / name).write_text(content)
+        try:
+            ds = EcdFolderDataset(sequence_copy)
+        except DataError as exc:
+            assert name in str(exc) and "\n" not in str(exc)
+            continue
+        finally:
+            (sequence_copy / name).write_bytes(original)
+        rows = numeric_rows(content)
+        if name == "groundtruth.txt":
+            got = np.column_stack([ds.ground_truth.t, ds.ground_truth.p_w_c, ds.ground_truth.q_w_c]).reshape(-1, 8)
+            np.testing.assert_allclose(got, np.array(rows).reshape(-1, 8), rtol=0, atol=1e-2)  # q renormalised
+            np.testing.assert_array_equal(got[:, :4], np.array(rows).reshape(-1, 8)[:, :4])
+        elif name == "imu.txt":
+            got = np.column_stack([ds.imu.t, ds.imu.acc, ds.imu.gyro]).reshape(-1, 7)
+            np.testing.assert_array_equal(got, np.array(rows).reshape(-1, 7))
+        elif name == "calib.txt":
+            values = [v for row in rows for v in row]
+            np.testing.assert_array_equal(ds.camera.calib_values()[: len(values)], values)
+        else:  # no listed frame exists, so only an empty list can be accepted: an event-only stream
+            assert rows == [] and ds.load_frame(0) is None

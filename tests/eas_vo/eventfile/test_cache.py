@@ -1,0 +1,78 @@
+"""Loading event text through the cache: invalidation, errors naming file and line, lenient drops, clamping."""
+
+import os
+
+import numpy as np
+import pytest
+
+from eas_vo.errors import DataError, DataWarnings
+from helpers import load_event_file
+
+
+def test_cache_is_invalidated_when_the_file_changes(tmp_path):
+    path = tmp_path / "events.txt"
+    path.write_text("0.1 1 2 1\n0.2 3 4 0\n")
+    assert len(load_event_file(path)) == 2
+    path.write_text("0.1 1 2 1\n0.2 3 4 0\n0.3 5 6 1\n")
+    os.utime(path, ns=(1, 2))
+    assert len(load_event_file(path)) == 3
+
+
+BAD = [
+    ("0.1 1 2 1\n0.2 3 x 0\n", 2, "not a number"),
+    ("0.1 1 2 1\n0.2 3 4\n", 2, "expected 4 columns"),
+    ("0.1 1 2 1\n0.2 3 4 0\n0.15 1 1 1\n", 3, "timestamp goes backwards"),
+    ("0.1 1 2 1\n0.2 300 4 0\n", 2, "outside the 240x180 sensor"),
+    ("0.1 1 2 1\n0.2 3 4 7\n", 2, "polarity"),
+    ("0.1 1 2 1\n0.2 nan 4 0\n", 2, "not a number|integers"),
+    ("0.1 1 2 1\n0.2 3 4 0\n0.3 5", 3, "expected 4 columns"),  # truncated last line
+]
+
+
+@pytest.mark.parametrize("text,line,message", BAD)
+def test_malformed_events_name_file_and_line(tmp_path, text, line, message):
+    path = tmp_path / "events.txt"
+    path.write_text(text)
+    with pytest.raises(DataError, match=message) as info:
+        load_event_file(path)
+    assert info.value.line == line and str(info.value).startswith(f"{path}:{line}:")
+
+
+@pytest.mark.parametrize("text,line,message", BAD)
+def test_lenient_drops_and_counts(tmp_path, text, line, message):
+    path = tmp_path / "events.txt"
+    path.write_text(text)
+    warnings = DataWarnings()
+    events = load_event_file(path, lenient=True, warnings=warnings)
+    assert len(events) == text.count("\n") + (not text.endswith("\n")) - 1
+    (report,) = warnings.lines()
+    assert f"1 dropped" in report and f"(first at line {line})" in report
+    again = DataWarnings()
+    load_event_file(path, lenient=True, warnings=again)  # from the cache: the warning is reported again
+    assert again.lines() == warnings.lines()
+    with pytest.raises(DataError):
+        load_event_file(path)  # the lenient cache never serves a strict read
+
+
+def test_small_steps_back_within_tolerance_are_clamped(tmp_path):
+    path = tmp_path / "events.txt"
+    path.write_text("0.1 1 2 1\n0.2000000 3 4 0\n0.1999995 5 6 1\n0.3 1 1 1\n")
+    t = load_event_file(path)["t"]
+    np.testing.assert_array_equal(t, [0.1, 0.2, 0.2, 0.3])
+    with pytest.raises(DataError, match="goes backwards"):
+        load_event_file(path, tolerance_s=1e-7)
+
+
+def test_strict_reports_the_earliest_bad_line_whatever_its_problem(tmp_path):
+    path = tmp_path / "events.txt"
+    path.write_text("0.1 1 2 1\n0.2 3 4 5\n0.3 999 4 1\n")  # line 2: polarity, line 3: off the sensor
+    with pytest.raises(DataError, match="polarity") as info:
+        load_event_file(path)
+    assert info.value.line == 2
+    warnings = DataWarnings()
+    assert len(load_event_file(path, lenient=True, warnings=warnings)) == 1
+    assert sorted(warnings.lines()) == sorted([
+        f"{path}: 1 dropped: polarity not 0/1 (or -1/1) (first at line 2)",
+        f"{path}: 1 dropped: pixel outside the 240x180 sensor (first at line 3)",
+    ])
+

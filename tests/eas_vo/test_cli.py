@@ -1,0 +1,135 @@
+"""The real CLI, in-process and as a subprocess: outputs, evo agreement, user errors."""
+
+import csv
+import json
+import re
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from eas_vo.cli import main
+
+OUTPUTS = ("trajectory.tum", "groundtruth.tum", "metrics.json", "frames.csv", "config.toml", "rotation.png")
+
+
+@pytest.fixture(scope="module")
+def eas_run(short_sequence, tmp_path_factory):
+    out = tmp_path_factory.mktemp("run") / "eas"
+    assert main(["run", "--dataset", str(short_sequence), "--frontend", "eas", "--out", str(out), "--quiet"]) == 0
+    return out
+
+
+def test_run_writes_every_output(eas_run):
+    for name in OUTPUTS:
+        assert (eas_run / name).stat().st_size > 0, name
+    metrics = json.loads((eas_run / "metrics.json").read_text())
+    for key in ("ape_mean_rad", "ape_rmse_rad", "ape_max_rad", "nc_mean", "frames", "frontend", "backend", "dataset", "elapsed_s"):
+        assert key in metrics, key
+    assert metrics["frontend"] == "eas" and metrics["backend"] == "chain"
+    rows = list(csv.DictReader(open(eas_run / "frames.csv")))
+    assert len(rows) == metrics["frames"] == len((eas_run / "trajectory.tum").read_text().splitlines())
+    assert metrics["nc_mean"] == pytest.approx(np.mean([int(r["nc"]) for r in rows[1:]]))
+    assert (eas_run / "rotation.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_evo_reports_the_same_average_ape(eas_run):
+    beside = Path(sys.executable).parent / "evo_ape"  # the evo of this interpreter, venv or not
+    evo_ape = str(beside) if beside.exists() else shutil.which("evo_ape")
+    if evo_ape is None:
+        pytest.skip("evo_ape not found beside the Python interpreter nor on PATH")
+    result = subprocess.run(
+        [evo_ape, "tum", str(eas_run / "groundtruth.tum"), str(eas_run / "trajectory.tum"), "-r", "angle_rad", "--align_origin"],
+        capture_output=True,
+        text=True,
+        check=True,
+    )
+    evo_mean = float(re.search(r"^\s*mean\s+([0-9.eE+-]+)", result.stdout, re.M).group(1))
+    ours = json.loads((eas_run / "metrics.json").read_text())["ape_mean_rad"]
+    assert evo_mean == pytest.approx(ours, abs=1e-6)
+
+
+def test_resolved_config_reproduces_the_run(eas_run, tmp_path):
+    out = tmp_path / "again"
+    assert main(["run", "--config", str(eas_run / "config.toml"), "--out", str(out), "--quiet"]) == 0
+    first = json.loads((eas_run / "metrics.json").read_text())
+    second = json.loads((out / "metrics.json").read_text())
+    assert second["ape_mean_rad"] == first["ape_mean_rad"] and second["nc_mean"] == first["nc_mean"]
+
+
+def test_start_and_duration_select_the_window(short_sequence, tmp_path):
+    out = tmp_path / "w"
+    assert main(["run", "--dataset", str(short_sequence), "--frontend", "original", "--start", "0.5",
+                 "--duration", "0.5", "--out", str(out), "--quiet"]) == 0
+    assert json.loads((out / "metrics.json").read_text())["frames"] == 10
+
+
+def user_error(argv, capsys):
+    code = main(argv)
+    err = capsys.readouterr().err
+    assert code == 2
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and "Traceback" not in err, err
+    return lines[0]
+
+
+def test_missing_images_txt_is_one_line(sequence_copy, tmp_path, capsys):
+    (sequence_copy / "images.txt").unlink()
+    line = user_error(["run", "--dataset", str(sequence_copy), "--out", str(tmp_path / "o")], capsys)
+    assert line.startswith("eas-vo: error: ") and "needs APS frames" in line and "images.txt does not exist" in line
+
+
+def test_bad_event_line_is_one_line_with_file_and_line(sequence_copy, tmp_path, capsys):
+    path = sequence_copy / "events.txt"
+    with open(path, "r+b") as fh:
+        head = b"".join(fh.readline() for _ in range(4))
+        fh.seek(len(head))
+        fh.write(b"0.0 garbage")
+    line = user_error(["run", "--dataset", str(sequence_copy), "--out", str(tmp_path / "o")], capsys)
+    assert re.search(r"events.txt:5: ", line), line
+
+
+def test_missing_frame_file_is_one_line(sequence_copy, tmp_path, capsys):
+    (sequence_copy / "images" / "frame_00000007.png").unlink()
+    line = user_error(["run", "--dataset", str(sequence_copy), "--out", str(tmp_path / "o")], capsys)
+    assert "images.txt:8: frame file images/frame_00000007.png does not exist" in line
+
+
+def test_unknown_plugin_and_bad_config_are_one_line(short_sequence, tmp_path, capsys):
+    line = user_error(["run", "--dataset", str(short_sequence), "--frontend", "nope"], capsys)
+    assert "unknown frontend 'nope'; installed:" in line
+    line = user_error(["run", "--dataset", str(short_sequence), "--set", "frontend.beta=999"], capsys)
+    assert "beta" in line
+
+
+def test_subprocess_entry_point_help_and_error():
+    help_text = subprocess.run([sys.executable, "-m", "eas_vo", "run", "--help"], capture_output=True, text=True)
+    assert help_text.returncode == 0 and "metrics.json" in help_text.stdout
+    bad = subprocess.run([sys.executable, "-m", "eas_vo", "run", "--dataset", "/nonexistent/folder"], capture_output=True, text=True)
+    assert bad.returncode == 2 and bad.stderr.count("\n") == 1 and "dataset not found" in bad.stderr
+
+
+def test_simulate_command(tmp_path, capsys):
+    out = tmp_path / "sim"
+    assert main(["simulate", "--out", str(out), "--seed", "2", "--duration", "0.4"]) == 0
+    assert (out / "images.txt").exists() and (out / "imu.txt").exists()
+    assert "wrote a 0.4 s synthetic sequence" in capsys.readouterr().out
+
+
+def test_lenient_flag_counts_and_reports(sequence_copy, tmp_path, capsys):
+    path = sequence_copy / "events.txt"
+    lines = path.read_bytes().split(b"\n")
+    lines[100] = b"0.5 9999 3 1"  # out of the sensor
+    lines[200] = b"garbage"
+    path.write_bytes(b"\n".join(lines))
+    assert main(["run", "--dataset", str(sequence_copy), "--out", str(tmp_path / "strict"), "--quiet"]) == 2
+    assert "events.txt:101: " in capsys.readouterr().err
+    assert main(["run", "--dataset", str(sequence_copy), "--out", str(tmp_path / "lenient"), "--quiet", "--lenient"]) == 0
+    err = capsys.readouterr().err
+    assert "eas-vo: warning:" in err and "1 dropped: malformed line (first at line 201)" in err
+    assert "1 dropped: pixel outside the 240x180 sensor (first at line 101)" in err
+    metrics = json.loads((tmp_path / "lenient" / "metrics.json").read_text())
+    assert len(metrics["data_warnings"]) == 2

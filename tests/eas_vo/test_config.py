@@ -1,0 +1,121 @@
+"""Configuration: files, flags, --set, per-plugin tables, validation, round trip."""
+
+import math
+import tomllib
+
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+
+from eas_vo import registry
+from eas_vo.config import SECTIONS, parse_set, resolve
+from eas_vo.errors import ConfigError, EasVoError
+from helpers import hostile_number, hostile_settings
+
+
+def test_defaults():
+    cfg = resolve()
+    assert (cfg.run.dataset, cfg.run.frontend, cfg.run.backend) == ("synthetic:default", "eas", "chain")
+    assert cfg.run.duration_s == math.inf and cfg.frontend.n == 4000
+
+
+def test_precedence_file_then_flags_then_set(tmp_path):
+    path = tmp_path / "c.toml"
+    path.write_text('[run]\nfrontend = "slice"\nbackend = "chain"\n[frontend]\nn = 100\n[tracker]\nthreshold1 = 12\n')
+    cfg = resolve(path, {"frontend": None}, ["frontend.n=300"])
+    assert cfg.run.frontend == "slice" and cfg.frontend.n == 300 and cfg.tracker.threshold1 == 12
+    cfg = resolve(path, {"frontend": "eas"}, [])
+    assert cfg.run.frontend == "eas" and cfg.frontend.n == 100
+
+
+def test_per_plugin_tables_apply_only_to_their_plugin(tmp_path):
+    path = tmp_path / "c.toml"
+    path.write_text("[frontend.eas]\nbeta = 40.0\n[frontend.slice]\nn = 123\n")
+    assert resolve(path, {"frontend": "eas"}).frontend.beta == 40.0
+    assert resolve(path, {"frontend": "slice"}).frontend.n == 123
+
+
+@pytest.mark.parametrize(
+    "assignment,match",
+    [
+        ("frontend.bogus=1", "unknown key frontend.bogus"),
+        ("frontend.n=abc", "frontend.n must be int"),
+        ("frontend.n=0", "n = 0 is out of range"),
+        ("tracker.threshold1=500", "threshold1 .* must not exceed threshold2"),
+        ("nosection.x=1", "SECTION.KEY=VALUE"),
+        ("run.frontend=nope", "unknown frontend 'nope'; installed: "),
+        ("run.tracker=nope", "unknown tracker 'nope'; installed: "),
+        ("frontend.eass.n=0", "unknown table frontend.eass: not an installed frontend plugin"),
+        ("run.duration_s=0", r"run.duration_s = 0.0 is out of range \(0.0, inf\]"),
+    ],
+)
+def test_invalid_values_are_rejected_with_the_key(assignment, match):
+    with pytest.raises(EasVoError, match=match):
+        resolve(None, {}, [assignment])
+
+
+def test_an_unknown_plugin_lists_what_the_registry_reports():
+    with pytest.raises(EasVoError) as info:
+        resolve(None, {"frontend": "nope"})
+    assert str(info.value).endswith("installed: " + ", ".join(registry.available("frontends")))
+
+
+def test_set_parses_toml_values():
+    assert parse_set("frontend.beta=40") == (["frontend", "beta"], 40)
+    assert parse_set("run.dataset=some/folder") == (["run", "dataset"], "some/folder")
+    assert parse_set("tracker.essential_method='ransac'") == (["tracker", "essential_method"], "ransac")
+
+
+def test_resolved_config_round_trips_through_toml(tmp_path):
+    cfg = resolve(None, {"frontend": "slice", "duration_s": 2.5}, ["tracker.threshold2=99"])
+    path = tmp_path / "config.toml"
+    path.write_text(cfg.to_toml())
+    assert resolve(path) == cfg
+
+
+def test_bundled_config_by_name():
+    cfg = resolve("paper")
+    assert cfg.run.frontend == "eas" and cfg.run.backend == "chain"
+
+
+def test_bad_toml_file(tmp_path):
+    path = tmp_path / "bad.toml"
+    path.write_text("[run\n")
+    with pytest.raises(ConfigError, match="invalid TOML"):
+        resolve(path)
+
+
+def resolved_value(cfg, section: str, key: str):
+    value = getattr(getattr(cfg, section), key)
+    return list(value) if isinstance(value, tuple) else value
+
+
+@hostile_settings()
+@given(key=st.sampled_from(["frontend.n", "frontend.beta", "frontend.sigma_px", "tracker.threshold1", "tracker.max_corners",
+                            "run.start_s", "run.duration_s", "backend.x", "nosuch.key", "frontend"]),
+       value=st.one_of(hostile_number(), st.text(max_size=8)))
+def test_hostile_set_values_are_one_line_errors_or_taken_exactly(key, value):
+    try:
+        cfg = resolve(None, {}, [f"{key}={value}"])
+    except EasVoError as exc:
+        assert "\n" not in str(exc)
+        return
+    keys, parsed = parse_set(f"{key}={value}")
+    assert resolved_value(cfg, *keys) == parsed  # accepted: the value given is the value used
+
+
+@hostile_settings()
+@given(st.binary(max_size=300))
+def test_hostile_config_files_are_one_line_errors_or_taken_exactly(tmp_path_factory, data):
+    path = tmp_path_factory.mktemp("c") / "c.toml"
+    path.write_bytes(data)
+    try:
+        cfg = resolve(path)
+    except EasVoError as exc:
+        assert "\n" not in str(exc).strip()
+        return
+    for section, table in tomllib.loads(data.decode()).items():  # accepted: every flat key was taken
+        assert section in SECTIONS
+        for key, value in table.items():
+            if not isinstance(value, dict):
+                assert resolved_value(cfg, section, key) == value

@@ -1,0 +1,30 @@
+"""`eas-vo render`: every frontend's image of chosen frames (the paper's Fig. 1)."""
+
+from eas_vo import config, registry
+from eas_vo.cli import main
+from eas_vo.gallery import frontend_images
+
+
+def test_render_draws_a_gallery_of_every_installed_frontend(short_sequence, tmp_path, capsys):
+    out = tmp_path / "gallery.png"
+    assert main(["render", "--dataset", str(short_sequence), "--frames", "3,20", "--out", str(out)]) == 0
+    assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    n_frontends = len(registry.available("frontends"))
+    assert f"2 frame(s) x {n_frontends} frontend(s)" in capsys.readouterr().out
+
+
+def test_render_images_match_running_each_frontend(short_sequence):
+    names, images = frontend_images(str(short_sequence), [5], ["sits", "eas"])
+    dataset = registry.open_dataset(str(short_sequence))
+    for name in names:
+        frontend = registry.get("frontends", name)(config.resolve(None, {"frontend": name}).frontend, dataset.camera)
+        for sample in dataset.samples():
+            image = frontend(sample)
+            if sample.index == 5:
+                break
+        assert (image == images[(5, name)]).all(), name
+
+
+def test_render_rejects_missing_frames(short_sequence, capsys):
+    assert main(["render", "--dataset", str(short_sequence), "--frames", "3,9999", "--out", "x.png"]) == 2
+    assert "frame 9999 does not exist" in capsys.readouterr().err

@@ -1,0 +1,57 @@
+"""End-to-end results: the paper's qualitative claim on the default synthetic sequence,
+and the frame path on the real Event Camera Dataset excerpt."""
+
+import pytest
+
+from helpers import SHAPES_ROTATION, require
+from eas_vo import config, pipeline
+
+
+def run(dataset, frontend, **run_overrides):
+    cfg = config.resolve(None, {"dataset": dataset, "frontend": frontend, "backend": "chain", **run_overrides})
+    return pipeline.run(cfg).metrics
+
+
+@pytest.fixture(scope="module")
+def default_results():
+    """original and eas on the embedded default sequence (simulated once, about 30 s)."""
+    return {f: run("synthetic:default", f) for f in ("original", "eas")}
+
+
+def test_eas_tracks_more_correspondences_than_original(default_results):
+    assert default_results["eas"]["nc_mean"] > 2 * default_results["original"]["nc_mean"]
+
+
+def test_eas_is_more_accurate_than_original(default_results):
+    # Measured: eas 0.040 rad, original 0.40 rad (see README); the claim is the ordering.
+    assert default_results["eas"]["ape_mean_rad"] < 0.5 * default_results["original"]["ape_mean_rad"]
+
+
+def test_original_frames_on_the_real_excerpt():
+    """original + chain on the first 25 s of shapes_rotation (real DAVIS frames).
+
+    Measured (ground truth 10 ms after the frames, OpenCV 5.0): 0.048 rad over the
+    first 8 s, 0.503 rad over 25 s. Tracking holds while the hand-held motion is slow
+    and breaks after ~14 s, when it reaches several hundred deg/s; over 25 s the
+    estimate is then worse than standing still (0.273 rad), so the 25 s bound (0.7)
+    only checks that the whole run completes sanely. The 8 s bound (0.09) is the
+    accuracy check: standing still scores 0.158 and the same pipeline without
+    undistortion 0.117, so it fails if the distortion of calib.txt is ignored.
+    """
+    folder = str(require(SHAPES_ROTATION))
+    long = run(folder, "original", duration_s=25.0, time_offset_s=0.01)
+    assert long["frames"] == 568 and long["ape_mean_rad"] < 0.7
+    assert long["nc_mean"] > 30
+    short = run(folder, "original", duration_s=8.0, time_offset_s=0.01)
+    assert short["ape_mean_rad"] < 0.09
+
+
+def test_best_config_beats_the_paper_config():
+    """configs/best.toml against configs/paper.toml. Measured: synthetic eas 0.0104 vs
+    0.0396 rad; the real excerpt (histeq, 25 s) 0.0447 vs 0.486 rad."""
+    paper = pipeline.run(config.resolve("paper", {"frontend": "eas"})).metrics
+    best = pipeline.run(config.resolve("best", {"frontend": "eas"})).metrics
+    assert best["ape_mean_rad"] < 0.5 * paper["ape_mean_rad"]
+    folder = str(require(SHAPES_ROTATION))
+    real = pipeline.run(config.resolve("best", {"dataset": folder, "frontend": "histeq", "duration_s": 25.0, "time_offset_s": 0.01}))
+    assert real.metrics["ape_mean_rad"] <= 0.08

@@ -1,0 +1,76 @@
+"""Helpers the tests share (imported as `helpers`: `tests/support` is on pytest's pythonpath):
+where the real data lives, skipping without it, and manifold-aware asserts."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from eas_vo.types import EVENT_DTYPE
+
+SHARED_DATA = Path(__file__).resolve().parents[3] / "shared" / "data"
+SHAPES_ROTATION = SHARED_DATA / "ecd" / "shapes_rotation_0-30s"
+EVENT_WINDOWS = SHARED_DATA / "ecd" / "event_windows"
+REPOSITORY = Path(__file__).resolve().parents[2]
+
+
+def require(path: Path) -> Path:
+    """Skip the test, saying why, when a real-data folder is absent."""
+    if not path.exists():
+        pytest.skip(f"real data not available: {path} is absent (it lives in ../shared/data beside the repository)")
+    return path
+
+
+def assert_rotations_close(R_a, R_b, tol_rad: float) -> None:
+    """Manifold-aware comparison of rotation stacks: every geodesic angle below tol_rad."""
+    from eas_vo.geometry.rotations import geodesic_angle
+
+    angles = np.atleast_1d(geodesic_angle(np.asarray(R_a), np.asarray(R_b)))
+    assert angles.max() <= tol_rad, f"largest rotation difference {angles.max():.3g} rad > {tol_rad:.3g} rad"
+
+
+def random_events(n: int, seed: int = 0):
+    """n events (EVENT_DTYPE) sorted by time over [0, 1234.5] s on a 240x180 sensor."""
+    rng = np.random.default_rng(seed)
+    ev = np.empty(n, EVENT_DTYPE)
+    ev["t"] = np.sort(rng.uniform(0, 1234.5, n))
+    ev["x"] = rng.integers(0, 240, n)
+    ev["y"] = rng.integers(0, 180, n)
+    ev["p"] = rng.integers(0, 2, n)
+    return ev
+
+
+def load_event_file(path, lenient=False, warnings=None, width=240, height=180, tolerance_s=1e-6):
+    """An events.txt through eas_vo.eventfile.load_event_text (and its cache)."""
+    from eas_vo.eventfile import file_identity, load_event_text
+
+    return load_event_text(lambda: open(path, "rb"), file_identity(path), str(path), width, height, tolerance_s, lenient, warnings)
+
+
+# ----------------------------------------------------------------------------- hostile input (hypothesis)
+
+def hostile_settings(max_examples: int = 150):
+    """Property-test settings: deterministic, no deadline (the readers hit the disk)."""
+    from hypothesis import HealthCheck, settings
+
+    return settings(max_examples=max_examples, deadline=None, derandomize=True,
+                    suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow])
+
+
+def hostile_number():
+    """Number-like text: good numbers, NaN/inf, overflow, hex, empty, words, a non-ASCII digit."""
+    from hypothesis import strategies as st
+
+    return st.one_of(
+        st.integers(-10, 400).map(str),
+        st.floats(allow_nan=True, allow_infinity=True).map(repr),
+        st.floats(0, 100).map(lambda v: f"{v:.9f}"),
+        st.sampled_from(["nan", "inf", "-1", "1e309", "0x10", "", "abc", "1.2.3", "٣"]),
+    )
+
+
+def numeric_rows(text: str) -> list[list[float]]:
+    """A reference reading of a whitespace table: the non-blank, non-comment lines as floats."""
+    return [[float(v) for v in line.split()] for line in text.splitlines() if line.strip() and not line.strip().startswith("#")]

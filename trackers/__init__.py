@@ -1,0 +1,1 @@
+"""Tracker plugins; installed as `eas_vo.trackers`."""
