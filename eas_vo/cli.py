@@ -30,6 +30,7 @@ examples:
   eas-vo run --frontend eas --backend chain
   eas-vo run --dataset path/to/hdr_boxes --frontend original --start 0 --duration 25
   eas-vo run --frontend eas --set frontend.n=8000 --set tracker.threshold1=15
+  eas-vo run --dataset ecd:path/to/folder --tracker klt --config best
 """
 
 

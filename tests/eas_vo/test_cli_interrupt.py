@@ -25,7 +25,8 @@ def test_signal_mid_run_leaves_valid_partial_outputs(short_sequence, tmp_path, m
     monkeypatch.setattr(OriginalFrontend, "__call__", interrupting)
     out = tmp_path / "run"
     assert main(["run", "--dataset", str(short_sequence), "--frontend", "original", "--out", str(out), "--quiet"]) == code
-    assert "interrupted" in capsys.readouterr().err
+    err = capsys.readouterr().err
+    assert err == f"eas-vo run: interrupted; the 12 frames processed so far were written to {out} (metrics.json: partial)\n"
     metrics = json.loads((out / "metrics.json").read_text())
     assert metrics["partial"] is True and metrics["frames"] == 12
     assert len((out / "trajectory.tum").read_text().splitlines()) == 12
@@ -74,6 +75,8 @@ def test_compare_interrupted_writes_its_table_and_resumes(short_sequence, tmp_pa
     out = tmp_path / "cmp"
     argv = ["compare", "--dataset", str(short_sequence), "--frontends", "original,slice,eas", "--out", str(out), "--jobs", "1", "--quiet"]
     assert main(argv) == 130
+    err = capsys.readouterr().err
+    assert err == f"eas-vo compare: interrupted; the table of the 1 finished cells was written to {out}; the same command resumes the rest\n"
     rows = json.loads((out / "table.json").read_text())
     assert [r["status"] for r in rows] == ["ok", "not run", "not run"]
     monkeypatch.setattr(compare, "run_cell", real_run_cell)
