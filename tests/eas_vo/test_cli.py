@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 
 from eas_vo.cli import main
+from helpers import run_eas_vo
 
 OUTPUTS = ("trajectory.tum", "groundtruth.tum", "metrics.json", "frames.csv", "config.toml", "rotation.png")
 
@@ -106,9 +107,9 @@ def test_unknown_plugin_and_bad_config_are_one_line(short_sequence, tmp_path, ca
 
 
 def test_subprocess_entry_point_help_and_error():
-    help_text = subprocess.run([sys.executable, "-m", "eas_vo", "run", "--help"], capture_output=True, text=True)
+    help_text = run_eas_vo("run", "--help")
     assert help_text.returncode == 0 and "metrics.json" in help_text.stdout
-    bad = subprocess.run([sys.executable, "-m", "eas_vo", "run", "--dataset", "/nonexistent/folder"], capture_output=True, text=True)
+    bad = run_eas_vo("run", "--dataset", "/nonexistent/folder")
     assert bad.returncode == 2 and bad.stderr.count("\n") == 1 and "dataset not found" in bad.stderr
 
 

@@ -13,7 +13,7 @@ import pytest
 
 from eas_vo import registry
 from eas_vo.cli import main
-from helpers import REPOSITORY
+from helpers import REPOSITORY, run_eas_vo
 
 PLUGIN_PACKAGE = REPOSITORY / "tests" / "plugin_example"
 
@@ -58,10 +58,6 @@ def write_npz(dataset, path) -> None:
              K=dataset.camera.K, gt_t=gt.t, gt_p_w_c=gt.p_w_c, gt_q_w_c=gt.q_w_c)
 
 
-def cli(env, *argv):
-    return subprocess.run([sys.executable, "-m", "eas_vo", *argv], capture_output=True, text=True, env=env)
-
-
 def test_the_readme_example_plugins_run_through_the_cli(short_sequence, tmp_path):
     source, pyproject = readme_plugin_guide()
     entry_points = pyproject["project"]["entry-points"]
@@ -71,7 +67,7 @@ def test_the_readme_example_plugins_run_through_the_cli(short_sequence, tmp_path
     install_privately(site, "eas_vo_example", "eas_vo_example", source, entry_points)
     env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(site), os.environ.get("PYTHONPATH", "")]))
 
-    listing = cli(env, "list")
+    listing = run_eas_vo("list", env=env)
     assert listing.returncode == 0, listing.stderr
     for eps in entry_points.values():
         for name in eps:
@@ -81,15 +77,15 @@ def test_the_readme_example_plugins_run_through_the_cli(short_sequence, tmp_path
     recording = tmp_path / "recording.npz"  # no plugin prefix: the npz plugin claims the suffix
     write_npz(registry.open_dataset(str(short_sequence)), recording)
     out = tmp_path / "run"
-    run = cli(env, "run", "--dataset", str(recording), "--frontend", "sobel", "--tracker", "orbmatch",
-              "--backend", "trusted_chain", "--set", "backend.min_inliers=30", "--out", str(out))
+    run = run_eas_vo("run", "--dataset", str(recording), "--frontend", "sobel", "--tracker", "orbmatch",
+                     "--backend", "trusted_chain", "--set", "backend.min_inliers=30", "--out", str(out), env=env)
     assert run.returncode == 0, run.stderr
     assert "sobel+orbmatch+trusted_chain" in run.stdout and "average APE" in run.stdout
     assert "min_inliers = 30" in (out / "config.toml").read_text()
     frames = (out / "frames.csv").read_text().splitlines()
     assert len(frames) == 1 + len(np.load(recording)["frame_times"]) and ",ok," in frames[2]
 
-    bad = cli(env, "run", "--dataset", str(recording), "--frontend", "sobel", "--set", "frontend.nope=1")
+    bad = run_eas_vo("run", "--dataset", str(recording), "--frontend", "sobel", "--set", "frontend.nope=1", env=env)
     assert bad.returncode == 2 and bad.stderr.strip() == "eas-vo: error: unknown key frontend.nope; allowed keys: blur_px"
 
 
@@ -111,11 +107,11 @@ def plugin_site(tmp_path_factory):
 
 def test_a_pip_installed_plugin_runs_through_the_cli(plugin_site, short_sequence, tmp_path):
     env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(plugin_site), os.environ.get("PYTHONPATH", "")]))
-    listing = cli(env, "list")
+    listing = run_eas_vo("list", env=env)
     assert "edges      Canny edges of the equalised frame (an example plugin)" in listing.stdout
     assert "config: low=50 high=150" in listing.stdout
     out = tmp_path / "edges"
-    run = cli(env, "run", "--dataset", str(short_sequence), "--frontend", "edges", "--set", "frontend.high=120", "--out", str(out))
+    run = run_eas_vo("run", "--dataset", str(short_sequence), "--frontend", "edges", "--set", "frontend.high=120", "--out", str(out), env=env)
     assert run.returncode == 0, run.stderr
     assert "edges+klt+chain" in run.stdout and (out / "metrics.json").exists()
     assert "high = 120" in (out / "config.toml").read_text()

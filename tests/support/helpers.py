@@ -74,3 +74,15 @@ def hostile_number():
 def numeric_rows(text: str) -> list[list[float]]:
     """A reference reading of a whitespace table: the non-blank, non-comment lines as floats."""
     return [[float(v) for v in line.split()] for line in text.splitlines() if line.strip() and not line.strip().startswith("#")]
+
+
+def run_eas_vo(*argv: str, env: dict | None = None):
+    """`python -m eas_vo ARGV` in a subprocess, from a neutral folder: `-m` puts the current
+    folder on sys.path, and from the repository root the source `eas_vo/` would shadow a
+    non-editable installation."""
+    import subprocess
+    import sys
+    import tempfile
+
+    with tempfile.TemporaryDirectory() as neutral:
+        return subprocess.run([sys.executable, "-m", "eas_vo", *argv], capture_output=True, text=True, env=env, cwd=neutral)
