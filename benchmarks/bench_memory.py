@@ -46,7 +46,7 @@ def run(folder, frontend: str) -> tuple[float, float]:
     subprocess.run(
         [sys.executable, "-m", "eas_vo", "run", "--dataset", str(folder), "--frontend", frontend,
          "--set", "dataset.sample_rate_hz=20", "--quiet", "--out", str(folder / f"run_{frontend}"), "--overwrite"],
-        check=True, stdout=subprocess.DEVNULL,
+        check=True, stdout=subprocess.DEVNULL, cwd=folder,  # not the repository root: see tests/conftest.py
     )
     elapsed = time.perf_counter() - t0
     return elapsed, resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024

@@ -21,7 +21,7 @@ import cv2
 import numpy as np
 
 from eas_vo.datasets.recording import StreamConfig, check_increasing, event_sample_times, pose_series
-from eas_vo.datasets.sources import open_source
+from eas_vo.datasets.sources import MARKERS, open_source
 from eas_vo.errors import DataError, DataWarnings
 from eas_vo.eventfile import load_event_text, write_events_text
 from eas_vo.io import atomic_path, parse_table, write_text_atomic
@@ -69,9 +69,9 @@ class EcdFolderDataset(Dataset):
 
     @classmethod
     def can_open(cls, location: str) -> bool:
-        """A folder, or a path ending in `.zip`."""
+        """A folder holding `images.txt` or `events.txt`, or a path ending in `.zip`."""
         path = Path(location)
-        return path.suffix.lower() == ".zip" or path.is_dir()
+        return path.suffix.lower() == ".zip" or any((path / marker).is_file() for marker in MARKERS)
 
     def data_warnings(self) -> list[str]:
         return self.warnings.lines()

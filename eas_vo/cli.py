@@ -9,13 +9,10 @@ from __future__ import annotations
 
 import argparse
 import os
-import signal
 import sys
-import threading
-from contextlib import contextmanager
 from pathlib import Path
 
-from eas_vo.errors import EasVoError, Interrupted
+from eas_vo.errors import EasVoError, Interrupted, sigterm_as_interrupt
 
 EPILOG_RUN = """\
 outputs (in --out):
@@ -44,7 +41,7 @@ def build_parser() -> argparse.ArgumentParser:
     run = sub.add_parser(
         "run",
         help="estimate rotation on a sequence and evaluate it",
-        description="Run one frontend + backend on a dataset and write the trajectory, metrics and plots.",
+        description="Run one frontend + tracker + backend on a dataset and write the trajectory, metrics and plots.",
         epilog=EPILOG_RUN,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
@@ -56,6 +53,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     run.add_argument("--frontend", metavar="NAME",
                      help="image source: original, histeq, slice, ts, sits, eas or a plugin's (eas-vo list; default eas)")
+    run.add_argument("--tracker", metavar="NAME", help="relative rotations from the images: klt (the paper; default) or a plugin's")
     run.add_argument("--backend", metavar="NAME", help="relative -> absolute rotations: chain or gtsam (default chain)")
     _add_common_options(run)
     run.add_argument(
@@ -63,22 +61,23 @@ def build_parser() -> argparse.ArgumentParser:
         action="store_true",
         help="drop malformed lines, out-of-order or out-of-sensor events and missing frames, with counted warnings",
     )
-    run.add_argument("--out", metavar="DIR", help="output folder (default: runs/DATASET_FRONTEND_BACKEND_TIME)")
+    run.add_argument("--out", metavar="DIR", help="output folder (default: runs/DATASET_FRONTEND_TRACKER_BACKEND_TIME)")
     run.add_argument("--overwrite", action="store_true", help="write into --out even if it holds results")
     run.set_defaults(func=cmd_run)
 
     compare = sub.add_parser(
         "compare",
-        help="run a grid of datasets x frontends x backends (x sweeps); write the paper's Table 1",
-        description="Run every cell (dataset x frontend x backend x sweep point) as `eas-vo run` would, "
+        help="run a grid of datasets x frontends x trackers x backends (x sweeps); write the paper's Table 1",
+        description="Run every cell (dataset x frontend x tracker x backend x sweep point) as `eas-vo run` would, "
         "in parallel processes; cells already complete are not run again. Writes table.md, table.csv, "
         "table.json (Table 1 of the paper: average NC and APE per source type), ape_bars.png, "
         "ape_time.png and each cell's own folder.",
     )
     compare.add_argument("--dataset", dest="datasets", action="append", metavar="SPEC",
                          help="a dataset (repeatable; default synthetic:default)")
-    compare.add_argument("--frontends", default="original,histeq,slice,ts,sits,eas", metavar="A,B,...")
-    compare.add_argument("--backends", default="chain", metavar="A,B,...")
+    compare.add_argument("--frontends", metavar="A,B,...", help="default: the paper's six sources, original,histeq,slice,ts,sits,eas")
+    compare.add_argument("--trackers", metavar="A,B,...", help="default: the run default, klt")
+    compare.add_argument("--backends", metavar="A,B,...", help="default: the run default, chain")
     _add_common_options(compare)
     compare.add_argument("--sweep", dest="sweeps", action="append", default=[], metavar="SECTION.KEY=V1,V2",
                          help="values to try (repeatable: the cartesian product is run)")
@@ -126,8 +125,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def _add_common_options(parser) -> None:
-    """Options `run` and `compare` share: tracker, configuration, window, time offset, progress."""
-    parser.add_argument("--tracker", metavar="NAME", help="relative rotations from images: klt (the paper; default) or a plugin's")
+    """Options `run` and `compare` share: configuration, window, time offset, progress."""
     parser.add_argument("--config", metavar="FILE", help="TOML config file, or the name of a bundled one (e.g. paper)")
     parser.add_argument("--set", dest="assignments", action="append", default=[], metavar="SECTION.KEY=VALUE",
                         help="override one config value, e.g. frontend.n=8000 (repeatable)")
@@ -141,14 +139,13 @@ def _add_common_options(parser) -> None:
 def _shared_overrides(args) -> dict:
     """The [run] values given by the shared options."""
     offset, auto = _time_offset(args.time_offset)
-    return {"tracker": args.tracker, "start_s": args.start, "duration_s": args.duration,
-            "time_offset_s": offset, "time_offset_auto": auto}
+    return {"start_s": args.start, "duration_s": args.duration, "time_offset_s": offset, "time_offset_auto": auto}
 
 
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     try:
-        with _sigterm_as_interrupt():
+        with sigterm_as_interrupt():
             return args.func(args)
     except EasVoError as exc:
         print(f"eas-vo: error: {exc}", file=sys.stderr)
@@ -159,24 +156,6 @@ def main(argv: list[str] | None = None) -> int:
         return 143 if isinstance(exc, Interrupted) and exc.sigterm else 130
 
 
-@contextmanager
-def _sigterm_as_interrupt():
-    """Within the block, SIGTERM raises Interrupted(sigterm=True), handled like Ctrl-C
-    (main thread only; elsewhere a no-op). The previous handler is restored after."""
-    if threading.current_thread() is not threading.main_thread():
-        yield
-        return
-
-    def handler(signum, frame):
-        raise Interrupted(sigterm=True)
-
-    previous = signal.signal(signal.SIGTERM, handler)
-    try:
-        yield
-    finally:
-        signal.signal(signal.SIGTERM, previous)
-
-
 def cmd_run(args) -> int:
     from eas_vo import config as config_mod
     from eas_vo import pipeline
@@ -185,7 +164,8 @@ def cmd_run(args) -> int:
     assignments = args.assignments + (["dataset.lenient=true"] if args.lenient else [])
     config = config_mod.resolve(
         args.config,
-        {"dataset": args.dataset, "frontend": args.frontend, "backend": args.backend, **_shared_overrides(args)},
+        {"dataset": args.dataset, "frontend": args.frontend, "tracker": args.tracker, "backend": args.backend,
+         **_shared_overrides(args)},
         assignments,
     )
     rc = config.run
@@ -214,22 +194,30 @@ def cmd_run(args) -> int:
 
 def cmd_compare(args) -> int:
     from eas_vo import compare
+    from eas_vo import config as config_mod
     from eas_vo.evaluation import tum_rotation_errors
+    from eas_vo.gallery import PAPER_ORDER
     from eas_vo.io import atomic_path
     from eas_vo.plots import plot_ape_bars, plot_ape_time
     from eas_vo.registry import open_dataset
 
+    def names(text, default):
+        return [v.strip() for v in (text or default).split(",") if v.strip()]
+
     out = Path(args.out)
+    run_defaults = config_mod.RunConfig()
     cells = compare.plan(
-        args.datasets or ["synthetic:default"],
-        [v.strip() for v in args.frontends.split(",") if v.strip()],
-        [v.strip() for v in args.backends.split(",") if v.strip()],
+        args.datasets or [run_defaults.dataset],
+        names(args.frontends, ",".join(PAPER_ORDER)),
+        names(args.trackers, run_defaults.tracker),
+        names(args.backends, run_defaults.backend),
         args.sweeps,
     )
     overrides = {**_shared_overrides(args), "orb_stats": True if args.orb else None}
     for dataset in dict.fromkeys(c.dataset for c in cells):  # simulate or cache once, not once per process
         try:
-            open_dataset(dataset).events()
+            resolved = config_mod.resolve(args.config, {**overrides, "dataset": dataset}, args.assignments)
+            open_dataset(dataset, resolved.dataset).events()
         except EasVoError:
             pass  # its cells will report the error
     if args.executor == "dask" and not args.scheduler:
@@ -252,7 +240,8 @@ def cmd_compare(args) -> int:
         if results[cell]["status"] == "ok":
             curve = tum_rotation_errors(out / cell.folder / "trajectory.tum", out / cell.folder / "groundtruth.tum")
             if curve is not None:
-                series[(cell.dataset, " ".join(filter(None, [cell.frontend, cell.backend, cell.sweep_label])))] = curve
+                label = " ".join(filter(None, [cell.frontend, f"{cell.tracker}+{cell.backend}", cell.sweep_label]))
+                series[(cell.dataset, label)] = curve
     if series:
         with atomic_path(out / "ape_time.png") as tmp:
             plot_ape_time(tmp, series)
@@ -288,9 +277,10 @@ def cmd_list(args) -> int:
 
 
 def cmd_render(args) -> int:
+    from eas_vo.config import RunConfig
     from eas_vo.gallery import frontend_images
-    from eas_vo.plots import plot_gallery
     from eas_vo.io import atomic_path
+    from eas_vo.plots import plot_gallery
 
     try:
         frames = [int(v) for v in args.frames.split(",") if v.strip()]
@@ -301,7 +291,7 @@ def cmd_render(args) -> int:
     frontends = [v.strip() for v in args.frontends.split(",")] if args.frontends else None
     names, images = frontend_images(args.dataset, frames, frontends, args.config, args.assignments)
     with atomic_path(args.out) as tmp:
-        plot_gallery(tmp, names, images, frames, title=args.dataset or "synthetic:default")
+        plot_gallery(tmp, names, images, frames, title=args.dataset or RunConfig().dataset)
     print(f"wrote {len(frames)} frame(s) x {len(names)} frontend(s) to {args.out}")
     return 0
 

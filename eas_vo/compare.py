@@ -1,5 +1,6 @@
-"""Experiments: every cell of dataset x frontend x backend x sweep point, run as `eas-vo run`
-would, in parallel processes, resumable, summarised as the paper's Table 1."""
+"""Experiments: every cell of dataset x frontend x tracker x backend x sweep point, run as
+`eas-vo run` would, in parallel processes, resumable, summarised as the paper's Table 1
+(a row per source type, a column pair per dataset and method = tracker+backend)."""
 
 from __future__ import annotations
 
@@ -11,9 +12,8 @@ from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
-
 from eas_vo.config import parse_set
-from eas_vo.errors import EasVoError
+from eas_vo.errors import EasVoError, sigterm_as_interrupt
 from eas_vo.io import slug, write_text_atomic
 
 
@@ -23,6 +23,7 @@ class Cell:
 
     dataset: str
     frontend: str
+    tracker: str
     backend: str
     sweep: tuple  # ((key, value text), ...)
 
@@ -32,7 +33,7 @@ class Cell:
 
     @property
     def folder(self) -> str:
-        parts = [f"{self.frontend}_{self.backend}"] + [f"{k.split('.')[-1]}-{v}" for k, v in self.sweep]
+        parts = [f"{self.frontend}_{self.tracker}_{self.backend}"] + [f"{k.split('.')[-1]}-{v}" for k, v in self.sweep]
         return f"{slug(self.dataset)}/{slug('_'.join(parts))}"
 
 
@@ -49,13 +50,15 @@ def parse_sweeps(sweeps: list[str]) -> list[tuple[str, list[str]]]:
     return out
 
 
-def plan(datasets: list[str], frontends: list[str], backends: list[str], sweeps: list[str]) -> list[Cell]:
+def plan(
+    datasets: list[str], frontends: list[str], trackers: list[str], backends: list[str], sweeps: list[str]
+) -> list[Cell]:
     """The cartesian grid of cells."""
     parsed = parse_sweeps(sweeps)
     points = [tuple(zip([k for k, _ in parsed], combo)) for combo in itertools.product(*[v for _, v in parsed])]
     return [
-        Cell(d, f, b, point)
-        for d, f, b, point in itertools.product(datasets, frontends, backends, points or [()])
+        Cell(d, f, t, b, point)
+        for d, f, t, b, point in itertools.product(datasets, frontends, trackers, backends, points or [()])
     ]
 
 
@@ -67,10 +70,12 @@ def run_cell(cell: Cell, out_root: str, config_file, assignments: list[str], run
     try:
         cfg = config.resolve(
             config_file,
-            {**run_overrides, "dataset": cell.dataset, "frontend": cell.frontend, "backend": cell.backend},
+            {**run_overrides, "dataset": cell.dataset, "frontend": cell.frontend, "tracker": cell.tracker,
+             "backend": cell.backend},
             list(assignments) + [f"{k}={v}" for k, v in cell.sweep],
         )
-        metrics = pipeline.run(cfg, folder).metrics
+        with sigterm_as_interrupt():  # a worker keeps its partial outputs on SIGTERM, however it was started
+            metrics = pipeline.run(cfg, folder).metrics
         return {"status": "ok", **metrics}
     except EasVoError as exc:
         message = str(exc).splitlines()[0]
@@ -100,10 +105,10 @@ def run_grid(
     from tqdm import tqdm
 
     results = results if results is not None else {}
-    results.update({cell: completed(out_root, cell) for cell in cells})
-    todo = [cell for cell in cells if results[cell] is None]
-    for cell in todo:
-        results[cell] = {"status": "not run", "error": "interrupted before this cell ran"}
+    done = {cell: completed(out_root, cell) for cell in cells}
+    todo = [cell for cell in cells if done[cell] is None]
+    not_run = {"status": "not run", "error": "interrupted before this cell ran"}
+    results.update({cell: done[cell] or dict(not_run) for cell in cells})  # one step: never half-filled
     args = (str(out_root), config_file, list(assignments), run_overrides)
     with tqdm(total=len(cells), initial=len(cells) - len(todo), disable=not progress, unit="cell", desc="compare") as bar:
         if scheduler is not None:
@@ -133,9 +138,11 @@ def run_grid(
 
 
 def table_rows(cells: list[Cell], results: dict) -> list[dict]:
+    """One row per cell: what it ran (`method` = tracker+backend, a table column) and its figures."""
     return [
         {
             **asdict(cell),
+            "method": f"{cell.tracker}+{cell.backend}",
             "sweep": cell.sweep_label,
             "folder": cell.folder,
             "status": results.get(cell, {}).get("status", "not run"),
@@ -150,25 +157,25 @@ def table_rows(cells: list[Cell], results: dict) -> list[dict]:
 
 
 def _best(rows: list[dict], key: str, lower: bool) -> dict:
-    """Per (dataset, backend) column: the best value of `key`."""
+    """Per (dataset, method) column: the best value of `key`."""
     best = {}
     for r in rows:
         v = r[key]
         if v is None or v != v:
             continue
-        col = (r["dataset"], r["backend"])
+        col = (r["dataset"], r["method"])
         if col not in best or (v < best[col] if lower else v > best[col]):
             best[col] = v
     return best
 
 
 def table_markdown(rows: list[dict]) -> str:
-    """The paper's Table 1: a row per source type (and sweep point), per sequence and backend
-    the average NC and average APE [rad]; the best of each column in bold."""
+    """The paper's Table 1: a row per source type (and sweep point), per sequence and method
+    (tracker+backend) the average NC and average APE [rad]; the best of each column in bold."""
     datasets = list(dict.fromkeys(r["dataset"] for r in rows))
-    backends = list(dict.fromkeys(r["backend"] for r in rows))
+    backends = list(dict.fromkeys(r["method"] for r in rows))
     sources = list(dict.fromkeys((r["frontend"], r["sweep"]) for r in rows))
-    by_key = {(r["dataset"], r["backend"], r["frontend"], r["sweep"]): r for r in rows}
+    by_key = {(r["dataset"], r["method"], r["frontend"], r["sweep"]): r for r in rows}
     best_nc, best_ape = _best(rows, "nc_mean", lower=False), _best(rows, "ape_mean_rad", lower=True)
     head1 = ["Sequence"] + [f"{slug(d)} ({b})" for d in datasets for b in backends for _ in (0, 1)]
     head2 = ["Source type"] + ["average NC", "average APE"] * (len(datasets) * len(backends))
@@ -194,14 +201,14 @@ def table_markdown(rows: list[dict]) -> str:
 
 
 def table_csv(rows: list[dict]) -> str:
-    fields = ["dataset", "frontend", "backend", "sweep", "status", "nc_mean", "ape_mean_rad",
+    fields = ["dataset", "frontend", "tracker", "backend", "method", "sweep", "status", "nc_mean", "ape_mean_rad",
               "orb_keypoints_mean", "orb_matches_mean", "best_nc", "best_ape", "folder", "error"]
     best_nc, best_ape = _best(rows, "nc_mean", lower=False), _best(rows, "ape_mean_rad", lower=True)
     buffer = io.StringIO()
     writer = csv.DictWriter(buffer, fieldnames=fields, extrasaction="ignore")
     writer.writeheader()
     for r in rows:
-        col = (r["dataset"], r["backend"])
+        col = (r["dataset"], r["method"])
         writer.writerow({**r, "best_nc": int(r["nc_mean"] is not None and r["nc_mean"] == best_nc.get(col)),
                          "best_ape": int(r["ape_mean_rad"] is not None and r["ape_mean_rad"] == best_ape.get(col))})
     return buffer.getvalue()

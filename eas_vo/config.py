@@ -125,6 +125,9 @@ def _coerce(value, hint, key: str):
     elif hint is str:
         if isinstance(value, str):
             return value
+    elif hint is tuple:
+        if isinstance(value, (list, tuple)):
+            return tuple(value)  # TOML arrays arrive as lists; a frozen config holds tuples
     else:
         return value
     raise ConfigError(f"{key} must be {hint.__name__}, got {value!r}")

@@ -4,6 +4,9 @@ warnings of data problems tolerated under `--lenient`."""
 from __future__ import annotations
 
 import json
+import signal
+import threading
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 
 
@@ -67,3 +70,22 @@ class Interrupted(KeyboardInterrupt):
     def keeping(cls, cause: KeyboardInterrupt, kept: str) -> "Interrupted":
         """The interrupt `cause`, re-raised once `kept` was saved."""
         return cls(kept, sigterm=isinstance(cause, Interrupted) and cause.sigterm)
+
+
+@contextmanager
+def sigterm_as_interrupt():
+    """Within the block, SIGTERM raises Interrupted(sigterm=True), handled like Ctrl-C (main
+    thread only; elsewhere a no-op). The previous handler is restored after. Used by the CLI
+    and by each compare worker process, whatever the process start method."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def handler(signum, frame):
+        raise Interrupted(sigterm=True)
+
+    previous = signal.signal(signal.SIGTERM, handler)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)

@@ -79,14 +79,18 @@ def run(config: ResolvedConfig, out_dir: str | Path | None = None, progress: boo
     if out is not None:
         out.mkdir(parents=True, exist_ok=True)
         write_text_atomic(out / "config.toml", config.to_toml())
-    tracked = track(parts, config, out / "frames.csv" if out else None, progress)
-    t = tracked.times
-    R_w_c = parts.backend.solve(len(t), tracked.edges, times=t, imu=parts.dataset.imu)
-    errors, offset = evaluate(config, parts.dataset, t, R_w_c, tracked.edges)
-    metrics = summarise(config, parts.dataset, tracked, errors, offset, time.perf_counter() - started, load_s)
-    result = RunResult(t, R_w_c, tracked.records, tracked.edges, errors, metrics, parts.backend.causal_R_w_c)
-    if out is not None:
-        write_outputs(out, result, parts.dataset.label)
+    try:
+        tracked = track(parts, config, out / "frames.csv" if out else None, progress)
+        t = tracked.times
+        R_w_c = parts.backend.solve(len(t), tracked.edges, times=t, imu=parts.dataset.imu)
+        errors, offset = evaluate(config, parts.dataset, t, R_w_c, tracked.edges)
+        metrics = summarise(config, parts.dataset, tracked, errors, offset, time.perf_counter() - started, load_s)
+        result = RunResult(t, R_w_c, tracked.records, tracked.edges, errors, metrics, parts.backend.causal_R_w_c)
+        if out is not None:
+            write_outputs(out, result, parts.dataset.label)
+    except KeyboardInterrupt as exc:  # before there was anything to evaluate, or while writing
+        kept = f"{out} holds an incomplete run (no metrics.json): rerun with --overwrite" if out else ""
+        raise Interrupted.keeping(exc, kept) from None
     if tracked.interrupted is not None:
         kept = f"the {len(t)} frames processed so far were written to {out} (metrics.json: partial)" if out else ""
         raise Interrupted.keeping(tracked.interrupted, kept) from None

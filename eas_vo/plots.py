@@ -79,10 +79,11 @@ def plot_gallery(path: str | Path, names: list[str], images: dict, frame_indices
 
 
 def plot_ape_bars(path: str | Path, rows: list[dict]) -> None:
-    """Average APE per source type (bars) and backend (colours), one panel per dataset."""
+    """Average APE per source type (bars) and method, tracker+backend (colours), one panel per
+    dataset; `rows` as compare.table_rows makes them."""
     ok = [r for r in rows if r["status"] == "ok" and r["ape_mean_rad"] is not None]
     datasets = list(dict.fromkeys(r["dataset"] for r in rows))
-    backends = list(dict.fromkeys(r["backend"] for r in rows))
+    backends = list(dict.fromkeys(r["method"] for r in rows))
     sources = list(dict.fromkeys(r["frontend"] + (f"\n{r['sweep']}" if r["sweep"] else "") for r in rows))
     panel_width = max(5.0, 0.8 * len(sources) * len(backends) + 2.0)
     fig = _figure(figsize=(panel_width * len(datasets), 3.8), layout="constrained")
@@ -92,7 +93,7 @@ def plot_ape_bars(path: str | Path, rows: list[dict]) -> None:
         for b, backend in enumerate(backends):
             values = []
             for source in sources:
-                match = [r for r in ok if r["dataset"] == dataset and r["backend"] == backend
+                match = [r for r in ok if r["dataset"] == dataset and r["method"] == backend
                          and r["frontend"] + (f"\n{r['sweep']}" if r["sweep"] else "") == source]
                 values.append(match[0]["ape_mean_rad"] if match else np.nan)
             ax.bar(np.arange(len(sources)) + b * width, values, width, label=backend)

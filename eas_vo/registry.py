@@ -64,18 +64,22 @@ def broken_builtins(kind: str) -> dict[str, str]:
     return {name: why for name, why in _load(kind)[1].items() if why.startswith(_BUILTIN_PREFIX)}
 
 
-def _installation_problem(kind: str) -> str:
+def _installation_problem(kind: str, name: str | None = None) -> str:
+    """A clause naming the built-in plugins of `kind` that failed to import (`name`'s alone if it
+    is one of them), with the likely cause; empty when there are none."""
     broken = broken_builtins(kind)
+    if name in broken:
+        broken = {name: broken[name]}
     if not broken:
         return ""
     import eas_vo
 
-    name, why = next(iter(broken.items()))
-    return (
-        f"; the built-in {kind[:-1]} plugin {name!r} failed to import ({why}); eas_vo was imported from "
-        f"{Path(eas_vo.__file__).parent}: if that is a source checkout shadowing the installed package, "
-        "run from another folder or install with `pip install -e .`"
-    )
+    failures = "; ".join(f"{n} ({why})" for n, why in broken.items())
+    text = f"; built-in {kind} that failed to import: {failures}"
+    if any("No module named 'eas_vo." in why for why in broken.values()):
+        text += (f"; eas_vo was imported from {Path(eas_vo.__file__).parent}: if that is a source checkout "
+                 "shadowing the installed package, run from another folder or install with `pip install -e .`")
+    return text
 
 
 def get(kind: str, name: str) -> type:
@@ -83,7 +87,7 @@ def get(kind: str, name: str) -> type:
     plugins = available(kind)
     if name not in plugins:
         installed = ", ".join(plugins) or "none"
-        raise EasVoError(f"unknown {kind[:-1]} {name!r}; installed: {installed}{_installation_problem(kind)}")
+        raise EasVoError(f"unknown {kind[:-1]} {name!r}; installed: {installed}{_installation_problem(kind, name)}")
     return plugins[name]
 
 
@@ -96,8 +100,14 @@ def resolve_dataset(spec: str) -> tuple[type, str]:
     """
     plugins = available("datasets")
     scheme, sep, location = spec.partition(":")
-    if sep and len(scheme) > 1 and scheme in plugins:  # (a one-letter scheme is a drive letter)
+    explicit = sep and len(scheme) > 1 and scheme.isidentifier()  # (a one-letter scheme is a drive letter)
+    if explicit and scheme in plugins:
+        if not location:
+            raise EasVoError(f"--dataset {spec}: names no location after '{scheme}:'")
         return plugins[scheme], location
+    if explicit and not Path(spec).exists():
+        raise EasVoError(f"--dataset {spec}: no dataset plugin {scheme!r} (installed: {', '.join(plugins) or 'none'})"
+                         f"{_installation_problem('datasets', scheme)}")
     claims = [cls for _, cls in sorted(plugins.items()) if _claims(cls, spec)]
     if len(claims) == 1:
         return claims[0], spec
@@ -121,6 +131,10 @@ def _claims(cls: type, location: str) -> bool:
 
 
 def open_dataset(spec: str, config=None):
-    """Open a `--dataset` value with its plugin (and that plugin's config, default if None)."""
+    """Open a `--dataset` value with its plugin (and that plugin's config, default if None).
+    A dataset that sets no `label` is labelled with the spec."""
     cls, location = resolve_dataset(spec)
-    return cls(location, config if config is not None else cls.Config())
+    dataset = cls(location, config if config is not None else cls.Config())
+    if not dataset.label:
+        dataset.label = spec
+    return dataset

@@ -28,7 +28,7 @@ def test_table_equals_each_cells_metrics(grid):
     md = (out / "table.md").read_text()
     assert "| Source type | average NC | average APE |" in md and md.count("**") >= 4
     csv_lines = (out / "table.csv").read_text().splitlines()
-    assert len(csv_lines) == 5 and csv_lines[0].startswith("dataset,frontend,backend")
+    assert len(csv_lines) == 5 and csv_lines[0].startswith("dataset,frontend,tracker,backend,method")
     assert (out / "ape_bars.png").exists() and (out / "ape_time.png").exists()
 
 
@@ -64,14 +64,14 @@ def test_one_and_two_jobs_give_the_same_table(grid, short_sequence, tmp_path):
 
 
 def test_plan_is_the_cartesian_product():
-    cells = plan(["a", "b"], ["x"], ["chain", "gtsam"], ["frontend.n=1,2", "frontend.beta=3,4,5"])
-    assert len(cells) == 2 * 2 * 2 * 3
-    assert Cell("a", "x", "chain", (("frontend.n", "1"), ("frontend.beta", "3"))) in cells
+    cells = plan(["a", "b"], ["x"], ["klt", "other"], ["chain", "gtsam"], ["frontend.n=1,2", "frontend.beta=3,4,5"])
+    assert len(cells) == 2 * 2 * 2 * 2 * 3
+    assert Cell("a", "x", "other", "chain", (("frontend.n", "1"), ("frontend.beta", "3"))) in cells
 
 
 def test_markdown_marks_the_best_of_each_column():
     rows = [
-        {"dataset": "d", "backend": "chain", "frontend": f, "sweep": "", "status": "ok", "nc_mean": nc, "ape_mean_rad": ape}
+        {"dataset": "d", "method": "klt+chain", "frontend": f, "sweep": "", "status": "ok", "nc_mean": nc, "ape_mean_rad": ape}
         for f, nc, ape in (("original", 20.0, 0.6), ("eas", 60.0, 0.2))
     ]
     md = table_markdown(rows)

@@ -73,6 +73,15 @@ def test_resolved_config_round_trips_through_toml(tmp_path):
     assert resolve(path) == cfg
 
 
+@pytest.mark.parametrize("name", ["paper", "best"])
+@pytest.mark.parametrize("backend", ["chain", "gtsam"])
+def test_bundled_configs_round_trip_exactly(tmp_path, name, backend):
+    cfg = resolve(name, {"backend": backend})
+    path = tmp_path / "config.toml"
+    path.write_text(cfg.to_toml())
+    assert resolve(path) == cfg and hash(resolve(path)) == hash(cfg)  # frozen all the way down (tuples, not lists)
+
+
 def test_bundled_config_by_name():
     cfg = resolve("paper")
     assert cfg.run.frontend == "eas" and cfg.run.backend == "chain"

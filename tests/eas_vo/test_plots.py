@@ -22,7 +22,7 @@ def test_plotting_leaves_the_backend_and_pyplot_alone(tmp_path):
 
 
 def draw(tmp_path):
-    rows = [{"dataset": "d", "backend": "chain", "frontend": f, "sweep": "", "status": "ok", "ape_mean_rad": v}
+    rows = [{"dataset": "d", "method": "klt+chain", "frontend": f, "sweep": "", "status": "ok", "ape_mean_rad": v}
             for f, v in (("original", 0.4), ("eas", 0.04))]
     plots.plot_ape_bars(tmp_path / "bars.png", rows)
     plots.plot_ape_time(tmp_path / "time.png", {("d", "eas"): (np.arange(5.0), np.linspace(0, 0.1, 5))})

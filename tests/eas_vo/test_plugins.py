@@ -65,7 +65,7 @@ def test_the_readme_example_plugins_run_through_the_cli(short_sequence, tmp_path
     site = tmp_path / "site"
     site.mkdir()
     install_privately(site, "eas_vo_example", "eas_vo_example", source, entry_points)
-    env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(site), os.environ.get("PYTHONPATH", "")]))
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join(filter(None, [str(site), os.environ.get("PYTHONPATH")])))
 
     listing = run_eas_vo("list", env=env)
     assert listing.returncode == 0, listing.stderr
@@ -106,7 +106,7 @@ def plugin_site(tmp_path_factory):
 
 
 def test_a_pip_installed_plugin_runs_through_the_cli(plugin_site, short_sequence, tmp_path):
-    env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(plugin_site), os.environ.get("PYTHONPATH", "")]))
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join(filter(None, [str(plugin_site), os.environ.get("PYTHONPATH")])))
     listing = run_eas_vo("list", env=env)
     assert "edges      Canny edges of the equalised frame (an example plugin)" in listing.stdout
     assert "config: low=50 high=150" in listing.stdout

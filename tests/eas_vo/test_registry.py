@@ -37,6 +37,13 @@ def test_a_dataset_spec_is_resolved_explicitly_or_by_can_open(short_sequence, tm
     assert registry.resolve_dataset(str(tmp_path / "x.bag"))[0].name == "rosbag"
     with pytest.raises(EasVoError, match="dataset not found"):
         registry.resolve_dataset(str(tmp_path / "missing"))
+    with pytest.raises(EasVoError, match="names no location after 'ecd:'"):
+        registry.resolve_dataset("ecd:")
+    with pytest.raises(EasVoError, match=r"no dataset plugin 'npz' \(installed: "):
+        registry.resolve_dataset("npz:recording")
+    (tmp_path / "empty").mkdir()  # a folder no plugin recognises; ecd: forces the ECD reader and its message
+    with pytest.raises(EasVoError, match="no installed dataset plugin can open it"):
+        registry.resolve_dataset(str(tmp_path / "empty"))
     (tmp_path / "x.h5").write_bytes(b"")
     with pytest.raises(EasVoError, match="no installed dataset plugin can open it"):
         registry.resolve_dataset(str(tmp_path / "x.h5"))
@@ -65,8 +72,10 @@ def test_a_built_in_that_fails_to_import_is_named(monkeypatch):
     with pytest.raises(EasVoError) as info:
         registry.get("datasets", "ecd")
     message = str(info.value)
-    assert message.startswith("unknown dataset 'ecd'; installed: none; the built-in dataset plugin 'ecd' failed to import")
-    assert "No module named 'eas_vo.datasets'" in message and "eas_vo was imported from" in message
+    assert message.startswith(f"unknown dataset 'ecd'; installed: none; built-in datasets that failed to import: ecd ({why})")
+    assert "eas_vo was imported from" in message
+    with pytest.raises(EasVoError, match=r"no dataset plugin 'ecd' \(installed: none\); built-in datasets that failed"):
+        registry.resolve_dataset("ecd:/some/folder")
 
 
 def test_datasets_folder_refuses_to_be_a_top_level_package(monkeypatch):

@@ -41,7 +41,6 @@ def test_recovers_known_rotations_to_0_2_degrees_per_frame(seed):
     tracker = KltTracker(KltConfig(), CAMERA)
     tracker.process(base, 0.0)
     R_c0_ck = np.eye(3)
-    previous = np.eye(3)
     for k in range(1, 5):
         step = Rotation.from_rotvec(rng.normal(0, 0.012, 3)).as_matrix()  # ~1 degree per frame
         R_c0_ck = R_c0_ck @ step
@@ -52,7 +51,6 @@ def test_recovers_known_rotations_to_0_2_degrees_per_frame(seed):
         assert (edge.i, edge.j) == (k - 1, k)
         assert_rotations_close(edge.R_i_j, step, np.radians(0.2))
         assert record.inliers <= record.nc
-        previous = R_c0_ck
 
 
 def test_featureless_frames_keep_the_previous_rotation_and_trigger_redetection():

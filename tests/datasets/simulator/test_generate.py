@@ -5,7 +5,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 from eas_vo.datasets.ecd import EcdFolderDataset
 from eas_vo.datasets.simulator import SimConfig, simulate
-from eas_vo.datasets.simulator.sensor import ApsModel, DvsModel, EventSimulator
+from eas_vo.datasets.simulator.sensor import DvsModel, EventSimulator
 
 
 def test_same_seed_same_sequence_other_seed_differs(tmp_path):

@@ -1,6 +1,5 @@
 """The compiled block parser: exact times, two threads equal one, unusual lines leave the fast path."""
 
-import os
 
 import numpy as np
 import pytest

@@ -46,7 +46,7 @@ def test_lenient_drops_and_counts(tmp_path, text, line, message):
     events = load_event_file(path, lenient=True, warnings=warnings)
     assert len(events) == text.count("\n") + (not text.endswith("\n")) - 1
     (report,) = warnings.lines()
-    assert f"1 dropped" in report and f"(first at line {line})" in report
+    assert "1 dropped" in report and f"(first at line {line})" in report
     again = DataWarnings()
     load_event_file(path, lenient=True, warnings=again)  # from the cache: the warning is reported again
     assert again.lines() == warnings.lines()
