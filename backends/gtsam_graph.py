@@ -15,6 +15,7 @@ from eas_vo.validation import check_choice, check_range, check_vector
 
 MODES = ("batch", "online")
 ROBUST = ("none", "huber", "cauchy")
+EDGE_NOISE = ("inliers", "residual")
 
 
 @dataclass(frozen=True)
@@ -22,9 +23,14 @@ class GtsamConfig:
     """Attributes:
         mode: `batch` (Levenberg-Marquardt over all frames) or `online` (iSAM2, frame by frame:
             `causal_R_w_c` holds each frame's estimate as it was when that frame arrived).
-        sigma_rad: noise of an edge measured with `reference_inliers` inliers; an edge with m
-            inliers gets sigma_rad * sqrt(reference_inliers / m).
+        edge_noise: how an edge's noise [rad] follows from its quality: `inliers` (the default):
+            sigma_rad * sqrt(reference_inliers / inliers); `residual`: the spread of the edge's
+            own inlier residuals over sqrt(inliers), 1.4826 * residual_rad / sqrt(inliers)
+            (the median absolute deviation of a Gaussian), divided by the inlier ratio and
+            never below sigma_floor_rad.
+        sigma_rad: (`inliers`) noise of an edge measured with `reference_inliers` inliers.
         reference_inliers: see sigma_rad.
+        sigma_floor_rad: (`residual`) the smallest edge noise [rad].
         gap_sigma_rad: a frame without a measurement is tied to the previous one by an
             identity edge this loose (the chain's "keep the previous rotation").
         robust, robust_k: robust kernel (`none`, `huber`, `cauchy`) and its threshold in sigmas.
@@ -38,8 +44,10 @@ class GtsamConfig:
     """
 
     mode: str = "batch"
+    edge_noise: str = "inliers"
     sigma_rad: float = 0.005
     reference_inliers: int = 100
+    sigma_floor_rad: float = 1e-4
     gap_sigma_rad: float = 1.0
     robust: str = "none"
     robust_k: float = 2.0
@@ -58,6 +66,8 @@ class GtsamConfig:
         check_choice(self, "robust", ROBUST)
         check_range(self, "sigma_rad", 0.0, 10.0, lo_open=True)
         check_range(self, "reference_inliers", 1, 10**6)
+        check_choice(self, "edge_noise", EDGE_NOISE)
+        check_range(self, "sigma_floor_rad", 0.0, 10.0, lo_open=True)
         check_range(self, "gap_sigma_rad", 0.0, 1e3, lo_open=True)
         check_range(self, "robust_k", 0.0, 1e3, lo_open=True)
         check_range(self, "iterations", 1, 10_000)
@@ -69,6 +79,15 @@ class GtsamBackend(Backend):
     name = "gtsam"
     description = "rotation-only pose graph (GTSAM Rot3): batch Levenberg-Marquardt or online iSAM2"
     Config = GtsamConfig
+
+    def edge_sigma(self, edge: RelativeRotation) -> float:
+        """The isotropic noise [rad] of a measured edge, from its quality (see edge_noise)."""
+        c = self.config
+        inliers = max(edge.inliers, 1)
+        if c.edge_noise == "inliers":
+            return c.sigma_rad * np.sqrt(c.reference_inliers / inliers)
+        spread = 1.4826 * edge.residual_rad / np.sqrt(inliers) / max(edge.inlier_ratio, 1e-3)
+        return max(spread, c.sigma_floor_rad)
 
     def _noise(self, gtsam, sigma: float):
         c = self.config
@@ -85,7 +104,7 @@ class GtsamBackend(Backend):
         by_frame[0].append(gtsam.PriorFactorRot3(0, gtsam.Rot3(), gtsam.noiseModel.Isotropic.Sigma(3, 1e-9)))
         measured = set()
         for e in edges:
-            sigma = c.sigma_rad * np.sqrt(c.reference_inliers / max(e.inliers, 1))
+            sigma = self.edge_sigma(e)
             by_frame[e.j].append(gtsam.BetweenFactorRot3(e.i, e.j, gtsam.Rot3(e.R_i_j), self._noise(gtsam, sigma)))
             measured.add(e.j)
         gap = gtsam.noiseModel.Isotropic.Sigma(3, c.gap_sigma_rad)

@@ -25,7 +25,7 @@ from eas_vo.orb import OrbStats
 from eas_vo.plugins import Backend, Dataset, Frontend, Tracker
 from eas_vo.types import FrameRecord, RelativeRotation
 
-FRAMES_CSV_FIELDS = ("index", "t", "nc", "inliers", "status", "redetected")
+FRAMES_CSV_FIELDS = ("index", "t", "nc", "inliers", "status", "redetected", "inlier_ratio", "residual_px", "reason")
 
 
 @dataclass
@@ -250,7 +250,8 @@ class _FrameLog:
 
     def write(self, r: FrameRecord) -> None:
         if self._fh:
-            self._writer.writerow([r.index, f"{r.t:.9f}", r.nc, r.inliers, r.status, int(r.redetected)])
+            self._writer.writerow([r.index, f"{r.t:.9f}", r.nc, r.inliers, r.status, int(r.redetected),
+                                   f"{r.inlier_ratio:.4f}", f"{r.residual_px:.4f}", r.reason])
             self._fh.flush()
 
     def __exit__(self, *exc):

@@ -136,12 +136,22 @@ class Sample:
 
 @dataclass(frozen=True)
 class RelativeRotation:
-    """A measured rotation between frames i and j (j > i): `R_i_j` maps frame-j vectors into frame i."""
+    """A measured rotation between frames i and j (j > i): `R_i_j` maps frame-j vectors into frame i.
+
+    Attributes:
+        inliers: correspondences the model explains.
+        inlier_ratio: inliers / correspondences offered to the estimator.
+        residual_rad: median residual of the inliers [rad, ~ px / focal length]: the angle
+            between rotated and observed bearings (rotation model) or the Sampson distance
+            (essential matrix); 0 when unknown.
+    """
 
     i: int
     j: int
     R_i_j: np.ndarray
     inliers: int = 0
+    inlier_ratio: float = 1.0
+    residual_rad: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -152,10 +162,14 @@ class FrameRecord:
         index, t: frame index and time [s].
         nc: correspondences tracked from the previous frame (the paper's NC).
         inliers: essential-matrix inliers (0 when no model was estimated).
-        status: `first`, `ok`, `few_correspondences` (< threshold1, previous rotation kept),
-            `no_model` (estimation failed, previous rotation kept), `same_time` (the frame has
-            the previous frame's timestamp: previous rotation kept, frame skipped).
-        redetected: corners were detected again in this frame (< threshold2).
+        status: `first`; `ok`; `weak` (a rotation was measured but its model is weak: too few
+            inliers, a low inlier ratio or a large residual, see `reason`); `lost` (nothing was
+            measured, the previous rotation is kept: too few correspondences or no model);
+            `same_time` (the frame has the previous frame's timestamp: frame skipped).
+        redetected: features were detected again in this frame (klt: < threshold2).
+        inlier_ratio: inliers / nc of the frame-to-frame model (0 without one).
+        residual_px: median inlier residual of that model [px] (0 without one).
+        reason: why the frame is `weak` or `lost` ("" otherwise).
     """
 
     index: int
@@ -164,3 +178,6 @@ class FrameRecord:
     inliers: int
     status: str
     redetected: bool
+    inlier_ratio: float = 0.0
+    residual_px: float = 0.0
+    reason: str = ""

@@ -1,26 +1,35 @@
 """`klt`, the paper's tracker: Shi-Tomasi corners, pyramidal Lucas-Kanade flow from frame
-to frame, five-point essential matrix, thresholds 1 and 2.
+to frame, five-point essential matrix, thresholds 1 and 2 -- and, off by default, what keeps
+it on track through fast motion: LK started from a predicted rotation (gyro or constant
+angular velocity), a forward-backward check, and descriptor matching when LK loses the track.
 
 It only ever sees uint8 images; the geometry is the shared `eas_vo.geometry.two_view`.
 """
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 
 import cv2
 import numpy as np
 
 from eas_vo.errors import ConfigError
-from eas_vo.geometry.two_view import ESSENTIAL_METHODS, GEOMETRIES, rotation_from_correspondences
+from eas_vo.geometry.rotations import rotvec_to_matrix
 from eas_vo.plugins import Tracker
+from eas_vo.trackers.features import DETECTORS, MAX_RESIDUAL_PX, MIN_MATCHES, RANSAC_THRESHOLD_PX, Features
+from eas_vo.trackers.measurement import TwoViewConfig, frame_record, measure
+from eas_vo.trackers.motion import gyro_rotation, scaled_rotation
 from eas_vo.types import CameraModel, FrameRecord, ImuSeries, RelativeRotation
-from eas_vo.validation import check_choice, check_range
+from eas_vo.validation import check_choice, check_range, check_vector
+
+PREDICTIONS = ("none", "gyro", "velocity", "auto")
+FALLBACKS = ("none", "match")
 
 
 @dataclass(frozen=True)
-class KltConfig:
-    """Corner detection, optical flow and essential-matrix settings.
+class KltConfig(TwoViewConfig):
+    """Corner detection and optical flow settings, and (TwoViewConfig) the geometry.
 
     Attributes:
         max_corners, quality_level, min_distance_px, block_size: Shi-Tomasi detection.
@@ -30,11 +39,17 @@ class KltConfig:
         keyframe_interval: 0 (the paper) or N: also measure the rotation from a keyframe to
             each frame with the corners tracked since it, a new keyframe every N frames and
             at each redetection (multi-frame edges i -> j for the gtsam backend).
-        geometry: `essential` (the paper), `rotation` or `auto` (see rotation_from_correspondences).
-        essential_method: robust estimator around OpenCV's five-point solver: `usac`
-            (RANSAC with local optimisation, the default), `ransac` (plain), `magsac`, `lmeds`.
-        ransac_threshold_px: inlier threshold [px].
-        ransac_confidence: success probability.
+        predict: where LK starts each corner: `none` (where it was: the paper), `gyro` (moved
+            by the rotation the gyro measured since the previous frame), `velocity` (by the
+            last measured rotation, scaled to this frame interval) or `auto` (gyro when the
+            dataset has an IMU, else velocity).
+        imu_rotvec_cam, imu_time_offset_s: (gyro) R_imu_cam as a rotation vector [rad]; IMU
+            time = frame time + offset [s].
+        fb_max_px: 0 (the paper) or the forward-backward check: a corner tracked back into the
+            previous frame must land within this many pixels of where it started.
+        fallback: `none` (the paper) or `match`: when LK gives a weak or no measurement, the
+            previous and current images are matched by descriptors (`fallback_detector`) and
+            that measurement is used if it is not weak; corners are then detected again.
     """
 
     max_corners: int = 500
@@ -46,12 +61,21 @@ class KltConfig:
     threshold1: int = 10
     threshold2: int = 150
     keyframe_interval: int = 0
-    geometry: str = "essential"
-    essential_method: str = "usac"
-    ransac_threshold_px: float = 1.0
-    ransac_confidence: float = 0.999
+    predict: str = "none"
+    imu_rotvec_cam: tuple = (0.0, 0.0, 0.0)
+    imu_time_offset_s: float = 0.0
+    fb_max_px: float = 0.0
+    fallback: str = "none"
+    fallback_detector: str = "orb"
 
     def validate(self) -> None:
+        super().validate()
+        check_choice(self, "predict", PREDICTIONS)
+        check_vector(self, "imu_rotvec_cam", 3, "rad")
+        check_range(self, "imu_time_offset_s", -1.0, 1.0)
+        check_range(self, "fb_max_px", 0.0, 100.0)
+        check_choice(self, "fallback", FALLBACKS)
+        check_choice(self, "fallback_detector", DETECTORS)
         check_range(self, "max_corners", 1, 100_000)
         check_range(self, "quality_level", 0.0, 1.0, lo_open=True)
         check_range(self, "min_distance_px", 0.0, 1000.0)
@@ -63,10 +87,6 @@ class KltConfig:
         check_range(self, "keyframe_interval", 0, 100_000)
         if self.threshold1 > self.threshold2:
             raise ConfigError(f"threshold1 ({self.threshold1}) must not exceed threshold2 ({self.threshold2})")
-        check_choice(self, "geometry", GEOMETRIES)
-        check_choice(self, "essential_method", ESSENTIAL_METHODS)
-        check_range(self, "ransac_threshold_px", 0.0, 100.0, lo_open=True)
-        check_range(self, "ransac_confidence", 0.0, 1.0, lo_open=True)
 
 
 class KltTracker(Tracker):
@@ -89,6 +109,11 @@ class KltTracker(Tracker):
             maxLevel=c.lk_max_level,
             criteria=(cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 30, 0.01),
         )
+        self._R_imu_cam = rotvec_to_matrix(np.asarray(c.imu_rotvec_cam, float))
+        self._predict = c.predict if c.predict != "auto" else ("gyro" if imu is not None else "velocity")
+        self._fallback_config = dataclasses.replace(  # measuring matched keypoints, not LK tracks
+            c, geometry="auto", ransac_threshold_px=RANSAC_THRESHOLD_PX, max_residual_px=MAX_RESIDUAL_PX)
+        self._features = Features(c.fallback_detector) if c.fallback == "match" else None
 
     def reset(self) -> None:
         """Forget every frame seen; the next frame is a first frame."""
@@ -97,6 +122,7 @@ class KltTracker(Tracker):
         self._kf_pts = np.empty((0, 2), np.float32)  # where each tracked corner was in the keyframe
         self._kf_index = 0
         self._k = -1
+        self._last_step: tuple[np.ndarray, float] | None = None  # (R_{k-2}_{k-1}, its interval [s]) for velocity
 
     def detect(self, image: np.ndarray) -> np.ndarray:
         """Shi-Tomasi corners of `image`, (N, 2) float32 [px]."""
@@ -106,29 +132,48 @@ class KltTracker(Tracker):
         )
         return np.empty((0, 2), np.float32) if pts is None else pts.reshape(-1, 2).astype(np.float32)
 
-    def track(self, image: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """LK-track the previous corners into `image`: (N, 2) positions [px] and a mask of the tracked ones."""
+    def track(self, image: np.ndarray, R_prev_cur: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """LK-track the previous corners into `image`; with `fb_max_px`, tracked back too.
+
+        With a predicted rotation R_prev_cur, the previous image is first derotated into the
+        current view (the homography K R_cur_prev K^-1) and each corner is tracked from where
+        that puts it: LK then only corrects the prediction's error, on patches that are no
+        longer rotated against each other (a roll of 10 degrees otherwise biases it).
+        Returns (N, 2) positions [px] and a mask of the tracked ones."""
         if len(self._prev_pts) == 0:
             return np.empty((0, 2), np.float32), np.zeros(0, bool)
-        cur, status, _ = cv2.calcOpticalFlowPyrLK(
-            self._prev_image, image, self._prev_pts.reshape(-1, 1, 2), None, **self._lk_params
-        )
+        source, start = self._prev_image, self._prev_pts.reshape(-1, 1, 2)
+        if R_prev_cur is not None:
+            H = self.camera.K @ R_prev_cur.T @ np.linalg.inv(self.camera.K)
+            source = cv2.warpPerspective(self._prev_image, H, image.shape[::-1], flags=cv2.INTER_LINEAR)
+            start = cv2.perspectiveTransform(start, H).astype(np.float32)
+        cur, status, _ = cv2.calcOpticalFlowPyrLK(source, image, start, start.copy(),
+                                                  flags=cv2.OPTFLOW_USE_INITIAL_FLOW, **self._lk_params)
         h, w = image.shape
-        cur = cur.reshape(-1, 2)
-        ok = (status.ravel() == 1) & (cur[:, 0] >= 0) & (cur[:, 0] <= w - 1) & (cur[:, 1] >= 0) & (cur[:, 1] <= h - 1)
-        return cur, ok
+        ok = (status.ravel() == 1) & (cur[:, 0, 0] >= 0) & (cur[:, 0, 0] <= w - 1) & (cur[:, 0, 1] >= 0) & (cur[:, 0, 1] <= h - 1)
+        if self.config.fb_max_px > 0:
+            back, back_status, _ = cv2.calcOpticalFlowPyrLK(image, source, cur, start.copy(),
+                                                            flags=cv2.OPTFLOW_USE_INITIAL_FLOW, **self._lk_params)
+            ok &= (back_status.ravel() == 1) & (np.linalg.norm((back - start).reshape(-1, 2), axis=1) <= self.config.fb_max_px)
+        return cur.reshape(-1, 2), ok
 
-    def _measure(self, pts_from: np.ndarray, pts_to: np.ndarray, i: int, j: int) -> RelativeRotation | None:
-        c = self.config
-        result = rotation_from_correspondences(
-            self.camera.undistort(pts_from),
-            self.camera.undistort(pts_to),
-            c.ransac_threshold_px / self.camera.focal_px,
-            c.ransac_confidence,
-            c.essential_method,
-            c.geometry,
-        )
-        return None if result is None else RelativeRotation(i, j, result[0], result[1])
+    def predicted_rotation(self, t_prev: float, t: float) -> np.ndarray | None:
+        """R_{k-1}_{k} expected before measuring it (None: no prediction, as the paper)."""
+        if self._predict == "gyro" and self.imu is not None:
+            return gyro_rotation(self.imu, t_prev, t, self._R_imu_cam, self.config.imu_time_offset_s)
+        if self._predict == "velocity" and self._last_step is not None:
+            R_last, dt_last = self._last_step
+            return scaled_rotation(R_last, (t - t_prev) / dt_last)
+        return None
+
+    def _match_fallback(self, image: np.ndarray, k: int) -> tuple[RelativeRotation | None, int]:
+        """The frame-to-frame rotation by descriptor matching of the previous and this image."""
+        points_prev, desc_prev = self._features.detect(self._prev_image)
+        points, desc = self._features.detect(image)
+        a, b = self._features.match(desc_prev, desc)
+        if len(a) < MIN_MATCHES:
+            return None, len(a)
+        return measure(self._fallback_config, self.camera, points_prev[a], points[b], k - 1, k), len(a)
 
     def process(self, image: np.ndarray, t: float) -> tuple[FrameRecord, list[RelativeRotation]]:
         """Track into `image` (uint8, sensor size) taken at `t` [s]."""
@@ -141,31 +186,34 @@ class KltTracker(Tracker):
             return FrameRecord(k, t, 0, 0, "first", True), []
         if t <= self._prev_t:  # no time between the two: nothing to measure, the rotation is kept
             return FrameRecord(k, t, 0, 0, "same_time", False), []
-        self._prev_t = t
+        t_prev, self._prev_t = self._prev_t, t
 
-        cur, ok = self.track(image)
+        cur, ok = self.track(image, self.predicted_rotation(t_prev, t))
         nc = int(ok.sum())
-        edges, inliers, status = [], 0, "few_correspondences"
+        edges, step = [], None
         if nc >= c.threshold1:
-            step = self._measure(self._prev_pts[ok], cur[ok], k - 1, k)
-            if step is None:
-                status = "no_model"
-            else:
+            step = measure(c, self.camera, self._prev_pts[ok], cur[ok], k - 1, k)
+            if step is not None:
                 edges.append(step)
-                inliers, status = step.inliers, "ok"
                 if c.keyframe_interval > 0 and k - self._kf_index >= 2:
-                    skip = self._measure(self._kf_pts[ok], cur[ok], self._kf_index, k)
+                    skip = measure(c, self.camera, self._kf_pts[ok], cur[ok], self._kf_index, k)
                     if skip is not None:
                         edges.append(skip)
 
-        redetect = nc < c.threshold2
-        if redetect:
+        record = frame_record(c, self.camera, k, t, nc, step, nc < c.threshold2, nc >= c.threshold1)
+        if self._features is not None and record.status in ("weak", "lost"):
+            matched, n_matched = self._match_fallback(image, k)
+            rescued = frame_record(self._fallback_config, self.camera, k, t, n_matched, matched, True, True)
+            if rescued.status == "ok":
+                step, edges, record = matched, [matched], rescued
+        self._last_step = (step.R_i_j, t - t_prev) if step is not None else None
+        if record.redetected:
             self._start_keyframe(image, self.detect(image))
         else:
             self._prev_image, self._prev_pts, self._kf_pts = image, cur[ok], self._kf_pts[ok]
             if c.keyframe_interval > 0 and k - self._kf_index >= c.keyframe_interval:
                 self._kf_index, self._kf_pts = k, cur[ok]
-        return FrameRecord(k, t, nc, inliers, status, redetect), edges
+        return record, edges
 
     def _start_keyframe(self, image: np.ndarray, pts: np.ndarray) -> None:
         self._prev_image, self._prev_pts, self._kf_pts, self._kf_index = image, pts, pts, self._k

@@ -7,6 +7,8 @@ bearings into the current frame: f_cur ~ R_cur_prev f_prev (+ translation for E)
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import cv2
 import numpy as np
 
@@ -119,6 +121,15 @@ ESSENTIAL_METHODS = {
 GEOMETRIES = ("essential", "rotation", "auto")
 
 
+class TwoViewRotation(NamedTuple):
+    """A relative rotation measured from correspondences."""
+
+    R_prev_cur: np.ndarray  #: maps current-frame vectors into the previous frame
+    inliers: int  #: correspondences the model explains
+    model: str  #: `essential` or `rotation`
+    residual: float  #: median inlier residual [normalised image units ~ rad]
+
+
 def rotation_from_correspondences(
     pts_prev_n: np.ndarray,
     pts_cur_n: np.ndarray,
@@ -126,7 +137,7 @@ def rotation_from_correspondences(
     confidence: float,
     method: str = "usac",
     geometry: str = "essential",
-) -> tuple[np.ndarray, int, str] | None:
+) -> TwoViewRotation | None:
     """The relative rotation of two views from matched normalised image points.
 
     Args:
@@ -140,25 +151,37 @@ def rotation_from_correspondences(
             closest to the rotation-only one, so a cheirality flip cannot get through).
 
     Returns:
-        (R_prev_cur, inlier count, model used), or None when no model is found.
+        The rotation, its inlier count, the model used and the median inlier residual, or
+        None when no model is found.
     """
     if geometry == "essential":
         found = essential_rotation(pts_prev_n, pts_cur_n, threshold, confidence, ESSENTIAL_METHODS[method])
-        return None if found is None else (found[1].T, int(found[2].sum()), "essential")
+        if found is None:
+            return None
+        E, R_ess, ess_mask = found
+        return _result(R_ess, ess_mask, "essential", sampson_residuals(E, pts_prev_n, pts_cur_n))
     f_prev, f_cur = bearings(pts_prev_n), bearings(pts_cur_n)
     rotation = rotation_ransac(f_prev, f_cur, threshold)
     if rotation is None:
         return None
     R_rot, rot_mask = rotation
+    rot_residuals = angular_residuals(R_rot, f_prev, f_cur)
     if geometry == "rotation":
-        return R_rot.T, int(rot_mask.sum()), "rotation"
+        return _result(R_rot, rot_mask, "rotation", rot_residuals)
     found = essential_rotation(pts_prev_n, pts_cur_n, threshold, confidence, ESSENTIAL_METHODS[method], R_hint=R_rot)
     if found is None:
-        return R_rot.T, int(rot_mask.sum()), "rotation"
+        return _result(R_rot, rot_mask, "rotation", rot_residuals)
     E, R_ess, ess_mask = found
     sigma = threshold / 2.0
-    gric_rot = gric(angular_residuals(R_rot, f_prev, f_cur), sigma, model_dim=2, params=3)
-    gric_ess = gric(sampson_residuals(E, pts_prev_n, pts_cur_n), sigma, model_dim=3, params=5)
+    ess_residuals = sampson_residuals(E, pts_prev_n, pts_cur_n)
+    gric_rot = gric(rot_residuals, sigma, model_dim=2, params=3)
+    gric_ess = gric(ess_residuals, sigma, model_dim=3, params=5)
     if gric_rot <= gric_ess:
-        return R_rot.T, int(rot_mask.sum()), "rotation"
-    return R_ess.T, int(ess_mask.sum()), "essential"
+        return _result(R_rot, rot_mask, "rotation", rot_residuals)
+    return _result(R_ess, ess_mask, "essential", ess_residuals)
+
+
+def _result(R_cur_prev: np.ndarray, mask: np.ndarray, model: str, residuals: np.ndarray) -> TwoViewRotation:
+    inlier_residuals = residuals[mask]
+    residual = float(np.median(inlier_residuals)) if len(inlier_residuals) else 0.0
+    return TwoViewRotation(R_cur_prev.T, int(mask.sum()), model, residual)

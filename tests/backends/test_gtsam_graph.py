@@ -120,3 +120,16 @@ def test_gyro_fusion_cuts_the_error_of_the_chain():
         fused = ape(GtsamBackend(gyro).solve(len(R), with_keyframes, times=t_imu[frames], imu=imu), R)
         vision_only = ape(GtsamBackend(GtsamConfig(mode=mode)).solve(len(R), with_keyframes), R)
         assert fused <= 0.3 * chain and fused < vision_only, (mode, fused, vision_only, chain)
+
+
+def test_edge_quality_sets_the_noise_and_a_weak_edge_yields():
+    """Two contradicting measurements of one step: with `residual` noise the one with the small
+    residual and high inlier ratio wins, whatever their inlier counts."""
+    good, bad = np.eye(3), Rotation.from_rotvec([0.0, 0.05, 0.0]).as_matrix()
+    edges = [RelativeRotation(0, 1, good, 100, inlier_ratio=0.95, residual_rad=0.001),
+             RelativeRotation(0, 1, bad, 300, inlier_ratio=0.4, residual_rad=0.004)]
+    backend = GtsamBackend(GtsamConfig(edge_noise="residual"))
+    assert backend.edge_sigma(edges[0]) < backend.edge_sigma(edges[1]) / 5
+    assert_rotations_close(backend.solve(2, edges)[1], good, np.radians(0.2))
+    by_inliers = GtsamBackend(GtsamConfig(edge_noise="inliers")).solve(2, edges)[1]  # today's default trusts the count
+    assert_rotations_close(by_inliers, bad, np.radians(1.0))

@@ -5,10 +5,11 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import cv2
 import numpy as np
 import pytest
 
-from eas_vo.types import EVENT_DTYPE
+from eas_vo.types import EVENT_DTYPE, CameraModel
 
 SHARED_DATA = Path(__file__).resolve().parents[3] / "shared" / "data"
 SHAPES_ROTATION = SHARED_DATA / "ecd" / "shapes_rotation_0-30s"
@@ -86,3 +87,42 @@ def run_eas_vo(*argv: str, env: dict | None = None):
 
     with tempfile.TemporaryDirectory() as neutral:
         return subprocess.run([sys.executable, "-m", "eas_vo", *argv], capture_output=True, text=True, env=env, cwd=neutral)
+
+
+# ----------------------------------------------------------------------------- synthetic views
+
+#: A pinhole camera without distortion for warped-image tests.
+K = np.array([[200.0, 0, 120], [0, 200.0, 90], [0, 0, 1]])
+CAMERA = CameraModel(240, 180, K)
+
+
+def textured_image(seed=0, size=(180, 240), shapes=120):
+    """Random rectangles and discs: plenty of corners."""
+    rng = np.random.default_rng(seed)
+    img = np.full(size, 60, np.uint8)
+    for _ in range(shapes):
+        x, y = rng.integers(0, size[1]), rng.integers(0, size[0])
+        r = int(rng.integers(4, 14))
+        colour = int(rng.integers(0, 256))
+        if rng.random() < 0.5:
+            cv2.rectangle(img, (x - r, y - r), (x + r, y + int(r * 0.7)), colour, -1)
+        else:
+            cv2.circle(img, (x, y), r, colour, -1)
+    return cv2.GaussianBlur(img, (3, 3), 0.7)
+
+
+def warp_by_rotation(img, R_c2_c1):
+    """The view of a camera rotated by R_c1_c2 = R_c2_c1^T: x2 ~ K R_c2_c1 K^-1 x1 (infinite depth)."""
+    H = K @ R_c2_c1 @ np.linalg.inv(K)
+    return cv2.warpPerspective(img, H, (img.shape[1], img.shape[0]), flags=cv2.INTER_LINEAR, borderValue=60)
+
+
+def large_rotation(rng, angle_deg=(15, 25), roll_deg=(10, 12)) -> np.ndarray:
+    """R_c0_c1 of a fast hand-held step: 15-25 degrees in all, of which 10-12 degrees of roll."""
+    from scipy.spatial.transform import Rotation
+
+    angle = np.radians(rng.uniform(*angle_deg))
+    roll = np.radians(rng.uniform(*roll_deg)) * rng.choice([-1, 1])
+    axis = rng.normal(size=2)
+    tilt = np.sqrt(angle**2 - roll**2) * axis / np.linalg.norm(axis)
+    return Rotation.from_rotvec([tilt[0], tilt[1], roll]).as_matrix()

@@ -5,34 +5,10 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from helpers import assert_rotations_close
+from eas_vo.errors import ConfigError
 from eas_vo.trackers.klt import KltConfig, KltTracker
 from eas_vo.types import CameraModel
-
-K = np.array([[200.0, 0, 120], [0, 200.0, 90], [0, 0, 1]])
-CAMERA = CameraModel(240, 180, K)
-
-
-def textured_image(seed=0, size=(180, 240)):
-    """Random rectangles and discs: plenty of corners."""
-    rng = np.random.default_rng(seed)
-    img = np.full(size, 60, np.uint8)
-    for _ in range(120):
-        x, y = rng.integers(0, size[1]), rng.integers(0, size[0])
-        r = int(rng.integers(4, 14))
-        colour = int(rng.integers(0, 256))
-        if rng.random() < 0.5:
-            cv2.rectangle(img, (x - r, y - r), (x + r, y + int(r * 0.7)), colour, -1)
-        else:
-            cv2.circle(img, (x, y), r, colour, -1)
-    return cv2.GaussianBlur(img, (3, 3), 0.7)
-
-
-def warp_by_rotation(img, R_c2_c1):
-    """The view of a camera rotated by R_c1_c2 = R_c2_c1^T: x2 ~ K R_c2_c1 K^-1 x1 (infinite depth)."""
-    H = K @ R_c2_c1 @ np.linalg.inv(K)
-    return cv2.warpPerspective(img, H, (img.shape[1], img.shape[0]), flags=cv2.INTER_LINEAR, borderValue=60)
-
+from helpers import CAMERA, K, assert_rotations_close, large_rotation, textured_image, warp_by_rotation
 
 @pytest.mark.parametrize("seed", range(6))
 def test_recovers_known_rotations_to_0_2_degrees_per_frame(seed):
@@ -58,7 +34,7 @@ def test_featureless_frames_keep_the_previous_rotation_and_trigger_redetection()
     record, edges = tracker.process(np.zeros((180, 240), np.uint8), 0.0)
     assert record.status == "first" and edges == []
     record, edges = tracker.process(np.zeros((180, 240), np.uint8), 0.05)
-    assert (record.status, record.nc, edges, record.redetected) == ("few_correspondences", 0, [], True)
+    assert (record.status, record.reason, record.nc, edges, record.redetected) == ("lost", "few correspondences", 0, [], True)
 
 
 def test_threshold2_controls_redetection():
@@ -77,7 +53,7 @@ def test_threshold1_above_nc_keeps_the_previous_rotation():
     tracker = KltTracker(KltConfig(threshold1=100_000, threshold2=100_000), CAMERA)
     tracker.process(base, 0.0)
     record, edges = tracker.process(shifted, 0.05)
-    assert record.nc > 20 and record.status == "few_correspondences" and edges == []
+    assert record.nc > 20 and (record.status, record.reason) == ("lost", "few correspondences") and edges == []
 
 
 def test_distortion_is_removed_before_geometry():
@@ -94,10 +70,10 @@ def test_distortion_is_removed_before_geometry():
     X1 = X @ R_c1_c0.T + t_c1
     px0 = cv2.projectPoints(X, np.zeros(3), np.zeros(3), K, dist)[0].reshape(-1, 2)
     px1 = cv2.projectPoints(X1, np.zeros(3), np.zeros(3), K, dist)[0].reshape(-1, 2)
-    R, _, _ = rotation_from_correspondences(camera.undistort(px0), camera.undistort(px1), 1e-3, 0.999)
+    R = rotation_from_correspondences(camera.undistort(px0), camera.undistort(px1), 1e-3, 0.999).R_prev_cur
     assert_rotations_close(R, R_c1_c0.T, 1e-5)
     naive = CameraModel(240, 180, K)
-    R_naive, _, _ = rotation_from_correspondences(naive.undistort(px0), naive.undistort(px1), 1e-3, 0.999)
+    R_naive = rotation_from_correspondences(naive.undistort(px0), naive.undistort(px1), 1e-3, 0.999).R_prev_cur
     assert np.degrees(float(np.arccos((np.trace(R_naive.T @ R_c1_c0.T) - 1) / 2))) > 0.05
 
 
@@ -116,3 +92,65 @@ def test_keyframe_edges_measure_rotation_across_several_frames():
             spans.append((e.i, e.j))
     assert (0, 2) in spans and (0, 3) in spans and (3, 5) in spans and (3, 6) in spans
     assert all(j - i <= 3 for i, j in spans)
+
+
+# ----------------------------------------------------------------------------- fast motion
+
+
+def big_pair(seed):
+    base = textured_image(seed, shapes=300)
+    R_c0_c1 = large_rotation(np.random.default_rng(100 + seed))
+    return base, R_c0_c1
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_gyro_prediction_lets_lk_follow_a_large_rotation(seed):
+    """The gyro turned by R_c0_c1 over the frame interval; LK starts from K R K^-1."""
+    from eas_vo.types import ImuSeries
+
+    base, R_c0_c1 = big_pair(seed)
+    t_imu = np.linspace(-0.1, 0.2, 61)
+    omega = np.tile(Rotation.from_matrix(R_c0_c1).as_rotvec() / 0.05, (len(t_imu), 1))
+    imu = ImuSeries(t_imu, np.zeros_like(omega), omega)
+    tracker = KltTracker(KltConfig(predict="auto", fb_max_px=1.0), CAMERA, imu=imu)
+    tracker.process(base, 0.0)
+    record, (edge,) = tracker.process(warp_by_rotation(base, R_c0_c1.T), 0.05)
+    assert record.status == "ok" and record.inlier_ratio > 0.8
+    assert_rotations_close(edge.R_i_j, R_c0_c1, np.radians(0.2))
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_constant_velocity_prediction_bridges_a_long_gap(seed):
+    """A 2-degree step in 50 ms, then ten times as long at the same angular velocity (20 degrees)."""
+    base, _ = big_pair(seed)
+    rotvec = np.random.default_rng(seed).normal(size=3)
+    rotvec *= np.radians(2.0) / np.linalg.norm(rotvec)
+    step = Rotation.from_rotvec(rotvec).as_matrix()
+    R_c0_c2 = step @ Rotation.from_rotvec(10 * rotvec).as_matrix()
+    tracker = KltTracker(KltConfig(predict="velocity", fb_max_px=1.0), CAMERA)
+    tracker.process(base, 0.0)
+    tracker.process(warp_by_rotation(base, step.T), 0.05)
+    record, (edge,) = tracker.process(warp_by_rotation(base, R_c0_c2.T), 0.55)
+    assert record.status == "ok"
+    assert_rotations_close(edge.R_i_j, Rotation.from_rotvec(10 * rotvec).as_matrix(), np.radians(0.2))
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_descriptor_fallback_rescues_a_lost_track(seed):
+    base, R_c0_c1 = big_pair(seed)
+    tracker = KltTracker(KltConfig(fallback="match", fallback_detector="sift"), CAMERA)
+    tracker.process(base, 0.0)
+    record, (edge,) = tracker.process(warp_by_rotation(base, R_c0_c1.T), 0.05)
+    assert record.status == "ok" and record.redetected
+    assert_rotations_close(edge.R_i_j, R_c0_c1, np.radians(0.2))
+    small = Rotation.from_rotvec([0.0, 0.01, 0.0]).as_matrix()  # and LK carries on from the new corners
+    record, (edge,) = tracker.process(warp_by_rotation(base, (R_c0_c1 @ small).T), 0.1)
+    assert record.status == "ok"
+    assert_rotations_close(edge.R_i_j, small, np.radians(0.2))
+
+
+def test_prediction_options_are_checked():
+    with pytest.raises(ConfigError, match="predict = 'psychic'; allowed: none, gyro, velocity, auto"):
+        KltConfig(predict="psychic").validate()
+    with pytest.raises(ConfigError, match="imu_rotvec_cam"):
+        KltConfig(imu_rotvec_cam=(0.0, float("nan"), 0.0)).validate()

@@ -1,0 +1,58 @@
+"""Rotation-invariant keypoints and descriptors (OpenCV) and their matching, shared by the
+trackers that match rather than track. Not a plugin."""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+
+DETECTORS = ("orb", "sift")  # AKAZE left OpenCV's main modules in 5.0
+MATCHINGS = ("ratio", "crosscheck")
+
+#: Measuring from matched keypoints: they are localised on an image pyramid (ORB: scale 1.2
+#: per level) to about half a pixel or worse at the base level, unlike LK's sub-pixel tracks,
+#: so the inlier threshold and the residual above which a fit is weak are twice LK's [px].
+RANSAC_THRESHOLD_PX = 2.0
+MAX_RESIDUAL_PX = 1.0
+#: With fewer matches nothing is measured.
+MIN_MATCHES = 10
+
+
+class Features:
+    """Detects keypoints with descriptors in an image and matches two sets of them.
+
+    Args:
+        detector: `orb` or `sift` (both rotation invariant).
+        max_features: at most this many keypoints per image.
+        matching: `ratio` (Lowe's test: nearest / second nearest distance below `ratio`) or
+            `crosscheck` (mutual nearest neighbours).
+        ratio: Lowe's ratio.
+    """
+
+    def __init__(self, detector: str = "orb", max_features: int = 1000, matching: str = "ratio", ratio: float = 0.8):
+        if detector == "orb":
+            self.extractor = cv2.ORB_create(nfeatures=max_features)
+        else:
+            self.extractor = cv2.SIFT_create(nfeatures=max_features)
+        norm = cv2.NORM_L2 if detector == "sift" else cv2.NORM_HAMMING
+        self.matcher = cv2.BFMatcher(norm, crossCheck=matching == "crosscheck")
+        self.matching, self.ratio = matching, ratio
+
+    def detect(self, image: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
+        """(N, 2) keypoint positions [px] and their descriptors (None when there are none)."""
+        keypoints, descriptors = self.extractor.detectAndCompute(image, None)
+        return np.float32([kp.pt for kp in keypoints]).reshape(-1, 2), descriptors
+
+    def match(self, descriptors_a: np.ndarray | None, descriptors_b: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
+        """Indices (into a, into b) of the accepted matches, one per keypoint of a at most."""
+        if descriptors_a is None or descriptors_b is None or len(descriptors_a) == 0 or len(descriptors_b) < 2:
+            return np.empty(0, int), np.empty(0, int)
+        if self.matching == "crosscheck":
+            pairs = [(m.queryIdx, m.trainIdx) for m in self.matcher.match(descriptors_a, descriptors_b)]
+        else:
+            pairs = [(m[0].queryIdx, m[0].trainIdx) for m in self.matcher.knnMatch(descriptors_a, descriptors_b, k=2)
+                     if len(m) == 2 and m[0].distance < self.ratio * m[1].distance]
+        if not pairs:
+            return np.empty(0, int), np.empty(0, int)
+        a, b = np.array(pairs).T
+        return a, b

@@ -1,0 +1,78 @@
+"""`match`: rotation-invariant keypoints and descriptors matched frame to frame, the rotation
+from the shared two-view geometry. Follows motion of any speed as long as consecutive images
+overlap: nothing is predicted, so nothing can be lost by a wrong prediction."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from eas_vo.plugins import Tracker
+from eas_vo.trackers.features import DETECTORS, MATCHINGS, MAX_RESIDUAL_PX, MIN_MATCHES, RANSAC_THRESHOLD_PX, Features
+from eas_vo.trackers.measurement import TwoViewConfig, frame_record, measure
+from eas_vo.types import FrameRecord, RelativeRotation
+from eas_vo.validation import check_choice, check_range
+
+
+@dataclass(frozen=True)
+class MatchConfig(TwoViewConfig):
+    """Keypoints, descriptors and matching, and (TwoViewConfig) the geometry.
+
+    Attributes:
+        detector: `orb` or `sift`.
+        max_features: keypoints per image at most.
+        matching: `ratio` (Lowe's test) or `crosscheck` (mutual nearest neighbours).
+        ratio: Lowe's ratio (nearest / second-nearest descriptor distance).
+        min_matches: with fewer matches nothing is measured (the frame is `lost`).
+        geometry: as TwoViewConfig; `auto` by default here (GRIC picks rotation-only or the
+            essential matrix per pair).
+        ransac_threshold_px, max_residual_px: twice TwoViewConfig's (see features.RANSAC_THRESHOLD_PX).
+    """
+
+    geometry: str = "auto"
+    ransac_threshold_px: float = RANSAC_THRESHOLD_PX
+    max_residual_px: float = MAX_RESIDUAL_PX
+    detector: str = "orb"
+    max_features: int = 1000
+    matching: str = "ratio"
+    ratio: float = 0.8
+    min_matches: int = MIN_MATCHES
+
+    def validate(self) -> None:
+        super().validate()
+        check_choice(self, "detector", DETECTORS)
+        check_range(self, "max_features", 10, 100_000)
+        check_choice(self, "matching", MATCHINGS)
+        check_range(self, "ratio", 0.0, 1.0, lo_open=True)
+        check_range(self, "min_matches", 5, 100_000)
+
+
+class MatchTracker(Tracker):
+    """Matches the keypoints of each image with the previous image's and measures R_{k-1}_{k}."""
+
+    name = "match"
+    description = "ORB or SIFT descriptors matched frame to frame (ratio or cross check), shared two-view geometry"
+    Config = MatchConfig
+
+    def reset(self) -> None:
+        c = self.config
+        self.features = Features(c.detector, c.max_features, c.matching, c.ratio)
+        self._previous: tuple[np.ndarray, np.ndarray | None] | None = None  # keypoints [px], descriptors
+        self._prev_t = -np.inf
+        self._k = -1
+
+    def process(self, image: np.ndarray, t: float) -> tuple[FrameRecord, list[RelativeRotation]]:
+        c = self.config
+        self._k += 1
+        k = self._k
+        if self._previous is not None and t <= self._prev_t:
+            return FrameRecord(k, t, 0, 0, "same_time", False), []
+        points, descriptors = self.features.detect(image)
+        previous, self._previous, self._prev_t = self._previous, (points, descriptors), t
+        if previous is None:
+            return FrameRecord(k, t, 0, 0, "first", True), []
+        a, b = self.features.match(previous[1], descriptors)
+        nc = len(a)
+        step = measure(c, self.camera, previous[0][a], points[b], k - 1, k) if nc >= c.min_matches else None
+        return frame_record(c, self.camera, k, t, nc, step, True, nc >= c.min_matches), [step] if step else []

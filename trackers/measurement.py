@@ -1,0 +1,93 @@
+"""What every tracker shares: turning matched pixels into a relative rotation with the shared
+two-view geometry, and judging whether that measurement is weak. Not a plugin."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from eas_vo.geometry.two_view import ESSENTIAL_METHODS, GEOMETRIES, rotation_from_correspondences
+from eas_vo.types import CameraModel, FrameRecord, RelativeRotation
+from eas_vo.validation import check_choice, check_range
+
+
+@dataclass(frozen=True)
+class TwoViewConfig:
+    """Geometry and quality settings of a tracker's measurements.
+
+    Attributes:
+        geometry: `essential` (the paper: five-point essential matrix), `rotation` (rotation-only
+            2-point RANSAC and least squares on bearings) or `auto` (the better by GRIC).
+        essential_method: robust estimator around OpenCV's five-point solver: `usac` (RANSAC
+            with local optimisation, the default), `ransac` (plain), `magsac`, `lmeds`.
+        ransac_threshold_px: inlier threshold [px].
+        ransac_confidence: success probability.
+        min_inliers, min_inlier_ratio, max_residual_px: a measurement with fewer inliers, a
+            lower inlier ratio or a larger median inlier residual [px] is `weak` (the frame is
+            marked so; the edge is still used). Fixed from first principles, not tuned on any
+            sequence: 15 inliers (three times the five-point minimum), half of the
+            correspondences (a model most of them contradict is not trusted), half the
+            inlier threshold (inliers that all sit near the threshold fit badly).
+    """
+
+    geometry: str = "essential"
+    essential_method: str = "usac"
+    ransac_threshold_px: float = 1.0
+    ransac_confidence: float = 0.999
+    min_inliers: int = 15
+    min_inlier_ratio: float = 0.5
+    max_residual_px: float = 0.5
+
+    def validate(self) -> None:
+        check_choice(self, "geometry", GEOMETRIES)
+        check_choice(self, "essential_method", ESSENTIAL_METHODS)
+        check_range(self, "ransac_threshold_px", 0.0, 100.0, lo_open=True)
+        check_range(self, "ransac_confidence", 0.0, 1.0, lo_open=True)
+        check_range(self, "min_inliers", 0, 100_000)
+        check_range(self, "min_inlier_ratio", 0.0, 1.0)
+        check_range(self, "max_residual_px", 0.0, 100.0, lo_open=True)
+
+
+def measure(
+    config: TwoViewConfig, camera: CameraModel, pts_from_px: np.ndarray, pts_to_px: np.ndarray, i: int, j: int
+) -> RelativeRotation | None:
+    """The rotation R_i_j from pixel positions [px] of the same points in frames i and j
+    (undistorted first), with its quality; None when no model is found."""
+    found = rotation_from_correspondences(
+        camera.undistort(pts_from_px),
+        camera.undistort(pts_to_px),
+        config.ransac_threshold_px / camera.focal_px,
+        config.ransac_confidence,
+        config.essential_method,
+        config.geometry,
+    )
+    if found is None:
+        return None
+    return RelativeRotation(i, j, found.R_prev_cur, found.inliers, found.inliers / max(len(pts_from_px), 1), found.residual)
+
+
+def weakness(config: TwoViewConfig, edge: RelativeRotation, focal_px: float) -> str:
+    """Why `edge` is a weak measurement ("" if it is not)."""
+    if edge.inliers < config.min_inliers:
+        return f"few inliers ({edge.inliers} < {config.min_inliers})"
+    if edge.inlier_ratio < config.min_inlier_ratio:
+        return f"low inlier ratio ({edge.inlier_ratio:.2f} < {config.min_inlier_ratio})"
+    if edge.residual_rad * focal_px > config.max_residual_px:
+        return f"large residual ({edge.residual_rad * focal_px:.2f} px > {config.max_residual_px})"
+    return ""
+
+
+def frame_record(
+    config: TwoViewConfig, camera: CameraModel, k: int, t: float, nc: int, step: RelativeRotation | None,
+    redetected: bool, enough_correspondences: bool,
+) -> FrameRecord:
+    """The record of frame k at `t` [s] with `nc` correspondences and its frame-to-frame
+    measurement `step` (None: nothing measured, because there were not enough correspondences
+    to try or because no model was found): `ok`, `weak` or `lost`, with the reason."""
+    if step is None:
+        reason = "no model" if enough_correspondences else "few correspondences"
+        return FrameRecord(k, t, nc, 0, "lost", redetected, reason=reason)
+    why = weakness(config, step, camera.focal_px)
+    return FrameRecord(k, t, nc, step.inliers, "weak" if why else "ok", redetected, step.inlier_ratio,
+                       step.residual_rad * camera.focal_px, why)
