@@ -24,9 +24,8 @@ class GtsamConfig:
         mode: `batch` (Levenberg-Marquardt over all frames) or `online` (iSAM2, frame by frame:
             `causal_R_w_c` holds each frame's estimate as it was when that frame arrived).
         edge_noise: how an edge's noise [rad] follows from its quality: `inliers` (the default):
-            sigma_rad * sqrt(reference_inliers / inliers); `residual`: the spread of the edge's
-            own inlier residuals over sqrt(inliers), 1.4826 * residual_rad / sqrt(inliers)
-            (the median absolute deviation of a Gaussian), divided by the inlier ratio and
+            sigma_rad * sqrt(reference_inliers / inliers); `residual`: the edge's own inlier
+            noise over sqrt(inliers) divided by the inlier ratio (RelativeRotation.sigma_rad),
             never below sigma_floor_rad.
         sigma_rad: (`inliers`) noise of an edge measured with `reference_inliers` inliers.
         reference_inliers: see sigma_rad.
@@ -83,11 +82,9 @@ class GtsamBackend(Backend):
     def edge_sigma(self, edge: RelativeRotation) -> float:
         """The isotropic noise [rad] of a measured edge, from its quality (see edge_noise)."""
         c = self.config
-        inliers = max(edge.inliers, 1)
         if c.edge_noise == "inliers":
-            return c.sigma_rad * np.sqrt(c.reference_inliers / inliers)
-        spread = 1.4826 * edge.residual_rad / np.sqrt(inliers) / max(edge.inlier_ratio, 1e-3)
-        return max(spread, c.sigma_floor_rad)
+            return c.sigma_rad * np.sqrt(c.reference_inliers / max(edge.inliers, 1))
+        return max(min(edge.sigma_rad, 1e3), c.sigma_floor_rad)
 
     def _noise(self, gtsam, sigma: float):
         c = self.config

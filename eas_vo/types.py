@@ -141,9 +141,9 @@ class RelativeRotation:
     Attributes:
         inliers: correspondences the model explains.
         inlier_ratio: inliers / correspondences offered to the estimator.
-        residual_rad: median residual of the inliers [rad, ~ px / focal length]: the angle
-            between rotated and observed bearings (rotation model) or the Sampson distance
-            (essential matrix); 0 when unknown.
+        residual_rad: robust per-axis noise of the inliers [rad, ~ px / focal length], from the
+            median of their residuals (the angle between rotated and observed bearings for
+            the rotation model, the Sampson distance for the essential matrix); 0 when unknown.
     """
 
     i: int
@@ -152,6 +152,14 @@ class RelativeRotation:
     inliers: int = 0
     inlier_ratio: float = 1.0
     residual_rad: float = 0.0
+
+    @property
+    def sigma_rad(self) -> float:
+        """A rough 1-sigma uncertainty of R_i_j [rad] from its quality: the inlier noise over
+        sqrt(inliers), inflated by 1 / inlier_ratio (inf without inliers)."""
+        if self.inliers <= 0:
+            return float("inf")
+        return self.residual_rad / np.sqrt(self.inliers) / max(self.inlier_ratio, 1e-3)
 
 
 @dataclass(frozen=True)

@@ -24,11 +24,12 @@ class TwoViewConfig:
         ransac_threshold_px: inlier threshold [px].
         ransac_confidence: success probability.
         min_inliers, min_inlier_ratio, max_residual_px: a measurement with fewer inliers, a
-            lower inlier ratio or a larger median inlier residual [px] is `weak` (the frame is
-            marked so; the edge is still used). Fixed from first principles, not tuned on any
-            sequence: 15 inliers (three times the five-point minimum), half of the
-            correspondences (a model most of them contradict is not trusted), half the
-            inlier threshold (inliers that all sit near the threshold fit badly).
+            lower inlier ratio or a larger inlier noise (per-axis sigma from the median
+            residual [px]) is `weak` (the frame is marked so; the edge is still used). Fixed
+            from first principles, not tuned on any sequence: 15 inliers (three times the
+            five-point minimum), half of the correspondences (a model most of them contradict
+            is not trusted), a noise of half the inlier threshold (the threshold would then
+            cut the noise at two sigma: inliers no longer separate from outliers).
     """
 
     geometry: str = "essential"

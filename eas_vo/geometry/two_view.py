@@ -127,7 +127,7 @@ class TwoViewRotation(NamedTuple):
     R_prev_cur: np.ndarray  #: maps current-frame vectors into the previous frame
     inliers: int  #: correspondences the model explains
     model: str  #: `essential` or `rotation`
-    residual: float  #: median inlier residual [normalised image units ~ rad]
+    residual: float  #: robust per-axis noise of the inliers [normalised image units ~ rad], see _result
 
 
 def rotation_from_correspondences(
@@ -159,7 +159,7 @@ def rotation_from_correspondences(
         if found is None:
             return None
         E, R_ess, ess_mask = found
-        return _result(R_ess, ess_mask, "essential", sampson_residuals(E, pts_prev_n, pts_cur_n))
+        return _result(R_ess, ess_mask, "essential", sampson_residuals(E, pts_prev_n, pts_cur_n), dims=1)
     f_prev, f_cur = bearings(pts_prev_n), bearings(pts_cur_n)
     rotation = rotation_ransac(f_prev, f_cur, threshold)
     if rotation is None:
@@ -167,21 +167,29 @@ def rotation_from_correspondences(
     R_rot, rot_mask = rotation
     rot_residuals = angular_residuals(R_rot, f_prev, f_cur)
     if geometry == "rotation":
-        return _result(R_rot, rot_mask, "rotation", rot_residuals)
+        return _result(R_rot, rot_mask, "rotation", rot_residuals, dims=2)
     found = essential_rotation(pts_prev_n, pts_cur_n, threshold, confidence, ESSENTIAL_METHODS[method], R_hint=R_rot)
     if found is None:
-        return _result(R_rot, rot_mask, "rotation", rot_residuals)
+        return _result(R_rot, rot_mask, "rotation", rot_residuals, dims=2)
     E, R_ess, ess_mask = found
     sigma = threshold / 2.0
     ess_residuals = sampson_residuals(E, pts_prev_n, pts_cur_n)
     gric_rot = gric(rot_residuals, sigma, model_dim=2, params=3)
     gric_ess = gric(ess_residuals, sigma, model_dim=3, params=5)
     if gric_rot <= gric_ess:
-        return _result(R_rot, rot_mask, "rotation", rot_residuals)
-    return _result(R_ess, ess_mask, "essential", ess_residuals)
+        return _result(R_rot, rot_mask, "rotation", rot_residuals, dims=2)
+    return _result(R_ess, ess_mask, "essential", ess_residuals, dims=1)
 
 
-def _result(R_cur_prev: np.ndarray, mask: np.ndarray, model: str, residuals: np.ndarray) -> TwoViewRotation:
+#: Median of |x| for x ~ N(0, 1) in 1 and of ||x|| in 2 dimensions (half-normal, Rayleigh).
+_MEDIAN_NORM = {1: 0.6745, 2: 1.1774}
+
+
+def _result(R_cur_prev: np.ndarray, mask: np.ndarray, model: str, residuals: np.ndarray, dims: int) -> TwoViewRotation:
+    """The model's result; its residual is the robust noise estimate sigma = median / the median
+    of a standard `dims`-dimensional Gaussian's norm, so that the angular residual of the
+    rotation model (a 2-D distance) and the Sampson distance (1-D, to the epipolar line) are
+    on one scale: the per-axis noise of the inlier points."""
     inlier_residuals = residuals[mask]
-    residual = float(np.median(inlier_residuals)) if len(inlier_residuals) else 0.0
+    residual = float(np.median(inlier_residuals)) / _MEDIAN_NORM[dims] if len(inlier_residuals) else 0.0
     return TwoViewRotation(R_cur_prev.T, int(mask.sum()), model, residual)
