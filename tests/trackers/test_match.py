@@ -41,9 +41,12 @@ def test_frame_to_frame_lk_loses_the_same_step_and_says_so(seed):
     assert error_deg > 1.0 and record.status in ("weak", "lost") and record.reason
 
 
-def test_unrelated_images_are_not_ok():
-    record, _ = measure(MatchTracker(MatchConfig(), CAMERA), textured_image(1, shapes=300), textured_image(2, shapes=300))
+@pytest.mark.parametrize("seed", range(4))
+def test_unrelated_images_are_not_ok_and_give_no_unsupported_edge(seed):
+    tracker = MatchTracker(MatchConfig(), CAMERA)
+    record, edges = measure(tracker, textured_image(seed, shapes=300), textured_image(seed + 10, shapes=300))
     assert record.status in ("weak", "lost")
+    assert all(e.inliers >= tracker.config.min_matches for e in edges)
 
 
 def test_config_choices_are_checked():
