@@ -18,6 +18,7 @@ from eas_vo.errors import ConfigError
 from eas_vo.geometry.rotations import rotvec_to_matrix
 from eas_vo.plugins import Tracker
 from eas_vo.trackers.features import DETECTORS, MAX_RESIDUAL_PX, MIN_MATCHES, RANSAC_THRESHOLD_PX, Features
+from eas_vo.trackers.loops import LoopClosureConfig, LoopCloser
 from eas_vo.trackers.measurement import TwoViewConfig, frame_record, measure
 from eas_vo.trackers.motion import gyro_rotation, scaled_rotation
 from eas_vo.types import CameraModel, FrameRecord, ImuSeries, RelativeRotation
@@ -28,8 +29,9 @@ FALLBACKS = ("none", "match")
 
 
 @dataclass(frozen=True)
-class KltConfig(TwoViewConfig):
-    """Corner detection and optical flow settings, and (TwoViewConfig) the geometry.
+class KltConfig(LoopClosureConfig, TwoViewConfig):
+    """Corner detection and optical flow settings, (TwoViewConfig) the geometry and
+    (LoopClosureConfig) loop closure.
 
     Attributes:
         max_corners, quality_level, min_distance_px, block_size: Shi-Tomasi detection.
@@ -72,7 +74,8 @@ class KltConfig(TwoViewConfig):
     fallback_detector: str = "sift"
 
     def validate(self) -> None:
-        super().validate()
+        TwoViewConfig.validate(self)
+        LoopClosureConfig.validate(self)
         check_choice(self, "predict", PREDICTIONS)
         check_vector(self, "imu_rotvec_cam", 3, "rad")
         check_range(self, "imu_time_offset_s", -1.0, 1.0)
@@ -126,6 +129,7 @@ class KltTracker(Tracker):
         self._kf_index = 0
         self._k = -1
         self._last_step: tuple[np.ndarray, float] | None = None  # (R_{k-2}_{k-1}, its interval [s]) for velocity
+        self._loops = LoopCloser(self.config, self.camera) if self.config.loop_closure else None
 
     def detect(self, image: np.ndarray) -> np.ndarray:
         """Shi-Tomasi corners of `image`, (N, 2) float32 [px]."""
@@ -186,6 +190,8 @@ class KltTracker(Tracker):
         if self._prev_image is None:
             self._start_keyframe(image, self.detect(image))
             self._prev_t = t
+            if self._loops is not None:
+                self._loops.step(k, image, [], lost=False)
             return FrameRecord(k, t, 0, 0, "first", True), []
         if t <= self._prev_t:  # no time between the two: nothing to measure, the rotation is kept
             return FrameRecord(k, t, 0, 0, "same_time", False), []
@@ -216,6 +222,8 @@ class KltTracker(Tracker):
             self._prev_image, self._prev_pts, self._kf_pts = image, cur[ok], self._kf_pts[ok]
             if c.keyframe_interval > 0 and k - self._kf_index >= c.keyframe_interval:
                 self._kf_index, self._kf_pts = k, cur[ok]
+        if self._loops is not None:
+            edges = edges + self._loops.step(k, image, edges, lost=record.status == "lost")
         return record, edges
 
     def _start_keyframe(self, image: np.ndarray, pts: np.ndarray) -> None:

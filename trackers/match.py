@@ -10,14 +10,16 @@ import numpy as np
 
 from eas_vo.plugins import Tracker
 from eas_vo.trackers.features import DETECTORS, MATCHINGS, MAX_RESIDUAL_PX, MIN_MATCHES, RANSAC_THRESHOLD_PX, Features
+from eas_vo.trackers.loops import LoopClosureConfig, LoopCloser
 from eas_vo.trackers.measurement import TwoViewConfig, frame_record, measure
 from eas_vo.types import FrameRecord, RelativeRotation
 from eas_vo.validation import check_choice, check_range
 
 
 @dataclass(frozen=True)
-class MatchConfig(TwoViewConfig):
-    """Keypoints, descriptors and matching, and (TwoViewConfig) the geometry.
+class MatchConfig(LoopClosureConfig, TwoViewConfig):
+    """Keypoints, descriptors and matching, (TwoViewConfig) the geometry and
+    (LoopClosureConfig) loop closure.
 
     Attributes:
         detector: `orb` or `sift`.
@@ -42,7 +44,8 @@ class MatchConfig(TwoViewConfig):
     min_matches: int = MIN_MATCHES
 
     def validate(self) -> None:
-        super().validate()
+        TwoViewConfig.validate(self)
+        LoopClosureConfig.validate(self)
         check_choice(self, "detector", DETECTORS)
         check_range(self, "max_features", 10, 100_000)
         check_choice(self, "matching", MATCHINGS)
@@ -63,6 +66,7 @@ class MatchTracker(Tracker):
         self._previous: tuple[np.ndarray, np.ndarray | None] | None = None  # keypoints [px], descriptors
         self._prev_t = -np.inf
         self._k = -1
+        self._loops = LoopCloser(c, self.camera) if c.loop_closure else None
 
     def process(self, image: np.ndarray, t: float) -> tuple[FrameRecord, list[RelativeRotation]]:
         c = self.config
@@ -73,10 +77,14 @@ class MatchTracker(Tracker):
         points, descriptors = self.features.detect(image)
         previous, self._previous, self._prev_t = self._previous, (points, descriptors), t
         if previous is None:
-            return FrameRecord(k, t, 0, 0, "first", True), []
-        a, b = self.features.match(previous[1], descriptors)
-        nc = len(a)
-        step = measure(c, self.camera, previous[0][a], points[b], k - 1, k) if nc >= c.min_matches else None
-        if step is not None and step.inliers < c.min_matches:
-            step = None  # unsupported: "no model"
-        return frame_record(c, self.camera, k, t, nc, step, True, nc >= c.min_matches), [step] if step else []
+            record, edges = FrameRecord(k, t, 0, 0, "first", True), []
+        else:
+            a, b = self.features.match(previous[1], descriptors)
+            nc = len(a)
+            step = measure(c, self.camera, previous[0][a], points[b], k - 1, k) if nc >= c.min_matches else None
+            if step is not None and step.inliers < c.min_matches:
+                step = None  # unsupported: "no model"
+            record, edges = frame_record(c, self.camera, k, t, nc, step, True, nc >= c.min_matches), [step] if step else []
+        if self._loops is not None:
+            edges = edges + self._loops.step(k, image, edges, lost=record.status == "lost")
+        return record, edges

@@ -1,0 +1,87 @@
+"""Loop closure on a synthetic sweep that returns to its start (views of a textured plane at
+infinity, exact ground truth): loop edges pull the drift out of the pose graph, and false
+loop edges do not wreck a robust graph."""
+
+import cv2
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from eas_vo.backends.chain import ChainBackend
+from eas_vo.backends.gtsam_graph import GtsamBackend, GtsamConfig
+from eas_vo.errors import ConfigError
+from eas_vo.geometry.rotations import geodesic_angle
+from eas_vo.trackers.loops import LoopClosureConfig
+from eas_vo.trackers.match import MatchConfig, MatchTracker
+from eas_vo.types import RelativeRotation
+from helpers import CAMERA, K, textured_image
+
+N = 80
+TIMES = 0.05 * np.arange(N)
+
+
+@pytest.fixture(scope="module")
+def sweep():
+    """R_w_c of a camera panning 35 degrees left and right and nodding 8, back where it began,
+    and its noisy views of a textured plane at infinity (a 960x720 panorama)."""
+    world = textured_image(7, size=(720, 960), shapes=2500)
+    K_world = np.array([[200.0, 0, 480], [0, 200.0, 360], [0, 0, 1]])
+    phase = np.linspace(0, 2 * np.pi, N)
+    R_w_c = Rotation.from_euler("yx", np.column_stack([np.radians(35) * np.sin(phase), np.radians(8) * np.sin(2 * phase)])).as_matrix()
+    rng = np.random.default_rng(0)
+    views = []
+    for R in R_w_c:
+        image = cv2.warpPerspective(world, K_world @ R @ np.linalg.inv(K), (240, 180), flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP)
+        views.append(np.clip(image + rng.normal(0, 6, image.shape), 0, 255).astype(np.uint8))
+    return R_w_c, views
+
+
+def track(views, **options):
+    tracker = MatchTracker(MatchConfig(**options), CAMERA)  # ORB frame to frame: it drifts
+    edges = []
+    for k, image in enumerate(views):
+        edges += tracker.process(image, TIMES[k])[1]
+    return edges
+
+
+def errors_deg(R_w_c, estimate):
+    return np.degrees(geodesic_angle(R_w_c, R_w_c[0] @ estimate[0].T @ estimate))
+
+
+def test_loop_closure_cuts_the_final_drift_fivefold(sweep):
+    R_w_c, views = sweep
+    plain, closed = track(views), track(views, loop_closure=True)
+    loops = [e for e in closed if e.j - e.i > 1]
+    assert not any(e.j - e.i > 1 for e in plain) and len(loops) >= 5
+    for e in loops:  # every loop edge is right
+        assert np.degrees(geodesic_angle(e.R_i_j, R_w_c[e.i].T @ R_w_c[e.j])) < 0.2
+    graph = GtsamBackend(GtsamConfig(robust="cauchy"))
+    drift = errors_deg(R_w_c, graph.solve(N, plain, times=TIMES))[-1]
+    final = errors_deg(R_w_c, graph.solve(N, closed, times=TIMES))[-1]
+    assert final * 5 <= drift, (final, drift)
+    chain = ChainBackend().solve(N, closed, times=TIMES)  # the chain ignores loop edges
+    np.testing.assert_allclose(chain, ChainBackend().solve(N, plain, times=TIMES))
+
+
+@pytest.mark.parametrize("mode", ["batch", "online"])
+def test_false_loops_do_not_wreck_a_robust_graph(sweep, mode):
+    R_w_c, views = sweep
+    edges = track(views, loop_closure=True)
+    rng = np.random.default_rng(1)
+    false = []
+    while len(false) < 5:  # confident-looking loop edges 5-15 degrees off
+        i, j = sorted(int(v) for v in rng.choice(N, 2, replace=False))
+        if j - i >= 20:
+            error = Rotation.from_rotvec(rng.normal(size=3) / np.sqrt(3) * np.radians(rng.uniform(5, 15))).as_matrix()
+            false.append(RelativeRotation(i, j, R_w_c[i].T @ R_w_c[j] @ error, 100, 0.9, 0.0005))
+    graph = GtsamBackend(GtsamConfig(robust="cauchy", mode=mode))
+    clean = errors_deg(R_w_c, graph.solve(N, edges, times=TIMES)).mean()
+    fooled = errors_deg(R_w_c, graph.solve(N, edges + false, times=TIMES)).mean()
+    assert fooled <= 1.5 * clean, (fooled, clean)
+    trusting = errors_deg(R_w_c, GtsamBackend(GtsamConfig(robust="none", mode=mode)).solve(N, edges + false, times=TIMES)).mean()
+    assert trusting > 5 * clean  # what the robust kernel prevented
+
+
+def test_loop_options_are_checked():
+    with pytest.raises(ConfigError, match="loop_min_inliers = 1 is out of range"):
+        LoopClosureConfig(loop_min_inliers=1).validate()
