@@ -1,16 +1,19 @@
-"""Loop closure and relocalisation, for any tracker: keyframes with descriptors, recognised
-again when the running estimate says the camera looks the same way (or after the track was
-lost), verified with rotation-only RANSAC, added as edges kf -> k. Not a plugin."""
+"""Loop closure and relocalisation, for any tracker: keyframes with descriptors and corners,
+recognised again when the running estimate says the camera looks the same way (or after the
+track was lost), verified with rotation-only RANSAC on the matched keypoints, refined by LK
+from the keyframe's corners, added as edges kf -> k. Not a plugin."""
 
 from __future__ import annotations
 
 from dataclasses import dataclass
 
+import cv2
 import numpy as np
 
 from eas_vo.geometry.rotations import geodesic_angle
 from eas_vo.trackers.features import DETECTORS, MAX_RESIDUAL_PX, RANSAC_THRESHOLD_PX, Features
 from eas_vo.trackers.measurement import TwoViewConfig, measure, weakness
+from eas_vo.trackers.motion import lk_params, lk_track
 from eas_vo.types import CameraModel, RelativeRotation
 from eas_vo.validation import check_choice, check_range
 
@@ -19,7 +22,8 @@ from eas_vo.validation import check_choice, check_range
 class LoopClosureConfig:
     """Attributes:
         loop_closure: off (the paper) or on.
-        loop_detector: keypoints for keyframes (`sift` or `orb`).
+        loop_detector: keypoints for keyframes (`orb` or `sift`); the loop rotation they give
+            is refined by LK from the keyframe's corners, so ORB's coarser keypoints suffice.
         loop_keyframe_deg: a new keyframe when the view turned this much [deg] since the last.
         loop_min_gap: a frame may close a loop only with keyframes at least this many frames old.
         loop_overlap_deg: candidates are keyframes whose optical axis is within this angle [deg]
@@ -31,7 +35,7 @@ class LoopClosureConfig:
     """
 
     loop_closure: bool = False
-    loop_detector: str = "sift"
+    loop_detector: str = "orb"
     loop_keyframe_deg: float = 5.0
     loop_min_gap: int = 20
     loop_overlap_deg: float = 30.0
@@ -51,7 +55,9 @@ class LoopClosureConfig:
 class _Keyframe:
     index: int
     R_w_c: np.ndarray
-    points: np.ndarray
+    image: np.ndarray
+    corners: np.ndarray  # Shi-Tomasi corners [px], for the LK refinement
+    points: np.ndarray  # keypoints [px] with their descriptors
     descriptors: np.ndarray | None
 
 
@@ -62,8 +68,10 @@ class LoopCloser:
     def __init__(self, config: LoopClosureConfig, camera: CameraModel):
         self.config, self.camera = config, camera
         self.features = Features(config.loop_detector)
-        self.geometry = TwoViewConfig(geometry="rotation", ransac_threshold_px=RANSAC_THRESHOLD_PX,
-                                      max_residual_px=MAX_RESIDUAL_PX, min_inliers=config.loop_min_inliers)
+        self.coarse = TwoViewConfig(geometry="rotation", ransac_threshold_px=RANSAC_THRESHOLD_PX,
+                                    max_residual_px=MAX_RESIDUAL_PX, min_inliers=config.loop_min_inliers)
+        self.fine = TwoViewConfig(geometry="rotation", min_inliers=config.loop_min_inliers)
+        self.lk = lk_params()
         self.keyframes: list[_Keyframe] = []
         self.R_w_c = np.eye(3)
         self._since_query = 0
@@ -86,24 +94,31 @@ class LoopCloser:
             self._since_query = 0
             candidates.sort(key=lambda kf: _axis_angle(kf.R_w_c, self.R_w_c))
             for kf in candidates[:3]:
-                edge = self._verify(kf, k, points, descriptors)
+                edge = self._verify(kf, k, image, points, descriptors)
                 if edge is not None:
                     loops.append(edge)
             if loops:  # relocalise the running estimate on the best-supported loop
                 best = max(loops, key=lambda e: e.inliers)
                 self.R_w_c = next(kf.R_w_c for kf in self.keyframes if kf.index == best.i) @ best.R_i_j
         if new_keyframe:
-            self.keyframes.append(_Keyframe(k, self.R_w_c.copy(), points, descriptors))
+            corners = cv2.goodFeaturesToTrack(image, 300, 0.01, 7.0, blockSize=7)
+            corners = np.empty((0, 2), np.float32) if corners is None else corners.reshape(-1, 2)
+            self.keyframes.append(_Keyframe(k, self.R_w_c.copy(), image, corners, points, descriptors))
         return loops
 
-    def _verify(self, kf: _Keyframe, k: int, points: np.ndarray, descriptors) -> RelativeRotation | None:
+    def _verify(self, kf: _Keyframe, k: int, image: np.ndarray, points: np.ndarray, descriptors) -> RelativeRotation | None:
+        """The loop kf -> k: matched keypoints give it, LK from the keyframe's corners refines it."""
         a, b = self.features.match(kf.descriptors, descriptors)
         if len(a) < self.config.loop_min_inliers:
             return None
-        edge = measure(self.geometry, self.camera, kf.points[a], points[b], kf.index, k)
-        if edge is None or weakness(self.geometry, edge, self.camera.focal_px):
+        coarse = measure(self.coarse, self.camera, kf.points[a], points[b], kf.index, k)
+        if coarse is None or weakness(self.coarse, coarse, self.camera.focal_px):
             return None
-        return edge
+        cur, ok = lk_track(self.camera, kf.image, kf.corners, image, self.lk, coarse.R_i_j, fb_max_px=1.0)
+        fine = measure(self.fine, self.camera, kf.corners[ok], cur[ok], kf.index, k) if ok.sum() >= self.config.loop_min_inliers else None
+        if fine is None or weakness(self.fine, fine, self.camera.focal_px):
+            return coarse
+        return fine
 
 
 def _axis_angle(R_w_a: np.ndarray, R_w_b: np.ndarray) -> float:

@@ -52,7 +52,10 @@ def rotation_ransac(
     pairs = rng.integers(0, n, (hypotheses, 2))
     pairs = pairs[pairs[:, 0] != pairs[:, 1]]
     R = kabsch(f_prev[pairs], f_cur[pairs])
-    inliers = angular_residuals(R, f_prev, f_cur) < threshold_rad
+    # f_cur . (R f_prev) for every hypothesis and point in one product: (K, 9) @ (9, N); an angle
+    # below the threshold is a cosine above its cosine (no arccos over K x N values).
+    outer = (f_cur[:, :, None] * f_prev[:, None, :]).reshape(n, 9)
+    inliers = R.reshape(len(R), 9) @ outer.T > np.cos(threshold_rad)
     best = int(np.argmax(inliers.sum(axis=1)))
     R_best, mask = R[best], inliers[best]
     for _ in range(2):
