@@ -93,13 +93,11 @@ class LoopCloser:
         if query:
             self._since_query = 0
             candidates.sort(key=lambda kf: _axis_angle(kf.R_w_c, self.R_w_c))
-            for kf in candidates[:3]:
-                edge = self._verify(kf, k, image, points, descriptors)
-                if edge is not None:
-                    loops.append(edge)
-            if loops:  # relocalise the running estimate on the best-supported loop
-                best = max(loops, key=lambda e: e.inliers)
-                self.R_w_c = next(kf.R_w_c for kf in self.keyframes if kf.index == best.i) @ best.R_i_j
+            edge = self._verify(candidates[0], k, image, points, descriptors)  # the closest view overlaps most
+            if edge is not None:
+                loops.append(edge)
+            if loops:  # relocalise the running estimate on the loop
+                self.R_w_c = candidates[0].R_w_c @ loops[0].R_i_j
         if new_keyframe:
             corners = cv2.goodFeaturesToTrack(image, 300, 0.01, 7.0, blockSize=7)
             corners = np.empty((0, 2), np.float32) if corners is None else corners.reshape(-1, 2)
