@@ -125,13 +125,8 @@ class GtsamBackend(Backend):
             if a < t_imu[0] or b > t_imu[-1] + 0.1:
                 continue  # no gyro over this interval
             pim = gtsam.PreintegratedAhrsMeasurements(params, np.zeros(3))
-            first = max(int(np.searchsorted(t_imu, a, side="right")) - 1, 0)
-            for s in range(first, len(t_imu)):
-                start, end = max(t_imu[s], a), min(t_imu[s + 1] if s + 1 < len(t_imu) else b, b)
-                if start >= b:
-                    break
-                if end > start:
-                    pim.integrateMeasurement(imu.gyro[s], end - start)
+            for s, dt in imu.readings_between(a, b, c.imu_time_offset_s):
+                pim.integrateMeasurement(imu.gyro[s], dt)
             by_frame[k].append(gtsam.AHRSFactor(k - 1, k, bias, pim))
 
     def solve(

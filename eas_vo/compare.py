@@ -173,27 +173,27 @@ def table_markdown(rows: list[dict]) -> str:
     """The paper's Table 1: a row per source type (and sweep point), per sequence and method
     (tracker+backend) the average NC and average APE [rad]; the best of each column in bold."""
     datasets = list(dict.fromkeys(r["dataset"] for r in rows))
-    backends = list(dict.fromkeys(r["method"] for r in rows))
+    methods = list(dict.fromkeys(r["method"] for r in rows))
     sources = list(dict.fromkeys((r["frontend"], r["sweep"]) for r in rows))
     by_key = {(r["dataset"], r["method"], r["frontend"], r["sweep"]): r for r in rows}
     best_nc, best_ape = _best(rows, "nc_mean", lower=False), _best(rows, "ape_mean_rad", lower=True)
-    head1 = ["Sequence"] + [f"{slug(d)} ({b})" for d in datasets for b in backends for _ in (0, 1)]
-    head2 = ["Source type"] + ["average NC", "average APE"] * (len(datasets) * len(backends))
+    head1 = ["Sequence"] + [f"{slug(d)} ({m})" for d in datasets for m in methods for _ in (0, 1)]
+    head2 = ["Source type"] + ["average NC", "average APE"] * (len(datasets) * len(methods))
     lines = ["| " + " | ".join(head1) + " |", "|" + "---|" * len(head1), "| " + " | ".join(head2) + " |"]
     for frontend, sweep in sources:
         cells = [frontend + (f" ({sweep})" if sweep else "")]
         for d in datasets:
-            for b in backends:
-                r = by_key.get((d, b, frontend, sweep))
+            for m in methods:
+                r = by_key.get((d, m, frontend, sweep))
                 if r is None or r["status"] != "ok":
                     cells += ["failed" if r else "", (r or {}).get("error", "")[:60]]
                     continue
                 nc, ape = r["nc_mean"], r["ape_mean_rad"]
                 nc_text = f"{nc:.0f}"
                 ape_text = f"{ape:.3f}" if ape == ape else "n/a"
-                if nc == best_nc.get((d, b)):
+                if nc == best_nc.get((d, m)):
                     nc_text = f"**{nc_text}**"
-                if ape == best_ape.get((d, b)):
+                if ape == best_ape.get((d, m)):
                     ape_text = f"**{ape_text}**"
                 cells += [nc_text, ape_text]
         lines.append("| " + " | ".join(cells) + " |")

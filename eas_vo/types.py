@@ -102,6 +102,19 @@ class ImuSeries:
     acc: np.ndarray
     gyro: np.ndarray
 
+    def readings_between(self, t0: float, t1: float, time_offset_s: float = 0.0) -> list[tuple[int, float]]:
+        """(index, duration [s]) of each reading that holds within frame times [t0, t1], a reading
+        held until the next one (the last until t1); IMU time = frame time + time_offset_s."""
+        t = self.t - time_offset_s
+        out = []
+        for s in range(max(int(np.searchsorted(t, t0, side="right")) - 1, 0), len(t)):
+            start, end = max(t[s], t0), min(t[s + 1] if s + 1 < len(t) else t1, t1)
+            if start >= t1:
+                break
+            if end > start:
+                out.append((s, end - start))
+        return out
+
 
 @dataclass(frozen=True)
 class Sample:

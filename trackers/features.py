@@ -6,6 +6,9 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
+from eas_vo.trackers.measurement import TwoViewConfig, measure
+from eas_vo.types import CameraModel, RelativeRotation
+
 DETECTORS = ("orb", "sift")  # AKAZE left OpenCV's main modules in 5.0
 MATCHINGS = ("ratio", "crosscheck")
 
@@ -56,3 +59,16 @@ class Features:
             return np.empty(0, int), np.empty(0, int)
         a, b = np.array(pairs).T
         return a, b
+
+    def rotation(
+        self, config: TwoViewConfig, camera: CameraModel, detected_i: tuple, detected_j: tuple, i: int, j: int,
+        min_matches: int = MIN_MATCHES,
+    ) -> tuple[RelativeRotation | None, int]:
+        """R_i_j from two detections (keypoints [px], descriptors) by their matches, and the
+        number of matches. None with fewer than `min_matches` matches, or a model with fewer
+        inliers (a rotation so few matches support is noise)."""
+        a, b = self.match(detected_i[1], detected_j[1])
+        if len(a) < min_matches:
+            return None, len(a)
+        edge = measure(config, camera, detected_i[0][a], detected_j[0][b], i, j)
+        return (edge if edge is not None and edge.inliers >= min_matches else None), len(a)

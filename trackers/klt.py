@@ -17,7 +17,7 @@ import numpy as np
 from eas_vo.errors import ConfigError
 from eas_vo.geometry.rotations import rotvec_to_matrix
 from eas_vo.plugins import Tracker
-from eas_vo.trackers.features import DETECTORS, MAX_RESIDUAL_PX, MIN_MATCHES, RANSAC_THRESHOLD_PX, Features
+from eas_vo.trackers.features import DETECTORS, MAX_RESIDUAL_PX, RANSAC_THRESHOLD_PX, Features
 from eas_vo.trackers.loops import LoopClosureConfig, LoopCloser
 from eas_vo.trackers.measurement import TwoViewConfig, frame_record, measure
 from eas_vo.trackers.motion import gyro_rotation, lk_params, lk_track, scaled_rotation
@@ -151,15 +151,6 @@ class KltTracker(Tracker):
             return scaled_rotation(R_last, (t - t_prev) / dt_last)
         return None
 
-    def _match_fallback(self, image: np.ndarray, k: int) -> tuple[RelativeRotation | None, int]:
-        """The frame-to-frame rotation by descriptor matching of the previous and this image."""
-        points_prev, desc_prev = self._features.detect(self._prev_image)
-        points, desc = self._features.detect(image)
-        a, b = self._features.match(desc_prev, desc)
-        if len(a) < MIN_MATCHES:
-            return None, len(a)
-        return measure(self._fallback_config, self.camera, points_prev[a], points[b], k - 1, k), len(a)
-
     def process(self, image: np.ndarray, t: float) -> tuple[FrameRecord, list[RelativeRotation]]:
         """Track into `image` (uint8, sensor size) taken at `t` [s]."""
         c = self.config
@@ -189,7 +180,8 @@ class KltTracker(Tracker):
 
         record = frame_record(c, self.camera, k, t, nc, step, nc < c.threshold2, nc >= c.threshold1)
         if self._features is not None and record.status in ("weak", "lost"):
-            matched, n_matched = self._match_fallback(image, k)
+            matched, n_matched = self._features.rotation(  # descriptor matching of the previous and this image
+                self._fallback_config, self.camera, self._features.detect(self._prev_image), self._features.detect(image), k - 1, k)
             rescued = frame_record(self._fallback_config, self.camera, k, t, n_matched, matched, True, True)
             if rescued.status == "ok" and (step is None or matched.sigma_rad < step.sigma_rad):
                 step, edges, record = matched, [matched], rescued

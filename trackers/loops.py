@@ -57,8 +57,7 @@ class _Keyframe:
     R_w_c: np.ndarray
     image: np.ndarray
     corners: np.ndarray  # Shi-Tomasi corners [px], for the LK refinement
-    points: np.ndarray  # keypoints [px] with their descriptors
-    descriptors: np.ndarray | None
+    detected: tuple  # keypoints [px] and their descriptors
 
 
 class LoopCloser:
@@ -88,28 +87,25 @@ class LoopCloser:
         query = candidates and (lost or self._since_query >= c.loop_every)
         if not (query or new_keyframe):
             return []
-        points, descriptors = self.features.detect(image)
+        detected = self.features.detect(image)
         loops = []
         if query:
             self._since_query = 0
-            candidates.sort(key=lambda kf: _axis_angle(kf.R_w_c, self.R_w_c))
-            edge = self._verify(candidates[0], k, image, points, descriptors)  # the closest view overlaps most
+            closest = min(candidates, key=lambda kf: _axis_angle(kf.R_w_c, self.R_w_c))  # overlaps most
+            edge = self._verify(closest, k, image, detected)
             if edge is not None:
-                loops.append(edge)
-            if loops:  # relocalise the running estimate on the loop
-                self.R_w_c = candidates[0].R_w_c @ loops[0].R_i_j
+                loops = [edge]
+                self.R_w_c = closest.R_w_c @ edge.R_i_j  # relocalise the running estimate on the loop
         if new_keyframe:
             corners = cv2.goodFeaturesToTrack(image, 300, 0.01, 7.0, blockSize=7)
             corners = np.empty((0, 2), np.float32) if corners is None else corners.reshape(-1, 2)
-            self.keyframes.append(_Keyframe(k, self.R_w_c.copy(), image, corners, points, descriptors))
+            self.keyframes.append(_Keyframe(k, self.R_w_c.copy(), image, corners, detected))
         return loops
 
-    def _verify(self, kf: _Keyframe, k: int, image: np.ndarray, points: np.ndarray, descriptors) -> RelativeRotation | None:
+    def _verify(self, kf: _Keyframe, k: int, image: np.ndarray, detected: tuple) -> RelativeRotation | None:
         """The loop kf -> k: matched keypoints give it, LK from the keyframe's corners refines it."""
-        a, b = self.features.match(kf.descriptors, descriptors)
-        if len(a) < self.config.loop_min_inliers:
-            return None
-        coarse = measure(self.coarse, self.camera, kf.points[a], points[b], kf.index, k)
+        coarse, _ = self.features.rotation(self.coarse, self.camera, kf.detected, detected, kf.index, k,
+                                           self.config.loop_min_inliers)
         if coarse is None or weakness(self.coarse, coarse, self.camera.focal_px):
             return None
         cur, ok = lk_track(self.camera, kf.image, kf.corners, image, self.lk, coarse.R_i_j, fb_max_px=1.0)

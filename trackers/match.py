@@ -11,7 +11,7 @@ import numpy as np
 from eas_vo.plugins import Tracker
 from eas_vo.trackers.features import DETECTORS, MATCHINGS, MAX_RESIDUAL_PX, MIN_MATCHES, RANSAC_THRESHOLD_PX, Features
 from eas_vo.trackers.loops import LoopClosureConfig, LoopCloser
-from eas_vo.trackers.measurement import TwoViewConfig, frame_record, measure
+from eas_vo.trackers.measurement import TwoViewConfig, frame_record
 from eas_vo.types import FrameRecord, RelativeRotation
 from eas_vo.validation import check_choice, check_range
 
@@ -74,16 +74,12 @@ class MatchTracker(Tracker):
         k = self._k
         if self._previous is not None and t <= self._prev_t:
             return FrameRecord(k, t, 0, 0, "same_time", False), []
-        points, descriptors = self.features.detect(image)
-        previous, self._previous, self._prev_t = self._previous, (points, descriptors), t
+        detected = self.features.detect(image)
+        previous, self._previous, self._prev_t = self._previous, detected, t
         if previous is None:
             record, edges = FrameRecord(k, t, 0, 0, "first", True), []
         else:
-            a, b = self.features.match(previous[1], descriptors)
-            nc = len(a)
-            step = measure(c, self.camera, previous[0][a], points[b], k - 1, k) if nc >= c.min_matches else None
-            if step is not None and step.inliers < c.min_matches:
-                step = None  # unsupported: "no model"
+            step, nc = self.features.rotation(c, self.camera, previous, detected, k - 1, k, c.min_matches)
             record, edges = frame_record(c, self.camera, k, t, nc, step, True, nc >= c.min_matches), [step] if step else []
         if self._loops is not None:
             edges = edges + self._loops.step(k, image, edges, lost=record.status == "lost")

@@ -1,6 +1,6 @@
 """Motion for trackers: the rotation between two frames predicted from the gyro or from a
-constant angular velocity, where it moves image points, and Lucas-Kanade tracking started
-from such a prediction on a derotated image. Not a plugin."""
+constant angular velocity, and Lucas-Kanade tracking started from such a prediction on a
+derotated image. Not a plugin."""
 
 from __future__ import annotations
 
@@ -19,36 +19,15 @@ def gyro_rotation(imu: ImuSeries, t0: float, t1: float, R_imu_cam: np.ndarray, t
     if len(t) < 2 or t0 < t[0] or t1 > t[-1]:
         return None
     R = np.eye(3)
-    first = max(int(np.searchsorted(t, t0, side="right")) - 1, 0)
     omega_cam = imu.gyro @ R_imu_cam  # rows: R_imu_cam^T omega_imu
-    for s in range(first, len(t)):
-        start, end = max(t[s], t0), min(t[s + 1] if s + 1 < len(t) else t1, t1)
-        if start >= t1:
-            break
-        if end > start:
-            R = R @ Rotation.from_rotvec(omega_cam[s] * (end - start)).as_matrix()
+    for s, dt in imu.readings_between(t0, t1, time_offset_s):
+        R = R @ Rotation.from_rotvec(omega_cam[s] * dt).as_matrix()
     return R
 
 
 def scaled_rotation(R: np.ndarray, factor: float) -> np.ndarray:
     """The rotation about the same axis by `factor` times the angle (constant angular velocity)."""
     return Rotation.from_rotvec(Rotation.from_matrix(R).as_rotvec() * factor).as_matrix()
-
-
-def predict_pixels(camera: CameraModel, pts_px: np.ndarray, R_prev_cur: np.ndarray) -> np.ndarray:
-    """Where points seen at `pts_px` [px] in the previous frame appear after the camera rotated
-    by R_prev_cur (infinite depth: x_cur ~ K R_cur_prev K^-1 x_prev, with distortion).
-    Points that would fall behind the camera keep their position. (N, 2) float32."""
-    if len(pts_px) == 0:
-        return np.asarray(pts_px, np.float32).reshape(-1, 2)
-    f_prev = np.column_stack([camera.undistort(pts_px), np.ones(len(pts_px))])
-    f_cur = f_prev @ R_prev_cur  # rows: R_cur_prev f_prev
-    ahead = f_cur[:, 2] > 1e-6
-    out = np.asarray(pts_px, np.float64).reshape(-1, 2).copy()
-    if ahead.any():
-        projected, _ = cv2.projectPoints(f_cur[ahead], np.zeros(3), np.zeros(3), camera.K, camera.dist)
-        out[ahead] = projected.reshape(-1, 2)
-    return out.astype(np.float32)
 
 
 def lk_params(win_size: int = 21, max_level: int = 3) -> dict:
