@@ -4,7 +4,7 @@ Prints frames/s and the real-time factor (sequence duration / processing time) o
 whole run, and where the time goes (loading, frontend, tracker, backend).
 
     python benchmarks/bench_pipeline.py [--dataset SPEC] [--frontend eas] [--tracker klt]
-                                        [--backend chain] [--config FILE] [--repeat 3]
+                                        [--backend chain] [--config FILE] [--set KEY=VALUE] [--repeat 3]
 """
 
 from __future__ import annotations
@@ -58,10 +58,11 @@ def main() -> None:
     parser.add_argument("--tracker", default="klt")
     parser.add_argument("--backend", default="chain")
     parser.add_argument("--config", help="a config file or bundled name (its [run] plugins are overridden by the flags)")
+    parser.add_argument("--set", action="append", default=[], metavar="SECTION.KEY=VALUE", help="a config override, as eas-vo run --set")
     parser.add_argument("--repeat", type=int, default=3)
     args = parser.parse_args()
     chosen = {"dataset": args.dataset, "frontend": args.frontend, "tracker": args.tracker, "backend": args.backend}
-    cfg = config.resolve(args.config, chosen)
+    cfg = config.resolve(args.config, chosen, args.set)
     registry.open_dataset(args.dataset).events()  # simulate and cache outside the timing
 
     runs = [pipeline.run(cfg).metrics for _ in range(args.repeat)]

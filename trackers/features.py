@@ -6,7 +6,8 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from eas_vo.trackers.measurement import TwoViewConfig, measure
+from eas_vo.trackers.measurement import TwoViewConfig, measure, weakness
+from eas_vo.trackers.motion import lk_params, lk_track
 from eas_vo.types import CameraModel, RelativeRotation
 
 DETECTORS = ("orb", "sift")  # AKAZE left OpenCV's main modules in 5.0
@@ -72,3 +73,36 @@ class Features:
             return None, len(a)
         edge = measure(config, camera, detected_i[0][a], detected_j[0][b], i, j)
         return (edge if edge is not None and edge.inliers >= min_matches else None), len(a)
+
+
+class RefinedMatching:
+    """The rotation between two views from matched keypoints, refined by LK: the matches give
+    a coarse rotation (keypoints localised to about half a pixel), LK started from it tracks
+    the first view's corners into the second (forward-backward within 1 px) and, unless that
+    measurement is weak, replaces it. A weak coarse rotation is no measurement.
+
+    Args:
+        features: the keypoint detector and matcher.
+        fine: the geometry of the LK refinement (the coarse one: rotation-only, twice its thresholds).
+        min_inliers: fewer matches, or inliers, and nothing is measured.
+    """
+
+    def __init__(self, features: Features, camera: CameraModel, fine: TwoViewConfig, min_inliers: int = MIN_MATCHES):
+        self.features, self.camera, self.fine, self.min_inliers = features, camera, fine, min_inliers
+        self.coarse = TwoViewConfig(geometry="rotation", ransac_threshold_px=RANSAC_THRESHOLD_PX,
+                                    max_residual_px=MAX_RESIDUAL_PX, min_inliers=min_inliers)
+        self.lk = lk_params()
+
+    def rotation(
+        self, source: np.ndarray, corners: np.ndarray, source_detected: tuple, image: np.ndarray, detected: tuple, i: int, j: int,
+    ) -> tuple[RelativeRotation | None, int]:
+        """R_i_j from `source` (its Shi-Tomasi `corners` [px] and `source_detected` keypoints)
+        to `image` (`detected`), and the number of matches."""
+        coarse, n_matches = self.features.rotation(self.coarse, self.camera, source_detected, detected, i, j, self.min_inliers)
+        if coarse is None or weakness(self.coarse, coarse, self.camera.focal_px):
+            return None, n_matches
+        cur, ok = lk_track(self.camera, source, corners, image, self.lk, coarse.R_i_j, fb_max_px=1.0)
+        fine = measure(self.fine, self.camera, corners[ok], cur[ok], i, j) if ok.sum() >= self.min_inliers else None
+        if fine is None or weakness(self.fine, fine, self.camera.focal_px):
+            return coarse, n_matches
+        return fine, n_matches

@@ -1,7 +1,8 @@
-"""Loop closure and relocalisation, for any tracker: keyframes with descriptors and corners,
-recognised again when the running estimate says the camera looks the same way (or after the
-track was lost), verified with rotation-only RANSAC on the matched keypoints, refined by LK
-from the keyframe's corners, added as edges kf -> k. Not a plugin."""
+"""Loop closure and relocalisation, for any tracker: keyframes (their keypoints, descriptors
+and corners detected only once a query needs them), recognised again when the running
+estimate says the camera looks the same way (or after the track was lost), verified with
+rotation-only RANSAC on the matched keypoints, refined by LK from the keyframe's corners,
+added as edges kf -> k. Not a plugin."""
 
 from __future__ import annotations
 
@@ -11,9 +12,8 @@ import cv2
 import numpy as np
 
 from eas_vo.geometry.rotations import geodesic_angle
-from eas_vo.trackers.features import DETECTORS, MAX_RESIDUAL_PX, RANSAC_THRESHOLD_PX, Features
-from eas_vo.trackers.measurement import TwoViewConfig, measure, weakness
-from eas_vo.trackers.motion import lk_params, lk_track
+from eas_vo.trackers.features import DETECTORS, Features, RefinedMatching
+from eas_vo.trackers.measurement import TwoViewConfig
 from eas_vo.types import CameraModel, RelativeRotation
 from eas_vo.validation import check_choice, check_range
 
@@ -28,7 +28,9 @@ class LoopClosureConfig:
         loop_min_gap: a frame may close a loop only with keyframes at least this many frames old.
         loop_overlap_deg: candidates are keyframes whose optical axis is within this angle [deg]
             of the current one by the running estimate (about half the DAVIS240's field of view).
-        loop_every: query for loops every this many frames (every frame after a lost one).
+        loop_every: query for loops at most every this many frames, and only once the view
+            turned `loop_keyframe_deg` since the last query (a still camera would find the
+            loop it just closed again); after a lost frame, at once.
         loop_min_inliers: a loop is accepted with at least this many rotation-only inliers
             (and not weak): twice the support a frame-to-frame edge needs, since a wrong loop
             costs more than a missed one.
@@ -56,8 +58,8 @@ class _Keyframe:
     index: int
     R_w_c: np.ndarray
     image: np.ndarray
-    corners: np.ndarray  # Shi-Tomasi corners [px], for the LK refinement
-    detected: tuple  # keypoints [px] and their descriptors
+    corners: np.ndarray | None = None  # Shi-Tomasi corners [px] for the LK refinement, once needed
+    detected: tuple | None = None  # keypoints [px] and their descriptors, once needed
 
 
 class LoopCloser:
@@ -67,13 +69,13 @@ class LoopCloser:
     def __init__(self, config: LoopClosureConfig, camera: CameraModel):
         self.config, self.camera = config, camera
         self.features = Features(config.loop_detector)
-        self.coarse = TwoViewConfig(geometry="rotation", ransac_threshold_px=RANSAC_THRESHOLD_PX,
-                                    max_residual_px=MAX_RESIDUAL_PX, min_inliers=config.loop_min_inliers)
-        self.fine = TwoViewConfig(geometry="rotation", min_inliers=config.loop_min_inliers)
-        self.lk = lk_params()
+        self.matching = RefinedMatching(self.features, camera, TwoViewConfig(geometry="rotation", min_inliers=config.loop_min_inliers),
+                                        config.loop_min_inliers)
         self.keyframes: list[_Keyframe] = []
+        self._axes = np.empty((0, 3))  # each keyframe's optical axis in the world frame
         self.R_w_c = np.eye(3)
         self._since_query = 0
+        self._R_w_query = np.eye(3)  # the running estimate at the last query
 
     def step(self, k: int, image: np.ndarray, edges: list[RelativeRotation], lost: bool) -> list[RelativeRotation]:
         c = self.config
@@ -81,40 +83,45 @@ class LoopCloser:
         if step is not None:
             self.R_w_c = self.R_w_c @ step.R_i_j
         self._since_query += 1
-        candidates = [kf for kf in self.keyframes if k - kf.index >= c.loop_min_gap
-                      and (lost or np.degrees(_axis_angle(kf.R_w_c, self.R_w_c)) < c.loop_overlap_deg)]
         new_keyframe = not self.keyframes or np.degrees(geodesic_angle(self.keyframes[-1].R_w_c, self.R_w_c)) > c.loop_keyframe_deg
-        query = candidates and (lost or self._since_query >= c.loop_every)
+        candidates = self._candidates(k, lost)
+        moved = np.degrees(geodesic_angle(self._R_w_query, self.R_w_c)) > c.loop_keyframe_deg
+        query = len(candidates) > 0 and (lost or (self._since_query >= c.loop_every and moved))
         if not (query or new_keyframe):
             return []
-        detected = self.features.detect(image)
-        loops = []
+        current, loops = _Keyframe(k, self.R_w_c, image), []
         if query:
-            self._since_query = 0
-            closest = min(candidates, key=lambda kf: _axis_angle(kf.R_w_c, self.R_w_c))  # overlaps most
-            edge = self._verify(closest, k, image, detected)
+            self._since_query, self._R_w_query = 0, self.R_w_c.copy()
+            closest = self.keyframes[candidates[0]]
+            edge, _ = self.matching.rotation(closest.image, self._corners(closest), self._detected(closest),
+                                             image, self._detected(current), closest.index, k)
             if edge is not None:
                 loops = [edge]
                 self.R_w_c = closest.R_w_c @ edge.R_i_j  # relocalise the running estimate on the loop
         if new_keyframe:
-            corners = cv2.goodFeaturesToTrack(image, 300, 0.01, 7.0, blockSize=7)
-            corners = np.empty((0, 2), np.float32) if corners is None else corners.reshape(-1, 2)
-            self.keyframes.append(_Keyframe(k, self.R_w_c.copy(), image, corners, detected))
+            current.R_w_c = self.R_w_c.copy()
+            self.keyframes.append(current)
+            self._axes = np.vstack([self._axes, self.R_w_c[:, 2]])
         return loops
 
-    def _verify(self, kf: _Keyframe, k: int, image: np.ndarray, detected: tuple) -> RelativeRotation | None:
-        """The loop kf -> k: matched keypoints give it, LK from the keyframe's corners refines it."""
-        coarse, _ = self.features.rotation(self.coarse, self.camera, kf.detected, detected, kf.index, k,
-                                           self.config.loop_min_inliers)
-        if coarse is None or weakness(self.coarse, coarse, self.camera.focal_px):
-            return None
-        cur, ok = lk_track(self.camera, kf.image, kf.corners, image, self.lk, coarse.R_i_j, fb_max_px=1.0)
-        fine = measure(self.fine, self.camera, kf.corners[ok], cur[ok], kf.index, k) if ok.sum() >= self.config.loop_min_inliers else None
-        if fine is None or weakness(self.fine, fine, self.camera.focal_px):
-            return coarse
-        return fine
+    def _detected(self, keyframe: _Keyframe) -> tuple:
+        """The keyframe's keypoints and descriptors, detected the first time they are needed."""
+        if keyframe.detected is None:
+            keyframe.detected = self.features.detect(keyframe.image)
+        return keyframe.detected
 
+    def _corners(self, keyframe: _Keyframe) -> np.ndarray:
+        """The keyframe's Shi-Tomasi corners [px], detected the first time they are needed."""
+        if keyframe.corners is None:
+            corners = cv2.goodFeaturesToTrack(keyframe.image, 300, 0.01, 7.0, blockSize=7)
+            keyframe.corners = np.empty((0, 2), np.float32) if corners is None else corners.reshape(-1, 2)
+        return keyframe.corners
 
-def _axis_angle(R_w_a: np.ndarray, R_w_b: np.ndarray) -> float:
-    """Angle [rad] between the optical axes (camera z) of two orientations."""
-    return float(np.arccos(np.clip(R_w_a[:, 2] @ R_w_b[:, 2], -1.0, 1.0)))
+    def _candidates(self, k: int, lost: bool) -> np.ndarray:
+        """Indices into `keyframes` of those old enough to close a loop with frame k and looking
+        within `loop_overlap_deg` of its optical axis (any, after a lost frame), the closest first."""
+        c = self.config
+        old = np.flatnonzero(k - np.array([kf.index for kf in self.keyframes], int) >= c.loop_min_gap)
+        angles = np.arccos(np.clip(self._axes[old] @ self.R_w_c[:, 2], -1.0, 1.0))
+        keep = np.ones(len(old), bool) if lost else np.degrees(angles) < c.loop_overlap_deg
+        return old[keep][np.argsort(angles[keep], kind="stable")]

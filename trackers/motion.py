@@ -4,10 +4,12 @@ derotated image. Not a plugin."""
 
 from __future__ import annotations
 
+from functools import reduce
+
 import cv2
 import numpy as np
-from scipy.spatial.transform import Rotation
 
+from eas_vo.geometry.rotations import rotvec_to_matrix
 from eas_vo.types import CameraModel, ImuSeries
 
 
@@ -18,16 +20,18 @@ def gyro_rotation(imu: ImuSeries, t0: float, t1: float, R_imu_cam: np.ndarray, t
     t = imu.t - time_offset_s
     if len(t) < 2 or t0 < t[0] or t1 > t[-1]:
         return None
-    R = np.eye(3)
-    omega_cam = imu.gyro @ R_imu_cam  # rows: R_imu_cam^T omega_imu
-    for s, dt in imu.readings_between(t0, t1, time_offset_s):
-        R = R @ Rotation.from_rotvec(omega_cam[s] * dt).as_matrix()
-    return R
+    held = imu.readings_between(t0, t1, time_offset_s)
+    if not held:
+        return np.eye(3)
+    index, dt = (np.array(column) for column in zip(*held))
+    omega_cam = imu.gyro[index] @ R_imu_cam  # rows: R_imu_cam^T omega_imu
+    return reduce(np.matmul, rotvec_to_matrix(omega_cam * dt[:, None]), np.eye(3))
 
 
 def scaled_rotation(R: np.ndarray, factor: float) -> np.ndarray:
     """The rotation about the same axis by `factor` times the angle (constant angular velocity)."""
-    return Rotation.from_rotvec(Rotation.from_matrix(R).as_rotvec() * factor).as_matrix()
+    rotvec, _ = cv2.Rodrigues(np.asarray(R, float))
+    return cv2.Rodrigues(rotvec * factor)[0]
 
 
 def lk_params(win_size: int = 21, max_level: int = 3) -> dict:

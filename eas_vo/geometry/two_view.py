@@ -41,29 +41,53 @@ def angular_residuals(R_cur_prev: np.ndarray, f_prev: np.ndarray, f_cur: np.ndar
 
 
 def rotation_ransac(
-    f_prev: np.ndarray, f_cur: np.ndarray, threshold_rad: float, hypotheses: int = 256, seed: int = 0
+    f_prev: np.ndarray, f_cur: np.ndarray, threshold_rad: float, confidence: float = 0.999,
+    max_hypotheses: int = 256, batch: int = 32, seed: int = 0,
 ) -> tuple[np.ndarray, np.ndarray] | None:
-    """Pure-rotation model: 2-point minimal sets scored in one batch, then least squares on the
-    inliers (twice). Returns (R_cur_prev, inlier mask) or None with fewer than 2 points."""
+    """Pure-rotation model: 2-point minimal sets scored in batches until, given the best inlier
+    ratio w so far, another sample is unlikely to do better (log(1 - confidence) / log(1 - w^2)
+    samples, at most `max_hypotheses`), then least squares on the inliers (twice). Returns
+    (R_cur_prev, inlier mask) or None with fewer than 2 points."""
     n = len(f_prev)
     if n < 2:
         return None
     rng = np.random.default_rng(seed)
-    pairs = rng.integers(0, n, (hypotheses, 2))
-    pairs = pairs[pairs[:, 0] != pairs[:, 1]]
-    R = kabsch(f_prev[pairs], f_cur[pairs])
     # f_cur . (R f_prev) for every hypothesis and point in one product: (K, 9) @ (9, N); an angle
     # below the threshold is a cosine above its cosine (no arccos over K x N values).
-    outer = (f_cur[:, :, None] * f_prev[:, None, :]).reshape(n, 9)
-    inliers = R.reshape(len(R), 9) @ outer.T > np.cos(threshold_rad)
-    best = int(np.argmax(inliers.sum(axis=1)))
-    R_best, mask = R[best], inliers[best]
+    outer = (f_cur[:, :, None] * f_prev[:, None, :]).reshape(n, 9).T
+    cos_threshold = np.cos(threshold_rad)
+    drawn, needed, best_count = 0, max_hypotheses, -1
+    while drawn < needed:
+        pairs = rng.integers(0, n, (batch, 2))
+        pairs = pairs[pairs[:, 0] != pairs[:, 1]]
+        drawn += batch
+        if len(pairs) == 0:
+            continue
+        R = kabsch(f_prev[pairs], f_cur[pairs])
+        inliers = R.reshape(len(R), 9) @ outer > cos_threshold
+        counts = inliers.sum(axis=1)
+        best = int(np.argmax(counts))
+        if counts[best] > best_count:
+            best_count, R_best, mask = int(counts[best]), R[best], inliers[best]
+            needed = min(max_hypotheses, _samples_needed(best_count / n, confidence))
+    if best_count < 0:
+        return None
     for _ in range(2):
         if mask.sum() < 2:
             break
         R_best = kabsch(f_prev[mask], f_cur[mask])
         mask = angular_residuals(R_best, f_prev, f_cur) < threshold_rad
     return R_best, mask
+
+
+def _samples_needed(inlier_ratio: float, confidence: float) -> int:
+    """2-point samples needed to draw one all-inlier sample with probability `confidence`."""
+    all_inliers = inlier_ratio**2
+    if all_inliers >= 1.0:
+        return 1
+    if all_inliers <= 0.0:
+        return np.iinfo(np.int32).max
+    return int(np.ceil(np.log(1.0 - confidence) / np.log(1.0 - all_inliers)))
 
 
 def sampson_residuals(E: np.ndarray, x_prev: np.ndarray, x_cur: np.ndarray) -> np.ndarray:
@@ -164,7 +188,7 @@ def rotation_from_correspondences(
         E, R_ess, ess_mask = found
         return _result(R_ess, ess_mask, "essential", sampson_residuals(E, pts_prev_n, pts_cur_n), dims=1)
     f_prev, f_cur = bearings(pts_prev_n), bearings(pts_cur_n)
-    rotation = rotation_ransac(f_prev, f_cur, threshold)
+    rotation = rotation_ransac(f_prev, f_cur, threshold, confidence)
     if rotation is None:
         return None
     R_rot, rot_mask = rotation
