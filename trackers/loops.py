@@ -29,8 +29,8 @@ class LoopClosureConfig:
         loop_overlap_deg: candidates are keyframes whose optical axis is within this angle [deg]
             of the current one by the running estimate (about half the DAVIS240's field of view).
         loop_every: query for loops at most every this many frames, and only once the view
-            turned `loop_keyframe_deg` since the last query (a still camera would find the
-            loop it just closed again); after a lost frame, at once.
+            turned `loop_keyframe_deg` (along its path) since the last query: a still camera
+            would find the loop it just closed again. After a lost frame, at once.
         loop_min_inliers: a loop is accepted with at least this many rotation-only inliers
             (and not weak): twice the support a frame-to-frame edge needs, since a wrong loop
             costs more than a missed one.
@@ -75,23 +75,23 @@ class LoopCloser:
         self._axes = np.empty((0, 3))  # each keyframe's optical axis in the world frame
         self.R_w_c = np.eye(3)
         self._since_query = 0
-        self._R_w_query = np.eye(3)  # the running estimate at the last query
+        self._turned_deg = 0.0  # how far the view turned since the last query [deg], along its path
 
     def step(self, k: int, image: np.ndarray, edges: list[RelativeRotation], lost: bool) -> list[RelativeRotation]:
         c = self.config
         step = next((e for e in edges if e.j == k and e.i == k - 1), None)
         if step is not None:
             self.R_w_c = self.R_w_c @ step.R_i_j
+            self._turned_deg += np.degrees(geodesic_angle(np.eye(3), step.R_i_j))
         self._since_query += 1
         new_keyframe = not self.keyframes or np.degrees(geodesic_angle(self.keyframes[-1].R_w_c, self.R_w_c)) > c.loop_keyframe_deg
         candidates = self._candidates(k, lost)
-        moved = np.degrees(geodesic_angle(self._R_w_query, self.R_w_c)) > c.loop_keyframe_deg
-        query = len(candidates) > 0 and (lost or (self._since_query >= c.loop_every and moved))
+        query = len(candidates) > 0 and (lost or (self._since_query >= c.loop_every and self._turned_deg > c.loop_keyframe_deg))
         if not (query or new_keyframe):
             return []
         current, loops = _Keyframe(k, self.R_w_c, image), []
         if query:
-            self._since_query, self._R_w_query = 0, self.R_w_c.copy()
+            self._since_query, self._turned_deg = 0, 0.0
             closest = self.keyframes[candidates[0]]
             edge, _ = self.matching.rotation(closest.image, self._corners(closest), self._detected(closest),
                                              image, self._detected(current), closest.index, k)

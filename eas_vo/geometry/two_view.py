@@ -10,6 +10,7 @@ from __future__ import annotations
 from typing import NamedTuple
 
 import cv2
+import numba
 import numpy as np
 
 
@@ -52,10 +53,7 @@ def rotation_ransac(
     if n < 2:
         return None
     rng = np.random.default_rng(seed)
-    # f_cur . (R f_prev) for every hypothesis and point in one product: (K, 9) @ (9, N); an angle
-    # below the threshold is a cosine above its cosine (no arccos over K x N values).
-    outer = (f_cur[:, :, None] * f_prev[:, None, :]).reshape(n, 9).T
-    cos_threshold = np.cos(threshold_rad)
+    cos_threshold = np.cos(threshold_rad)  # an angle below the threshold is a cosine above its cosine
     drawn, needed, best_count = 0, max_hypotheses, -1
     while drawn < needed:
         pairs = rng.integers(0, n, (batch, 2))
@@ -63,21 +61,71 @@ def rotation_ransac(
         drawn += batch
         if len(pairs) == 0:
             continue
-        R = kabsch(f_prev[pairs], f_cur[pairs])
-        inliers = R.reshape(len(R), 9) @ outer > cos_threshold
-        counts = inliers.sum(axis=1)
+        R, counts = _two_point_hypotheses(f_prev, f_cur, pairs, cos_threshold)
         best = int(np.argmax(counts))
         if counts[best] > best_count:
-            best_count, R_best, mask = int(counts[best]), R[best], inliers[best]
+            best_count, R_best = int(counts[best]), R[best]
             needed = min(max_hypotheses, _samples_needed(best_count / n, confidence))
     if best_count < 0:
         return None
+    mask = np.einsum("ij,nj,ni->n", R_best, f_prev, f_cur) > cos_threshold
     for _ in range(2):
         if mask.sum() < 2:
             break
         R_best = kabsch(f_prev[mask], f_cur[mask])
         mask = angular_residuals(R_best, f_prev, f_cur) < threshold_rad
     return R_best, mask
+
+
+@numba.njit(cache=True, nogil=True)
+def _pair_frame(v, i, j, F):
+    """Write into F the orthonormal frame (columns: sum, difference, their cross product) of the
+    unit vectors v[i], v[j]; False if they are (anti)parallel."""
+    ns = nd = 0.0
+    for r in range(3):
+        F[r, 0] = v[i, r] + v[j, r]
+        F[r, 1] = v[i, r] - v[j, r]
+        ns += F[r, 0] * F[r, 0]
+        nd += F[r, 1] * F[r, 1]
+    if ns < 1e-24 or nd < 1e-24:
+        return False
+    ns, nd = np.sqrt(ns), np.sqrt(nd)
+    for r in range(3):
+        F[r, 0] /= ns
+        F[r, 1] /= nd
+    F[0, 2] = F[1, 0] * F[2, 1] - F[2, 0] * F[1, 1]
+    F[1, 2] = F[2, 0] * F[0, 1] - F[0, 0] * F[2, 1]
+    F[2, 2] = F[0, 0] * F[1, 1] - F[1, 0] * F[0, 1]
+    return True
+
+
+@numba.njit(cache=True, nogil=True)
+def _two_point_hypotheses(f_prev, f_cur, pairs, cos_threshold):
+    """For each 2-point sample (K, 2) of bearings: Kabsch's rotation of the pair in closed form
+    (a1 + a2 and a1 - a2 are orthogonal, so a1 b1^T + a2 b2^T is already an SVD in the frames
+    sum, difference, cross product of a and of b: R maps a's frame onto b's) and the number of
+    points it maps within the threshold. Returns (K, 3, 3) rotations and (K,) counts (0 for an
+    (anti)parallel pair, which defines no rotation)."""
+    K, n = pairs.shape[0], f_prev.shape[0]
+    R = np.zeros((K, 3, 3))
+    counts = np.zeros(K, np.int64)
+    A = np.empty((3, 3))
+    B = np.empty((3, 3))
+    for k in range(K):
+        if not (_pair_frame(f_prev, pairs[k, 0], pairs[k, 1], A) and _pair_frame(f_cur, pairs[k, 0], pairs[k, 1], B)):
+            continue
+        for r in range(3):
+            for c in range(3):
+                R[k, r, c] = B[r, 0] * A[c, 0] + B[r, 1] * A[c, 1] + B[r, 2] * A[c, 2]
+        count = 0
+        for m in range(n):
+            dot = 0.0
+            for r in range(3):
+                dot += f_cur[m, r] * (R[k, r, 0] * f_prev[m, 0] + R[k, r, 1] * f_prev[m, 1] + R[k, r, 2] * f_prev[m, 2])
+            if dot > cos_threshold:
+                count += 1
+        counts[k] = count
+    return R, counts
 
 
 def _samples_needed(inlier_ratio: float, confidence: float) -> int:

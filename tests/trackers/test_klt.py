@@ -135,10 +135,11 @@ def test_constant_velocity_prediction_bridges_a_long_gap(seed):
     assert_rotations_close(edge.R_i_j, Rotation.from_rotvec(10 * rotvec).as_matrix(), np.radians(0.2))
 
 
+@pytest.mark.parametrize("detector", ["orb", "sift"])
 @pytest.mark.parametrize("seed", range(3))
-def test_descriptor_fallback_rescues_a_lost_track(seed):
+def test_descriptor_fallback_rescues_a_lost_track(seed, detector):
     base, R_c0_c1 = big_pair(seed)
-    tracker = KltTracker(KltConfig(fallback="match", fallback_detector="sift"), CAMERA)
+    tracker = KltTracker(KltConfig(fallback="match", fallback_detector=detector), CAMERA)
     tracker.process(base, 0.0)
     record, (edge,) = tracker.process(warp_by_rotation(base, R_c0_c1.T), 0.05)
     assert record.status == "ok" and record.redetected

@@ -11,7 +11,7 @@ from eas_vo.backends.chain import ChainBackend
 from eas_vo.backends.gtsam_graph import GtsamBackend, GtsamConfig
 from eas_vo.errors import ConfigError
 from eas_vo.geometry.rotations import geodesic_angle
-from eas_vo.trackers.loops import LoopClosureConfig
+from eas_vo.trackers.loops import LoopCloser, LoopClosureConfig
 from eas_vo.trackers.match import MatchConfig, MatchTracker
 from eas_vo.types import RelativeRotation
 from helpers import CAMERA, K, textured_image
@@ -85,3 +85,21 @@ def test_false_loops_do_not_wreck_a_robust_graph(sweep, mode):
 def test_loop_options_are_checked():
     with pytest.raises(ConfigError, match="loop_min_inliers = 1 is out of range"):
         LoopClosureConfig(loop_min_inliers=1).validate()
+
+
+def test_queries_wait_for_motion_and_catch_a_return():
+    """A still camera never queries; one that turns 60 degrees away and back queries the
+    start's keyframe once it is within the overlap again."""
+    closer = LoopCloser(LoopClosureConfig(loop_closure=True), CAMERA)
+    queried = []
+    closer.matching.rotation = lambda source, corners, detected_src, image, detected, i, j: queried.append((i, j)) or (None, 0)
+    image = np.zeros((180, 240), np.uint8)
+    steps = [0.0] * 40 + [5.0] * 12 + [-5.0] * 12 + [0.0] * 10  # yaw per frame [deg]
+    for k, yaw in enumerate(steps):
+        step = Rotation.from_euler("y", yaw, degrees=True).as_matrix()
+        edges = [RelativeRotation(k - 1, k, step, 100, 1.0, 1e-4)] if k else []
+        closer.step(k, image, edges, lost=False)
+        if k < 40:
+            assert not queried, "a still camera queried"
+    returned = [j for i, j in queried if i == 0]
+    assert returned and min(returned) <= 64 + closer.config.loop_every, queried

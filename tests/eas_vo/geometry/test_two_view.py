@@ -5,6 +5,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from eas_vo.geometry.rotations import geodesic_angle
+from eas_vo.geometry import two_view
 from eas_vo.geometry.two_view import bearings, kabsch, rotation_from_correspondences, rotation_ransac
 
 F_PX = 200.0
@@ -31,6 +32,38 @@ def test_kabsch_recovers_an_exact_rotation():
     a = rng.normal(size=(10, 3))
     R = Rotation.from_rotvec([0.3, -0.2, 0.5]).as_matrix()
     np.testing.assert_allclose(kabsch(a, a @ R.T), R, atol=1e-12)
+
+
+def test_two_point_hypotheses_are_kabsch_and_count_inliers():
+    """The compiled closed form against numpy's SVD-based Kabsch on random pairs; its inlier
+    counts against a direct angle test; a pair of parallel bearings defines nothing."""
+    rng = np.random.default_rng(3)
+    x_prev, x_cur, _ = view_pair(rng, outliers=0.3)
+    f_prev, f_cur = bearings(x_prev), bearings(x_cur)
+    pairs = rng.integers(0, len(f_prev), (64, 2))
+    pairs = pairs[pairs[:, 0] != pairs[:, 1]]
+    f_prev[pairs[0, 1]] = f_prev[pairs[0, 0]]  # parallel in the previous view
+    threshold = 1.5 / F_PX
+    R, counts = two_view._two_point_hypotheses(f_prev, f_cur, pairs, np.cos(threshold))
+    np.testing.assert_allclose(R[1:], kabsch(f_prev[pairs[1:]], f_cur[pairs[1:]]), atol=1e-12)
+    angles = np.arccos(np.clip(np.einsum("kij,nj,ni->kn", R[1:], f_prev, f_cur), -1, 1))
+    np.testing.assert_array_equal(counts[1:], (angles < threshold).sum(axis=1))
+    assert counts[0] == 0 and not R[0].any()
+
+
+@pytest.mark.parametrize("outliers,batches", [(0.0, 1), (0.7, 3)])
+def test_ransac_draws_as_many_samples_as_its_inlier_ratio_needs(monkeypatch, outliers, batches):
+    """log(1 - 0.999) / log(1 - w^2) samples: 1 batch of 32 when every point agrees, 73
+    samples (3 batches) when 30 % do."""
+    drawn = []
+    kernel = two_view._two_point_hypotheses
+    monkeypatch.setattr(two_view, "_two_point_hypotheses", lambda *a: drawn.append(1) or kernel(*a))
+    rng = np.random.default_rng(4)
+    x_prev, x_cur, R = view_pair(rng, n=400, noise_px=0.0, outliers=0.0)
+    x_cur[: int(outliers * 400)] = rng.uniform(-0.55, 0.55, (int(outliers * 400), 2))
+    R_est, mask = rotation_ransac(bearings(x_prev), bearings(x_cur), 1.0 / F_PX, confidence=0.999)
+    assert len(drawn) == batches
+    assert np.degrees(geodesic_angle(R, R_est)) < 0.01 and mask.sum() >= 400 - int(outliers * 400)
 
 
 def test_rotation_only_solver_is_accurate_on_noisy_pure_rotations():
