@@ -120,6 +120,13 @@ def build_parser() -> argparse.ArgumentParser:
     sim.add_argument("--out", required=True, metavar="DIR", help="output folder")
     sim.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     sim.add_argument("--duration", type=float, default=10.0, metavar="S", help="length in seconds (default 10)")
+    sim.add_argument("--illumination", type=float, default=1.0, metavar="X",
+                     help="scale of the scene's light (default 1.0, the dim room; 0.1 is ten times darker)")
+    sim.add_argument("--set", dest="assignments", action="append", default=[], metavar="dataset.KEY=VALUE",
+                     help="a DVS pixel value, as for run (see `eas-vo list`: the synthetic dataset's keys)")
+    sim.add_argument("--stats", action="store_true",
+                     help="print what the simulator knows of its events: rate, noise fraction, noise rate "
+                     "per pixel and median latency in dark and bright regions")
     sim.set_defaults(func=cmd_simulate)
     return parser
 
@@ -198,7 +205,7 @@ def cmd_compare(args) -> int:
     from eas_vo.evaluation import tum_rotation_errors
     from eas_vo.gallery import PAPER_ORDER
     from eas_vo.io import atomic_path
-    from eas_vo.plots import plot_ape_bars, plot_ape_time
+    from eas_vo.plots import plot_ape_bars, plot_ape_time, plot_sweep
     from eas_vo.registry import open_dataset
 
     def names(text, default):
@@ -214,9 +221,11 @@ def cmd_compare(args) -> int:
         args.sweeps,
     )
     overrides = {**_shared_overrides(args), "orb_stats": True if args.orb else None}
-    for dataset in dict.fromkeys(c.dataset for c in cells):  # simulate or cache once, not once per process
+    for dataset, dataset_sweep in dict.fromkeys(  # simulate or cache each dataset once, not once per process
+        (c.dataset, tuple(f"{k}={v}" for k, v in c.sweep if k.startswith("dataset."))) for c in cells
+    ):
         try:
-            resolved = config_mod.resolve(args.config, {**overrides, "dataset": dataset}, args.assignments)
+            resolved = config_mod.resolve(args.config, {**overrides, "dataset": dataset}, list(args.assignments) + list(dataset_sweep))
             open_dataset(dataset, resolved.dataset).events()
         except EasVoError:
             pass  # its cells will report the error
@@ -245,6 +254,10 @@ def cmd_compare(args) -> int:
     if series:
         with atomic_path(out / "ape_time.png") as tmp:
             plot_ape_time(tmp, series)
+    swept = compare.sweep_curves(cells, rows)
+    if swept is not None and swept[1]:
+        with atomic_path(out / "ape_sweep.png") as tmp:
+            plot_sweep(tmp, *swept)
     if interrupted is not None:
         kept = f"the table of the {n_run} finished cells was written to {out}; the same command resumes the rest"
         raise Interrupted.keeping(interrupted, kept) from None
@@ -309,10 +322,20 @@ def _time_offset(text: str | None) -> tuple[float | None, bool | None]:
 
 
 def cmd_simulate(args) -> int:
+    from eas_vo.config import build, parse_set
     from eas_vo.datasets.simulator import SimConfig, simulate
-    from eas_vo.config import build
+    from eas_vo.datasets.synthetic import SyntheticConfig
 
-    config = build(SimConfig, {"seed": args.seed, "duration_s": args.duration}, "simulate")
-    simulate(config, args.out, progress=sys.stderr.isatty())
-    print(f"wrote a {config.duration_s:g} s synthetic sequence (seed {config.seed}) to {args.out}")
+    pixel = {}
+    for assignment in args.assignments:
+        keys, value = parse_set(assignment)
+        if keys[0] != "dataset" or len(keys) != 2:
+            raise EasVoError(f"--set {assignment!r}: simulate takes dataset.KEY=VALUE (the synthetic dataset's keys)")
+        pixel[keys[1]] = value
+    sensor = build(SyntheticConfig, {**pixel, "illumination": args.illumination}, "dataset")
+    config = sensor.applied_to(build(SimConfig, {"seed": args.seed, "duration_s": args.duration}, "simulate"))
+    stats = simulate(config, args.out, progress=sys.stderr.isatty())
+    print(f"wrote a {config.duration_s:g} s synthetic sequence (seed {config.seed}, illumination {config.illumination:g}) to {args.out}")
+    if args.stats:
+        print("\n".join("  " + line for line in stats.lines()))
     return 0

@@ -12,6 +12,8 @@ from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
+import numpy as np
+
 from eas_vo.config import parse_set
 from eas_vo.errors import EasVoError, sigterm_as_interrupt
 from eas_vo.io import slug, write_text_atomic
@@ -154,6 +156,24 @@ def table_rows(cells: list[Cell], results: dict) -> list[dict]:
         }
         for cell in cells
     ]
+
+
+def sweep_curves(cells: list[Cell], rows: list[dict]) -> tuple[str, dict] | None:
+    """For a grid swept over exactly one key with numeric values: the key and, per (dataset,
+    method, frontend), an (n, 3) array of (value, NC, APE) sorted by value, from the finished
+    cells; None otherwise. `rows` as table_rows made them from `cells`."""
+    keys = {k for c in cells for k, _ in c.sweep}
+    if len(keys) != 1:
+        return None
+    try:
+        values = {c: float(c.sweep[0][1]) for c in cells}
+    except ValueError:
+        return None
+    curves: dict = {}
+    for cell, row in zip(cells, rows):
+        if row["status"] == "ok" and row["ape_mean_rad"] is not None:
+            curves.setdefault((cell.dataset, row["method"], cell.frontend), []).append((values[cell], row["nc_mean"], row["ape_mean_rad"]))
+    return keys.pop(), {k: np.array(sorted(v)) for k, v in curves.items()}
 
 
 def _best(rows: list[dict], key: str, lower: bool) -> dict:

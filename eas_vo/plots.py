@@ -120,3 +120,26 @@ def plot_ape_time(path: str | Path, series: dict) -> None:
         ax.legend(fontsize="small", ncol=3)
     axes[-1, 0].set_xlabel("time [s]")
     fig.savefig(path, dpi=110, format="png")
+
+
+def plot_sweep(path: str | Path, key: str, curves: dict) -> None:
+    """Average APE and NC against a swept value: {(dataset, method, frontend): (n, 3) array of
+    (value, NC, APE)}, a line per frontend (and method and dataset when there are several);
+    a logarithmic value axis when the values span more than a decade."""
+    fig = _figure(figsize=(11, 4), layout="constrained")
+    ape_ax, nc_ax = fig.subplots(1, 2)
+    several = {part: len({k[i] for k in curves}) > 1 for i, part in enumerate(("dataset", "method", "frontend"))}
+    for (dataset, method, frontend), xy in curves.items():
+        label = " ".join([frontend] + ([method] if several["method"] else []) + ([Path(dataset).name or dataset] if several["dataset"] else []))
+        ape_ax.plot(xy[:, 0], xy[:, 2], "o-", lw=1.2, ms=4, label=label)
+        nc_ax.plot(xy[:, 0], xy[:, 1], "o-", lw=1.2, ms=4, label=label)
+    values = np.concatenate([xy[:, 0] for xy in curves.values()]) if curves else np.array([1.0])
+    for ax, what in ((ape_ax, "average APE [rad]"), (nc_ax, "average NC")):
+        if values.min() > 0 and values.max() > 10 * values.min():
+            ax.set_xscale("log")
+        ax.set_xlabel(key)
+        ax.set_ylabel(what)
+        ax.grid(alpha=0.3, which="both")
+    ape_ax.set_yscale("log")
+    ape_ax.legend(fontsize="small")
+    fig.savefig(path, dpi=110, format="png")

@@ -16,7 +16,7 @@ from eas_vo.datasets.simulator.sensor import ApsModel, DvsModel, EventSimulator,
 from eas_vo.geometry.rotations import quats_from_matrices
 from eas_vo.types import EVENT_DTYPE, CameraModel, ImuSeries, PoseSeries
 
-SIMULATOR_VERSION = 2  # bump when the output for a given config changes (invalidates caches)
+SIMULATOR_VERSION = 3  # bump when the output for a given config changes (invalidates caches)
 
 
 @dataclass(frozen=True)
@@ -28,10 +28,13 @@ class SimConfig:
         frame_rate_hz: APS frame rate; gt_rate_hz: ground-truth and IMU rate.
         max_flow_px: largest image motion between two render steps [px] (ESIM's adaptive step).
         speed_growth: the motion's speed grows by the factor (1 + speed_growth) over the sequence.
+        illumination: scale of the scene's light (1.0: the default dim room); the APS and the
+            DVS see radiance times this.
     """
 
     duration_s: float = 10.0
     seed: int = 0
+    illumination: float = 1.0
     frame_rate_hz: float = 20.0
     gt_rate_hz: float = 200.0
     max_flow_px: float = 0.5
@@ -44,6 +47,7 @@ class SimConfig:
     def validate(self) -> None:
         check_range(self, "duration_s", 0.2, 3600.0)
         check_range(self, "frame_rate_hz", 1.0, 1000.0)
+        check_range(self, "illumination", 0.0, 1e6, lo_open=True)
 
     def fingerprint(self) -> str:
         return repr((SIMULATOR_VERSION, dataclasses.asdict(self)))
@@ -64,8 +68,47 @@ def camera_rays(camera: CameraModel) -> np.ndarray:
     return np.column_stack([normalised, np.ones(len(normalised))]).astype(np.float32)
 
 
-def simulate(config: SimConfig, out_dir: str | Path, progress: bool = False) -> None:
-    """Simulate `config` and write the sequence into `out_dir` (ECD layout)."""
+@dataclass(frozen=True)
+class SimStats:
+    """What the simulator knows about the events it wrote (its own ground truth).
+
+    Dark pixels see under 2.5 % of the DVS model's white radiance, bright ones over 10 %
+    (`dark_pixel_s`, `bright_pixel_s`: pixel-seconds spent so). Rates are per pixel [Hz];
+    latencies [s] are medians over the signal events whose unfiltered crossing was found
+    (`latency_matched` of them)."""
+
+    duration_s: float
+    events: int
+    noise_fraction: float
+    noise_rate_dark_hz: float
+    noise_rate_bright_hz: float
+    latency_dark_s: float
+    latency_bright_s: float
+    latency_matched: float
+    dark_pixel_s: float
+    bright_pixel_s: float
+
+    def lines(self) -> list[str]:
+        def ms(s):
+            return "-" if s != s else f"{1e3 * s:.1f} ms"
+
+        def hz(rate, pixel_s):
+            return f"{rate:.2f} Hz" if pixel_s else "- (no such pixels)"
+
+        return [
+            f"events: {self.events:,} ({self.events / self.duration_s / 1e6:.2f} M events/s), noise fraction {self.noise_fraction:.3f}",
+            f"noise rate per pixel: dark {hz(self.noise_rate_dark_hz, self.dark_pixel_s)}, "
+            f"bright {hz(self.noise_rate_bright_hz, self.bright_pixel_s)}",
+            f"median event latency after the unfiltered crossing: dark {ms(self.latency_dark_s)}, "
+            f"bright {ms(self.latency_bright_s)} ({100 * self.latency_matched:.0f} % of signal events matched)",
+        ]
+
+
+DARK, BRIGHT = 0.025, 0.1  # fractions of the DVS white radiance splitting dark and bright pixels
+
+
+def simulate(config: SimConfig, out_dir: str | Path, progress: bool = False) -> SimStats:
+    """Simulate `config`, write the sequence into `out_dir` (ECD layout) and return its stats."""
     from eas_vo.datasets.ecd import write_ecd_folder
 
     seeds = np.random.SeedSequence(config.seed).spawn(5)
@@ -78,9 +121,9 @@ def simulate(config: SimConfig, out_dir: str | Path, progress: bool = False) -> 
 
     def render(t: float) -> np.ndarray:
         R, p = motion.pose(t)
-        return scene.render(R[0], p[0], rays, shape)
+        return scene.render(R[0], p[0], rays, shape) * np.float32(config.illumination)
 
-    events = _simulate_events(config, camera, motion, render, dvs_rng, progress)
+    events, stats = _simulate_events(config, camera, motion, render, dvs_rng, progress)
     frame_times = np.arange(config.aps.exposure_s, config.duration_s - config.aps.exposure_s, 1.0 / config.frame_rate_hz)
     fixed_pattern = config.aps.fixed_pattern(shape, aps_rng)
     frames = []
@@ -94,16 +137,19 @@ def simulate(config: SimConfig, out_dir: str | Path, progress: bool = False) -> 
     ground_truth = PoseSeries(gt_t, p_w_c, quats_from_matrices(R_w_c))
     acc, gyro = config.imu.measure(R_w_c, motion.angular_velocity(gt_t), motion.acceleration(gt_t), config.gt_rate_hz, imu_rng)
     write_ecd_folder(out_dir, camera, frame_times, frames, events, ground_truth, ImuSeries(gt_t, acc, gyro))
+    return stats
 
 
-def _simulate_events(config, camera, motion, render, rng, progress) -> np.ndarray:
+def _simulate_events(config, camera, motion, render, rng, progress) -> tuple[np.ndarray, SimStats]:
     """Adaptive render steps (largest flow `max_flow_px`), events between consecutive steps."""
     from tqdm import tqdm
 
     sim = EventSimulator(config.dvs, (camera.height, camera.width), rng)
     t = 0.0
     sim.start(render(t))
-    chunks = []
+    chunks, truths = [], []
+    pixel_s = np.zeros(2)  # dark, bright
+    white = config.dvs.white_radiance
     max_ray = math.hypot(camera.width, camera.height) / (2 * camera.focal_px)
     with tqdm(total=round(config.duration_s, 3), disable=not progress, unit="s", desc="simulating events") as bar:
         while t < config.duration_s:
@@ -111,7 +157,37 @@ def _simulate_events(config, camera, motion, render, rng, progress) -> np.ndarra
             flow_rate = camera.focal_px * omega * (1 + max_ray**2) + 1e-6  # px/s at the image corner
             dt = float(np.clip(config.max_flow_px / flow_rate, 2e-4, 5e-3))
             t1 = min(t + dt, config.duration_s)
-            chunks.append(sim.step(t, t1, render(t1)))
+            radiance = render(t1)
+            events, truth = sim.step(t, t1, radiance)
+            chunks.append(events)
+            truths.append(truth)
+            pixel_s += (t1 - t) * np.array([np.count_nonzero(radiance < DARK * white), np.count_nonzero(radiance > BRIGHT * white)])
             bar.update(round(t1 - t, 6))
             t = t1
-    return np.concatenate(chunks) if chunks else np.empty(0, EVENT_DTYPE)
+    events = np.concatenate(chunks) if chunks else np.empty(0, EVENT_DTYPE)
+    return events, _stats(config.duration_s, truths, pixel_s, white)
+
+
+def _stats(duration_s: float, truths, pixel_s: np.ndarray, white: float) -> SimStats:
+    noise = np.concatenate([tr.noise for tr in truths])
+    latency = np.concatenate([tr.latency_s for tr in truths])
+    radiance = np.concatenate([tr.radiance for tr in truths])
+    dark, bright = radiance < DARK * white, radiance > BRIGHT * white
+    signal = ~noise
+    matched = signal & np.isfinite(latency)
+
+    def median(mask):
+        return float(np.median(latency[mask & matched])) if (mask & matched).any() else float("nan")
+
+    return SimStats(
+        duration_s=duration_s,
+        events=len(noise),
+        noise_fraction=float(noise.mean()) if len(noise) else 0.0,
+        noise_rate_dark_hz=float((noise & dark).sum() / max(pixel_s[0], 1e-12)),
+        noise_rate_bright_hz=float((noise & bright).sum() / max(pixel_s[1], 1e-12)),
+        latency_dark_s=median(dark),
+        latency_bright_s=median(bright),
+        latency_matched=float(matched.sum() / max(signal.sum(), 1)),
+        dark_pixel_s=float(pixel_s[0]),
+        bright_pixel_s=float(pixel_s[1]),
+    )

@@ -44,102 +44,203 @@ class ApsModel:
 
 @dataclass(frozen=True)
 class DvsModel:
-    """Event generation parameters.
+    """DVS pixel model: v2e's "noisy" preset (Delbruck, Hu, He, "v2e: From Video Frames to
+    Realistic DVS Events", CVPRW 2021; values fixed from it before any APE was looked at).
+
+    Intensity enters as v2e's `inten01` = (luma + 20) / 275 with luma = 255 * min(L /
+    white_radiance, 1): the pixel's 8-bit level had the APS imaged it at its default exposure
+    (ApsModel: 80 DN per unit radiance, so white_radiance = 255 / 80), the +20 standing for the
+    dark current that keeps a black pixel's bandwidth above zero.
 
     Attributes:
-        contrast_threshold: mean log-intensity step per event.
-        threshold_sigma: per-pixel mismatch (std) of the thresholds.
-        refractory_s: minimum time between two events of a pixel [s].
-        log_eps: dark-current offset in log(radiance + log_eps).
-        noise_rate_hz: background activity per pixel in bright light [Hz].
-        dark_noise_rate_hz: extra background activity in the dark [Hz] (falls off above `dark_radiance`).
-        dark_radiance: radiance below which the dark noise dominates.
-        hot_pixel_fraction, hot_pixel_rate_hz: a few pixels that fire at a high rate regardless of light.
+        contrast_threshold: mean log-intensity step per event (v2e noisy: 0.2).
+        threshold_sigma: per-pixel mismatch (std) of the ON and OFF thresholds (v2e noisy: 0.05).
+        refractory_s: minimum time between two events of a pixel [s] (0.5 ms, as in v0.1).
+        log_eps: dark offset in log(radiance + log_eps) [radiance].
+        cutoff_hz: photoreceptor 3 dB bandwidth at white [Hz], proportional to inten01 below
+            (a first-order low-pass on log intensity; v2e noisy: 30 Hz); 0: unlimited.
+        white_radiance: the radiance mapped to full scale (255 / 80, see above).
+        shot_noise_rate_hz: shot-noise events per pixel per second in the dark, both polarities
+            (v2e noisy: 5 Hz), falling linearly with inten01 to `shot_noise_bright_factor` of it.
+        shot_noise_bright_factor: v2e's SHOT_NOISE_INTEN_FACTOR (0.25).
+        leak_rate_hz: leak (ON) events per pixel per second (v2e noisy: 0.1 Hz), each pixel's
+            rate log-normal with `leak_spread_decades` (v2e: 0.1 decade). v2e lets the leak
+            drift the pixel's reference; here they are a Poisson process at that rate.
+        hot_pixel_fraction, hot_pixel_rate_hz: pixels that fire at a high rate regardless of
+            light (not in v2e: the order of magnitude seen in DAVIS240 recordings).
     """
 
-    contrast_threshold: float = 0.3
-    threshold_sigma: float = 0.03
+    contrast_threshold: float = 0.2
+    threshold_sigma: float = 0.05
     refractory_s: float = 5e-4
     log_eps: float = 5e-4
-    noise_rate_hz: float = 0.05
-    dark_noise_rate_hz: float = 2.0
-    dark_radiance: float = 0.01
+    cutoff_hz: float = 30.0
+    white_radiance: float = 255.0 / 80.0
+    shot_noise_rate_hz: float = 5.0
+    shot_noise_bright_factor: float = 0.25
+    leak_rate_hz: float = 0.1
+    leak_spread_decades: float = 0.1
     hot_pixel_fraction: float = 5e-4
     hot_pixel_rate_hz: float = 500.0
 
+    def inten01(self, radiance: np.ndarray) -> np.ndarray:
+        """v2e's normalised intensity of each pixel, (20 / 275) in the dark to 1 at white."""
+        return (255.0 * np.minimum(radiance / self.white_radiance, 1.0) + 20.0) / 275.0
+
+    def noise_rate_hz(self, radiance: np.ndarray) -> np.ndarray:
+        """Expected shot-noise events per pixel per second at `radiance`, both polarities."""
+        return self.shot_noise_rate_hz * ((self.shot_noise_bright_factor - 1.0) * self.inten01(radiance) + 1.0)
+
+
+@dataclass
+class EventTruth:
+    """What the simulator knows of its events (for `eas-vo simulate --stats`).
+
+    Attributes:
+        noise: per event, True for shot-noise, leak and hot-pixel events.
+        latency_s: per event, how long after the unfiltered log intensity crossed the same
+            level the event fired [s] (NaN for noise and for events no crossing matched).
+        radiance: per event, the pixel's radiance when it fired.
+    """
+
+    noise: np.ndarray
+    latency_s: np.ndarray
+    radiance: np.ndarray
+
 
 class EventSimulator:
-    """Per-pixel log-radiance threshold crossings between render steps (as ESIM), with
-    timestamps interpolated linearly inside a step, threshold mismatch, a refractory
-    period and background-activity noise that grows in the dark."""
+    """Per-pixel threshold crossings of the photoreceptor's low-passed log radiance between
+    render steps (as ESIM, the filter as v2e's), timestamps interpolated linearly inside a
+    step, threshold mismatch, a refractory period, shot-noise, leak and hot-pixel events.
+
+    Alongside, an unfiltered twin of every pixel records when the raw log radiance crossed
+    each level (the last `HISTORY` crossings), so each signal event knows its latency."""
+
+    HISTORY = 8
 
     def __init__(self, model: DvsModel, shape: tuple[int, int], rng: np.random.Generator):
         self.model = model
         self.shape = shape
         self.rng = rng
         h, w = shape
+        n = h * w
         c, s = model.contrast_threshold, model.threshold_sigma
-        self.c_pos = np.clip(rng.normal(c, s, h * w), 0.05, None).astype(np.float32)
-        self.c_neg = np.clip(rng.normal(c, s, h * w), 0.05, None).astype(np.float32)
+        self.c_pos = np.clip(rng.normal(c, s, n), 0.05, None).astype(np.float32)
+        self.c_neg = np.clip(rng.normal(c, s, n), 0.05, None).astype(np.float32)
         self.ref: np.ndarray | None = None
-        self.last_log: np.ndarray | None = None
-        self.last_t = np.full(h * w, -np.inf)
-        self.hot_rate = np.zeros(h * w)
-        hot = rng.choice(h * w, int(round(model.hot_pixel_fraction * h * w)), replace=False)
+        self.last_lp: np.ndarray | None = None
+        self.last_t = np.full(n, -np.inf)
+        self.hot_rate = np.zeros(n)
+        hot = rng.choice(n, int(round(model.hot_pixel_fraction * n)), replace=False)
         self.hot_rate[hot] = model.hot_pixel_rate_hz * rng.uniform(0.2, 2.0, len(hot))
+        self.leak_rate = model.leak_rate_hz * 10.0 ** rng.normal(0.0, model.leak_spread_decades, n)
+        # the unfiltered twin: its reference, last log radiance and a ring of (level, time, up)
+        self.raw_ref: np.ndarray | None = None
+        self.last_raw: np.ndarray | None = None
+        self.ring_level = np.full((n, self.HISTORY), np.nan, np.float32)
+        self.ring_t = np.full((n, self.HISTORY), np.nan)
+        self.ring_up = np.zeros((n, self.HISTORY), bool)
+        self.ring_next = np.zeros(n, np.int64)
 
     def log_intensity(self, radiance: np.ndarray) -> np.ndarray:
         return np.log(radiance.ravel() + self.model.log_eps).astype(np.float32)
 
     def start(self, radiance: np.ndarray) -> None:
-        """Initialise the reference levels from the first rendered image."""
+        """Initialise the filter and the reference levels from the first rendered image."""
         self.ref = self.log_intensity(radiance)
-        self.last_log = self.ref.copy()
+        self.last_lp = self.ref.copy()
+        self.raw_ref, self.last_raw = self.ref.copy(), self.ref.copy()
 
-    def step(self, t0: float, t1: float, radiance: np.ndarray) -> np.ndarray:
-        """Events in (t0, t1] given the radiance at t1; returns EVENT_DTYPE sorted by time."""
-        log1 = self.log_intensity(radiance)
-        log0 = self.last_log
-        diff = log1 - self.ref
+    def step(self, t0: float, t1: float, radiance: np.ndarray) -> tuple[np.ndarray, EventTruth]:
+        """Events in (t0, t1] given the radiance at t1, sorted by time, and their truth."""
+        m = self.model
+        flat = radiance.ravel()
+        raw1 = self.log_intensity(radiance)
+        if m.cutoff_hz > 0:  # first-order low-pass, exact for a step held over the interval
+            gain = 1.0 - np.exp(-2.0 * np.pi * m.cutoff_hz * m.inten01(flat) * (t1 - t0))
+            lp1 = (self.last_lp + gain * (raw1 - self.last_lp)).astype(np.float32)
+        else:
+            lp1 = raw1
+        self._record_raw_crossings(t0, t1, raw1)
+        signal, levels = self._crossings(t0, t1, self.last_lp, lp1)
+        self.last_lp = lp1
+        latency = self._latency(signal, levels)
+        noise = self._noise(t0, t1, flat)
+        events = np.concatenate([signal, noise])
+        truth = EventTruth(
+            np.concatenate([np.zeros(len(signal), bool), np.ones(len(noise), bool)]),
+            np.concatenate([latency, np.full(len(noise), np.nan)]),
+            flat[events["y"].astype(np.int64) * self.shape[1] + events["x"]],
+        )
+        order = np.argsort(events["t"], kind="stable")
+        return events[order], EventTruth(truth.noise[order], truth.latency_s[order], truth.radiance[order])
+
+    def _levels_crossed(self, ref, v0, v1):
+        """Crossings of the thresholds around `ref` from v0 to v1: counts up and down."""
+        diff = v1 - ref
         n_pos = np.floor(np.maximum(diff, 0) / self.c_pos).astype(np.int64)
         n_neg = np.floor(np.maximum(-diff, 0) / self.c_neg).astype(np.int64)
-        signal = self._crossings(t0, t1, log0, log1, n_pos, n_neg)
-        self.ref += n_pos * self.c_pos - n_neg * self.c_neg
-        self.last_log = log1
-        noise = self._noise(t0, t1, radiance.ravel())
-        events = np.concatenate([signal, noise])
-        return events[np.argsort(events["t"], kind="stable")]
+        return n_pos, n_neg
 
-    def _crossings(self, t0, t1, log0, log1, n_pos, n_neg) -> np.ndarray:
-        w = self.shape[1]
-        n_cross = n_pos + n_neg
-        out = []
-        for k in range(1, int(n_cross.max(initial=0)) + 1):
-            pix = np.flatnonzero(n_cross >= k)
+    def _each_crossing(self, t0, t1, ref, v0, v1, n_pos, n_neg):
+        """Yield (k, pixels, positive, level, time) for the k-th crossing of each pixel."""
+        for k in range(1, int((n_pos + n_neg).max(initial=0)) + 1):
+            pix = np.flatnonzero(n_pos + n_neg >= k)
             positive = n_pos[pix] > 0
-            step = np.where(positive, self.c_pos[pix], -self.c_neg[pix])
-            level = self.ref[pix] + k * step
-            span = log1[pix] - log0[pix]
-            frac = np.clip((level - log0[pix]) / np.where(span == 0, 1e-12, span), 0.0, 1.0)
-            t = t0 + frac.astype(np.float64) * (t1 - t0)  # float64: a float32 time would be us-coarse
+            level = ref[pix] + k * np.where(positive, self.c_pos[pix], -self.c_neg[pix])
+            span = v1[pix] - v0[pix]
+            frac = np.clip((level - v0[pix]) / np.where(span == 0, 1e-12, span), 0.0, 1.0)
+            yield pix, positive, level, t0 + frac.astype(np.float64) * (t1 - t0)  # float64: us times
+
+    def _record_raw_crossings(self, t0, t1, raw1) -> None:
+        n_pos, n_neg = self._levels_crossed(self.raw_ref, self.last_raw, raw1)
+        for pix, positive, level, t in self._each_crossing(t0, t1, self.raw_ref, self.last_raw, raw1, n_pos, n_neg):
+            slot = self.ring_next[pix] % self.HISTORY
+            self.ring_level[pix, slot], self.ring_t[pix, slot], self.ring_up[pix, slot] = level, t, positive
+            self.ring_next[pix] += 1
+        self.raw_ref += n_pos * self.c_pos - n_neg * self.c_neg
+        self.last_raw = raw1
+
+    def _crossings(self, t0, t1, v0, v1) -> tuple[np.ndarray, np.ndarray]:
+        """Signal events of the filtered signal from v0 to v1 and the levels they crossed."""
+        w = self.shape[1]
+        n_pos, n_neg = self._levels_crossed(self.ref, v0, v1)
+        out, levels = [], []
+        for pix, positive, level, t in self._each_crossing(t0, t1, self.ref, v0, v1, n_pos, n_neg):
             keep = t - self.last_t[pix] >= self.model.refractory_s
-            pix, t, positive = pix[keep], t[keep], positive[keep]
+            pix, t, positive, level = pix[keep], t[keep], positive[keep], level[keep]
             self.last_t[pix] = t
             ev = np.empty(len(pix), EVENT_DTYPE)
             ev["t"], ev["x"], ev["y"], ev["p"] = t, pix % w, pix // w, positive
             out.append(ev)
-        return np.concatenate(out) if out else np.empty(0, EVENT_DTYPE)
+            levels.append(level)
+        self.ref += n_pos * self.c_pos - n_neg * self.c_neg
+        if not out:
+            return np.empty(0, EVENT_DTYPE), np.empty(0, np.float32)
+        return np.concatenate(out), np.concatenate(levels)
+
+    def _latency(self, events: np.ndarray, levels: np.ndarray) -> np.ndarray:
+        """Each event's time minus the latest earlier unfiltered crossing in its pixel of the
+        same direction and level (within half a threshold: the two references may have
+        drifted apart by unequal ON and OFF steps); NaN when none of the last HISTORY matches."""
+        pix = events["y"].astype(np.int64) * self.shape[1] + events["x"]
+        tolerance = 0.5 * np.minimum(self.c_pos[pix], self.c_neg[pix])[:, None]
+        match = (np.abs(self.ring_level[pix] - levels[:, None]) < tolerance) & (self.ring_up[pix] == events["p"][:, None].astype(bool))
+        t_raw = np.where(match & (self.ring_t[pix] <= events["t"][:, None]), self.ring_t[pix], -np.inf).max(axis=1)
+        return np.where(np.isfinite(t_raw), events["t"] - t_raw, np.nan)
 
     def _noise(self, t0, t1, radiance) -> np.ndarray:
-        m = self.model
-        rate = m.noise_rate_hz + m.dark_noise_rate_hz / (1.0 + radiance / m.dark_radiance) + self.hot_rate
+        """Shot-noise (either polarity), leak (ON) and hot-pixel events in (t0, t1]."""
+        rate = self.model.noise_rate_hz(radiance) + self.leak_rate + self.hot_rate
         cdf = np.cumsum(rate)
         count = self.rng.poisson(cdf[-1] * (t1 - t0))
         pix = np.searchsorted(cdf, self.rng.uniform(0, cdf[-1], count))
         ev = np.empty(count, EVENT_DTYPE)
         ev["t"] = self.rng.uniform(t0, t1, count)
         ev["x"], ev["y"] = pix % self.shape[1], pix // self.shape[1]
-        ev["p"] = self.rng.integers(0, 2, count)
+        shot = self.model.noise_rate_hz(radiance)[pix]
+        on_share = (0.5 * shot + self.leak_rate[pix] + 0.5 * self.hot_rate[pix]) / rate[pix]
+        ev["p"] = self.rng.random(count) < on_share
         return ev
 
 

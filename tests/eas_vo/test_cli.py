@@ -120,6 +120,25 @@ def test_simulate_command(tmp_path, capsys):
     assert "wrote a 0.4 s synthetic sequence" in capsys.readouterr().out
 
 
+def stats_of(capsys, tmp_path, illumination):
+    """`eas-vo simulate --stats` output -> (events/s, noise fraction, dark latency [ms])."""
+    import re
+
+    assert main(["simulate", "--out", str(tmp_path / str(illumination)), "--duration", "1.0",
+                 "--illumination", str(illumination), "--stats"]) == 0
+    text = capsys.readouterr().out
+    rate = float(re.search(r"\(([\d.]+) M events/s\)", text).group(1))
+    noise = float(re.search(r"noise fraction ([\d.]+)", text).group(1))
+    latency = float(re.search(r"crossing: dark ([\d.]+) ms", text).group(1))
+    assert "noise rate per pixel: dark" in text
+    return rate, noise, latency
+
+
+def test_simulate_stats_darker_means_fewer_later_noisier_events(tmp_path, capsys):
+    bright, dark = stats_of(capsys, tmp_path, 1.0), stats_of(capsys, tmp_path, 0.1)
+    assert dark[0] < bright[0] and dark[1] > bright[1] and dark[2] > bright[2], (bright, dark)
+
+
 def test_lenient_flag_counts_and_reports(sequence_copy, tmp_path, capsys):
     path = sequence_copy / "events.txt"
     lines = path.read_bytes().split(b"\n")

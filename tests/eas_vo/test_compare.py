@@ -51,6 +51,21 @@ def test_a_failing_cell_is_reported_and_the_rest_complete(short_sequence, tmp_pa
     rows = {r["sweep"]: r for r in json.loads((out / "table.json").read_text())}
     assert rows["frontend.n=0"]["status"] == "failed" and rows["frontend.n=2000"]["status"] == "ok"
     assert "slice (frontend.n=2000)" in (out / "table.md").read_text()
+    assert (out / "ape_sweep.png").exists()  # a numeric sweep: APE and NC against n
+
+
+def test_sweep_curves_follow_one_numeric_key():
+    from eas_vo.compare import sweep_curves, table_rows
+
+    cells = [Cell("d", f, "klt", "chain", (("dataset.illumination", v),)) for f in ("eas", "slice") for v in ("1", "0.1", "0.5")]
+    results = {c: {"status": "ok", "nc_mean": 10.0 * float(c.sweep[0][1]), "ape_mean_rad": 1.0 / float(c.sweep[0][1])} for c in cells}
+    results[cells[0]] = {"status": "failed", "error": "boom"}
+    key, curves = sweep_curves(cells, table_rows(cells, results))
+    assert key == "dataset.illumination" and set(curves) == {("d", "klt+chain", "eas"), ("d", "klt+chain", "slice")}
+    assert curves[("d", "klt+chain", "slice")].tolist() == [[0.1, 1.0, 10.0], [0.5, 5.0, 2.0], [1.0, 10.0, 1.0]]
+    assert len(curves[("d", "klt+chain", "eas")]) == 2  # the failed cell is left out
+    words = [Cell("d", "eas", "klt", "chain", (("tracker.geometry", g),)) for g in ("rotation", "essential")]
+    assert sweep_curves(words, table_rows(words, {})) is None
 
 
 def test_one_and_two_jobs_give_the_same_table(grid, short_sequence, tmp_path):

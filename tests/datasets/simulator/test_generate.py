@@ -17,11 +17,12 @@ def test_same_seed_same_sequence_other_seed_differs(tmp_path):
 
 
 def test_event_times_are_float64_and_sorted_late_in_a_long_sequence():
-    model = DvsModel(threshold_sigma=0.0, noise_rate_hz=0.0, dark_noise_rate_hz=0.0, hot_pixel_fraction=0.0, refractory_s=0.0)
+    model = DvsModel(contrast_threshold=0.3, threshold_sigma=0.0, cutoff_hz=0.0, shot_noise_rate_hz=0.0, leak_rate_hz=0.0,
+                     hot_pixel_fraction=0.0, refractory_s=0.0)
     sim = EventSimulator(model, (1, 1), np.random.default_rng(0))
     sim.start(np.array([[1.0]]) - model.log_eps)
     t0 = 1000.0  # where float32 resolution would be 61 us
-    ev = sim.step(t0, t0 + 1e-4, np.array([[np.e]]) - model.log_eps)
+    ev, _ = sim.step(t0, t0 + 1e-4, np.array([[np.e]]) - model.log_eps)
     np.testing.assert_allclose(ev["t"] - t0, [0.3e-4, 0.6e-4, 0.9e-4], atol=1e-9)
 
 
