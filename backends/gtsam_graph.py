@@ -34,8 +34,9 @@ class GtsamConfig:
             identity edge this loose (the chain's "keep the previous rotation").
         robust, robust_k: robust kernel (`none`, `huber`, `cauchy`) and its threshold in sigmas.
         iterations: Levenberg-Marquardt iterations (batch) or extra iSAM2 updates at the end.
-        gyro: fuse the dataset's gyro (when it has an IMU): readings preintegrated between
-            frames (PreintegratedAhrsMeasurements) in AHRSFactors sharing one bias variable.
+        gyro: fuse the dataset's gyro (a dataset without an IMU is refused): readings
+            preintegrated between frames (PreintegratedAhrsMeasurements) in AHRSFactors
+            sharing one bias variable.
         gyro_noise: gyro white-noise density [rad/s/sqrt(Hz)].
         gyro_bias_sigma: prior on the gyro bias [rad/s].
         imu_rotvec_cam: rotation from the camera to the IMU frame, R_imu_cam as a rotation vector [rad].
@@ -59,6 +60,7 @@ class GtsamConfig:
 
     def validate(self) -> None:
         check_vector(self, "imu_rotvec_cam", 3, "rad")
+        check_range(self, "imu_time_offset_s", -1.0, 1.0)
         check_range(self, "gyro_noise", 0.0, 10.0, lo_open=True)
         check_range(self, "gyro_bias_sigma", 0.0, 10.0, lo_open=True)
         check_choice(self, "mode", MODES)
@@ -78,6 +80,10 @@ class GtsamBackend(Backend):
     name = "gtsam"
     description = "rotation-only pose graph (GTSAM Rot3): batch Levenberg-Marquardt or online iSAM2"
     Config = GtsamConfig
+
+    @property
+    def needs_imu(self) -> bool:
+        return self.config.gyro
 
     def edge_sigma(self, edge: RelativeRotation) -> float:
         """The isotropic noise [rad] of a measured edge, from its quality (see edge_noise)."""

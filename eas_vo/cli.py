@@ -31,12 +31,19 @@ examples:
 """
 
 
+class _OneLineParser(argparse.ArgumentParser):
+    """A usage error is one line on stderr (with where to read more) and exit status 2."""
+
+    def error(self, message: str):
+        self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = _OneLineParser(
         prog="eas-vo",
         description="3-DoF rotation estimation from event cameras fused with frames (EAS and peers).",
     )
-    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND", parser_class=_OneLineParser)
 
     run = sub.add_parser(
         "run",
@@ -82,7 +89,7 @@ def build_parser() -> argparse.ArgumentParser:
     compare.add_argument("--sweep", dest="sweeps", action="append", default=[], metavar="SECTION.KEY=V1,V2",
                          help="values to try (repeatable: the cartesian product is run)")
     compare.add_argument("--orb", action="store_true", help="also ORB keypoints and matches per source (Table 2)")
-    compare.add_argument("--jobs", type=int, default=os.cpu_count() or 1, help="parallel processes (default: all cores)")
+    compare.add_argument("--jobs", type=_positive_int, default=os.cpu_count() or 1, help="parallel processes (default: all cores)")
     compare.add_argument("--executor", choices=("local", "dask"), default="local",
                          help="local process pool (default), or an existing Dask distributed cluster")
     compare.add_argument("--scheduler", metavar="ADDRESS", help="the Dask scheduler, e.g. tcp://10.0.0.5:8786")
@@ -141,6 +148,17 @@ def _add_common_options(parser) -> None:
     parser.add_argument("--time-offset", metavar="S|auto",
                         help="ground truth is sampled at frame time + S seconds (default 0); 'auto' estimates S from the data")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
+
+
+def _positive_int(text: str) -> int:
+    """argparse type: an integer of at least 1."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a whole number, got {text!r}") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"must be at least 1, got {value}")
+    return value
 
 
 def _shared_overrides(args) -> dict:
@@ -221,6 +239,8 @@ def cmd_compare(args) -> int:
         args.sweeps,
     )
     overrides = {**_shared_overrides(args), "orb_stats": True if args.orb else None}
+    for cell in cells:  # a configuration error is the user's, known before any work: one line, exit 2
+        compare.cell_config(cell, args.config, args.assignments, overrides)
     for dataset, dataset_sweep in dict.fromkeys(  # simulate or cache each dataset once, not once per process
         (c.dataset, tuple(f"{k}={v}" for k, v in c.sweep if k.startswith("dataset."))) for c in cells
     ):
@@ -266,7 +286,7 @@ def cmd_compare(args) -> int:
         print(f"eas-vo: cell {r['folder']} failed: {r['error']}", file=sys.stderr)
     print(f"{len(cells)} cells ({n_run} run, {len(cells) - n_run} already complete, {len(failed)} failed) -> {out / 'table.md'}")
     print(compare.table_markdown(rows), end="")
-    return 0
+    return 1 if failed else 0
 
 
 def cmd_list(args) -> int:

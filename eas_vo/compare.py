@@ -16,7 +16,7 @@ import numpy as np
 
 from eas_vo.config import parse_set
 from eas_vo.errors import EasVoError, sigterm_as_interrupt
-from eas_vo.io import slug, write_text_atomic
+from eas_vo.io import json_text, slug, write_text_atomic
 
 
 @dataclass(frozen=True)
@@ -64,18 +64,24 @@ def plan(
     ]
 
 
+def cell_config(cell: Cell, config_file, assignments: list[str], run_overrides: dict):
+    """The resolved configuration of a cell (raises ConfigError for a bad one)."""
+    from eas_vo import config
+
+    return config.resolve(
+        config_file,
+        {**run_overrides, "dataset": cell.dataset, "frontend": cell.frontend, "tracker": cell.tracker, "backend": cell.backend},
+        list(assignments) + [f"{k}={v}" for k, v in cell.sweep],
+    )
+
+
 def run_cell(cell: Cell, out_root: str, config_file, assignments: list[str], run_overrides: dict) -> dict:
     """Run one cell into its folder (in a worker process). A user error is reported, not raised."""
-    from eas_vo import config, pipeline
+    from eas_vo import pipeline
 
     folder = Path(out_root) / cell.folder
     try:
-        cfg = config.resolve(
-            config_file,
-            {**run_overrides, "dataset": cell.dataset, "frontend": cell.frontend, "tracker": cell.tracker,
-             "backend": cell.backend},
-            list(assignments) + [f"{k}={v}" for k, v in cell.sweep],
-        )
+        cfg = cell_config(cell, config_file, assignments, run_overrides)
         with sigterm_as_interrupt():  # a worker keeps its partial outputs on SIGTERM, however it was started
             metrics = pipeline.run(cfg, folder).metrics
         return {"status": "ok", **metrics}
@@ -237,6 +243,6 @@ def table_csv(rows: list[dict]) -> str:
 def write_tables(out_root: Path, rows: list[dict]) -> None:
     write_text_atomic(out_root / "table.md", table_markdown(rows))
     write_text_atomic(out_root / "table.csv", table_csv(rows))
-    write_text_atomic(out_root / "table.json", json.dumps(rows, indent=2) + "\n")
+    write_text_atomic(out_root / "table.json", json_text(rows))
 
 

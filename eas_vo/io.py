@@ -3,6 +3,8 @@ atomic writes, folder names."""
 
 from __future__ import annotations
 
+import json
+import math
 import os
 import re
 import tempfile
@@ -26,19 +28,43 @@ def cache_dir() -> Path:
 # ----------------------------------------------------------------------------- atomic writes
 
 
+def _umask() -> int:
+    """The process's umask (read by setting it and putting it back)."""
+    mask = os.umask(0o022)
+    os.umask(mask)
+    return mask
+
+
 @contextmanager
 def atomic_path(path: str | Path):
-    """Yield a temporary path beside `path`; on success rename it over `path`, else delete it."""
+    """Yield a temporary path beside `path`; on success rename it over `path` with the mode a
+    plain `open` would have given it (0666 less the umask), else delete it."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
     os.close(fd)
     try:
         yield Path(tmp)
+        os.chmod(tmp, 0o666 & ~_umask())
         os.replace(tmp, path)
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
         raise
+
+
+def json_text(obj) -> str:
+    """Strict JSON (RFC 8259), indented: NaN and infinities, which it cannot hold, become null."""
+
+    def finite(value):
+        if isinstance(value, float) and not math.isfinite(value):
+            return None
+        if isinstance(value, dict):
+            return {k: finite(v) for k, v in value.items()}
+        if isinstance(value, (list, tuple)):
+            return [finite(v) for v in value]
+        return value
+
+    return json.dumps(finite(obj), indent=2, allow_nan=False) + "\n"
 
 
 def write_text_atomic(path: str | Path, text: str) -> None:

@@ -7,7 +7,6 @@ dataset --Sample--> frontend --uint8 image--> tracker --records, edges--> backen
 from __future__ import annotations
 
 import csv
-import json
 import time
 from collections import Counter
 from dataclasses import dataclass, field
@@ -20,7 +19,7 @@ from eas_vo.config import ResolvedConfig
 from eas_vo.errors import EasVoError, Interrupted
 from eas_vo.evaluation import RotationErrors, estimate_time_offset, rotation_errors
 from eas_vo.geometry.rotations import quats_from_matrices
-from eas_vo.io import atomic_path, write_text_atomic
+from eas_vo.io import atomic_path, json_text, write_text_atomic
 from eas_vo.orb import OrbStats
 from eas_vo.plugins import Backend, Dataset, Frontend, Tracker
 from eas_vo.types import FrameRecord, RelativeRotation
@@ -111,13 +110,34 @@ def open_pipeline(config: ResolvedConfig) -> Pipeline:
             f"{dataset.label}: the window start={rc.start_s} s, duration={rc.duration_s} s "
             f"holds {n_window} sample(s); at least 2 are needed"
         )
-    dataset.events()
-    return Pipeline(
+    _check_ground_truth_overlap(dataset, config.run, n_window)
+    parts = Pipeline(
         dataset=dataset,
         frontend=frontend_cls(config.frontend, dataset.camera),
         tracker=registry.get("trackers", rc.tracker)(config.tracker, dataset.camera, imu=dataset.imu),
         backend=registry.get("backends", rc.backend)(config.backend),
     )
+    for kind, plugin in (("tracker", parts.tracker), ("backend", parts.backend)):
+        if plugin.needs_imu and dataset.imu is None:
+            raise EasVoError(f"{kind} {plugin.name!r} as configured needs an IMU and {dataset.label} has none "
+                             f"(imu.txt, or the bag's IMU topic); change the {kind} settings or the dataset")
+    dataset.events()
+    return parts
+
+
+def _check_ground_truth_overlap(dataset: Dataset, rc, n_window: int) -> None:
+    """A fixed time offset that puts every frame of the window outside the ground truth would
+    leave nothing to evaluate: say so before any work."""
+    gt = dataset.ground_truth
+    if gt is None or rc.time_offset_auto or len(gt.t) == 0:
+        return
+    t = dataset.frame_times()[dataset.window(rc.start_s, rc.duration_s)] + rc.time_offset_s
+    if not np.any((t >= gt.t[0]) & (t <= gt.t[-1])):
+        raise EasVoError(
+            f"{dataset.label}: the ground truth ({gt.t[0]:.3f}-{gt.t[-1]:.3f} s) covers none of the {n_window} frame "
+            f"times of the window ({t[0]:.3f}-{t[-1]:.3f} s with the time offset {rc.time_offset_s:+g} s); "
+            "check --time-offset, --start and --duration"
+        )
 
 
 def track(parts: Pipeline, config: ResolvedConfig, frames_csv: Path | None = None, progress: bool = False) -> Tracked:
@@ -205,7 +225,7 @@ def write_outputs(out: Path, result: RunResult, label: str) -> None:
     errors = result.errors
     if errors is not None and errors.valid.any():
         write_text_atomic(out / "groundtruth.tum", format_tum(result.t[errors.valid], errors.p_w_c_gt, errors.R_w_c_gt))
-    write_text_atomic(out / "metrics.json", json.dumps(result.metrics, indent=2, allow_nan=True) + "\n")
+    write_text_atomic(out / "metrics.json", json_text(result.metrics))
     from eas_vo.plots import plot_rotation
 
     with atomic_path(out / "rotation.png") as tmp:

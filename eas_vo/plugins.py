@@ -144,7 +144,7 @@ class Tracker:
     """Measures relative rotations between the images of one sequence, fed in time order.
 
     Required: `process(image, t)`. Optional: `reset()`, which `__init__` calls last, so a
-    tracker sets up its per-sequence state there. It never knows which frontend made the
+    tracker sets up its per-sequence state there, and `needs_imu`. It never knows which frontend made the
     images. Frame indices count the images given since construction (or reset), from 0.
     """
 
@@ -162,6 +162,12 @@ class Tracker:
     def reset(self) -> None:
         """Forget every image seen (called by `__init__`)."""
 
+    @property
+    def needs_imu(self) -> bool:
+        """Whether this configuration cannot work without the dataset's IMU: the pipeline then
+        refuses a dataset that has none, before any work (default: False)."""
+        return False
+
     def process(self, image: np.ndarray, t: float) -> tuple[FrameRecord, list[RelativeRotation]]:
         """Take the next image (uint8, sensor size) taken at `t` [s].
 
@@ -174,7 +180,7 @@ class Tracker:
 class Backend:
     """Turns relative rotations into absolute camera-to-world rotations, one per frame.
 
-    Required: `solve(n_frames, edges, *, times, imu)`. Optional: `causal_R_w_c`.
+    Required: `solve(n_frames, edges, *, times, imu)`. Optional: `causal_R_w_c`, `needs_imu`.
     """
 
     name: ClassVar[str] = "backend"
@@ -187,6 +193,12 @@ class Backend:
 
     def __init__(self, config=None):
         self.config = config if config is not None else self.Config()
+
+    @property
+    def needs_imu(self) -> bool:
+        """Whether this configuration cannot work without the dataset's IMU: the pipeline then
+        refuses a dataset that has none, before any work (default: False)."""
+        return False
 
     def solve(
         self,

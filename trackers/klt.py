@@ -127,6 +127,10 @@ class KltTracker(Tracker):
         self._last_step: tuple[np.ndarray, float] | None = None  # (R_{k-2}_{k-1}, its interval [s]) for velocity
         self._loops = LoopCloser(self.config, self.camera) if self.config.loop_closure else None
 
+    @property
+    def needs_imu(self) -> bool:
+        return self.config.predict == "gyro"
+
     def detect(self, image: np.ndarray) -> np.ndarray:
         """Shi-Tomasi corners of `image`, (N, 2) float32 [px]."""
         c = self.config

@@ -46,6 +46,7 @@ class SimConfig:
 
     def validate(self) -> None:
         check_range(self, "duration_s", 0.2, 3600.0)
+        check_range(self, "seed", 0, 2**63 - 1)
         check_range(self, "frame_rate_hz", 1.0, 1000.0)
         check_range(self, "illumination", 0.0, 1e6, lo_open=True)
 

@@ -153,3 +153,70 @@ def test_lenient_flag_counts_and_reports(sequence_copy, tmp_path, capsys):
     assert "1 dropped: pixel outside the 240x180 sensor (first at line 101)" in err
     metrics = json.loads((tmp_path / "lenient" / "metrics.json").read_text())
     assert len(metrics["data_warnings"]) == 2
+
+
+def strict_json(path):
+    """json.loads that refuses NaN and Infinity, as strict readers do."""
+    import json
+
+    def refuse(token):
+        raise ValueError(f"non-standard JSON token {token}")
+
+    return json.loads(path.read_text(), parse_constant=refuse)
+
+
+def test_json_text_writes_null_for_what_json_cannot_hold(tmp_path):
+    from eas_vo.io import json_text
+
+    path = tmp_path / "m.json"
+    path.write_text(json_text({"a": float("nan"), "b": [1.5, float("inf"), {"c": -float("inf")}], "d": (2, "x")}))
+    assert strict_json(path) == {"a": None, "b": [1.5, None, {"c": None}], "d": [2, "x"]}
+
+
+def test_a_time_offset_that_misses_the_ground_truth_is_one_line_before_any_work(sequence_copy, tmp_path, capsys):
+    out = tmp_path / "off"
+    assert main(["run", "--dataset", str(sequence_copy), "--time-offset", "-9", "--out", str(out), "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "covers none of the" in err and "time offset -9 s" in err
+    assert not out.exists()
+
+
+def test_results_are_strict_json_with_or_without_ground_truth(sequence_copy, tmp_path):
+    assert main(["run", "--dataset", str(sequence_copy), "--out", str(tmp_path / "gt"), "--quiet"]) == 0
+    assert strict_json(tmp_path / "gt" / "metrics.json")["ape_mean_rad"] > 0
+    (sequence_copy / "groundtruth.txt").unlink()
+    assert main(["run", "--dataset", str(sequence_copy), "--out", str(tmp_path / "nogt"), "--quiet"]) == 0
+    metrics = strict_json(tmp_path / "nogt" / "metrics.json")
+    assert "ape_mean_rad" not in metrics and metrics["frames_evaluated"] == 0
+
+
+def one_line_failure(argv, capsys) -> str:
+    """Run the CLI in-process; it must fail with status 2 and exactly one line on stderr."""
+    try:
+        status = main(argv)
+    except SystemExit as exit_:  # argparse's usage errors
+        status = exit_.code
+    err = capsys.readouterr().err
+    assert status == 2 and err.count("\n") == 1 and "Traceback" not in err, (status, err)
+    return err
+
+
+@pytest.mark.parametrize("argv, says", [
+    (["run", "--set", "backend.imu_time_offset_s=nan", "--backend", "gtsam"], "imu_time_offset_s = nan is out of range"),
+    (["run", "--set", "backend.imu_rotvec_cam=[0.0, nan, 0.0]", "--backend", "gtsam"], "imu_rotvec_cam"),
+    (["simulate", "--seed", "-1", "--out", "{tmp}/sim"], "seed = -1 is out of range"),
+    (["compare", "--jobs", "0", "--out", "{tmp}/cmp"], "--jobs: must be at least 1"),
+    (["run", "--frobnicate"], "unrecognized arguments: --frobnicate"),
+    (["rn"], "invalid choice: 'rn'"),
+])
+def test_nonsense_values_and_usage_errors_are_one_line(argv, says, tmp_path, capsys):
+    err = one_line_failure([a.replace("{tmp}", str(tmp_path)) for a in argv], capsys)
+    assert says in err
+    assert not any(tmp_path.iterdir())
+
+
+@pytest.mark.parametrize("option", [["--backend", "gtsam", "--set", "backend.gyro=true"], ["--set", "tracker.predict='gyro'"]])
+def test_an_option_that_needs_an_imu_refuses_a_dataset_without_one(sequence_copy, tmp_path, capsys, option):
+    (sequence_copy / "imu.txt").unlink()
+    err = one_line_failure(["run", "--dataset", str(sequence_copy), *option, "--out", str(tmp_path / "out"), "--quiet"], capsys)
+    assert "needs an IMU" in err and not (tmp_path / "out").exists()

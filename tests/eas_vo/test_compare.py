@@ -40,18 +40,29 @@ def test_a_second_invocation_runs_nothing(grid, capsys):
     assert {p: p.stat().st_mtime_ns for p in out.rglob("metrics.json")} == before
 
 
-def test_a_failing_cell_is_reported_and_the_rest_complete(short_sequence, tmp_path, capsys):
+def test_a_failing_cell_is_reported_the_rest_complete_and_the_exit_says_so(short_sequence, tmp_path, capsys):
     out = tmp_path / "sweep"
-    argv = ["compare", "--dataset", str(short_sequence), "--frontends", "slice", "--sweep", "frontend.n=0,2000",
+    argv = ["compare", "--dataset", str(short_sequence), "--frontends", "slice", "--sweep", "run.start_s=0,100",
             "--out", str(out), "--jobs", "1", "--quiet"]
-    assert main(argv) == 0
+    assert main(argv) == 1
     captured = capsys.readouterr()
     assert "2 cells (2 run, 0 already complete, 1 failed)" in captured.out
-    assert "n = 0 is out of range" in captured.err
+    assert "holds 0 sample(s)" in captured.err
     rows = {r["sweep"]: r for r in json.loads((out / "table.json").read_text())}
-    assert rows["frontend.n=0"]["status"] == "failed" and rows["frontend.n=2000"]["status"] == "ok"
-    assert "slice (frontend.n=2000)" in (out / "table.md").read_text()
-    assert (out / "ape_sweep.png").exists()  # a numeric sweep: APE and NC against n
+    assert rows["run.start_s=100"]["status"] == "failed" and rows["run.start_s=0"]["status"] == "ok"
+    assert rows["run.start_s=100"]["ape_mean_rad"] is None  # strict JSON: null, never NaN
+    assert "slice (run.start_s=0)" in (out / "table.md").read_text()
+    assert (out / "ape_sweep.png").exists()  # a numeric sweep: APE and NC against it
+
+
+def test_a_configuration_error_stops_compare_before_any_work(short_sequence, tmp_path, capsys):
+    out = tmp_path / "bad"
+    argv = ["compare", "--dataset", str(short_sequence), "--frontends", "slice", "--sweep", "frontend.n=2000,0",
+            "--out", str(out), "--quiet"]
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "n = 0 is out of range" in err
+    assert not out.exists()
 
 
 def test_sweep_curves_follow_one_numeric_key():
