@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from pathlib import Path
+from pathlib import Path, PurePosixPath, PureWindowsPath
 
 import cv2
 import numpy as np
@@ -42,6 +42,19 @@ class EcdConfig(StreamConfig):
         super().validate()
         check_range(self, "width", 1, 65535)
         check_range(self, "height", 1, 65535)
+
+
+def _leaves_folder(name: str) -> bool:
+    """Whether a path named inside a dataset points outside it (absolute, or up past its root)."""
+    path = PurePosixPath(name.replace("\\", "/"))
+    if path.is_absolute() or PureWindowsPath(name).drive:
+        return True
+    depth = 0
+    for part in path.parts:
+        depth += -1 if part == ".." else (0 if part == "." else 1)
+        if depth < 0:
+            return True
+    return False
 
 
 class EcdFolderDataset(Dataset):
@@ -85,11 +98,15 @@ class EcdFolderDataset(Dataset):
     def load_frame(self, k: int) -> np.ndarray | None:
         if not self._frame_names:
             return None
-        image = self._decode_frame(k)
-        if image.shape != (self.camera.height, self.camera.width):
+        expected = self.camera.width, self.camera.height
+        size = self._png_size(k)  # a PNG of the wrong size is refused before it is decoded
+        if size is None or size == expected:
+            image = self._decode_frame(k)
+            size = image.shape[1], image.shape[0]
+        if size != expected:
             raise DataError(
                 self.source.label(self._frame_names[k]),
-                f"frame {k} is {image.shape[1]}x{image.shape[0]}, expected {self.camera.width}x{self.camera.height}",
+                f"frame {k} is {size[0]}x{size[1]}, expected {expected[0]}x{expected[1]} (images.txt line {self._frame_lines[k]})",
             )
         return image
 
@@ -126,6 +143,8 @@ class EcdFolderDataset(Dataset):
             if not parts or parts[0].startswith("#"):
                 continue
             problem = self._image_line_problem(parts, times)
+            if problem is None and _leaves_folder(parts[1]):
+                problem = ("frame outside the dataset", f"frame path {parts[1]} leaves the dataset folder (absolute or '..')")
             if problem is None and not self.source.exists(parts[1]):
                 problem = ("missing frame file", f"frame file {parts[1]} does not exist")
             if problem is not None:
@@ -155,10 +174,34 @@ class EcdFolderDataset(Dataset):
         return None
 
     def _sensor_size(self) -> tuple[int, int]:
-        if self._frame_names:
-            first = self._decode_frame(0)
-            return first.shape[1], first.shape[0]
-        return self.config.width, self.config.height
+        """(width, height) of the frames: the size most of the first three have (from the PNG
+        header, before decoding), so one odd first frame is blamed, not the good ones after it."""
+        if not self._frame_names:
+            return self.config.width, self.config.height
+        sizes = [self._frame_size(k) for k in range(min(3, len(self._frame_names)))]
+        common = max(set(sizes), key=sizes.count)
+        for k, size in enumerate(sizes):
+            if size != common:
+                raise DataError(self.source.label(self._frame_names[k]),
+                                f"frame {k} is {size[0]}x{size[1]} where the frames after it are {common[0]}x{common[1]} "
+                                f"(images.txt line {self._frame_lines[k]})")
+        return common
+
+    def _frame_size(self, k: int) -> tuple[int, int]:
+        """(width, height) of frame k: from its PNG header if it is one, else decoded."""
+        size = self._png_size(k)
+        if size is None:
+            image = self._decode_frame(k)
+            size = image.shape[1], image.shape[0]
+        return size
+
+    def _png_size(self, k: int) -> tuple[int, int] | None:
+        """(width, height) from frame k's PNG header (its first 24 bytes), None if not a PNG."""
+        with self.source.open(self._frame_names[k]) as f:
+            head = f.read(24)
+        if head[:8] == b"\x89PNG\r\n\x1a\n" and head[12:16] == b"IHDR":
+            return int.from_bytes(head[16:20], "big"), int.from_bytes(head[20:24], "big")
+        return None
 
     def _decode_frame(self, k: int) -> np.ndarray:
         name = self._frame_names[k]

@@ -59,6 +59,9 @@ class ZipSource:
             raise DataError(path, f"not a readable zip archive ({exc})") from None
         names = set(self.zip.namelist())
         prefixes = sorted({n[: -len(m)] for n in names for m in MARKERS if n.endswith(m) and n.count("/") <= 1})
+        if len(prefixes) > 1:
+            raise DataError(path, f"holds {len(prefixes)} sequences ({', '.join(p.rstrip('/') or '.' for p in prefixes)}); "
+                                  "a dataset archive must hold one")
         self.prefix = prefixes[0] if prefixes else ""
 
     def label(self, name: str) -> str:

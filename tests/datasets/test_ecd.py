@@ -56,11 +56,46 @@ def test_missing_frame_file_names_images_txt_line(sequence_copy):
         EcdFolderDataset(sequence_copy)
 
 
-def test_unreadable_frame_is_reported_with_its_index(sequence_copy):
-    (sequence_copy / "images" / "frame_00000002.png").write_bytes(b"not a png")
+@pytest.mark.parametrize("name", ["../outside.png", "images/../../outside.png", "/etc/passwd", "C:\\frames\\a.png"])
+def test_frames_named_outside_the_dataset_are_refused(sequence_copy, name):
+    (sequence_copy.parent / "outside.png").write_bytes((sequence_copy / "images" / "frame_00000000.png").read_bytes())
+    lines = (sequence_copy / "images.txt").read_text().splitlines()
+    lines[2] = f"{lines[2].split()[0]} {name}"
+    (sequence_copy / "images.txt").write_text("\n".join(lines) + "\n")
+    with pytest.raises(DataError, match=r"images.txt:3: frame path .* leaves the dataset folder"):
+        EcdFolderDataset(sequence_copy)
+
+
+def png_header(width: int, height: int) -> bytes:
+    """The first 33 bytes of a PNG claiming this size (no image data: decoding would fail)."""
+    import struct
+    import zlib
+
+    ihdr = struct.pack(">IIBBBBB", width, height, 8, 0, 0, 0, 0)
+    return b"\x89PNG\r\n\x1a\n" + struct.pack(">I", 13) + b"IHDR" + ihdr + struct.pack(">I", zlib.crc32(b"IHDR" + ihdr))
+
+
+def test_a_frame_of_the_wrong_size_is_refused_by_its_header(sequence_copy):
+    (sequence_copy / "images" / "frame_00000004.png").write_bytes(png_header(20000, 20000))
     ds = EcdFolderDataset(sequence_copy)
-    with pytest.raises(DataError, match="cannot decode frame 2"):
-        ds.load_frame(2)
+    with pytest.raises(DataError, match=r"frame 4 is 20000x20000, expected 240x180 \(images.txt line 5\)"):
+        ds.load_frame(4)
+
+
+def test_an_odd_first_frame_is_blamed_not_the_good_ones(sequence_copy):
+    (sequence_copy / "images" / "frame_00000000.png").write_bytes(png_header(20000, 20000))
+    with pytest.raises(DataError, match=r"frame_00000000.png: frame 0 is 20000x20000 where the frames after it are 240x180"):
+        EcdFolderDataset(sequence_copy)
+
+
+def test_unreadable_frame_is_reported_with_its_index(sequence_copy):
+    (sequence_copy / "images" / "frame_00000005.png").write_bytes(b"not a png")
+    ds = EcdFolderDataset(sequence_copy)
+    with pytest.raises(DataError, match=r"cannot decode frame 5 \(images.txt line 6\)"):
+        ds.load_frame(5)
+    (sequence_copy / "images" / "frame_00000002.png").write_bytes(b"not a png")  # among the first three: at once
+    with pytest.raises(DataError, match=r"cannot decode frame 2 \(images.txt line 3\)"):
+        EcdFolderDataset(sequence_copy)
 
 
 def test_bad_ground_truth_line(sequence_copy):

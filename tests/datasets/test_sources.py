@@ -108,3 +108,13 @@ def test_truncated_or_garbage_zip_is_named_or_read_whole(tmp_path_factory, short
     n = convert_text_to_cache(io.BytesIO(held), "events.txt", expected, 240, 180)
     assert len(events) == n and events.tobytes() == np.frombuffer(expected.getvalue(), EVENT_DTYPE).tobytes()
     np.testing.assert_array_equal(dataset.camera.calib_values()[: len(calib)], [float(v) for v in calib])
+
+
+def test_a_zip_holding_two_sequences_is_refused(short_sequence, tmp_path):
+    archive = tmp_path / "two.zip"
+    with zipfile.ZipFile(archive, "w") as z:
+        for top in ("a", "b"):
+            for name in ("images.txt", "calib.txt"):
+                z.write(short_sequence / name, f"{top}/{name}")
+    with pytest.raises(DataError, match=r"two.zip: holds 2 sequences \(a, b\); a dataset archive must hold one"):
+        EcdFolderDataset(archive)
