@@ -5,6 +5,7 @@
 from __future__ import annotations
 
 import csv
+import hashlib
 import io
 import itertools
 import json
@@ -28,6 +29,7 @@ class Cell:
     tracker: str
     backend: str
     sweep: tuple  # ((key, value text), ...)
+    dataset_name: str = ""  # distinct within its grid (plan); default: the dataset's slug
 
     @property
     def sweep_label(self) -> str:
@@ -36,7 +38,7 @@ class Cell:
     @property
     def folder(self) -> str:
         parts = [f"{self.frontend}_{self.tracker}_{self.backend}"] + [f"{k.split('.')[-1]}-{v}" for k, v in self.sweep]
-        return f"{slug(self.dataset)}/{slug('_'.join(parts))}"
+        return f"{self.dataset_name or slug(self.dataset)}/{slug('_'.join(parts))}"
 
 
 def parse_sweeps(sweeps: list[str]) -> list[tuple[str, list[str]]]:
@@ -58,10 +60,30 @@ def plan(
     """The cartesian grid of cells."""
     parsed = parse_sweeps(sweeps)
     points = [tuple(zip([k for k, _ in parsed], combo)) for combo in itertools.product(*[v for _, v in parsed])]
+    names = dataset_names(datasets)
     return [
-        Cell(d, f, t, b, point)
+        Cell(d, f, t, b, point, names[d])
         for d, f, t, b, point in itertools.product(datasets, frontends, trackers, backends, points or [()])
     ]
+
+
+def dataset_names(datasets: list[str]) -> dict[str, str]:
+    """A distinct file-name-safe name per dataset spec: its last path component, with as many
+    parent components as it takes to tell it from the others (`a-hdr_boxes`, `b-hdr_boxes`)."""
+
+    def tail(spec: str, depth: int) -> str:
+        parts = Path(spec.rstrip("/")).parts or (spec,)
+        return slug("-".join(parts[-depth:]))
+
+    names = {}
+    for spec in dict.fromkeys(datasets):
+        depth = 1
+        while any(tail(other, depth) == tail(spec, depth) for other in datasets if other != spec) and depth < len(Path(spec).parts):
+            depth += 1
+        names[spec] = tail(spec, depth)
+    if len(set(names.values())) < len(names):  # still equal (e.g. `x` and `x/`): tell apart by hash
+        names = {spec: f"{name}-{hashlib.sha1(spec.encode()).hexdigest()[:6]}" for spec, name in names.items()}
+    return names
 
 
 def cell_config(cell: Cell, config_file, assignments: list[str], run_overrides: dict):
@@ -92,14 +114,16 @@ def run_cell(cell: Cell, out_root: str, config_file, assignments: list[str], run
         return {"status": "failed", "error": message}
 
 
-def completed(out_root: Path, cell: Cell) -> dict | None:
-    """The metrics of a cell that already finished (resuming), else None."""
-    path = out_root / cell.folder / "metrics.json"
+def completed(out_root: Path, cell: Cell, identity: dict) -> dict | None:
+    """The metrics of a cell that already finished with the same inputs (pipeline.run_identity:
+    version, dataset, resolved configuration), else None: it must run (again)."""
+    folder = out_root / cell.folder
     try:
-        metrics = json.loads(path.read_text())
+        metrics = json.loads((folder / "metrics.json").read_text())
+        same = json.loads((folder / "identity.json").read_text()) == identity
     except (OSError, ValueError):
         return None
-    return None if metrics.get("partial") else {"status": "ok", **metrics}
+    return {"status": "ok", **metrics} if same and not metrics.get("partial") else None
 
 
 def run_grid(
@@ -112,8 +136,11 @@ def run_grid(
     `results`, if given, is filled in place as cells finish (what an interrupted caller keeps)."""
     from tqdm import tqdm
 
+    from eas_vo.pipeline import run_identity
+
     results = results if results is not None else {}
-    done = {cell: completed(out_root, cell) for cell in cells}
+    done = {cell: completed(out_root, cell, run_identity(cell_config(cell, config_file, assignments, run_overrides)))
+            for cell in cells}
     todo = [cell for cell in cells if done[cell] is None]
     not_run = {"status": "not run", "error": "interrupted before this cell ran"}
     results.update({cell: done[cell] or dict(not_run) for cell in cells})  # one step: never half-filled
@@ -203,7 +230,8 @@ def table_markdown(rows: list[dict]) -> str:
     sources = list(dict.fromkeys((r["frontend"], r["sweep"]) for r in rows))
     by_key = {(r["dataset"], r["method"], r["frontend"], r["sweep"]): r for r in rows}
     best_nc, best_ape = _best(rows, "nc_mean", lower=False), _best(rows, "ape_mean_rad", lower=True)
-    head1 = ["Sequence"] + [f"{slug(d)} ({m})" for d in datasets for m in methods for _ in (0, 1)]
+    name = {r["dataset"]: r.get("dataset_name") or slug(r["dataset"]) for r in rows}
+    head1 = ["Sequence"] + [f"{name[d]} ({m})" for d in datasets for m in methods for _ in (0, 1)]
     head2 = ["Source type"] + ["average NC", "average APE"] * (len(datasets) * len(methods))
     lines = ["| " + " | ".join(head1) + " |", "|" + "---|" * len(head1), "| " + " | ".join(head2) + " |"]
     for frontend, sweep in sources:

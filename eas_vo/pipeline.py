@@ -78,6 +78,7 @@ def run(config: ResolvedConfig, out_dir: str | Path | None = None, progress: boo
     if out is not None:
         out.mkdir(parents=True, exist_ok=True)
         write_text_atomic(out / "config.toml", config.to_toml())
+        write_text_atomic(out / "identity.json", json_text(run_identity(config)))
     try:
         tracked = track(parts, config, out / "frames.csv" if out else None, progress)
         t = tracked.times
@@ -94,6 +95,21 @@ def run(config: ResolvedConfig, out_dir: str | Path | None = None, progress: boo
         kept = f"the {len(t)} frames processed so far were written to {out} (metrics.json: partial)" if out else ""
         raise Interrupted.keeping(tracked.interrupted, kept) from None
     return result
+
+
+def run_identity(config: ResolvedConfig) -> dict:
+    """What made a run (identity.json): the eas-vo version, the dataset's resolved location
+    (an absolute path where it is one) and the whole resolved configuration. `compare` resumes
+    a cell only when its folder's identity equals the one it would write now."""
+    from eas_vo import __version__
+
+    _, location = registry.resolve_dataset(config.run.dataset)
+    path = Path(location).expanduser()
+    return {
+        "eas_vo": __version__,
+        "dataset": str(path.resolve()) if path.exists() else location,
+        "config": config.to_toml(),
+    }
 
 
 def open_pipeline(config: ResolvedConfig) -> Pipeline:

@@ -92,7 +92,42 @@ def test_one_and_two_jobs_give_the_same_table(grid, short_sequence, tmp_path):
 def test_plan_is_the_cartesian_product():
     cells = plan(["a", "b"], ["x"], ["klt", "other"], ["chain", "gtsam"], ["frontend.n=1,2", "frontend.beta=3,4,5"])
     assert len(cells) == 2 * 2 * 2 * 2 * 3
-    assert Cell("a", "x", "other", "chain", (("frontend.n", "1"), ("frontend.beta", "3"))) in cells
+    assert Cell("a", "x", "other", "chain", (("frontend.n", "1"), ("frontend.beta", "3")), "a") in cells
+
+
+def test_datasets_sharing_a_folder_name_never_share_cells(short_sequence, tmp_path, capsys):
+    """Two recordings both called `seq`: their cells, columns and reruns stay apart."""
+    import shutil
+
+    a, b = tmp_path / "a" / "seq", tmp_path / "b" / "seq"
+    shutil.copytree(short_sequence, a)
+    shutil.copytree(short_sequence, b)
+    lines = (b / "images.txt").read_text().splitlines()
+    (b / "images.txt").write_text("\n".join(lines[:20]) + "\n")  # b: a different (shorter) sequence
+    out = tmp_path / "cmp"
+    argv = ["compare", "--dataset", str(a), "--dataset", str(b), "--frontends", "original", "--out", str(out), "--jobs", "1", "--quiet"]
+    assert main(argv) == 0
+    first = capsys.readouterr().out
+    rows = {r["dataset"]: r for r in json.loads((out / "table.json").read_text())}
+    assert rows[str(a)]["folder"] != rows[str(b)]["folder"]
+    assert "a-seq (klt+chain)" in first and "b-seq (klt+chain)" in first
+    frames = {d: json.loads((out / r["folder"] / "metrics.json").read_text())["frames"] for d, r in rows.items()}
+    assert frames[str(b)] == 20 and frames[str(a)] > 20
+    assert main(argv) == 0  # the rerun reads each its own
+    assert {r["dataset"]: r["nc_mean"] for r in json.loads((out / "table.json").read_text())} == {d: r["nc_mean"] for d, r in rows.items()}
+
+
+def test_a_cell_is_reused_only_if_made_with_the_same_inputs(short_sequence, tmp_path, capsys):
+    out = tmp_path / "cmp"
+    base = ["compare", "--dataset", str(short_sequence), "--frontends", "original", "--out", str(out), "--jobs", "1", "--quiet"]
+    assert main(base + ["--duration", "1"]) == 0
+    assert "1 cells (1 run, 0 already complete" in capsys.readouterr().out
+    assert main(base + ["--duration", "1"]) == 0
+    assert "1 cells (0 run, 1 already complete" in capsys.readouterr().out
+    assert main(base) == 0  # no --duration: other inputs, so it runs again
+    assert "1 cells (1 run, 0 already complete" in capsys.readouterr().out
+    (row,) = json.loads((out / "table.json").read_text())
+    assert json.loads((out / row["folder"] / "metrics.json").read_text())["frames"] > 25
 
 
 def test_markdown_marks_the_best_of_each_column():
