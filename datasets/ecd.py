@@ -40,8 +40,8 @@ class EcdConfig(StreamConfig):
 
     def validate(self) -> None:
         super().validate()
-        check_range(self, "width", 1, 65535)
-        check_range(self, "height", 1, 65535)
+        check_range(self, "width", 1, 16384)  # the largest event sensors are a few thousand pixels wide
+        check_range(self, "height", 1, 16384)
 
 
 def _leaves_folder(name: str) -> bool:
@@ -219,8 +219,13 @@ class EcdFolderDataset(Dataset):
             values = [float(v) for v in fields]
         except ValueError:
             raise DataError(where, "calibration values must be numbers", 1) from None
-        if len(values) not in (4, 8, 9) or not all(map(math.isfinite, values)):
-            raise DataError(where, f"expected 4, 8 or 9 finite values (fx fy cx cy k1 k2 p1 p2 k3), found {len(values)}", 1)
+        if len(values) not in (4, 8, 9):
+            raise DataError(where, f"expected 4, 8 or 9 values (fx fy cx cy k1 k2 p1 p2 k3), found {len(values)}", 1)
+        if not all(map(math.isfinite, values)):
+            raise DataError(where, "calibration values must be finite (found NaN or infinity)", 1)
+        fx, fy = values[:2]
+        if not (0 < fx < 1e6 and 0 < fy < 1e6):
+            raise DataError(where, f"focal lengths fx = {fx:g}, fy = {fy:g} must be positive and below 1e6 px", 1)
         return CameraModel.from_calib(values, width, height)
 
     def _read_timed_table(self, name: str, ncols: int, what: str) -> np.ndarray | None:
@@ -228,6 +233,8 @@ class EcdFolderDataset(Dataset):
             return None
         where = self.source.label(name)
         table = parse_table(self.source.read_bytes(name), where, ncols, what)
+        if len(table) < 2:
+            raise DataError(where, f"holds {len(table)} row(s) of '{what}'; at least 2 are needed to interpolate (or remove the file)")
         check_increasing(where, table[:, 0])
         return table
 

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import shutil
 import sys
 from pathlib import Path
 
@@ -124,7 +125,8 @@ def build_parser() -> argparse.ArgumentParser:
         description="Simulate a textured HDR room seen by a hand-held DAVIS240: APS frames, events, "
         "ground truth (200 Hz), IMU (200 Hz), calib.txt, in the Event Camera Dataset text layout.",
     )
-    sim.add_argument("--out", required=True, metavar="DIR", help="output folder")
+    sim.add_argument("--out", required=True, metavar="DIR", help="output folder (new, or replaced with --overwrite)")
+    sim.add_argument("--overwrite", action="store_true", help="replace an existing --out folder")
     sim.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     sim.add_argument("--duration", type=float, default=10.0, metavar="S", help="length in seconds (default 10)")
     sim.add_argument("--illumination", type=float, default=1.0, metavar="X",
@@ -148,6 +150,15 @@ def _add_common_options(parser) -> None:
     parser.add_argument("--time-offset", metavar="S|auto",
                         help="ground truth is sampled at frame time + S seconds (default 0); 'auto' estimates S from the data")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
+
+
+def _check_output_folder(out: Path) -> None:
+    """Refuse, before any work, an output folder that is a file or cannot be written."""
+    if out.exists() and not out.is_dir():
+        raise EasVoError(f"--out {out} is a file, not a folder")
+    existing = next((p for p in [out, *out.parents] if p.exists()), Path("."))
+    if not os.access(existing, os.W_OK | os.X_OK):
+        raise EasVoError(f"--out {out}: {existing} is not writable")
 
 
 def _positive_int(text: str) -> int:
@@ -175,6 +186,10 @@ def main(argv: list[str] | None = None) -> int:
     except EasVoError as exc:
         print(f"eas-vo: error: {exc}", file=sys.stderr)
         return 2
+    except OSError as exc:  # the machine's answer to a user's request (a full disk, a path in the way)
+        where = f" ({exc.filename})" if exc.filename else ""
+        print(f"eas-vo: error: {exc.strerror or exc}{where}", file=sys.stderr)
+        return 2
     except KeyboardInterrupt as exc:  # the one place: a command says what it kept in Interrupted
         kept = exc.kept if isinstance(exc, Interrupted) and exc.kept else "nothing was written"
         print(f"eas-vo {args.command}: interrupted; {kept}", file=sys.stderr)
@@ -196,6 +211,7 @@ def cmd_run(args) -> int:
     rc = config.run
     if args.out:
         out = Path(args.out)
+        _check_output_folder(out)
         if not args.overwrite and any((out / name).exists() for name in ("metrics.json", "frames.csv")):
             raise EasVoError(f"{out} already holds results; choose another --out or add --overwrite")
     else:
@@ -227,9 +243,13 @@ def cmd_compare(args) -> int:
     from eas_vo.registry import open_dataset
 
     def names(text, default):
-        return [v.strip() for v in (text or default).split(",") if v.strip()]
+        listed = [v.strip() for v in (text or default).split(",") if v.strip()]
+        if not listed:
+            raise EasVoError(f"{text!r} names nothing; give comma-separated names")
+        return listed
 
     out = Path(args.out)
+    _check_output_folder(out)
     run_defaults = config_mod.RunConfig()
     cells = compare.plan(
         args.datasets or [run_defaults.dataset],
@@ -315,6 +335,8 @@ def cmd_render(args) -> int:
     from eas_vo.io import atomic_path
     from eas_vo.plots import plot_gallery
 
+    if Path(args.out).is_dir():
+        raise EasVoError(f"--out {args.out} is a folder; render writes one image, e.g. gallery.png")
     try:
         frames = [int(v) for v in args.frames.split(",") if v.strip()]
     except ValueError:
@@ -354,7 +376,17 @@ def cmd_simulate(args) -> int:
         pixel[keys[1]] = value
     sensor = build(SyntheticConfig, {**pixel, "illumination": args.illumination}, "dataset")
     config = sensor.applied_to(build(SimConfig, {"seed": args.seed, "duration_s": args.duration}, "simulate"))
-    stats = simulate(config, args.out, progress=sys.stderr.isatty())
+    out = Path(args.out)
+    _check_output_folder(out)
+    if out.exists() and any(out.iterdir()) and not args.overwrite:
+        raise EasVoError(f"--out {out} is not empty; choose another folder or add --overwrite")
+    tmp = out.with_name(f".{out.name}.{os.getpid()}.tmp")  # written whole, then swapped in: no stale frames
+    try:
+        stats = simulate(config, tmp, progress=sys.stderr.isatty())
+        shutil.rmtree(out, ignore_errors=True)
+        os.replace(tmp, out)
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
     print(f"wrote a {config.duration_s:g} s synthetic sequence (seed {config.seed}, illumination {config.illumination:g}) to {args.out}")
     if args.stats:
         print("\n".join("  " + line for line in stats.lines()))

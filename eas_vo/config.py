@@ -164,6 +164,8 @@ def read_config_file(path: str | Path) -> dict:
         else:
             names = ", ".join(sorted(bundled)) or "none"
             raise ConfigError(f"{path}: config file not found (bundled configs: {names})")
+    if not p.is_file():
+        raise ConfigError(f"{p}: not a config file (a directory?)")
     try:
         raw = tomllib.loads(p.read_text())
     except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:

@@ -220,3 +220,52 @@ def test_an_option_that_needs_an_imu_refuses_a_dataset_without_one(sequence_copy
     (sequence_copy / "imu.txt").unlink()
     err = one_line_failure(["run", "--dataset", str(sequence_copy), *option, "--out", str(tmp_path / "out"), "--quiet"], capsys)
     assert "needs an IMU" in err and not (tmp_path / "out").exists()
+
+
+def damage(seq, what):
+    """Damage a private copy of the short sequence as a careless user might."""
+    if what == "calib zeros":
+        (seq / "calib.txt").write_text("0 0 0 0\n")
+    elif what == "calib huge focal":
+        (seq / "calib.txt").write_text("1e308 1e308 120 90\n")
+    elif what == "calib nan":
+        (seq / "calib.txt").write_text("200 nan 120 90\n")
+    elif what == "empty groundtruth":
+        (seq / "groundtruth.txt").write_text("")
+    elif what == "one-line imu":
+        (seq / "imu.txt").write_text((seq / "imu.txt").read_text().splitlines()[0] + "\n")
+
+
+@pytest.mark.parametrize("what, says", [
+    ("calib zeros", "focal lengths fx = 0, fy = 0 must be positive"),
+    ("calib huge focal", "must be positive and below 1e6 px"),
+    ("calib nan", "must be finite"),
+    ("empty groundtruth", "groundtruth.txt: holds 0 row(s)"),
+    ("one-line imu", "imu.txt: holds 1 row(s)"),
+])
+def test_damaged_datasets_are_one_line_before_any_work(sequence_copy, tmp_path, capsys, what, says):
+    damage(sequence_copy, what)
+    err = one_line_failure(["run", "--dataset", str(sequence_copy), "--out", str(tmp_path / "out"), "--quiet"], capsys)
+    assert says in err and not (tmp_path / "out").exists()
+
+
+@pytest.mark.parametrize("argv, says", [
+    (["run", "--out", "{tmp}/a_file"], "is a file, not a folder"),
+    (["run", "--config", "{tmp}"], "not a config file"),
+    (["render", "--frames", "1", "--out", "{tmp}"], "is a folder; render writes one image"),
+    (["compare", "--frontends", ",", "--out", "{tmp}/cmp"], "names nothing"),
+    (["simulate", "--out", "{tmp}", "--duration", "0.3"], "is not empty"),
+])
+def test_paths_in_the_way_are_one_line(tmp_path, capsys, argv, says):
+    (tmp_path / "a_file").write_text("mine\n")
+    err = one_line_failure([a.replace("{tmp}", str(tmp_path)) for a in argv], capsys)
+    assert says in err and (tmp_path / "a_file").read_text() == "mine\n"
+
+
+def test_simulate_overwrite_replaces_the_folder_whole(tmp_path):
+    out = tmp_path / "sim"
+    assert main(["simulate", "--out", str(out), "--duration", "0.6"]) == 0
+    assert main(["simulate", "--out", str(out), "--duration", "0.3", "--overwrite"]) == 0
+    listed = len((out / "images.txt").read_text().splitlines())
+    assert len(list((out / "images").iterdir())) == listed  # no stale frames of the longer run
+    assert not list(tmp_path.glob(".*.tmp"))
