@@ -4,9 +4,11 @@ import os
 
 import numpy as np
 import pytest
+from hypothesis import given
+from hypothesis import strategies as st
 
 from eas_vo.errors import DataError, DataWarnings
-from helpers import load_event_file
+from helpers import hostile_settings, load_event_file
 
 
 def test_cache_is_invalidated_when_the_file_changes(tmp_path):
@@ -16,6 +18,49 @@ def test_cache_is_invalidated_when_the_file_changes(tmp_path):
     path.write_text("0.1 1 2 1\n0.2 3 4 0\n0.3 5 6 1\n")
     os.utime(path, ns=(1, 2))
     assert len(load_event_file(path)) == 3
+
+
+def test_a_rewrite_with_the_old_size_and_mtime_is_seen(tmp_path):
+    """Same size, mtime put back (touch -r): the change time and the content sample differ."""
+    path = tmp_path / "events.txt"
+    path.write_text("0.1 1 2 1\n0.2 3 4 0\n")
+    before = os.stat(path)
+    assert load_event_file(path)["x"].tolist() == [1, 3]
+    path.write_text("0.1 7 2 1\n0.2 3 4 0\n")  # x 1 -> 7, same size
+    os.utime(path, ns=(before.st_atime_ns, before.st_mtime_ns))
+    assert load_event_file(path)["x"].tolist() == [7, 3]
+
+
+def cached_file(path):
+    from eas_vo.eventfile import cache_key, cache_path, file_identity
+
+    return cache_path(cache_key("text", *file_identity(path), 240, 180, 1e-6))
+
+
+@given(st.data())
+@hostile_settings(max_examples=60)
+def test_a_damaged_cache_is_detected_and_rebuilt(tmp_path, data):
+    """Random damage to the cache file (flipped bits anywhere, a cut, bytes appended): the
+    next load gives exactly the events of the text, rebuilding the cache when it saw damage."""
+    path = tmp_path / "events.txt"
+    if not path.exists():
+        from eas_vo.eventfile import write_events_text
+        from helpers import random_events
+
+        write_events_text(path, random_events(3000, seed=5), 240, 180)
+    clean = np.array(load_event_file(path))
+    cache = cached_file(path)
+    raw = bytearray(cache.read_bytes())
+    kind = data.draw(st.sampled_from(["flip", "cut", "append"]))
+    if kind == "flip":
+        for offset in data.draw(st.lists(st.integers(0, len(raw) - 1), min_size=1, max_size=20)):
+            raw[offset] ^= 1 << data.draw(st.integers(0, 7))
+    elif kind == "cut":
+        raw = raw[: data.draw(st.integers(0, len(raw) - 1))]
+    else:
+        raw += bytes(data.draw(st.integers(1, 40)))
+    cache.write_bytes(bytes(raw))
+    np.testing.assert_array_equal(load_event_file(path), clean)
 
 
 BAD = [
