@@ -7,11 +7,15 @@ import json
 import math
 import os
 import re
+import shutil
 import tempfile
+import time
 from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
+
+from eas_vo.errors import EasVoError
 
 from eas_vo.errors import DataError
 
@@ -50,6 +54,90 @@ def atomic_path(path: str | Path):
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
         raise
+
+
+@contextmanager
+def output_folder(out: str | Path):
+    """One writer per folder, and a folder that holds one whole run: lock `out` (a sibling
+    `.NAME.lock` holding the writer's pid; a lock whose process is gone is taken over), yield a
+    fresh hidden sibling folder to write into, and when the block ends normally or by an
+    interrupt (the partial outputs are then written) move it into place, replacing what `out`
+    held. On any other error the new folder is dropped and `out` stays as it was."""
+    out = Path(out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    lock = out.with_name(f".{out.name}.lock")
+    _acquire(lock, out)
+    staging = out.with_name(f".{out.name}.{os.getpid()}.tmp")
+    try:
+        shutil.rmtree(staging, ignore_errors=True)
+        staging.mkdir()
+        try:
+            yield staging
+        except KeyboardInterrupt:
+            _move_into_place(staging, out)
+            raise
+        _move_into_place(staging, out)
+    finally:
+        shutil.rmtree(staging, ignore_errors=True)
+        lock.unlink(missing_ok=True)
+
+
+def _acquire(lock: Path, out: Path) -> None:
+    for _ in range(2):
+        try:
+            fd = os.open(lock, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o666)
+        except FileExistsError:
+            if _lock_is_held(lock):
+                raise EasVoError(f"{out} is being written by another eas-vo process (pid {_lock_pid(lock) or '?'}); "
+                                 "wait for it or choose another --out") from None
+            lock.unlink(missing_ok=True)  # its writer is gone: a crash left it, and maybe a staging folder
+            for stale in out.parent.glob(f".{out.name}.*.tmp"):
+                pid = stale.name[len(out.name) + 2: -len(".tmp")]
+                if not (pid.isdigit() and _alive(int(pid))):
+                    shutil.rmtree(stale, ignore_errors=True)
+            continue
+        with os.fdopen(fd, "w") as fh:
+            fh.write(f"{os.getpid()}\n")
+        return
+    raise EasVoError(f"{out}: could not take its lock {lock}")
+
+
+def _lock_pid(lock: Path) -> int:
+    try:
+        return int(lock.read_text().strip() or 0)
+    except (OSError, ValueError):
+        return 0
+
+
+def _lock_is_held(lock: Path) -> bool:
+    """A lock is held while its pid lives; one without a pid yet (being written, or a crash
+    between creating and writing it) for 10 s after it was made."""
+    pid = _lock_pid(lock)
+    if pid:
+        return _alive(pid)
+    try:
+        return time.time() - lock.stat().st_mtime < 10.0
+    except OSError:
+        return False  # gone meanwhile: try again
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
+
+
+def _move_into_place(staging: Path, out: Path) -> None:
+    """Rename `staging` to `out`, the old `out` (if any) set aside first and then removed."""
+    old = out.with_name(f".{out.name}.{os.getpid()}.old")
+    if out.exists():
+        os.replace(out, old)
+    os.replace(staging, out)
+    shutil.rmtree(old, ignore_errors=True)
 
 
 def json_text(obj) -> str:

@@ -19,7 +19,7 @@ from eas_vo.config import ResolvedConfig
 from eas_vo.errors import EasVoError, Interrupted
 from eas_vo.evaluation import RotationErrors, estimate_time_offset, rotation_errors
 from eas_vo.geometry.rotations import quats_from_matrices
-from eas_vo.io import atomic_path, json_text, write_text_atomic
+from eas_vo.io import atomic_path, json_text, output_folder, write_text_atomic
 from eas_vo.orb import OrbStats
 from eas_vo.plugins import Backend, Dataset, Frontend, Tracker
 from eas_vo.types import FrameRecord, RelativeRotation
@@ -74,9 +74,16 @@ def run(config: ResolvedConfig, out_dir: str | Path | None = None, progress: boo
     started = time.perf_counter()
     parts = open_pipeline(config)
     load_s = time.perf_counter() - started  # opening (and the first time simulating or caching)
-    out = Path(out_dir) if out_dir is not None else None
+    if out_dir is None:
+        return _run_into(parts, config, None, progress, started, load_s)
+    with output_folder(out_dir) as staging:  # one writer; `out_dir` gets a whole run or a marked partial one
+        return _run_into(parts, config, staging, progress, started, load_s, Path(out_dir))
+
+
+def _run_into(parts: Pipeline, config: ResolvedConfig, out: Path | None, progress: bool, started: float, load_s: float,
+              final: Path | None = None) -> RunResult:
+    """Track, solve, evaluate and (with `out`) write there; `final` is where it will end up."""
     if out is not None:
-        out.mkdir(parents=True, exist_ok=True)
         write_text_atomic(out / "config.toml", config.to_toml())
         write_text_atomic(out / "identity.json", json_text(run_identity(config)))
     try:
@@ -89,10 +96,10 @@ def run(config: ResolvedConfig, out_dir: str | Path | None = None, progress: boo
         if out is not None:
             write_outputs(out, result, parts.dataset.label)
     except KeyboardInterrupt as exc:  # before there was anything to evaluate, or while writing
-        kept = f"{out} holds an incomplete run (no metrics.json): rerun with --overwrite" if out else ""
+        kept = f"{final} holds an incomplete run (no metrics.json): rerun with --overwrite" if final else ""
         raise Interrupted.keeping(exc, kept) from None
     if tracked.interrupted is not None:
-        kept = f"the {len(t)} frames processed so far were written to {out} (metrics.json: partial)" if out else ""
+        kept = f"the {len(t)} frames processed so far were written to {final} (metrics.json: partial)" if final else ""
         raise Interrupted.keeping(tracked.interrupted, kept) from None
     return result
 

@@ -1,10 +1,18 @@
-"""Numeric text tables and atomic writes."""
+"""Numeric text tables, atomic writes, and output folders: one writer at a time, one whole
+run (or a marked partial one) per folder, nothing left behind, also when two real processes
+race into one folder."""
+
+import json
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
 
 import numpy as np
 import pytest
 
-from eas_vo.errors import DataError
-from eas_vo.io import atomic_path, read_table
+from eas_vo.errors import DataError, EasVoError
+from eas_vo.io import atomic_path, output_folder, read_table
 
 
 def test_read_table_skips_comments_and_blank_lines(tmp_path):
@@ -46,3 +54,67 @@ def test_files_written_atomically_get_the_users_umask(tmp_path, umask):
         os.umask(old)
     mode = stat.S_IMODE((tmp_path / "a.txt").stat().st_mode)
     assert mode == stat.S_IMODE((tmp_path / "b.txt").stat().st_mode) == 0o666 & ~umask
+
+
+def test_a_failed_run_leaves_the_old_folder_as_it_was(tmp_path):
+    out = tmp_path / "out"
+    with output_folder(out) as staging:
+        (staging / "metrics.json").write_text("old\n")
+    with pytest.raises(RuntimeError):
+        with output_folder(out) as staging:
+            (staging / "metrics.json").write_text("new\n")
+            raise RuntimeError("the run failed")
+    assert (out / "metrics.json").read_text() == "old\n"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["out"]  # no staging folder, no lock
+
+
+def test_an_interrupted_run_lands_whole_and_a_live_writer_excludes_others(tmp_path):
+    out = tmp_path / "out"
+    with pytest.raises(KeyboardInterrupt):
+        with output_folder(out) as staging:
+            (staging / "frames.csv").write_text("partial\n")
+            with pytest.raises(EasVoError, match=r"is being written by another eas-vo process \(pid \d+\)"):
+                with output_folder(out):
+                    pass
+            raise KeyboardInterrupt
+    assert (out / "frames.csv").read_text() == "partial\n"
+
+
+def test_a_crashed_writers_lock_and_leftovers_are_taken_over(tmp_path):
+    out = tmp_path / "out"
+    dead = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True, text=True)
+    (tmp_path / ".out.lock").write_text(dead.stdout)
+    (tmp_path / f".out.{dead.stdout.strip()}.tmp").mkdir()
+    with output_folder(out) as staging:
+        (staging / "metrics.json").write_text("{}\n")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["out"]
+
+
+def run_into(folder: Path, dataset: Path, duration: str) -> subprocess.Popen:
+    return subprocess.Popen(
+        [sys.executable, "-m", "eas_vo", "run", "--dataset", str(dataset), "--frontend", "original", "--duration", duration,
+         "--out", str(folder), "--overwrite", "--quiet"],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=tempfile.gettempdir(),
+    )
+
+
+def test_twenty_races_of_two_runs_into_one_folder_leave_one_whole_run(short_sequence, tmp_path):
+    """Two runs of different lengths into one folder at once, 20 times: each folder then holds
+    exactly one of them, every file agreeing (config, identity, metrics, frames.csv)."""
+    env_ok = {0, 2}  # done, or refused because the other one held the folder
+    for round_ in range(20):
+        folder = tmp_path / f"race{round_}"
+        runs = [run_into(folder, short_sequence, d) for d in ("0.5", "1.0")]
+        codes = [p.wait(timeout=120) for p in runs]
+        errors = [p.stderr.read() for p in runs]
+        assert set(codes) <= env_ok and 0 in codes, (codes, errors)
+        for code, err in zip(codes, errors):
+            assert code == 0 or "is being written by another eas-vo process" in err, err
+        config = (folder / "config.toml").read_text()
+        metrics = json.loads((folder / "metrics.json").read_text())
+        rows = (folder / "frames.csv").read_text().splitlines()
+        assert json.loads((folder / "identity.json").read_text())["config"] == config
+        assert len(rows) - 1 == metrics["frames"] and not metrics["partial"]
+        duration = 0.5 if "duration_s = 0.5" in config else 1.0
+        assert abs(metrics["frames"] - 20 * duration) <= 1, (duration, metrics["frames"])
+        assert sorted(p.name for p in folder.parent.iterdir() if p.name.startswith(f".race{round_}.")) == []
