@@ -13,7 +13,9 @@ rate or every N events.
 
 from __future__ import annotations
 
+import functools
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path, PurePosixPath, PureWindowsPath
 
@@ -24,7 +26,7 @@ from eas_vo.datasets.recording import StreamConfig, check_increasing, event_samp
 from eas_vo.datasets.sources import MARKERS, open_source
 from eas_vo.errors import DataError, DataWarnings
 from eas_vo.eventfile import load_event_text, write_events_text
-from eas_vo.io import atomic_path, parse_table, write_text_atomic
+from eas_vo.io import atomic_path, data_line, parse_table, write_text_atomic
 from eas_vo.plugins import Dataset
 from eas_vo.types import CameraModel, ImuSeries, PoseSeries, empty_events
 from eas_vo.validation import check_range
@@ -228,23 +230,29 @@ class EcdFolderDataset(Dataset):
             raise DataError(where, f"focal lengths fx = {fx:g}, fy = {fy:g} must be positive and below 1e6 px", 1)
         return CameraModel.from_calib(values, width, height)
 
-    def _read_timed_table(self, name: str, ncols: int, what: str) -> np.ndarray | None:
+    def _read_timed_table(self, name: str, ncols: int, what: str) -> tuple[np.ndarray, Callable] | None:
+        """The table of `name` with times increasing, and row index -> file line; None if absent."""
         if not self.source.exists(name):
             return None
         where = self.source.label(name)
-        table = parse_table(self.source.read_bytes(name), where, ncols, what)
+        data = self.source.read_bytes(name)
+        table = parse_table(data, where, ncols, what)
         if len(table) < 2:
             raise DataError(where, f"holds {len(table)} row(s) of '{what}'; at least 2 are needed to interpolate (or remove the file)")
-        check_increasing(where, table[:, 0])
-        return table
+        line_of = functools.partial(data_line, data)
+        check_increasing(where, table[:, 0], line_of)
+        return table, line_of
 
     def _read_ground_truth(self) -> PoseSeries | None:
-        table = self._read_timed_table("groundtruth.txt", 8, "t px py pz qx qy qz qw")
-        return None if table is None else pose_series(self.source.label("groundtruth.txt"), table)
+        read = self._read_timed_table("groundtruth.txt", 8, "t px py pz qx qy qz qw")
+        return None if read is None else pose_series(self.source.label("groundtruth.txt"), *read)
 
     def _read_imu(self) -> ImuSeries | None:
-        table = self._read_timed_table("imu.txt", 7, "t ax ay az gx gy gz")
-        return None if table is None else ImuSeries(t=table[:, 0], acc=table[:, 1:4], gyro=table[:, 4:7])
+        read = self._read_timed_table("imu.txt", 7, "t ax ay az gx gy gz")
+        if read is None:
+            return None
+        table, _ = read
+        return ImuSeries(t=table[:, 0], acc=table[:, 1:4], gyro=table[:, 4:7])
 
 
 def write_ecd_folder(

@@ -44,22 +44,28 @@ def event_sample_times(event_t: np.ndarray, rate_hz: float, every_events: int) -
     return np.arange(float(event_t[0]), float(event_t[-1]), 1.0 / rate_hz)
 
 
-def check_increasing(where: str, t: np.ndarray) -> None:
-    """Raise DataError naming the first row whose time [s] does not increase."""
+def _row_number(row: int) -> int:
+    return row + 1
+
+
+def check_increasing(where: str, t: np.ndarray, line_of=_row_number) -> None:
+    """Raise DataError naming the first row whose time [s] does not increase; `line_of(row)`
+    turns a row index into what the message names (a file line; default: the row from 1)."""
     bad = np.flatnonzero(np.diff(t) <= 0)
     if len(bad):
         i = int(bad[0]) + 1
-        raise DataError(where, f"timestamp {t[i]:.9f} does not increase (previous {t[i - 1]:.9f})", i + 1)
+        raise DataError(where, f"timestamp {t[i]:.9f} does not increase (previous {t[i - 1]:.9f})", line_of(i))
 
 
-def pose_series(where: str, table: np.ndarray) -> PoseSeries:
-    """`t px py pz qx qy qz qw` rows -> PoseSeries, checking that quaternions are unit."""
+def pose_series(where: str, table: np.ndarray, line_of=_row_number) -> PoseSeries:
+    """`t px py pz qx qy qz qw` rows -> PoseSeries, checking that quaternions are unit
+    (`line_of` as for check_increasing)."""
     q = table[:, 4:8]
     norms = np.linalg.norm(q, axis=1)
     off = np.abs(norms - 1.0) > 1e-2
     if off.any():
         i = int(np.argmax(off))
-        raise DataError(where, f"quaternion norm {norms[i]:.3f} is not 1", i + 1)
+        raise DataError(where, f"quaternion norm {norms[i]:.3f} is not 1", line_of(i))
     # Normalise only what is not unit already, so that re-reading written poses is exact.
     q = np.where(np.abs(norms - 1.0)[:, None] > 1e-12, q / norms[:, None], q)
     return PoseSeries(t=table[:, 0], p_w_c=table[:, 1:4], q_w_c=q)

@@ -139,8 +139,8 @@ def run_grid(
     from eas_vo.pipeline import run_identity
 
     results = results if results is not None else {}
-    done = {cell: completed(out_root, cell, run_identity(cell_config(cell, config_file, assignments, run_overrides)))
-            for cell in cells}
+    identities = {cell: run_identity(cell_config(cell, config_file, assignments, run_overrides)) for cell in cells}
+    done = {cell: completed(out_root, cell, identities[cell]) for cell in cells}
     todo = [cell for cell in cells if done[cell] is None]
     not_run = {"status": "not run", "error": "interrupted before this cell ran"}
     results.update({cell: done[cell] or dict(not_run) for cell in cells})  # one step: never half-filled
@@ -161,12 +161,34 @@ def run_grid(
                 results[cell] = run_cell(cell, *args)
                 bar.update(1)
         else:
-            with ProcessPoolExecutor(jobs) as pool:
-                futures = {pool.submit(run_cell, cell, *args): cell for cell in todo}
+            pool = ProcessPoolExecutor(jobs)
+            futures = {pool.submit(run_cell, cell, *args): cell for cell in todo}
+            try:
                 for future in as_completed(futures):
                     results[futures[future]] = future.result()
                     bar.update(1)
+            except KeyboardInterrupt:  # Ctrl-C or SIGTERM: stop now, keep every finished cell
+                _stop(pool, futures, results)
+                for cell in todo:  # a cell whose folder was complete before its worker stopped counts
+                    if results[cell]["status"] == "not run":
+                        results[cell] = completed(out_root, cell, identities[cell]) or results[cell]
+                raise
+            pool.shutdown()
     return results, len(todo)
+
+
+def _stop(pool: ProcessPoolExecutor, futures: dict, results: dict) -> None:
+    """Cancel the queued cells, keep those that finished, and end the running ones with SIGTERM
+    (each writes its partial outputs) before returning: no worker outlives compare."""
+    for future, cell in futures.items():
+        if future.done() and not future.cancelled() and future.exception() is None:
+            results[cell] = future.result()
+    workers = list(pool._processes.values())  # ProcessPoolExecutor has no public terminate before 3.14
+    pool.shutdown(wait=False, cancel_futures=True)
+    for process in workers:
+        process.terminate()
+    for process in workers:
+        process.join(timeout=30)
 
 
 # ----------------------------------------------------------------------------- tables

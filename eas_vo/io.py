@@ -206,6 +206,19 @@ def parse_table(data: bytes, where: str, ncols: int, what: str) -> np.ndarray:
     return _parse_table_slow(where, data, ncols, what)
 
 
+def data_line(data: bytes, row: int) -> int:
+    """The file line (from 1) of data row `row` (from 0) of a table, blank and comment lines
+    skipped as parse_table skips them."""
+    seen = -1
+    for lineno, line in enumerate(data.split(b"\n"), start=1):
+        text = line.strip()
+        if text and not text.startswith(b"#"):
+            seen += 1
+            if seen == row:
+                return lineno
+    return row + 1
+
+
 def _count_lines(data: bytes) -> int:
     n = data.count(b"\n")
     return n + 1 if data and not data.endswith(b"\n") else n

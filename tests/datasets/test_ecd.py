@@ -141,3 +141,18 @@ def test_hostile_tables_are_named_errors_or_read_exactly(sequence_copy, content)
             np.testing.assert_array_equal(ds.camera.calib_values()[: len(values)], values)
         else:  # no listed frame exists, so only an empty list can be accepted: an event-only stream
             assert rows == [] and ds.load_frame(0) is None
+
+
+@pytest.mark.parametrize("name, damage, message", [
+    ("groundtruth.txt", lambda rows: rows[:3] + [rows[3].split()[0] + " 0 0 0 0 0 0 2"] + rows[4:], "quaternion norm 2.000 is not 1"),
+    ("groundtruth.txt", lambda rows: rows[:3] + [rows[1]] + rows[4:], "does not increase"),
+    ("imu.txt", lambda rows: rows[:3] + [rows[1]] + rows[4:], "does not increase"),
+])
+def test_table_errors_name_the_file_line_past_comments_and_blanks(sequence_copy, name, damage, message):
+    """Row 3 (from 0) is damaged; two comment lines and a blank line precede it: file line 7."""
+    path = sequence_copy / name
+    rows = path.read_text().splitlines()
+    damaged = damage(rows)
+    path.write_text("\n".join(["# a header", "", "# another"] + damaged) + "\n")
+    with pytest.raises(DataError, match=rf"{name}:7: .*{message}"):
+        EcdFolderDataset(sequence_copy)

@@ -83,3 +83,31 @@ def test_compare_interrupted_writes_its_table_and_resumes(short_sequence, tmp_pa
     capsys.readouterr()
     assert main(argv) == 0
     assert "3 cells (2 run, 1 already complete, 0 failed)" in capsys.readouterr().out
+
+
+def test_sigterm_to_a_parallel_compare_stops_it_at_once_without_orphans(short_sequence, tmp_path):
+    """SIGTERM to the parent of --jobs 2 as the first cells finish: exit 143 within seconds, the
+    table of what finished written, queued cells not started, and no worker left running."""
+    import subprocess
+    import sys
+    import tempfile
+    import time
+
+    out = tmp_path / "cmp"
+    argv = [sys.executable, "-m", "eas_vo", "compare", "--dataset", str(short_sequence), "--frontends", "original,slice,eas",
+            "--sweep", "tracker.max_corners=100,200,300,400", "--out", str(out), "--jobs", "2", "--quiet"]
+    parent = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=tempfile.gettempdir())
+    deadline = time.monotonic() + 120
+    while not [f for f in out.glob("*/*/metrics.json") if not f.parent.name.startswith(".")] and time.monotonic() < deadline:
+        time.sleep(0.05)
+    parent.send_signal(signal.SIGTERM)
+    stopped = time.monotonic()
+    assert parent.wait(timeout=60) == 143
+    assert time.monotonic() - stopped < 15
+    err = parent.stderr.read()
+    assert err.startswith("eas-vo compare: interrupted; the table of the ") and err.count("\n") == 1, err
+    statuses = [r["status"] for r in json.loads((out / "table.json").read_text())]
+    assert "ok" in statuses and "not run" in statuses and len(statuses) == 12
+    time.sleep(0.5)
+    survivors = subprocess.run(["pgrep", "-f", str(out)], capture_output=True, text=True).stdout.split()
+    assert survivors == [], survivors
