@@ -116,14 +116,18 @@ def run_cell(cell: Cell, out_root: str, config_file, assignments: list[str], run
 
 def completed(out_root: Path, cell: Cell, identity: dict) -> dict | None:
     """The metrics of a cell that already finished with the same inputs (pipeline.run_identity:
-    version, dataset, resolved configuration), else None: it must run (again)."""
+    version, dataset, resolved configuration) and still holds all its files, else None: it
+    must run (again)."""
+    from eas_vo.pipeline import RUN_FILES
+
     folder = out_root / cell.folder
     try:
         metrics = json.loads((folder / "metrics.json").read_text())
         same = json.loads((folder / "identity.json").read_text()) == identity
     except (OSError, ValueError):
         return None
-    return {"status": "ok", **metrics} if same and not metrics.get("partial") else None
+    whole = isinstance(metrics, dict) and not metrics.get("partial") and all((folder / f).is_file() for f in RUN_FILES)
+    return {"status": "ok", **metrics} if same and whole else None
 
 
 def run_grid(

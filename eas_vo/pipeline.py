@@ -64,6 +64,10 @@ class RunResult:
     causal_R_w_c: np.ndarray | None = None  # an online backend's estimate of each frame when it arrived
 
 
+RUN_FILES = ("config.toml", "identity.json", "frames.csv", "trajectory.tum", "metrics.json", "rotation.png")
+"""What every finished run's folder holds (groundtruth.tum and trajectory_causal.tum when they apply)."""
+
+
 def run(config: ResolvedConfig, out_dir: str | Path | None = None, progress: bool = False) -> RunResult:
     """Run the configured pipeline; with `out_dir`, write every output file there.
 

@@ -1,11 +1,20 @@
 """`eas-vo compare`: the grid, its Table 1, resuming, failing cells, sweeps, parallel runs."""
 
+import contextlib
+import io
 import json
+import os
+import shutil
+import tempfile
+from pathlib import Path
 
 import pytest
+from hypothesis import given
+from hypothesis import strategies as st
 
 from eas_vo.cli import main
 from eas_vo.compare import Cell, plan, table_markdown
+from helpers import hostile_settings
 
 
 @pytest.fixture(scope="module")
@@ -148,3 +157,66 @@ def test_dask_executor_gives_the_same_table(grid, tmp_path):
         assert main(argv) == 0
     strip = lambda rows: [{k: v for k, v in r.items() if k != "folder"} for r in rows]  # noqa: E731
     assert strip(json.loads((target / "table.json").read_text())) == strip(json.loads((out / "table.json").read_text()))
+
+
+@pytest.fixture(scope="module")
+def one_cell(short_sequence, tmp_path_factory):
+    """A finished one-cell compare folder (1 s of the short sequence), its argv and its table row."""
+    out = tmp_path_factory.mktemp("cmp") / "one"
+    argv = ["compare", "--dataset", str(short_sequence), "--frontends", "eas", "--duration", "1", "--out", str(out),
+            "--jobs", "1", "--quiet"]
+    assert main(argv) == 0
+    (row,) = json.loads((out / "table.json").read_text())
+    return out, argv, row
+
+
+def _damage(folder, data) -> bool:
+    """Damage one cell folder as a crash, a careless user or an old version would; True if the
+    damage leaves its run whole (so it may be reused)."""
+    from eas_vo.pipeline import RUN_FILES
+
+    name = data.draw(st.sampled_from(RUN_FILES))
+    kind = data.draw(st.sampled_from(["delete", "garbage", "cut", "identity", "partial", "stray", "touch"]))
+    path = folder / name
+    if kind == "delete":
+        path.unlink()
+    elif kind == "garbage":
+        path.write_bytes(data.draw(st.binary(max_size=64)))
+    elif kind == "cut":
+        path.write_bytes(path.read_bytes()[: data.draw(st.integers(0, 20))])
+    elif kind == "identity":
+        identity = json.loads((folder / "identity.json").read_text())
+        identity[data.draw(st.sampled_from(sorted(identity)))] = data.draw(st.sampled_from(["0.0.1", "/elsewhere", ""]))
+        (folder / "identity.json").write_text(json.dumps(identity))
+    elif kind == "partial":
+        metrics = json.loads((folder / "metrics.json").read_text())
+        (folder / "metrics.json").write_text(json.dumps({**metrics, "partial": True}))
+    elif kind == "stray":
+        (folder / "notes.txt").write_text("mine")
+    else:
+        os.utime(path, ns=(1, 1))
+    return kind in ("stray", "touch") or (kind in ("garbage", "cut") and name not in ("metrics.json", "identity.json"))
+
+
+@given(st.data())
+@hostile_settings(max_examples=15)
+def test_a_damaged_cell_folder_is_run_again_never_trusted(one_cell, data):
+    """Random damage to a finished cell: the resumed compare either reuses it (the damage left
+    the run whole and its inputs unchanged) or runs it again; the table is always the clean one
+    and the folder ends whole."""
+    from eas_vo.pipeline import RUN_FILES
+
+    out, argv, row = one_cell
+    with tempfile.TemporaryDirectory() as tmp:
+        copy = Path(tmp) / "one"
+        shutil.copytree(out, copy)
+        may_reuse = _damage(copy / row["folder"], data)
+        with contextlib.redirect_stdout(io.StringIO()) as said:
+            assert main(argv[:-4] + [str(copy), "--jobs", "1", "--quiet"]) == 0
+        reused = "0 run, 1 already complete" in said.getvalue()
+        assert reused <= may_reuse, said.getvalue()
+        (again,) = json.loads((copy / "table.json").read_text())
+        assert {k: again[k] for k in ("status", "nc_mean", "ape_mean_rad")} == {k: row[k] for k in ("status", "nc_mean", "ape_mean_rad")}
+        folder = copy / row["folder"]
+        assert all((folder / f).is_file() for f in RUN_FILES)
+        assert json.loads((folder / "identity.json").read_text()) == json.loads((out / row["folder"] / "identity.json").read_text())
