@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import functools
 import math
+import sys
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path, PurePosixPath, PureWindowsPath
@@ -22,6 +23,7 @@ from pathlib import Path, PurePosixPath, PureWindowsPath
 import cv2
 import numpy as np
 
+from eas_vo.datasets import ecd_catalogue
 from eas_vo.datasets.recording import StreamConfig, check_increasing, event_sample_times, pose_series
 from eas_vo.datasets.sources import MARKERS, open_source
 from eas_vo.errors import DataError, DataWarnings
@@ -68,6 +70,8 @@ class EcdFolderDataset(Dataset):
 
     def __init__(self, location: str | Path, config: EcdConfig | None = None):
         self.config = config or EcdConfig()
+        if not Path(location).exists() and str(location) in ecd_catalogue.registry():  # ecd:hdr_boxes
+            location = ecd_catalogue.fetch(str(location), progress=sys.stderr.isatty())
         self.source = open_source(location)
         self.label = self.source.location
         self.warnings = DataWarnings()
@@ -87,6 +91,15 @@ class EcdFolderDataset(Dataset):
         """A folder holding `images.txt` or `events.txt`, or a path ending in `.zip`."""
         path = Path(location)
         return path.suffix.lower() == ".zip" or any((path / marker).is_file() for marker in MARKERS)
+
+    @classmethod
+    def catalogue(cls) -> dict[str, str]:
+        """The dataset's published sequences and the MD5s of their zips."""
+        return ecd_catalogue.registry()
+
+    @classmethod
+    def fetch(cls, name: str, folder: str | None = None, progress: bool = False) -> Path:
+        return ecd_catalogue.fetch(name, folder, progress)
 
     def data_warnings(self) -> list[str]:
         return self.warnings.lines()

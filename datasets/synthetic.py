@@ -89,6 +89,11 @@ class SyntheticDataset(EcdFolderDataset):
         """Never by guessing: a synthetic sequence is named explicitly, `synthetic:NAME`."""
         return False
 
+    @classmethod
+    def catalogue(cls) -> dict[str, str]:
+        """None: synthetic sequences are simulated on first use, never downloaded."""
+        return {}
+
     def __init__(self, name: str = "default", config: SyntheticConfig | None = None):
         config = config or SyntheticConfig()
         super().__init__(sequence_folder(name or "default", config, progress=sys.stderr.isatty()))

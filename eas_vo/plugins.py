@@ -19,10 +19,12 @@ Backend --R_w_c per frame--> evaluation.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from pathlib import Path
 from typing import ClassVar, Iterator, Sequence
 
 import numpy as np
 
+from eas_vo.errors import EasVoError
 from eas_vo.types import CameraModel, FrameRecord, ImuSeries, PoseSeries, RelativeRotation, Sample, search_times
 
 
@@ -37,7 +39,8 @@ class Dataset:
     Required: `__init__(location, config)` setting `camera` (and `ground_truth`, `imu`
     when the recording has them); `frame_times()`, `load_frame(k)`, `events()`.
     Optional (defaults here): `can_open`, `label`, `no_frames_reason`, `data_warnings`,
-    `window`, `samples`.
+    `window`, `samples`; `catalogue` and `fetch` for a plugin whose recordings can be
+    downloaded by name (`eas-vo fetch`, `--dataset PLUGIN:NAME`).
     """
 
     name: ClassVar[str] = "dataset"
@@ -67,6 +70,17 @@ class Dataset:
         every dataset plugin and needs exactly one yes. Default: no (explicit form only).
         """
         return False
+
+    @classmethod
+    def catalogue(cls) -> dict[str, str]:
+        """{name: checksum} of the recordings `fetch` can download. Default: none."""
+        return {}
+
+    @classmethod
+    def fetch(cls, name: str, folder: str | None = None, progress: bool = False) -> Path:
+        """Download recording `name` (one of `catalogue()`) into `folder` (default: the plugin's
+        data folder) unless it is already there and verified; return its location."""
+        raise EasVoError(f"dataset plugin {cls.name!r} cannot fetch recordings")
 
     def frame_times(self) -> np.ndarray:
         """(N,) sample timestamps [s], non-decreasing."""

@@ -121,6 +121,26 @@ def resolve_dataset(spec: str) -> tuple[type, str]:
                      f"write NAME:{spec} to force one){_installation_problem('datasets')}")
 
 
+def fetchable(spec: str) -> tuple[type, str]:
+    """(dataset plugin class, recording name) for an `eas-vo fetch` name: `PLUGIN:NAME`, or a
+    NAME exactly one plugin's catalogue lists."""
+    plugins = available("datasets")
+    scheme, sep, name = spec.partition(":")
+    if sep:
+        if scheme not in plugins:
+            raise EasVoError(f"{spec}: no dataset plugin {scheme!r} (installed: {', '.join(plugins) or 'none'})")
+        candidates = [plugins[scheme]]
+    else:
+        candidates, name = list(plugins.values()), spec
+    owners = [cls for cls in candidates if name in cls.catalogue()]
+    if len(owners) == 1:
+        return owners[0], name
+    if owners:
+        raise EasVoError(f"{spec}: several dataset plugins list it ({', '.join(c.name for c in owners)}); write PLUGIN:{spec}")
+    known = sorted(f"{cls.name}:{n}" if sep else n for cls in candidates for n in cls.catalogue())
+    raise EasVoError(f"{spec}: no dataset plugin can fetch it (known: {', '.join(known) or 'none'})")
+
+
 def _claims(cls: type, location: str) -> bool:
     try:
         return bool(cls.can_open(location))

@@ -126,3 +126,24 @@ def large_rotation(rng, angle_deg=(15, 25), roll_deg=(10, 12)) -> np.ndarray:
     axis = rng.normal(size=2)
     tilt = np.sqrt(angle**2 - roll**2) * axis / np.linalg.norm(axis)
     return Rotation.from_rotvec([tilt[0], tilt[1], roll]).as_matrix()
+
+
+# ----------------------------------------------------------------------------- download site
+
+
+def publish_sequences(site: Path, sequences: dict[str, Path], registry: Path) -> dict[str, str]:
+    """Zip each ECD folder as `site/NAME.zip` (files at the root, as the dataset publishes
+    them) and write `registry` (`name md5` lines); returns {name: md5}."""
+    import hashlib
+    import zipfile
+
+    md5s = {}
+    for name, folder in sequences.items():
+        archive = site / f"{name}.zip"
+        with zipfile.ZipFile(archive, "w", zipfile.ZIP_DEFLATED) as z:
+            for path in sorted(folder.rglob("*")):
+                if path.is_file():
+                    z.write(path, path.relative_to(folder).as_posix())
+        md5s[name] = hashlib.md5(archive.read_bytes()).hexdigest()
+    registry.write_text("".join(f"{n} {m}\n" for n, m in md5s.items()))
+    return md5s

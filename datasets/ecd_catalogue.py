@@ -1,0 +1,110 @@
+"""The Event Camera Dataset's published sequences: names, MD5s, and fetching them with pooch.
+
+Each sequence is one `NAME.zip` under the dataset's `datasets/davis/` folder. Fetching
+verifies the MD5 and moves the file into place only then (pooch), so a file under its
+final name is always whole; one already there and verified is not fetched again.
+
+Environment:
+    EAS_VO_DATA_DIR       where sequences are kept (default: $EAS_VO_CACHE_DIR/data, i.e. the cache)
+    EAS_VO_DATA_URL       base URL of the zips (a mirror, a local server)
+    EAS_VO_DATA_REGISTRY  a file of `name md5` lines that replaces the built-in registry
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import sys
+from importlib import resources
+from pathlib import Path
+
+from eas_vo.errors import DataError, EasVoError
+from eas_vo.io import cache_dir
+
+BASE_URL = "https://rpg.ifi.uzh.ch/datasets/davis/"
+_MD5 = re.compile(r"[0-9a-fA-F]{32}")
+
+
+def data_dir() -> Path:
+    """Where fetched sequences live: $EAS_VO_DATA_DIR, else the cache folder's `data/`."""
+    env = os.environ.get("EAS_VO_DATA_DIR")
+    return Path(env) if env else cache_dir() / "data"
+
+
+def registry() -> dict[str, str]:
+    """{sequence name: MD5 of its zip}: $EAS_VO_DATA_REGISTRY if set, else the built-in one."""
+    path = os.environ.get("EAS_VO_DATA_REGISTRY")
+    if path:
+        try:
+            text = Path(path).read_text(encoding="utf-8")
+        except (OSError, UnicodeDecodeError) as exc:
+            raise DataError(path, f"cannot read the registry named by EAS_VO_DATA_REGISTRY: {exc}") from None
+        return parse_registry(text, path)
+    return parse_registry(resources.files("eas_vo.datasets").joinpath("ecd_registry.txt").read_text(), "ecd_registry.txt")
+
+
+def parse_registry(text: str, where: str) -> dict[str, str]:
+    """`name md5` lines (blank lines and `#` comments skipped) -> {name: md5}."""
+    entries: dict[str, str] = {}
+    for lineno, line in enumerate(text.splitlines(), start=1):
+        parts = line.split("#", 1)[0].split()
+        if not parts:
+            continue
+        if len(parts) != 2 or not _MD5.fullmatch(parts[1]) or not re.fullmatch(r"[\w.-]+", parts[0]):
+            raise DataError(f"{where}:{lineno}", f"expected 'name md5' (32 hex digits), got {line.strip()!r}")
+        entries[parts[0]] = parts[1].lower()
+    if not entries:
+        raise DataError(where, "the registry lists no sequence")
+    return entries
+
+
+def local_path(name: str, folder: str | Path | None = None) -> Path:
+    """Where sequence `name` is (or will be) kept."""
+    return Path(folder or data_dir()) / f"{name}.zip"
+
+
+def fetch(name: str, folder: str | Path | None = None, progress: bool = False) -> Path:
+    """The verified zip of sequence `name`, downloaded first unless already there and whole.
+
+    A one-line notice (with the size) goes to stderr before a download. Raises EasVoError
+    for an unknown name, a failed download or a checksum mismatch (nothing is left under the
+    final name in either case).
+    """
+    import logging
+
+    import pooch
+    import requests
+
+    md5s = registry()
+    if name not in md5s:
+        raise EasVoError(f"{name}: not an Event Camera Dataset sequence (known: {', '.join(sorted(md5s))})")
+    target = local_path(name, folder)
+    known = f"md5:{md5s[name]}"
+    if target.is_file() and pooch.file_hash(str(target), alg="md5") == md5s[name]:
+        return target
+    url = os.environ.get("EAS_VO_DATA_URL", BASE_URL).rstrip("/") + "/"
+    print(f"eas-vo: fetching {name}.zip ({_size_text(url + name + '.zip')}) from {url} into {target.parent}",
+          file=sys.stderr)
+    pooch.get_logger().setLevel(logging.WARNING)  # our notice above replaces its own
+    store = pooch.create(path=target.parent, base_url=url, registry={target.name: known}, retry_if_failed=2)
+    try:
+        store.fetch(target.name, progressbar=progress)
+    except ValueError as exc:  # pooch: the downloaded file's hash is not the registry's
+        raise EasVoError(f"{url}{target.name}: downloaded file does not match its MD5 {md5s[name]} "
+                         f"(tried 3 times; nothing was kept): {str(exc).splitlines()[0]}") from None
+    except (requests.RequestException, OSError) as exc:  # connection dropped, HTTP status, disk
+        raise EasVoError(f"{url}{target.name}: download failed, nothing was kept ({type(exc).__name__}: "
+                         f"{str(exc).splitlines()[0] if str(exc) else 'no detail'})") from None
+    return target
+
+
+def _size_text(url: str) -> str:
+    """The size the server announces for `url` (HEAD), as text; 'size unknown' if it does not say."""
+    import requests
+
+    try:
+        answer = requests.head(url, allow_redirects=True, timeout=10)
+        size = int(answer.headers["Content-Length"])
+    except (requests.RequestException, KeyError, ValueError):
+        return "size unknown"
+    return f"{size / 1e9:.2f} GB" if size >= 1e9 else f"{size / 1e6:.1f} MB"
