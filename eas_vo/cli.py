@@ -1,4 +1,5 @@
-"""Command-line interface: `eas-vo run | compare | list | render | fetch | simulate`.
+"""Command-line interface: `eas-vo run | compare | list | render | export | evaluate | fetch |
+simulate`.
 
 User errors (bad data, bad config) end in one line on stderr and exit code 2.
 Ctrl-C and SIGTERM end in one line saying what was kept, and exit code 130 / 143.
@@ -119,6 +120,41 @@ def build_parser() -> argparse.ArgumentParser:
     render.add_argument("--out", required=True, metavar="PNG", help="output image, e.g. gallery.png")
     render.set_defaults(func=cmd_render)
 
+    export = sub.add_parser(
+        "export",
+        help="write a frontend's images as a sequence ORB-SLAM2 reads (TUM or EuRoC layout) with its settings.yaml",
+        description="Run a frontend (e.g. original or eas) over a dataset window and write its images in the "
+        "layout monocular ORB-SLAM2/ORB-SLAM3 examples read, plus settings.yaml (the dataset's calibration in "
+        "ORB-SLAM2's format, its frame rate, ORB-SLAM2's ORB extractor defaults): the paper's §4.3.",
+        epilog="then, e.g.: ./Examples/Monocular/mono_tum Vocabulary/ORBvoc.txt OUT/settings.yaml OUT  "
+        "(writes KeyFrameTrajectory.txt; score it with eas-vo evaluate)",
+    )
+    export.add_argument("--dataset", metavar="SPEC", help="as for run (default: synthetic:default)")
+    export.add_argument("--frontend", metavar="NAME", help="image source (default eas)")
+    export.add_argument("--format", choices=("tum", "euroc"), default="tum",
+                        help="tum: rgb.txt + rgb/T.png (mono_tum); euroc: mav0/cam0/data/T_NS.png + timestamps.txt (mono_euroc)")
+    _add_common_options(export, evaluated=False)
+    export.add_argument("--out", required=True, metavar="DIR", help="output folder (new, or replaced with --overwrite)")
+    export.add_argument("--overwrite", action="store_true", help="replace an existing non-empty --out")
+    export.set_defaults(func=cmd_export)
+
+    evaluate = sub.add_parser(
+        "evaluate",
+        help="score an external TUM trajectory (e.g. ORB-SLAM2's KeyFrameTrajectory.txt) against ground truth",
+        description="Associate the estimate's poses with the dataset's ground truth (nearest time within "
+        "--max-diff), align them (sim3: Umeyama with scale, for monocular SLAM; se3; origin) and report the "
+        "translation APE [m] and rotation APE [rad], as evo_ape tum GT EST -as / -a / --align_origin does. "
+        "With --out: metrics.json, table2_row.md, groundtruth.tum, estimate_aligned.tum.",
+    )
+    evaluate.add_argument("--dataset", required=True, metavar="SPEC", help="the dataset the estimate was made on")
+    evaluate.add_argument("--estimate", required=True, metavar="FILE", help="TUM trajectory: t tx ty tz qx qy qz qw")
+    evaluate.add_argument("--align", choices=("sim3", "se3", "origin"), default="sim3", help="default sim3 (evo_ape -as)")
+    evaluate.add_argument("--max-diff", type=float, default=0.01, metavar="S",
+                          help="largest time difference of an associated pose pair (default 0.01 s, evo's)")
+    evaluate.add_argument("--label", metavar="TEXT", help="the row's name in table2_row.md (default: the file's name)")
+    evaluate.add_argument("--out", metavar="DIR", help="output folder (replaced)")
+    evaluate.set_defaults(func=cmd_evaluate)
+
     fetch = sub.add_parser(
         "fetch",
         help="download Event Camera Dataset sequences (verified against their published MD5)",
@@ -154,15 +190,17 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-def _add_common_options(parser) -> None:
-    """Options `run` and `compare` share: configuration, window, time offset, progress."""
+def _add_common_options(parser, evaluated: bool = True) -> None:
+    """Options `run`, `compare` and `export` share: configuration, window, progress, and (for
+    those that evaluate) the ground truth's time offset."""
     parser.add_argument("--config", metavar="FILE", help="TOML config file, or the name of a bundled one (e.g. paper)")
     parser.add_argument("--set", dest="assignments", action="append", default=[], metavar="SECTION.KEY=VALUE",
                         help="override one config value, e.g. frontend.n=8000 (repeatable)")
     parser.add_argument("--start", type=float, metavar="S", help="skip the first S seconds of the sequence")
     parser.add_argument("--duration", type=float, metavar="S", help="process S seconds (default: all)")
-    parser.add_argument("--time-offset", metavar="S|auto",
-                        help="ground truth is sampled at frame time + S seconds (default 0); 'auto' estimates S from the data")
+    if evaluated:
+        parser.add_argument("--time-offset", metavar="S|auto",
+                            help="ground truth is sampled at frame time + S seconds (default 0); 'auto' estimates S from the data")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
 
 
@@ -380,6 +418,41 @@ def _time_offset(text: str | None) -> tuple[float | None, bool | None]:
         return float(text), False
     except ValueError:
         raise EasVoError(f"--time-offset takes seconds or 'auto', got {text!r}") from None
+
+
+def cmd_export(args) -> int:
+    from eas_vo import config as config_mod
+    from eas_vo.orbslam import export
+
+    config = config_mod.resolve(
+        args.config,
+        {"dataset": args.dataset, "frontend": args.frontend, "start_s": args.start, "duration_s": args.duration},
+        args.assignments,
+    )
+    out = Path(args.out)
+    _check_output_folder(out)
+    if out.exists() and any(out.iterdir()) and not args.overwrite:
+        raise EasVoError(f"--out {out} is not empty; choose another folder or add --overwrite")
+    done = export(config, out, args.format, progress=not args.quiet and sys.stderr.isatty())
+    print(f"wrote {done['frames']} {done['frontend']} images of {done['dataset']} ({done['format']} layout, "
+          f"{done['fps']:.2f} frames/s) and settings.yaml to {out}")
+    return 0
+
+
+def cmd_evaluate(args) -> int:
+    import math
+
+    from eas_vo.orbslam import evaluate_estimate
+
+    if not math.isfinite(args.max_diff) or args.max_diff < 0:
+        raise EasVoError(f"--max-diff must be a non-negative number of seconds, got {args.max_diff}")
+    if args.out:
+        _check_output_folder(Path(args.out))
+    m = evaluate_estimate(args.dataset, args.estimate, args.align, args.max_diff, args.out, args.label)
+    print(f"{args.estimate} vs {m['dataset']} ({m['align']}, {m['matched_poses']} of {m['estimate_poses']} poses matched, "
+          f"scale {m['scale']:.4f}): translation APE mean {m['ape_trans_mean_m']:.4f} m, RMSE {m['ape_trans_rmse_m']:.4f} m; "
+          f"rotation APE mean {m['ape_rot_mean_rad']:.4f} rad" + (f" -> {args.out}" if args.out else ""))
+    return 0
 
 
 def cmd_fetch(args) -> int:

@@ -116,3 +116,94 @@ def estimate_time_offset(t: np.ndarray, edges, ground_truth: PoseSeries, search_
     best = coarse[np.argmin([cost(d) for d in coarse])]
     fine = best + np.arange(-0.002, 0.002 + 1e-9, 0.0001)
     return float(fine[np.argmin([cost(d) for d in fine])])
+
+
+# ----------------------------------------------------------------------------- external trajectories
+
+ALIGNMENTS = ("sim3", "se3", "origin")
+
+
+@dataclass(frozen=True)
+class TrajectoryApe:
+    """An estimated 6-DoF trajectory against ground truth, after alignment (as evo_ape).
+
+    Attributes:
+        t: (M,) timestamps [s] of the matched estimate poses.
+        R_align, t_align, scale: the alignment applied to the estimate, p' = scale R_align p + t_align,
+            R' = R_align R (camera-to-world).
+        trans_error_m: (M,) |p_gt - p'| [m].
+        rot_error_rad: (M,) ||log(R_gt^-1 R')|| [rad] (Eq. 3).
+    """
+
+    t: np.ndarray
+    R_align: np.ndarray
+    t_align: np.ndarray
+    scale: float
+    trans_error_m: np.ndarray
+    rot_error_rad: np.ndarray
+
+    def summary(self) -> dict:
+        e, r = self.trans_error_m, self.rot_error_rad
+        return {
+            "ape_trans_mean_m": float(e.mean()),
+            "ape_trans_rmse_m": float(np.sqrt(np.mean(e**2))),
+            "ape_trans_max_m": float(e.max()),
+            "ape_rot_mean_rad": float(r.mean()),
+            "ape_rot_rmse_rad": float(np.sqrt(np.mean(r**2))),
+            "scale": float(self.scale),
+            "matched_poses": int(len(e)),
+        }
+
+
+def associate(t_ref: np.ndarray, t_est: np.ndarray, max_diff_s: float = 0.01) -> tuple[np.ndarray, np.ndarray]:
+    """Index pairs (i_ref, i_est) of nearest timestamps within `max_diff_s`, as evo's
+    `associate_trajectories`: each time of the series with fewer poses (the estimate on a
+    tie) takes the nearest of the other (the earlier one on a tie); both sorted."""
+    short, long_ = (t_ref, t_est) if len(t_ref) < len(t_est) else (t_est, t_ref)
+    upper = np.clip(np.searchsorted(long_, short, side="right"), 0, len(long_) - 1)
+    d_upper = long_[upper] - short
+    d_lower = np.where(upper > 0, short - long_[np.maximum(upper - 1, 0)], np.inf)
+    take_upper = (d_upper <= max_diff_s) & (d_upper < d_lower)
+    take_lower = ~take_upper & (d_lower <= max_diff_s) & (d_lower <= d_upper)
+    keep = (take_upper | take_lower) & (short >= long_[0] - max_diff_s) & (short <= long_[-1] + max_diff_s)
+    i_short = np.flatnonzero(keep)
+    i_long = np.where(take_upper, upper, upper - 1)[keep]
+    return (i_short, i_long) if len(t_ref) < len(t_est) else (i_long, i_short)
+
+
+def umeyama(x: np.ndarray, y: np.ndarray, with_scale: bool) -> tuple[np.ndarray, np.ndarray, float] | None:
+    """(R, t, s) minimising sum |y_k - (s R x_k + t)|^2 over points x, y (N, 3)
+    (Umeyama, IEEE PAMI 1991, eqs. 34-43); s = 1 without scale. None if degenerate."""
+    mean_x, mean_y = x.mean(axis=0), y.mean(axis=0)
+    dx, dy = x - mean_x, y - mean_y
+    var_x = float(np.mean(np.sum(dx**2, axis=1)))
+    U, d, Vt = np.linalg.svd(dy.T @ dx / len(x))
+    if np.count_nonzero(d > np.finfo(float).eps) < 2:
+        return None
+    S = np.diag([1.0, 1.0, -1.0 if np.linalg.det(U) * np.linalg.det(Vt) < 0 else 1.0])
+    R = U @ S @ Vt
+    s = float(np.trace(np.diag(d) @ S) / var_x) if with_scale else 1.0
+    return R, mean_y - s * R @ mean_x, s
+
+
+def trajectory_ape(ground_truth: PoseSeries, estimate: PoseSeries, align: str = "sim3", max_diff_s: float = 0.01):
+    """Translation and rotation APE of `estimate` (camera-to-world poses) after `align`:
+    sim3 (Umeyama with scale: evo_ape -as, for monocular SLAM), se3 (-a) or origin (first
+    poses made equal: --align_origin). Raises ValueError when the two cannot be compared."""
+    i_gt, i_est = associate(ground_truth.t, estimate.t, max_diff_s)
+    if len(i_gt) == 0:
+        raise ValueError(f"no estimate pose is within {max_diff_s} s of a ground-truth pose")
+    p_gt, R_gt = ground_truth.p_w_c[i_gt], matrices_from_quats(ground_truth.q_w_c[i_gt])
+    p_est, R_est = estimate.p_w_c[i_est], matrices_from_quats(estimate.q_w_c[i_est])
+    if align == "origin":
+        R_a = R_gt[0] @ R_est[0].T
+        t_a, s = p_gt[0] - R_a @ p_est[0], 1.0
+    else:
+        solved = umeyama(p_est, p_gt, with_scale=align == "sim3") if len(i_gt) >= 3 else None
+        if solved is None:
+            raise ValueError(f"{len(i_gt)} matched poses do not span a plane; {align} alignment is not defined")
+        R_a, t_a, s = solved
+    p_aligned = s * p_est @ R_a.T + t_a
+    R_aligned = R_a @ R_est
+    return TrajectoryApe(estimate.t[i_est], R_a, t_a, s, np.linalg.norm(p_gt - p_aligned, axis=1),
+                         geodesic_angle(R_gt, R_aligned))

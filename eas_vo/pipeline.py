@@ -179,7 +179,7 @@ def track(parts: Pipeline, config: ResolvedConfig, frames_csv: Path | None = Non
         try:
             for sample in parts.dataset.samples(rc.start_s, rc.duration_s):
                 image = parts.frontend(sample)
-                _check_image(image, parts.dataset.camera, rc.frontend, sample)
+                check_image(image, parts.dataset.camera, rc.frontend, sample)
                 if tracked.orb is not None:
                     tracked.orb.add(image)
                 record, edges = parts.tracker.process(image, sample.t)
@@ -269,7 +269,8 @@ def format_tum(t: np.ndarray, p: np.ndarray, R: np.ndarray) -> str:
     )
 
 
-def _check_image(image, camera, frontend: str, sample) -> None:
+def check_image(image, camera, frontend: str, sample) -> None:
+    """A frontend's output must be a uint8 image of sensor size (H, W): else one error line."""
     if (
         not isinstance(image, np.ndarray)
         or image.dtype != np.uint8

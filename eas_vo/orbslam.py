@@ -1,0 +1,166 @@
+"""The ORB-SLAM2 path of the paper (§4.3): image sequences and camera settings a monocular
+ORB-SLAM2 / ORB-SLAM3 run reads, and the scoring of the trajectories it writes.
+
+Layouts written by `export`:
+    tum    rgb.txt (`timestamp rgb/NAME.png`, three comment lines first) and rgb/*.png,
+           as the TUM RGB-D sequences that `mono_tum` reads
+    euroc  mav0/cam0/data/<t_ns>.png, mav0/cam0/data.csv and timestamps.txt (one t_ns a
+           line), as the EuRoC sequences that `mono_euroc` reads
+and, with either, settings.yaml in ORB-SLAM2's format (OpenCV FileStorage YAML).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from eas_vo.errors import DataError, EasVoError
+from eas_vo.io import data_line, json_text, output_folder, parse_table, write_text_atomic
+from eas_vo.types import CameraModel, PoseSeries
+
+FORMATS = ("tum", "euroc")
+
+#: ORB-SLAM2's own defaults for its ORB extractor and viewer (its TUM1.yaml).
+ORB_EXTRACTOR = {"nFeatures": 1000, "scaleFactor": 1.2, "nLevels": 8, "iniThFAST": 20, "minThFAST": 7}
+VIEWER = {"KeyFrameSize": 0.05, "KeyFrameLineWidth": 1, "GraphLineWidth": 0.9, "PointSize": 2, "CameraSize": 0.08,
+          "CameraLineWidth": 3, "ViewpointX": 0, "ViewpointY": -0.7, "ViewpointZ": -1.8, "ViewpointF": 500}
+
+
+def settings_yaml(camera: CameraModel, fps: float) -> str:
+    """ORB-SLAM2 monocular settings: the calibration, the frame rate, grayscale images."""
+    k1, k2, p1, p2, k3 = (float(v) for v in camera.dist)
+    values = {
+        "Camera.fx": camera.K[0, 0], "Camera.fy": camera.K[1, 1], "Camera.cx": camera.K[0, 2], "Camera.cy": camera.K[1, 2],
+        "Camera.k1": k1, "Camera.k2": k2, "Camera.p1": p1, "Camera.p2": p2, "Camera.k3": k3,
+        "Camera.width": camera.width, "Camera.height": camera.height, "Camera.fps": fps,
+        "Camera.RGB": 0,  # the images are grayscale; ORB-SLAM2 reads the flag, not the channel order
+        **{f"ORBextractor.{k}": v for k, v in ORB_EXTRACTOR.items()},
+        **{f"Viewer.{k}": v for k, v in VIEWER.items()},
+    }
+    lines = ["%YAML:1.0", "# written by eas-vo export: monocular ORB-SLAM2 settings for this sequence"]
+    lines += [f"{key}: {_yaml_number(value)}" for key, value in values.items()]
+    return "\n".join(lines) + "\n"
+
+
+def _yaml_number(value) -> str:
+    """Integers as integers, reals always with a decimal point (FileStorage then reads a real)."""
+    if isinstance(value, (int, np.integer)):
+        return str(int(value))
+    text = repr(float(value))
+    return text if any(c in text for c in ".en") else text + ".0"
+
+
+def export(config, out: str | Path, fmt: str, progress: bool = False) -> dict:
+    """Write the window's frontend images in layout `fmt` and settings.yaml into `out` (one
+    writer, moved into place whole); returns a summary (frames, fps, layout)."""
+    from tqdm import tqdm
+
+    from eas_vo.pipeline import check_image, open_pipeline
+
+    if fmt not in FORMATS:
+        raise EasVoError(f"--format {fmt!r}: choose one of {', '.join(FORMATS)}")
+    rc = config.run
+    parts = open_pipeline(config)
+    n_window = len(parts.dataset.window(rc.start_s, rc.duration_s))
+    times = []
+    with output_folder(out) as staging:
+        image_dir = staging / ("rgb" if fmt == "tum" else "mav0/cam0/data")
+        image_dir.mkdir(parents=True)
+        for sample in tqdm(parts.dataset.samples(rc.start_s, rc.duration_s), total=n_window, disable=not progress,
+                           unit="frame", desc=f"export {rc.frontend}"):
+            image = parts.frontend(sample)
+            check_image(image, parts.dataset.camera, rc.frontend, sample)
+            name = f"{sample.t:.6f}.png" if fmt == "tum" else f"{_ns(sample.t)}.png"
+            if not cv2.imwrite(str(image_dir / name), np.ascontiguousarray(image)):
+                raise EasVoError(f"{image_dir / name}: could not write the image")
+            times.append(sample.t)
+        t = np.array(times)
+        fps = float((len(t) - 1) / (t[-1] - t[0])) if len(t) > 1 and t[-1] > t[0] else 0.0
+        if fmt == "tum":
+            header = f"# {rc.frontend} images of {parts.dataset.label}\n# file: 'rgb.txt' (eas-vo export)\n# timestamp filename\n"
+            write_text_atomic(staging / "rgb.txt", header + "".join(f"{v:.6f} rgb/{v:.6f}.png\n" for v in t))
+        else:
+            write_text_atomic(staging / "mav0/cam0/data.csv",
+                              "#timestamp [ns],filename\n" + "".join(f"{_ns(v)},{_ns(v)}.png\n" for v in t))
+            write_text_atomic(staging / "timestamps.txt", "".join(f"{_ns(v)}\n" for v in t))
+        write_text_atomic(staging / "settings.yaml", settings_yaml(parts.dataset.camera, fps))
+    return {"frames": len(t), "fps": fps, "format": fmt, "frontend": rc.frontend, "dataset": parts.dataset.label}
+
+
+def _ns(t_s: float) -> int:
+    return int(round(t_s * 1e9))
+
+
+# ----------------------------------------------------------------------------- scoring external trajectories
+
+
+def read_estimate(path: str | Path) -> PoseSeries:
+    """A TUM trajectory file (`t tx ty tz qx qy qz qw` a line, `#` comments), times increasing,
+    quaternions non-zero; errors name the file line."""
+    path = Path(path)
+    try:
+        data = path.read_bytes()
+    except OSError as exc:
+        raise DataError(path, f"cannot read: {exc.strerror or exc}") from None
+    rows = parse_table(data, str(path), 8, "TUM pose 't tx ty tz qx qy qz qw'")
+    if len(rows) == 0:
+        raise DataError(path, "holds no pose")
+    back = np.flatnonzero(np.diff(rows[:, 0]) <= 0)
+    if len(back):
+        raise DataError(f"{path}:{data_line(data, int(back[0]) + 1)}", "timestamp does not increase")
+    zero = np.flatnonzero(np.linalg.norm(rows[:, 4:8], axis=1) < 1e-9)
+    if len(zero):
+        raise DataError(f"{path}:{data_line(data, int(zero[0]))}", "quaternion is zero")
+    return PoseSeries(rows[:, 0], rows[:, 1:4], rows[:, 4:8])
+
+
+def evaluate_estimate(dataset_spec: str, estimate_path: str | Path, align: str, max_diff_s: float,
+                      out: str | Path | None = None, label: str | None = None) -> dict:
+    """Score an external trajectory against a dataset's ground truth (evaluation.trajectory_ape);
+    with `out`, write metrics.json, table2_row.md, groundtruth.tum (what it was compared with)
+    and estimate_aligned.tum. Returns the metrics."""
+    from eas_vo.evaluation import ALIGNMENTS, trajectory_ape
+    from eas_vo.geometry.rotations import matrices_from_quats
+    from eas_vo.pipeline import format_tum
+    from eas_vo.registry import open_dataset
+
+    if align not in ALIGNMENTS:
+        raise EasVoError(f"--align {align!r}: choose one of {', '.join(ALIGNMENTS)}")
+    estimate = read_estimate(estimate_path)
+    dataset = open_dataset(dataset_spec)
+    gt = dataset.ground_truth
+    if gt is None:
+        raise EasVoError(f"{dataset.label}: has no ground truth to evaluate against")
+    try:
+        ape = trajectory_ape(gt, estimate, align, max_diff_s)
+    except ValueError as exc:
+        raise EasVoError(f"{estimate_path}: {exc}") from None
+    label = label or Path(estimate_path).stem
+    metrics = {"estimate": str(estimate_path), "dataset": dataset.label, "align": align, "max_diff_s": max_diff_s,
+               "estimate_poses": int(len(estimate.t)), **ape.summary()}
+    if out is not None:
+        with output_folder(out) as staging:
+            write_text_atomic(staging / "metrics.json", json_text(metrics))
+            write_text_atomic(staging / "table2_row.md", table2_row(label, metrics))
+            write_text_atomic(staging / "groundtruth.tum", format_tum(gt.t, gt.p_w_c, matrices_from_quats(gt.q_w_c)))
+            aligned = _aligned(estimate, ape)
+            write_text_atomic(staging / "estimate_aligned.tum", format_tum(estimate.t, *aligned))
+    return metrics
+
+
+def _aligned(estimate: PoseSeries, ape) -> tuple[np.ndarray, np.ndarray]:
+    from eas_vo.geometry.rotations import matrices_from_quats
+
+    p = ape.scale * estimate.p_w_c @ ape.R_align.T + ape.t_align
+    return p, ape.R_align @ matrices_from_quats(estimate.q_w_c)
+
+
+def table2_row(label: str, metrics: dict) -> str:
+    """A Markdown row as in the paper's Table 2: source, average (translation) APE [m], with
+    RMSE, rotation APE, scale and matched poses beside it."""
+    m = metrics
+    return ("| source | average APE [m] | RMSE [m] | rotation APE [rad] | scale | poses |\n|---|---|---|---|---|---|\n"
+            f"| {label} | {m['ape_trans_mean_m']:.3f} | {m['ape_trans_rmse_m']:.3f} | {m['ape_rot_mean_rad']:.3f} | "
+            f"{m['scale']:.3f} | {m['matched_poses']} |\n")

@@ -1,0 +1,182 @@
+"""The ORB-SLAM2 path: exported sequences read back, settings.yaml as ORB-SLAM2 reads it, and
+external trajectories scored exactly as evo_ape does."""
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from eas_vo.errors import DataError
+from eas_vo.evaluation import associate, trajectory_ape
+from eas_vo.geometry.rotations import matrices_from_quats
+from eas_vo.orbslam import read_estimate
+from eas_vo.pipeline import format_tum
+from eas_vo.types import PoseSeries
+from helpers import run_eas_vo
+
+
+def _frontend_pixels(sequence, frames, frontend):
+    from eas_vo.gallery import frontend_images
+
+    _, images = frontend_images(str(sequence), frames, [frontend])
+    return {k: images[(k, frontend)] for k in frames}
+
+
+@pytest.mark.parametrize("fmt", ["tum", "euroc"])
+def test_an_exported_sequence_reads_back_as_the_frontends_images(short_sequence, tmp_path, fmt):
+    out = tmp_path / fmt
+    done = run_eas_vo("export", "--dataset", str(short_sequence), "--frontend", "eas", "--format", fmt, "--duration", "1",
+                      "--out", str(out), "--quiet")
+    assert done.returncode == 0, done.stderr
+    if fmt == "tum":
+        lines = (out / "rgb.txt").read_text().splitlines()
+        assert all(line.startswith("#") for line in lines[:3])  # mono_tum skips three lines
+        listed = [(float(t), out / name) for t, name in (line.split() for line in lines[3:])]
+    else:
+        stamps = (out / "timestamps.txt").read_text().split()
+        csv = (out / "mav0/cam0/data.csv").read_text().splitlines()[1:]
+        assert [row.split(",")[0] for row in csv] == stamps
+        listed = [(int(ns) * 1e-9, out / "mav0/cam0/data" / f"{ns}.png") for ns in stamps]
+    times = np.loadtxt(short_sequence / "images.txt", usecols=0)
+    assert len(listed) == np.count_nonzero(times < times[0] + 1)
+    np.testing.assert_allclose([t for t, _ in listed], times[: len(listed)], atol=1e-6)
+    pixels = _frontend_pixels(short_sequence, [0, 7, len(listed) - 1], "eas")
+    for k, (_, path) in enumerate(listed):
+        image = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
+        assert image is not None and image.dtype == np.uint8 and image.shape == (180, 240), path
+        if k in pixels:
+            np.testing.assert_array_equal(image, pixels[k])
+
+
+def test_settings_yaml_holds_the_calibration_as_orbslam2_reads_it(short_sequence, tmp_path):
+    out = tmp_path / "tum"
+    assert run_eas_vo("export", "--dataset", str(short_sequence), "--frontend", "original", "--out", str(out),
+                      "--quiet").returncode == 0
+    fs = cv2.FileStorage(str(out / "settings.yaml"), cv2.FILE_STORAGE_READ)  # ORB-SLAM2's own reader
+    calib = np.loadtxt(short_sequence / "calib.txt")
+    keys = ["fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2", "k3"]
+    np.testing.assert_allclose([fs.getNode(f"Camera.{k}").real() for k in keys], calib[: len(keys)], rtol=1e-12)
+    times = np.loadtxt(short_sequence / "images.txt", usecols=0)
+    assert fs.getNode("Camera.fps").real() == pytest.approx((len(times) - 1) / (times[-1] - times[0]))
+    assert fs.getNode("ORBextractor.nFeatures").real() == 1000 and fs.getNode("ORBextractor.nLevels").real() == 8
+    assert fs.getNode("Camera.width").real() == 240 and fs.getNode("Camera.height").real() == 180
+
+
+def _ground_truth(n=400, seed=0) -> PoseSeries:
+    """A hand-held-like 6-DoF path: 20 s at 20 Hz, metres of motion, tens of degrees of turn."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(n) * 0.05
+    p = np.cumsum(rng.normal(0, 0.03, (n, 3)), axis=0) + np.c_[np.sin(t), np.cos(0.7 * t), 0.3 * t]
+    q = Rotation.from_rotvec(np.cumsum(rng.normal(0, 0.02, (n, 3)), axis=0)).as_quat()
+    return PoseSeries(t, p, q)
+
+
+def _similar(gt: PoseSeries, R_a, t_a, s, seed=1, every=3):
+    """The ground truth seen by a monocular SLAM: every 3rd pose, times jittered by up to
+    3 ms, mapped by x -> s R_a x + t_a, with position and rotation noise."""
+    rng = np.random.default_rng(seed)
+    idx = np.arange(0, len(gt.t), every)
+    t = gt.t[idx] + rng.uniform(-0.003, 0.003, len(idx))
+    p = s * gt.p_w_c[idx] @ R_a.T + t_a + rng.normal(0, 0.002, (len(idx), 3))
+    R = R_a @ matrices_from_quats(gt.q_w_c[idx]) @ Rotation.from_rotvec(rng.normal(0, 0.002, (len(idx), 3))).as_matrix()
+    return PoseSeries(t, p, Rotation.from_matrix(R).as_quat())
+
+
+def test_sim3_alignment_recovers_a_known_similarity():
+    gt = _ground_truth()
+    R_a, t_a, s = Rotation.from_rotvec([0.3, -0.2, 0.5]).as_matrix(), np.array([1.0, 2.0, -0.5]), 0.37
+    ape = trajectory_ape(gt, _similar(gt, R_a, t_a, s), "sim3")
+    assert ape.scale == pytest.approx(1 / s, rel=2e-3)  # the estimate is mapped back onto the ground truth
+    assert np.degrees(Rotation.from_matrix(ape.R_align @ R_a).magnitude()) < 0.05
+    np.testing.assert_allclose(ape.t_align, -(1 / s) * R_a.T @ t_a, atol=5e-3)
+    summary = ape.summary()
+    assert summary["matched_poses"] == 134 and summary["ape_trans_mean_m"] < 0.01 and summary["ape_rot_mean_rad"] < 0.005
+
+
+def _evo_ape(gt_path, est_path, align, relation):
+    from evo.core import metrics, sync
+    from evo.tools import file_interface
+
+    ref = file_interface.read_tum_trajectory_file(str(gt_path))
+    est = file_interface.read_tum_trajectory_file(str(est_path))
+    ref, est = sync.associate_trajectories(ref, est, max_diff=0.01)
+    if align == "origin":
+        est.align_origin(ref)
+    else:
+        est.align(ref, correct_scale=align == "sim3")
+    ape = metrics.APE(relation)
+    ape.process_data((ref, est))
+    return ape.get_statistic(metrics.StatisticsType.mean), ape.get_statistic(metrics.StatisticsType.rmse)
+
+
+@pytest.mark.parametrize("align", ["sim3", "se3", "origin"])
+def test_evaluate_equals_evo_ape_on_the_same_files(short_sequence, tmp_path, align):
+    from evo.core.metrics import PoseRelation
+
+    from eas_vo.registry import open_dataset
+
+    gt = open_dataset(str(short_sequence)).ground_truth
+    est = _similar(gt, Rotation.from_rotvec([0.1, 0.4, -0.2]).as_matrix(), np.array([0.2, -1.0, 0.4]), 2.5, every=7)
+    est_path = tmp_path / "KeyFrameTrajectory.txt"
+    est_path.write_text(format_tum(est.t, est.p_w_c, matrices_from_quats(est.q_w_c)))
+    out = tmp_path / "eval"
+    done = run_eas_vo("evaluate", "--dataset", str(short_sequence), "--estimate", str(est_path), "--align", align,
+                      "--out", str(out))
+    assert done.returncode == 0, done.stderr
+    ours = json.loads((out / "metrics.json").read_text())
+    trans = _evo_ape(out / "groundtruth.tum", est_path, align, PoseRelation.translation_part)
+    rot = _evo_ape(out / "groundtruth.tum", est_path, align, PoseRelation.rotation_angle_rad)
+    assert ours["ape_trans_mean_m"] == pytest.approx(trans[0], abs=1e-6)
+    assert ours["ape_trans_rmse_m"] == pytest.approx(trans[1], abs=1e-6)
+    assert ours["ape_rot_mean_rad"] == pytest.approx(rot[0], abs=1e-6)
+    assert "| KeyFrameTrajectory |" in (out / "table2_row.md").read_text()
+
+
+def test_evaluate_equals_the_evo_ape_command(short_sequence, tmp_path):
+    """The peer as a user runs it: `evo_ape tum GT EST -as` prints the same mean."""
+    from eas_vo.registry import open_dataset
+
+    gt = open_dataset(str(short_sequence)).ground_truth
+    est = _similar(gt, np.eye(3), np.zeros(3), 0.8, every=5)
+    est_path = tmp_path / "est.tum"
+    est_path.write_text(format_tum(est.t, est.p_w_c, matrices_from_quats(est.q_w_c)))
+    out = tmp_path / "eval"
+    assert run_eas_vo("evaluate", "--dataset", str(short_sequence), "--estimate", str(est_path), "--out", str(out)).returncode == 0
+    evo_ape = Path(sys.executable).with_name("evo_ape")
+    if not evo_ape.exists():
+        pytest.skip("evo_ape is not installed beside this Python")
+    printed = subprocess.run([str(evo_ape), "tum", str(out / "groundtruth.tum"), str(est_path), "-as"],
+                             capture_output=True, text=True, cwd=tmp_path).stdout
+    mean = float(next(line.split()[1] for line in printed.splitlines() if line.strip().startswith("mean")))
+    assert json.loads((out / "metrics.json").read_text())["ape_trans_mean_m"] == pytest.approx(mean, abs=1e-6)
+
+
+def test_association_equals_evos():
+    from evo.core.sync import matching_time_indices
+
+    rng = np.random.default_rng(4)
+    for _ in range(50):
+        a = np.sort(rng.uniform(0, 5, rng.integers(1, 60)))
+        b = np.sort(rng.choice(np.round(rng.uniform(0, 5, 80), 2), rng.integers(1, 80), replace=False))
+        i_a, i_b = associate(a, b, 0.02)
+        short, long_ = (a, b) if len(a) < len(b) else (b, a)
+        i_short, i_long = matching_time_indices(short, long_, 0.02)
+        expected = (i_short, i_long) if len(a) < len(b) else (i_long, i_short)
+        assert list(i_a) == list(expected[0]) and list(i_b) == list(expected[1])
+
+
+@pytest.mark.parametrize("text, line, message", [
+    ("1 0 0 0 0 0 0 1\n# c\n1 0 0 0 0 0 0 1\n", 3, "timestamp does not increase"),
+    ("1 0 0 0 0 0 0 1\n\n2 0 0 0 0 0 0 0\n", 3, "quaternion is zero"),
+    ("1 0 0 0 0 0 0 1\n2 0 0 0 0 0 1\n", 2, "expected 8 columns"),
+])
+def test_a_bad_estimate_file_names_its_line(tmp_path, text, line, message):
+    path = tmp_path / "est.txt"
+    path.write_text(text)
+    with pytest.raises(DataError, match=f"est.txt:{line}.*{message}"):
+        read_estimate(path)
