@@ -1,5 +1,5 @@
-"""Command-line interface: `eas-vo run | compare | list | render | export | evaluate | fetch |
-simulate`.
+"""Command-line interface: `eas-vo run | compare | list | render | reproduce | export | evaluate |
+fetch | simulate`.
 
 User errors (bad data, bad config) end in one line on stderr and exit code 2.
 Ctrl-C and SIGTERM end in one line saying what was kept, and exit code 130 / 143.
@@ -155,6 +155,27 @@ def build_parser() -> argparse.ArgumentParser:
     evaluate.add_argument("--out", metavar="DIR", help="output folder (replaced)")
     evaluate.set_defaults(func=cmd_evaluate)
 
+    reproduce = sub.add_parser(
+        "reproduce",
+        help="the paper's Table 1 or Table 2 on its own data (hdr_boxes, hdr_poster), beside its figures",
+        description="table1: fetch hdr_boxes and hdr_poster, run the six sources with --config paper on the first "
+        "25 s (time offset estimated) with both backends, and write table1.md (ours beside the paper's, ratios, "
+        "orderings), compare's tables and figures, and Fig. 3-style Euler plots. table2: ORB features and matches "
+        "of original and EAS images and, for ORB-SLAM2 keyframe trajectories given with --estimate (run it on "
+        "`eas-vo export` output), their APE after Sim(3) alignment: table2.md beside the paper's. Resumable: "
+        "the same command runs only what is missing.",
+    )
+    reproduce.add_argument("table", choices=("table1", "table2"))
+    reproduce.add_argument("--out", metavar="DIR", help="output folder (default: reproduce/TABLE)")
+    reproduce.add_argument("--duration", type=float, default=25.0, metavar="S", help="seconds of each sequence (default 25, the paper's)")
+    reproduce.add_argument("--config", default="paper", metavar="FILE", help="configuration (default paper, the paper's)")
+    reproduce.add_argument("--backends", default="chain,gtsam", metavar="A,B", help="table1's backends (default chain,gtsam)")
+    reproduce.add_argument("--estimate", dest="estimates", action="append", default=[], metavar="SEQUENCE:SOURCE=FILE",
+                           help="table2: an ORB-SLAM2 KeyFrameTrajectory.txt, e.g. hdr_boxes:eas=KeyFrameTrajectory.txt (repeatable)")
+    reproduce.add_argument("--jobs", type=_positive_int, default=os.cpu_count() or 1, help="parallel processes (default: all cores)")
+    reproduce.add_argument("--quiet", action="store_true", help="no progress bars")
+    reproduce.set_defaults(func=cmd_reproduce)
+
     fetch = sub.add_parser(
         "fetch",
         help="download Event Camera Dataset sequences (verified against their published MD5)",
@@ -291,11 +312,7 @@ def cmd_run(args) -> int:
 def cmd_compare(args) -> int:
     from eas_vo import compare
     from eas_vo import config as config_mod
-    from eas_vo.evaluation import tum_rotation_errors
     from eas_vo.gallery import PAPER_ORDER
-    from eas_vo.io import atomic_path
-    from eas_vo.plots import plot_ape_bars, plot_ape_time, plot_sweep
-    from eas_vo.registry import open_dataset
 
     def names(text, default):
         listed = [v.strip() for v in (text or default).split(",") if v.strip()]
@@ -313,54 +330,22 @@ def cmd_compare(args) -> int:
         names(args.backends, run_defaults.backend),
         args.sweeps,
     )
-    overrides = {**_shared_overrides(args), "orb_stats": True if args.orb else None}
-    for cell in cells:  # a configuration error is the user's, known before any work: one line, exit 2
-        compare.cell_config(cell, args.config, args.assignments, overrides)
-    for dataset, dataset_sweep in dict.fromkeys(  # simulate or cache each dataset once, not once per process
-        (c.dataset, tuple(f"{k}={v}" for k, v in c.sweep if k.startswith("dataset."))) for c in cells
-    ):
-        try:
-            resolved = config_mod.resolve(args.config, {**overrides, "dataset": dataset}, list(args.assignments) + list(dataset_sweep))
-            open_dataset(dataset, resolved.dataset).events()
-        except EasVoError:
-            pass  # its cells will report the error
     if args.executor == "dask" and not args.scheduler:
         raise EasVoError("--executor dask needs --scheduler ADDRESS")
-    results = {}
-    interrupted = None
-    try:
-        results, n_run = compare.run_grid(cells, out, args.config, args.assignments, overrides, args.jobs,
-                                          progress=not args.quiet and sys.stderr.isatty(),
-                                          scheduler=args.scheduler if args.executor == "dask" else None,
-                                          results=results)
-    except KeyboardInterrupt as exc:  # write the table of what finished; a new invocation resumes
-        interrupted, n_run = exc, sum(r["status"] != "not run" for r in results.values())
-    rows = compare.table_rows(cells, results)
-    compare.write_tables(out, rows)
-    with atomic_path(out / "ape_bars.png") as tmp:
-        plot_ape_bars(tmp, rows)
-    series = {}
-    for cell in cells:
-        if results[cell]["status"] == "ok":
-            curve = tum_rotation_errors(out / cell.folder / "trajectory.tum", out / cell.folder / "groundtruth.tum")
-            if curve is not None:
-                label = " ".join(filter(None, [cell.frontend, f"{cell.tracker}+{cell.backend}", cell.sweep_label]))
-                series[(cell.dataset, label)] = curve
-    if series:
-        with atomic_path(out / "ape_time.png") as tmp:
-            plot_ape_time(tmp, series)
-    swept = compare.sweep_curves(cells, rows)
-    if swept is not None and swept[1]:
-        with atomic_path(out / "ape_sweep.png") as tmp:
-            plot_sweep(tmp, *swept)
-    if interrupted is not None:
-        kept = f"the table of the {n_run} finished cells was written to {out}; the same command resumes the rest"
-        raise Interrupted.keeping(interrupted, kept) from None
+    overrides = {**_shared_overrides(args), "orb_stats": True if args.orb else None}
+    rows, n_run = compare.run_experiment(cells, out, args.config, args.assignments, overrides, args.jobs,
+                                         progress=not args.quiet and sys.stderr.isatty(),
+                                         scheduler=args.scheduler if args.executor == "dask" else None)
+    return _report_cells(rows, n_run, out / "table.md", compare.table_markdown(rows))
+
+
+def _report_cells(rows: list[dict], n_run: int, table: Path, markdown: str) -> int:
+    """Each failed cell in one line on stderr, the count and the table on stdout; exit 1 if a cell failed."""
     failed = [r for r in rows if r["status"] != "ok"]
     for r in failed:
         print(f"eas-vo: cell {r['folder']} failed: {r['error']}", file=sys.stderr)
-    print(f"{len(cells)} cells ({n_run} run, {len(cells) - n_run} already complete, {len(failed)} failed) -> {out / 'table.md'}")
-    print(compare.table_markdown(rows), end="")
+    print(f"{len(rows)} cells ({n_run} run, {len(rows) - n_run} already complete, {len(failed)} failed) -> {table}")
+    print(markdown, end="")
     return 1 if failed else 0
 
 
@@ -453,6 +438,35 @@ def cmd_evaluate(args) -> int:
           f"scale {m['scale']:.4f}): translation APE mean {m['ape_trans_mean_m']:.4f} m, RMSE {m['ape_trans_rmse_m']:.4f} m; "
           f"rotation APE mean {m['ape_rot_mean_rad']:.4f} rad" + (f" -> {args.out}" if args.out else ""))
     return 0
+
+
+def cmd_reproduce(args) -> int:
+    import math
+
+    from eas_vo import reproduce
+
+    if not (math.isfinite(args.duration) and args.duration > 0):
+        raise EasVoError(f"--duration must be a positive number of seconds, got {args.duration}")
+    estimates = {}
+    for text in args.estimates:
+        key, sep, path = text.partition("=")
+        seq, colon, source = key.partition(":")
+        if not (sep and colon and path):
+            raise EasVoError(f"--estimate {text!r}: expected SEQUENCE:SOURCE=FILE, e.g. hdr_boxes:eas=KeyFrameTrajectory.txt")
+        estimates[(seq.strip(), source.strip())] = path
+    if estimates and args.table != "table2":
+        raise EasVoError("--estimate belongs to table2 (ORB-SLAM2 trajectories)")
+    out = Path(args.out or f"reproduce/{args.table}")
+    _check_output_folder(out)
+    progress = not args.quiet and sys.stderr.isatty()
+    if args.table == "table1":
+        backends = [b.strip() for b in args.backends.split(",") if b.strip()]
+        if not backends:
+            raise EasVoError(f"--backends {args.backends!r} names nothing")
+        rows, n_run, markdown = reproduce.table1(out, args.duration, backends, args.config, args.jobs, progress)
+    else:
+        rows, n_run, markdown = reproduce.table2(out, estimates, args.duration, args.config, args.jobs, progress)
+    return _report_cells(rows, n_run, out / f"{args.table}.md", markdown)
 
 
 def cmd_fetch(args) -> int:

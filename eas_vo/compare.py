@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from eas_vo.config import parse_set
-from eas_vo.errors import EasVoError, sigterm_as_interrupt
+from eas_vo.errors import EasVoError, Interrupted, sigterm_as_interrupt
 from eas_vo.io import json_text, slug, write_text_atomic
 
 
@@ -193,6 +193,65 @@ def _stop(pool: ProcessPoolExecutor, futures: dict, results: dict) -> None:
         process.terminate()
     for process in workers:
         process.join(timeout=30)
+
+
+def run_experiment(cells: list[Cell], out: Path, config_file, assignments, overrides: dict, jobs: int,
+                   progress: bool, scheduler: str | None = None) -> tuple[list[dict], int]:
+    """What `eas-vo compare` does after parsing: check every cell's configuration (a bad one is
+    an error before any work), open each dataset once (simulated, fetched or cached here, not
+    once per process), run the cells not yet complete, and write the tables and figures, also
+    when interrupted (then Interrupted is raised, saying what was kept). Returns (rows, cells run)."""
+    from eas_vo import config as config_mod
+    from eas_vo.registry import open_dataset
+
+    for cell in cells:
+        cell_config(cell, config_file, assignments, overrides)
+    for dataset, dataset_sweep in dict.fromkeys(
+        (c.dataset, tuple(f"{k}={v}" for k, v in c.sweep if k.startswith("dataset."))) for c in cells
+    ):
+        try:
+            resolved = config_mod.resolve(config_file, {**overrides, "dataset": dataset}, list(assignments) + list(dataset_sweep))
+            open_dataset(dataset, resolved.dataset).events()
+        except EasVoError:
+            pass  # its cells will report the error
+    results: dict = {}
+    interrupted = None
+    try:
+        results, n_run = run_grid(cells, out, config_file, assignments, overrides, jobs, progress, scheduler, results)
+    except KeyboardInterrupt as exc:  # write the table of what finished; a new invocation resumes
+        interrupted, n_run = exc, sum(r["status"] != "not run" for r in results.values())
+    rows = table_rows(cells, results)
+    write_tables(out, rows)
+    write_figures(out, cells, rows)
+    if interrupted is not None:
+        kept = f"the table of the {n_run} finished cells was written to {out}; the same command resumes the rest"
+        raise Interrupted.keeping(interrupted, kept) from None
+    return rows, n_run
+
+
+def write_figures(out: Path, cells: list[Cell], rows: list[dict]) -> None:
+    """ape_bars.png (APE per source), ape_time.png (APE over time of each finished cell) and,
+    for a grid swept over one numeric key, ape_sweep.png."""
+    from eas_vo.evaluation import tum_rotation_errors
+    from eas_vo.io import atomic_path
+    from eas_vo.plots import plot_ape_bars, plot_ape_time, plot_sweep
+
+    with atomic_path(out / "ape_bars.png") as tmp:
+        plot_ape_bars(tmp, rows)
+    series = {}
+    for cell, row in zip(cells, rows):
+        if row["status"] == "ok":
+            curve = tum_rotation_errors(out / cell.folder / "trajectory.tum", out / cell.folder / "groundtruth.tum")
+            if curve is not None:
+                label = " ".join(filter(None, [cell.frontend, f"{cell.tracker}+{cell.backend}", cell.sweep_label]))
+                series[(cell.dataset, label)] = curve
+    if series:
+        with atomic_path(out / "ape_time.png") as tmp:
+            plot_ape_time(tmp, series)
+    swept = sweep_curves(cells, rows)
+    if swept is not None and swept[1]:
+        with atomic_path(out / "ape_sweep.png") as tmp:
+            plot_sweep(tmp, *swept)
 
 
 # ----------------------------------------------------------------------------- tables

@@ -68,6 +68,16 @@ def aligned_errors(R_w_c_gt: np.ndarray, R_w_c_est: np.ndarray) -> tuple[np.ndar
 def tum_rotation_errors(estimate_tum: Path, groundtruth_tum: Path) -> tuple[np.ndarray, np.ndarray] | None:
     """(t - t0 [s], error per frame [rad]) of two TUM files over their common timestamps,
     aligned at the first (as `rotation_errors`); None if either is unreadable or they share none."""
+    aligned = tum_aligned_rotations(estimate_tum, groundtruth_tum)
+    if aligned is None:
+        return None
+    t, R_gt, R_aligned = aligned
+    return t - t[0], geodesic_angle(R_gt, R_aligned)
+
+
+def tum_aligned_rotations(estimate_tum: Path, groundtruth_tum: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+    """(common timestamps [s], R_w_c ground truth, R_w_c estimate aligned at the first) of two
+    TUM files; None if either is unreadable or they share no timestamp."""
     from eas_vo.io import read_tum
 
     try:
@@ -78,8 +88,9 @@ def tum_rotation_errors(estimate_tum: Path, groundtruth_tum: Path) -> tuple[np.n
     common, i_est, i_gt = np.intersect1d(t_est, t_gt, return_indices=True)
     if len(common) == 0:
         return None
-    _, ape = aligned_errors(matrices_from_quats(q_gt[i_gt]), matrices_from_quats(q_est[i_est]))
-    return common - common[0], ape
+    R_gt = matrices_from_quats(q_gt[i_gt])
+    R_aligned, _ = aligned_errors(R_gt, matrices_from_quats(q_est[i_est]))
+    return common, R_gt, R_aligned
 
 
 def estimate_time_offset(t: np.ndarray, edges, ground_truth: PoseSeries, search_s: float = 0.1) -> float:

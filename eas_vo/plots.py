@@ -143,3 +143,26 @@ def plot_sweep(path: str | Path, key: str, curves: dict) -> None:
     ape_ax.set_yscale("log")
     ape_ax.legend(fontsize="small")
     fig.savefig(path, dpi=110, format="png")
+
+
+def plot_euler_grid(path: str | Path, panels: list[tuple[str, np.ndarray, np.ndarray, np.ndarray]], title: str = "") -> None:
+    """The paper's Fig. 3 for one sequence: a column per source, rows roll/pitch/yaw [deg],
+    estimate (aligned at the first frame) over ground truth. `panels`: (source label,
+    t [s], R_w_c ground truth (N, 3, 3), R_w_c estimate (N, 3, 3))."""
+    fig = _figure(figsize=(2.6 * len(panels) + 0.8, 6.0), layout="constrained")
+    axes = fig.subplots(3, len(panels), sharex=True, squeeze=False)
+    for c, (label, t, R_gt, R_est) in enumerate(panels):
+        gt = np.unwrap(euler_zyx_deg(R_gt), period=360, axis=0)
+        est = np.unwrap(euler_zyx_deg(R_est), period=360, axis=0)
+        for r, name in enumerate(("roll", "pitch", "yaw")):
+            ax = axes[r][c]
+            ax.plot(t - t[0], gt[:, r], color="0.2", lw=1.2, label="ground truth")
+            ax.plot(t - t[0], est[:, r], color="tab:red", lw=0.9, label="estimate")
+            ax.grid(alpha=0.3)
+            if c == 0:
+                ax.set_ylabel(f"{name} [deg]")
+        axes[0][c].set_title(label, fontsize="medium")
+        axes[-1][c].set_xlabel("time [s]")
+    axes[0][0].legend(loc="best", fontsize="x-small")
+    fig.suptitle(title, fontsize="medium")
+    fig.savefig(path, dpi=100, format="png")
