@@ -160,12 +160,12 @@ def run_grid(
                 for future in dask_completed(futures):
                     results[futures[future]] = future.result()
                     bar.update(1)
-        elif jobs <= 1:
+        elif jobs <= 1 or len(todo) <= 1:
             for cell in todo:
                 results[cell] = run_cell(cell, *args)
                 bar.update(1)
         else:
-            pool = ProcessPoolExecutor(jobs)
+            pool = ProcessPoolExecutor(min(jobs, len(todo)))  # never more workers than cells to run
             futures = {pool.submit(run_cell, cell, *args): cell for cell in todo}
             try:
                 for future in as_completed(futures):

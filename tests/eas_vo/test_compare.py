@@ -220,3 +220,24 @@ def test_a_damaged_cell_folder_is_run_again_never_trusted(one_cell, data):
         folder = copy / row["folder"]
         assert all((folder / f).is_file() for f in RUN_FILES)
         assert json.loads((folder / "identity.json").read_text()) == json.loads((out / row["folder"] / "identity.json").read_text())
+
+
+def test_a_pool_never_has_more_workers_than_cells(short_sequence, tmp_path, monkeypatch):
+    """`--jobs 100000` on two cells starts two workers, not a hundred thousand processes."""
+    from concurrent.futures import ProcessPoolExecutor
+
+    from eas_vo import compare
+
+    sizes = []
+
+    class Recording(ProcessPoolExecutor):
+        def __init__(self, max_workers=None, *args, **kwargs):
+            sizes.append(max_workers)
+            super().__init__(max_workers, *args, **kwargs)
+
+    monkeypatch.setattr(compare, "ProcessPoolExecutor", Recording)
+    argv = ["compare", "--dataset", str(short_sequence), "--frontends", "original,histeq", "--duration", "0.5",
+            "--out", str(tmp_path / "cmp"), "--jobs", "100000", "--quiet"]
+    assert main(argv) == 0
+    assert sizes == [2]
+    assert main(argv) == 0 and sizes == [2]  # nothing left to run: no pool at all
