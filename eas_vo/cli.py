@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import argparse
 import os
-import shutil
 import sys
 from pathlib import Path
 
@@ -225,13 +224,13 @@ def _add_common_options(parser, evaluated: bool = True) -> None:
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
 
 
-def _check_output_folder(out: Path) -> None:
-    """Refuse, before any work, an output folder that is a file or cannot be written."""
-    if out.exists() and not out.is_dir():
-        raise EasVoError(f"--out {out} is a file, not a folder")
-    existing = next((p for p in [out, *out.parents] if p.exists()), Path("."))
-    if not os.access(existing, os.W_OK | os.X_OK):
-        raise EasVoError(f"--out {out}: {existing} is not writable")
+def _refuse_dataset_inside(out: Path, dataset_spec: str) -> None:
+    """An output folder that is, or holds, the dataset it is made from would replace it."""
+    from eas_vo.registry import resolve_dataset
+
+    location = Path(resolve_dataset(dataset_spec)[1]).expanduser()
+    if location.exists() and location.resolve().is_relative_to(out):
+        raise EasVoError(f"--out {out} holds the dataset {location}; writing there would replace it")
 
 
 def _positive_int(text: str) -> int:
@@ -275,7 +274,7 @@ def main(argv: list[str] | None = None) -> int:
 def cmd_run(args) -> int:
     from eas_vo import config as config_mod
     from eas_vo import pipeline
-    from eas_vo.io import slug
+    from eas_vo.io import check_output_folder, slug
 
     assignments = args.assignments + (["dataset.lenient=true"] if args.lenient else [])
     config = config_mod.resolve(
@@ -286,15 +285,13 @@ def cmd_run(args) -> int:
     )
     rc = config.run
     if args.out:
-        out = Path(args.out)
-        _check_output_folder(out)
-        if not args.overwrite and any((out / name).exists() for name in ("metrics.json", "frames.csv")):
-            raise EasVoError(f"{out} already holds results; choose another --out or add --overwrite")
+        out = check_output_folder(args.out, replace=args.overwrite)
+        _refuse_dataset_inside(out, rc.dataset)
     else:
         import time
 
         out = Path(f"runs/{slug(rc.dataset)}_{rc.frontend}_{rc.tracker}_{rc.backend}_{time.strftime('%Y%m%d-%H%M%S')}")
-    result = pipeline.run(config, out, progress=not args.quiet and sys.stderr.isatty())
+    result = pipeline.run(config, out, progress=not args.quiet and sys.stderr.isatty(), replace=args.overwrite)
     m = result.metrics
     for line in m["data_warnings"]:
         print(f"eas-vo: warning: {line}", file=sys.stderr)
@@ -313,6 +310,7 @@ def cmd_compare(args) -> int:
     from eas_vo import compare
     from eas_vo import config as config_mod
     from eas_vo.gallery import PAPER_ORDER
+    from eas_vo.io import check_writable_folder
 
     def names(text, default):
         listed = [v.strip() for v in (text or default).split(",") if v.strip()]
@@ -320,8 +318,7 @@ def cmd_compare(args) -> int:
             raise EasVoError(f"{text!r} names nothing; give comma-separated names")
         return listed
 
-    out = Path(args.out)
-    _check_output_folder(out)
+    out = check_writable_folder(args.out)
     run_defaults = config_mod.RunConfig()
     cells = compare.plan(
         args.datasets or [run_defaults.dataset],
@@ -407,6 +404,7 @@ def _time_offset(text: str | None) -> tuple[float | None, bool | None]:
 
 def cmd_export(args) -> int:
     from eas_vo import config as config_mod
+    from eas_vo.io import check_output_folder
     from eas_vo.orbslam import export
 
     config = config_mod.resolve(
@@ -414,11 +412,9 @@ def cmd_export(args) -> int:
         {"dataset": args.dataset, "frontend": args.frontend, "start_s": args.start, "duration_s": args.duration},
         args.assignments,
     )
-    out = Path(args.out)
-    _check_output_folder(out)
-    if out.exists() and any(out.iterdir()) and not args.overwrite:
-        raise EasVoError(f"--out {out} is not empty; choose another folder or add --overwrite")
-    done = export(config, out, args.format, progress=not args.quiet and sys.stderr.isatty())
+    out = check_output_folder(args.out, replace=args.overwrite)
+    _refuse_dataset_inside(out, config.run.dataset)
+    done = export(config, out, args.format, progress=not args.quiet and sys.stderr.isatty(), replace=args.overwrite)
     print(f"wrote {done['frames']} {done['frontend']} images of {done['dataset']} ({done['format']} layout, "
           f"{done['fps']:.2f} frames/s) and settings.yaml to {out}")
     return 0
@@ -427,12 +423,13 @@ def cmd_export(args) -> int:
 def cmd_evaluate(args) -> int:
     import math
 
+    from eas_vo.io import check_output_folder
     from eas_vo.orbslam import evaluate_estimate
 
     if not math.isfinite(args.max_diff) or args.max_diff < 0:
         raise EasVoError(f"--max-diff must be a non-negative number of seconds, got {args.max_diff}")
     if args.out:
-        _check_output_folder(Path(args.out))
+        check_output_folder(args.out, replace=True)
     m = evaluate_estimate(args.dataset, args.estimate, args.align, args.max_diff, args.out, args.label)
     print(f"{args.estimate} vs {m['dataset']} ({m['align']}, {m['matched_poses']} of {m['estimate_poses']} poses matched, "
           f"scale {m['scale']:.4f}): translation APE mean {m['ape_trans_mean_m']:.4f} m, RMSE {m['ape_trans_rmse_m']:.4f} m; "
@@ -444,6 +441,7 @@ def cmd_reproduce(args) -> int:
     import math
 
     from eas_vo import reproduce
+    from eas_vo.io import check_writable_folder
 
     if not (math.isfinite(args.duration) and args.duration > 0):
         raise EasVoError(f"--duration must be a positive number of seconds, got {args.duration}")
@@ -456,8 +454,7 @@ def cmd_reproduce(args) -> int:
         estimates[(seq.strip(), source.strip())] = path
     if estimates and args.table != "table2":
         raise EasVoError("--estimate belongs to table2 (ORB-SLAM2 trajectories)")
-    out = Path(args.out or f"reproduce/{args.table}")
-    _check_output_folder(out)
+    out = check_writable_folder(args.out or f"reproduce/{args.table}")
     progress = not args.quiet and sys.stderr.isatty()
     if args.table == "table1":
         backends = [b.strip() for b in args.backends.split(",") if b.strip()]
@@ -483,6 +480,7 @@ def cmd_simulate(args) -> int:
     from eas_vo.config import build, parse_set
     from eas_vo.datasets.simulator import SimConfig, simulate
     from eas_vo.datasets.synthetic import SyntheticConfig
+    from eas_vo.io import check_output_folder, output_folder
 
     pixel = {}
     for assignment in args.assignments:
@@ -492,17 +490,9 @@ def cmd_simulate(args) -> int:
         pixel[keys[1]] = value
     sensor = build(SyntheticConfig, {**pixel, "illumination": args.illumination}, "dataset")
     config = sensor.applied_to(build(SimConfig, {"seed": args.seed, "duration_s": args.duration}, "simulate"))
-    out = Path(args.out)
-    _check_output_folder(out)
-    if out.exists() and any(out.iterdir()) and not args.overwrite:
-        raise EasVoError(f"--out {out} is not empty; choose another folder or add --overwrite")
-    tmp = out.with_name(f".{out.name}.{os.getpid()}.tmp")  # written whole, then swapped in: no stale frames
-    try:
-        stats = simulate(config, tmp, progress=sys.stderr.isatty())
-        shutil.rmtree(out, ignore_errors=True)
-        os.replace(tmp, out)
-    finally:
-        shutil.rmtree(tmp, ignore_errors=True)
+    check_output_folder(args.out, replace=args.overwrite)
+    with output_folder(args.out, replace=args.overwrite, keep_partial=False) as staging:  # whole, or not at all
+        stats = simulate(config, staging, progress=sys.stderr.isatty())
     print(f"wrote a {config.duration_s:g} s synthetic sequence (seed {config.seed}, illumination {config.illumination:g}) to {args.out}")
     if args.stats:
         print("\n".join("  " + line for line in stats.lines()))

@@ -105,7 +105,7 @@ def run_cell(cell: Cell, out_root: str, config_file, assignments: list[str], run
     try:
         cfg = cell_config(cell, config_file, assignments, run_overrides)
         with sigterm_as_interrupt():  # a worker keeps its partial outputs on SIGTERM, however it was started
-            metrics = pipeline.run(cfg, folder).metrics
+            metrics = pipeline.run(cfg, folder, replace=True).metrics  # a cell's folder is compare's own
         return {"status": "ok", **metrics}
     except EasVoError as exc:
         message = str(exc).splitlines()[0]

@@ -56,25 +56,63 @@ def atomic_path(path: str | Path):
         raise
 
 
+#: The file that marks a folder as an eas-vo output (a run, an export, an evaluation): only
+#: such a folder, or an empty one, is ever replaced.
+OUTPUT_MARKER = ".eas-vo-output"
+
+
+def check_writable_folder(out: str | Path) -> Path:
+    """The absolute folder `out` (symlinks followed) if it is, or can be made, a writable folder
+    other than the root; else a one-line error."""
+    out = Path(out).expanduser().resolve()
+    if out == Path(out.anchor):
+        raise EasVoError(f"--out {out} is the root of the file system; choose a folder")
+    if out.exists() and not out.is_dir():
+        raise EasVoError(f"--out {out} is a file, not a folder")
+    existing = next(p for p in [out, *out.parents] if p.exists())
+    if not os.access(existing, os.W_OK | os.X_OK):
+        raise EasVoError(f"--out {out}: {existing} is not writable")
+    return out
+
+
+def check_output_folder(out: str | Path, replace: bool) -> Path:
+    """The absolute output folder (symlinks followed), or a one-line error, before any work:
+    a file or the root is refused, so is a folder that cannot be written, and a non-empty one
+    unless `replace`; even then only a folder that eas-vo wrote (its marker, or an older run's
+    identity.json) is replaced, never one holding someone's other files."""
+    out = check_writable_folder(out)
+    if out.is_dir() and any(out.iterdir()):
+        if not replace:
+            raise EasVoError(f"--out {out} is not empty; choose another folder or add --overwrite")
+        if not ((out / OUTPUT_MARKER).exists() or (out / "identity.json").exists()):
+            raise EasVoError(f"--out {out} holds files eas-vo did not write; it replaces only its own output "
+                             "folders: choose another folder")
+    return out
+
+
 @contextmanager
-def output_folder(out: str | Path):
+def output_folder(out: str | Path, replace: bool = False, keep_partial: bool = True):
     """One writer per folder, and a folder that holds one whole run: lock `out` (a sibling
-    `.NAME.lock` holding the writer's pid; a lock whose process is gone is taken over), yield a
-    fresh hidden sibling folder to write into, and when the block ends normally or by an
-    interrupt (the partial outputs are then written) move it into place, replacing what `out`
-    held. On any other error the new folder is dropped and `out` stays as it was."""
-    out = Path(out)
+    `.NAME.lock` holding the writer's pid and start time; a lock whose process is gone is taken
+    over), check it under the lock (check_output_folder), yield a fresh hidden sibling folder to
+    write into, and when the block ends normally or (with `keep_partial`) by an interrupt (the
+    partial outputs are then written) move it into place, replacing what `out` held. On any
+    other error the new folder is dropped and `out` stays as it was."""
+    out = Path(out).expanduser().resolve()
     out.parent.mkdir(parents=True, exist_ok=True)
     lock = out.with_name(f".{out.name}.lock")
     _acquire(lock, out)
     staging = out.with_name(f".{out.name}.{os.getpid()}.tmp")
     try:
+        check_output_folder(out, replace)  # again, under the lock: another writer may have come first
         shutil.rmtree(staging, ignore_errors=True)
         staging.mkdir()
+        (staging / OUTPUT_MARKER).write_text("written by eas-vo; replaced only by eas-vo --overwrite\n")
         try:
             yield staging
         except KeyboardInterrupt:
-            _move_into_place(staging, out)
+            if keep_partial:
+                _move_into_place(staging, out)
             raise
         _move_into_place(staging, out)
     finally:
@@ -97,28 +135,52 @@ def _acquire(lock: Path, out: Path) -> None:
                     shutil.rmtree(stale, ignore_errors=True)
             continue
         with os.fdopen(fd, "w") as fh:
-            fh.write(f"{os.getpid()}\n")
+            fh.write(f"{os.getpid()} {_started(os.getpid()) or ''}\n")
         return
     raise EasVoError(f"{out}: could not take its lock {lock}")
 
 
-def _lock_pid(lock: Path) -> int:
+def _lock_owner(lock: Path) -> tuple[int, str | None]:
+    """(pid, process start time or None) written in a lock; pid 0 if it holds none yet."""
     try:
-        return int(lock.read_text().strip() or 0)
+        fields = lock.read_text().split()
+        return int(fields[0]) if fields else 0, fields[1] if len(fields) > 1 else None
     except (OSError, ValueError):
-        return 0
+        return 0, None
+
+
+def _lock_pid(lock: Path) -> int:
+    return _lock_owner(lock)[0]
 
 
 def _lock_is_held(lock: Path) -> bool:
-    """A lock is held while its pid lives; one without a pid yet (being written, or a crash
-    between creating and writing it) for 10 s after it was made."""
-    pid = _lock_pid(lock)
-    if pid:
-        return _alive(pid)
-    try:
+    """A lock is held while its process lives (the same process: its pid and, where the system
+    tells it, its start time); one without a pid yet (being written, or a crash between
+    creating and writing it), or without the start time the system gives (not written by
+    eas-vo), for 10 s after it was made."""
+    pid, started = _lock_owner(lock)
+    if pid and _alive(pid):
+        now = _started(pid)
+        if now is None or started == now:
+            return True
+        if started is not None:  # the pid lives, but it is another process now
+            return False
+    elif pid:
+        return False
+    try:  # no pid, or a pid without the start time this system gives: trusted only while young
         return time.time() - lock.stat().st_mtime < 10.0
     except OSError:
         return False  # gone meanwhile: try again
+
+
+def _started(pid: int) -> str | None:
+    """When process `pid` started (clock ticks since boot, Linux /proc), or None if unknown:
+    a pid reused by another process has another start time."""
+    try:
+        stat = Path(f"/proc/{pid}/stat").read_text()
+        return stat[stat.rindex(")") + 2:].split()[19]
+    except (OSError, ValueError, IndexError):
+        return None
 
 
 def _alive(pid: int) -> bool:

@@ -52,9 +52,10 @@ def _yaml_number(value) -> str:
     return text if any(c in text for c in ".en") else text + ".0"
 
 
-def export(config, out: str | Path, fmt: str, progress: bool = False) -> dict:
+def export(config, out: str | Path, fmt: str, progress: bool = False, replace: bool = False) -> dict:
     """Write the window's frontend images in layout `fmt` and settings.yaml into `out` (one
-    writer, moved into place whole); returns a summary (frames, fps, layout)."""
+    writer, moved into place whole; an existing output only if `replace`); returns a summary
+    (frames, fps, layout)."""
     from tqdm import tqdm
 
     from eas_vo.pipeline import check_image, open_pipeline
@@ -65,7 +66,7 @@ def export(config, out: str | Path, fmt: str, progress: bool = False) -> dict:
     parts = open_pipeline(config)
     n_window = len(parts.dataset.window(rc.start_s, rc.duration_s))
     times = []
-    with output_folder(out) as staging:
+    with output_folder(out, replace, keep_partial=False) as staging:
         image_dir = staging / ("rgb" if fmt == "tum" else "mav0/cam0/data")
         image_dir.mkdir(parents=True)
         for sample in tqdm(parts.dataset.samples(rc.start_s, rc.duration_s), total=n_window, disable=not progress,
@@ -141,7 +142,7 @@ def evaluate_estimate(dataset_spec: str, estimate_path: str | Path, align: str, 
     metrics = {"estimate": str(estimate_path), "dataset": dataset.label, "align": align, "max_diff_s": max_diff_s,
                "estimate_poses": int(len(estimate.t)), **ape.summary()}
     if out is not None:
-        with output_folder(out) as staging:
+        with output_folder(out, replace=True) as staging:
             write_text_atomic(staging / "metrics.json", json_text(metrics))
             write_text_atomic(staging / "table2_row.md", table2_row(label, metrics))
             write_text_atomic(staging / "groundtruth.tum", format_tum(gt.t, gt.p_w_c, matrices_from_quats(gt.q_w_c)))

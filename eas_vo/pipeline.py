@@ -68,8 +68,9 @@ RUN_FILES = ("config.toml", "identity.json", "frames.csv", "trajectory.tum", "me
 """What every finished run's folder holds (groundtruth.tum and trajectory_causal.tum when they apply)."""
 
 
-def run(config: ResolvedConfig, out_dir: str | Path | None = None, progress: bool = False) -> RunResult:
-    """Run the configured pipeline; with `out_dir`, write every output file there.
+def run(config: ResolvedConfig, out_dir: str | Path | None = None, progress: bool = False, replace: bool = False) -> RunResult:
+    """Run the configured pipeline; with `out_dir`, write every output file there (a non-empty
+    `out_dir` only if `replace` and it is an eas-vo output: io.output_folder).
 
     Ctrl-C (or SIGTERM turned into KeyboardInterrupt by the caller) during tracking
     keeps the frames processed so far: they are solved, evaluated and written, with
@@ -80,7 +81,7 @@ def run(config: ResolvedConfig, out_dir: str | Path | None = None, progress: boo
     load_s = time.perf_counter() - started  # opening (and the first time simulating or caching)
     if out_dir is None:
         return _run_into(parts, config, None, progress, started, load_s)
-    with output_folder(out_dir) as staging:  # one writer; `out_dir` gets a whole run or a marked partial one
+    with output_folder(out_dir, replace) as staging:  # one writer; `out_dir` gets a whole run or a marked partial one
         return _run_into(parts, config, staging, progress, started, load_s, Path(out_dir))
 
 

@@ -41,7 +41,7 @@ def test_existing_results_need_overwrite(short_sequence, tmp_path, capsys):
     argv = ["run", "--dataset", str(short_sequence), "--frontend", "original", "--out", str(out), "--quiet"]
     assert main(argv) == 0
     assert main(argv) == 2
-    assert "already holds results; choose another --out or add --overwrite" in capsys.readouterr().err
+    assert "is not empty; choose another folder or add --overwrite" in capsys.readouterr().err
     assert main(argv + ["--overwrite"]) == 0
 
 

@@ -3,16 +3,18 @@ run (or a marked partial one) per folder, nothing left behind, also when two rea
 race into one folder."""
 
 import json
+import os
 import subprocess
 import sys
 import tempfile
+import time
 from pathlib import Path
 
 import numpy as np
 import pytest
 
 from eas_vo.errors import DataError, EasVoError
-from eas_vo.io import atomic_path, output_folder, read_table
+from eas_vo.io import atomic_path, check_output_folder, output_folder, read_table
 
 
 def test_read_table_skips_comments_and_blank_lines(tmp_path):
@@ -61,7 +63,7 @@ def test_a_failed_run_leaves_the_old_folder_as_it_was(tmp_path):
     with output_folder(out) as staging:
         (staging / "metrics.json").write_text("old\n")
     with pytest.raises(RuntimeError):
-        with output_folder(out) as staging:
+        with output_folder(out, replace=True) as staging:
             (staging / "metrics.json").write_text("new\n")
             raise RuntimeError("the run failed")
     assert (out / "metrics.json").read_text() == "old\n"
@@ -88,6 +90,74 @@ def test_a_crashed_writers_lock_and_leftovers_are_taken_over(tmp_path):
     with output_folder(out) as staging:
         (staging / "metrics.json").write_text("{}\n")
     assert sorted(p.name for p in tmp_path.iterdir()) == ["out"]
+
+
+def test_a_folder_is_replaced_only_if_asked_and_only_if_eas_vo_wrote_it(tmp_path):
+    """Class 5 (and the data loss it hid): a non-empty --out is refused without --overwrite,
+    checked again under the lock (a writer that finished first is not silently replaced), and a
+    folder of someone's other files is never replaced, --overwrite or not."""
+    out = tmp_path / "out"
+    with output_folder(out) as staging:
+        (staging / "metrics.json").write_text("first\n")
+    with pytest.raises(EasVoError, match="is not empty; choose another folder or add --overwrite"):
+        with output_folder(out):
+            pass
+    with output_folder(out, replace=True) as staging:
+        (staging / "metrics.json").write_text("second\n")
+    assert (out / "metrics.json").read_text() == "second\n"
+    mine = tmp_path / "thesis"
+    mine.mkdir()
+    (mine / "thesis.tex").write_text("years of work")
+    for replace in (False, True):
+        with pytest.raises(EasVoError, match="holds files eas-vo did not write|is not empty"):
+            with output_folder(mine, replace=replace):
+                pass
+    assert (mine / "thesis.tex").read_text() == "years of work"
+
+
+def test_dot_dotdot_and_symlinks_name_the_folder_they_resolve_to(tmp_path, monkeypatch):
+    target = tmp_path / "real"
+    link = tmp_path / "link"
+    target.mkdir()
+    link.symlink_to(target)
+    with output_folder(link) as staging:
+        (staging / "metrics.json").write_text("{}\n")
+    assert link.is_symlink() and (target / "metrics.json").exists()
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["link", "real"]
+    work = tmp_path / "a" / "b"
+    work.mkdir(parents=True)
+    monkeypatch.chdir(work)
+    with output_folder(".") as staging:
+        (staging / "x.txt").write_text("x\n")
+    assert (work / "x.txt").exists()
+    with pytest.raises(EasVoError, match="is the root of the file system"):
+        check_output_folder("/", replace=True)
+
+
+def test_a_lock_left_by_a_pid_now_used_by_another_process_is_taken_over(tmp_path):
+    out = tmp_path / "out"
+    other = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(60)"])
+    try:
+        (tmp_path / ".out.lock").write_text(f"{other.pid} 1\n")  # its pid, but not its start time
+        with output_folder(out) as staging:
+            (staging / "metrics.json").write_text("{}\n")
+        (tmp_path / ".out.lock").write_text(f"{other.pid}\n")  # a bare pid (not eas-vo's): trusted 10 s
+        os.utime(tmp_path / ".out.lock", (time.time() - 60, time.time() - 60))
+        with output_folder(out, replace=True) as staging:
+            (staging / "metrics.json").write_text("{}\n")
+    finally:
+        other.kill()
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["out"]
+
+
+def test_run_refuses_to_write_over_its_own_dataset(sequence_copy):
+    from eas_vo.io import OUTPUT_MARKER
+    from helpers import run_eas_vo
+
+    (sequence_copy / OUTPUT_MARKER).write_text("")  # as `eas-vo simulate` leaves it: an eas-vo output, yet a dataset
+    done = run_eas_vo("run", "--dataset", str(sequence_copy), "--duration", "0.5", "--out", str(sequence_copy), "--overwrite")
+    assert done.returncode == 2 and "holds the dataset" in done.stderr
+    assert (sequence_copy / "events.txt").exists()
 
 
 def run_into(folder: Path, dataset: Path, duration: str) -> subprocess.Popen:
