@@ -3,9 +3,9 @@
 Cache file: 24-byte header (8-byte magic, uint64 event count, uint64 checksum) + packed
 EVENT_DTYPE records (13 B/event), named by a hash of what identifies the source (for a file:
 device, inode, size, modification and change times in ns, and a hash of samples of its
-content). Written atomically, read by memory-mapping it once its checksum (the wrapping sum
-of the records as 64-bit words, tail zero-padded: every single-bit flip changes it; ~20 GB/s
-from memory) matched; a damaged cache is rebuilt with a one-line notice.
+content). Written atomically, read by memory-mapping it once its checksum (XXH3-64 of the
+records, ~25 GB/s from memory) matched; a damaged cache is rebuilt with a one-line notice.
+A lenient build's warnings sidecar is part of it: missing or unreadable, both are rebuilt.
 """
 
 from __future__ import annotations
@@ -23,7 +23,7 @@ from eas_vo.eventfile.convert import convert_text_to_cache
 from eas_vo.io import atomic_path, cache_dir
 from eas_vo.types import EVENT_DTYPE
 
-CACHE_MAGIC = b"EASVOEV2"
+CACHE_MAGIC = b"EASVOEV3"
 HEADER_BYTES = 24
 SAMPLE_BYTES = 1 << 16  # content sampled for a file's identity: its start, middle and end
 
@@ -46,13 +46,11 @@ def file_identity(path: Path) -> tuple:
 
 
 def records_checksum(payload) -> int:
-    """The wrapping sum of `payload` (bytes-like: the packed records) as little-endian uint64
-    words, its last partial word zero-padded."""
-    data = np.frombuffer(payload, np.uint8)
-    whole = len(data) // 8 * 8
-    total = int(data[:whole].view("<u8").sum(dtype=np.uint64)) if whole else 0
-    tail = int.from_bytes(bytes(data[whole:]).ljust(8, b"\0"), "little")
-    return (total + tail) % (1 << 64)
+    """XXH3-64 of `payload` (bytes-like: the packed records): a full-avalanche hash, so no
+    pattern of damage cancels out (as two opposite bit flips did in a sum); memory speed."""
+    import xxhash
+
+    return xxhash.xxh3_64_intdigest(memoryview(payload).cast("B") if len(payload) else b"")
 
 
 def cache_path(key: str) -> Path:
@@ -131,11 +129,16 @@ def load_cached(
     tolerant = strict.with_name(strict.stem + "-lenient.ev")
     for path in (strict, tolerant) if lenient else (strict,):
         cached = open_cache(path)
-        if cached is not None:
-            side = path.with_suffix(".warnings")
-            if side.exists():
-                warnings.merge(DataWarnings.from_json(side.read_text()))
+        if cached is None:
+            continue
+        if path is strict:
             return cached
+        kept = _read_sidecar(path.with_suffix(".warnings"))
+        if kept is not None:
+            warnings.merge(kept)
+            return cached
+        print(f"eas-vo: the warnings of the event cache {path} are missing or damaged; rebuilding it", file=sys.stderr)
+        path.unlink(missing_ok=True)
     local = DataWarnings()
     target = tolerant if lenient else strict
     try:
@@ -151,6 +154,14 @@ def load_cached(
         events = open_cache(strict)
     warnings.merge(local)
     return events
+
+
+def _read_sidecar(path: Path) -> DataWarnings | None:
+    """The warnings a lenient build wrote beside its cache, or None if missing or unreadable."""
+    try:
+        return DataWarnings.from_json(path.read_text(encoding="utf-8"))
+    except (OSError, ValueError, TypeError, KeyError, AttributeError):
+        return None
 
 
 def load_event_text(

@@ -63,6 +63,56 @@ def test_a_damaged_cache_is_detected_and_rebuilt(tmp_path, data):
     np.testing.assert_array_equal(load_event_file(path), clean)
 
 
+def test_opposite_flips_of_one_bit_in_two_records_are_detected(tmp_path):
+    """The damage a sum of 64-bit words misses: one bit set in one record and the same bit of
+    the same word lane cleared in another (the sum is unchanged, as the test checks). The
+    checksum must catch it and the cache be rebuilt."""
+    from eas_vo.eventfile import write_events_text
+    from eas_vo.eventfile.cache import HEADER_BYTES
+    from helpers import random_events
+
+    path = tmp_path / "events.txt"
+    write_events_text(path, random_events(3000, seed=5), 240, 180)
+    clean = np.array(load_event_file(path))
+    cache = cached_file(path)
+    raw = bytearray(cache.read_bytes())
+    bit = 0x10
+    first = HEADER_BYTES + 8 * 101 + 3  # a byte whose bit is clear, and one 8k bytes on whose bit is set
+    first = next(i for i in range(first, len(raw) - 8, 8) if not raw[i] & bit)
+    second = next(i for i in range(first + 8, len(raw), 8) if raw[i] & bit)
+
+    def word_sum(data):
+        body = np.frombuffer(bytes(data[HEADER_BYTES:]), np.uint8)
+        return int(body[: len(body) // 8 * 8].view("<u8").sum(dtype=np.uint64))
+
+    before = word_sum(raw)
+    raw[first] |= bit
+    raw[second] &= ~bit & 0xFF
+    assert word_sum(raw) == before
+    cache.write_bytes(bytes(raw))
+    np.testing.assert_array_equal(load_event_file(path), clean)
+
+
+@pytest.mark.parametrize("damage", ["{not json", "[1,2,3]", b"\xff\xfe", None])
+def test_a_lenient_caches_missing_or_damaged_warnings_rebuild_it(tmp_path, damage):
+    path = tmp_path / "events.txt"
+    path.write_text("0.1 1 2 1\n0.2 300 4 0\n0.3 5 6 1\n")
+    first = DataWarnings()
+    load_event_file(path, lenient=True, warnings=first)
+    from eas_vo.eventfile import cache_key, cache_path, file_identity
+
+    key = cache_key("text", *file_identity(path), 240, 180, 1e-6)
+    sidecar = cache_path(key).with_name(cache_path(key).stem + "-lenient.warnings")
+    assert sidecar.exists()
+    if damage is None:
+        sidecar.unlink()
+    else:
+        sidecar.write_bytes(damage if isinstance(damage, bytes) else damage.encode())
+    again = DataWarnings()
+    assert len(load_event_file(path, lenient=True, warnings=again)) == 2
+    assert again.lines() == first.lines()  # the dropped line is reported again, not forgotten
+
+
 BAD = [
     ("0.1 1 2 1\n0.2 3 x 0\n", 2, "not a number"),
     ("0.1 1 2 1\n0.2 3 4\n", 2, "expected 4 columns"),
