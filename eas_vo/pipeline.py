@@ -111,17 +111,36 @@ def _run_into(parts: Pipeline, config: ResolvedConfig, out: Path | None, progres
 
 def run_identity(config: ResolvedConfig) -> dict:
     """What made a run (identity.json): the eas-vo version, the dataset's resolved location
-    (an absolute path where it is one) and the whole resolved configuration. `compare` resumes
-    a cell only when its folder's identity equals the one it would write now."""
+    (an absolute path where it is one), its content identity (dataset_identity) and the whole
+    resolved configuration. `compare` resumes a cell only when its folder's identity equals
+    the one it would write now."""
     from eas_vo import __version__
 
-    _, location = registry.resolve_dataset(config.run.dataset)
+    plugin, location = registry.resolve_dataset(config.run.dataset)
     path = Path(location).expanduser()
     return {
         "eas_vo": __version__,
         "dataset": str(path.resolve()) if path.exists() else location,
+        "dataset_content": dataset_identity(plugin, location),
         "config": config.to_toml(),
     }
+
+
+def dataset_identity(plugin: type, location: str):
+    """The content identity of a dataset: for a file, its eventfile.file_identity; for a folder,
+    that of each file in it and the times of its subfolders (a frame added, removed or renamed);
+    for a name a plugin fetches, the checksum it is verified against; else None (a simulated
+    sequence is a function of the configuration)."""
+    from eas_vo.eventfile import file_identity
+
+    path = Path(location).expanduser()
+    if path.is_file():
+        return list(file_identity(path))
+    if path.is_dir():
+        entries = sorted(p for p in path.iterdir() if not p.name.startswith("."))
+        return {p.name: list(file_identity(p)) if p.is_file() else [p.stat().st_mtime_ns, p.stat().st_ctime_ns]
+                for p in entries}
+    return plugin.catalogue().get(location)
 
 
 def open_pipeline(config: ResolvedConfig) -> Pipeline:

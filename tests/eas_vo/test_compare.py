@@ -241,3 +241,20 @@ def test_a_pool_never_has_more_workers_than_cells(short_sequence, tmp_path, monk
     assert main(argv) == 0
     assert sizes == [2]
     assert main(argv) == 0 and sizes == [2]  # nothing left to run: no pool at all
+
+
+def test_a_cell_is_run_again_when_its_dataset_changed_at_the_same_path(sequence_copy, short_sequence, tmp_path, capsys):
+    """Class 3 with the data, not the options, changed: the folder replaced by other content
+    under the same path (here the same recording, its frames list cut to 1 s)."""
+    out = tmp_path / "cmp"
+    argv = ["compare", "--dataset", str(sequence_copy), "--frontends", "original", "--out", str(out), "--jobs", "1", "--quiet"]
+    assert main(argv) == 0
+    shutil.rmtree(sequence_copy)
+    shutil.copytree(short_sequence, sequence_copy)
+    lines = (sequence_copy / "images.txt").read_text().splitlines(keepends=True)
+    (sequence_copy / "images.txt").write_text("".join(lines[:20]))
+    capsys.readouterr()
+    assert main(argv) == 0
+    assert "1 cells (1 run, 0 already complete" in capsys.readouterr().out
+    (after,) = json.loads((out / "table.json").read_text())
+    assert json.loads((out / after["folder"] / "metrics.json").read_text())["frames"] == 20
