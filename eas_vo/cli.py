@@ -84,8 +84,8 @@ def build_parser() -> argparse.ArgumentParser:
     compare.add_argument("--dataset", dest="datasets", action="append", metavar="SPEC",
                          help="a dataset (repeatable; default synthetic:default)")
     compare.add_argument("--frontends", metavar="A,B,...", help="default: the paper's six sources, original,histeq,slice,ts,sits,eas")
-    compare.add_argument("--trackers", metavar="A,B,...", help="default: the run default, klt")
-    compare.add_argument("--backends", metavar="A,B,...", help="default: the run default, chain")
+    compare.add_argument("--trackers", metavar="A,B,...", help="default: the config's [run] tracker (klt without --config)")
+    compare.add_argument("--backends", metavar="A,B,...", help="default: the config's [run] backend (chain without --config)")
     _add_common_options(compare)
     compare.add_argument("--sweep", dest="sweeps", action="append", default=[], metavar="SECTION.KEY=V1,V2",
                          help="values to try (repeatable: the cartesian product is run)")
@@ -319,7 +319,7 @@ def cmd_compare(args) -> int:
         return listed
 
     out = check_writable_folder(args.out)
-    run_defaults = config_mod.RunConfig()
+    run_defaults = config_mod.run_section(args.config, args.assignments)  # e.g. best.toml's tracker and backend
     cells = compare.plan(
         args.datasets or [run_defaults.dataset],
         names(args.frontends, ",".join(PAPER_ORDER)),

@@ -344,7 +344,7 @@ def table_csv(rows: list[dict]) -> str:
               "orb_keypoints_mean", "orb_matches_mean", "best_nc", "best_ape", "folder", "error"]
     best_nc, best_ape = _best(rows, "nc_mean", lower=False), _best(rows, "ape_mean_rad", lower=True)
     buffer = io.StringIO()
-    writer = csv.DictWriter(buffer, fieldnames=fields, extrasaction="ignore")
+    writer = csv.DictWriter(buffer, fieldnames=fields, extrasaction="ignore", lineterminator="\n")  # LF, as every file we write
     writer.writeheader()
     for r in rows:
         col = (r["dataset"], r["method"])

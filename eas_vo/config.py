@@ -176,6 +176,17 @@ def read_config_file(path: str | Path) -> dict:
     return raw
 
 
+def run_section(config_file: str | Path | None = None, assignments: list[str] = ()) -> RunConfig:
+    """The [run] section alone: defaults, the config file's [run], `--set run.KEY=V` (what
+    `compare` takes its default tracker and backend from)."""
+    raw = dict((read_config_file(config_file) if config_file else {}).get("run", {}))
+    for assignment in assignments:
+        keys, value = parse_set(assignment)
+        if keys[0] == "run" and len(keys) == 2:
+            raw[keys[1]] = value
+    return build(RunConfig, raw, "run")
+
+
 def resolve(
     config_file: str | Path | None = None,
     run_overrides: dict | None = None,

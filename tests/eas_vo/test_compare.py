@@ -36,6 +36,7 @@ def test_table_equals_each_cells_metrics(grid):
         assert (out / r["folder"] / "rotation.png").exists()
     md = (out / "table.md").read_text()
     assert "| Source type | average NC | average APE |" in md and md.count("**") >= 4
+    assert b"\r" not in (out / "table.csv").read_bytes()
     csv_lines = (out / "table.csv").read_text().splitlines()
     assert len(csv_lines) == 5 and csv_lines[0].startswith("dataset,frontend,tracker,backend,method")
     assert (out / "ape_bars.png").exists() and (out / "ape_time.png").exists()
@@ -258,3 +259,15 @@ def test_a_cell_is_run_again_when_its_dataset_changed_at_the_same_path(sequence_
     assert "1 cells (1 run, 0 already complete" in capsys.readouterr().out
     (after,) = json.loads((out / "table.json").read_text())
     assert json.loads((out / after["folder"] / "metrics.json").read_text())["frames"] == 20
+
+
+def test_compare_takes_its_default_tracker_and_backend_from_the_config(short_sequence, tmp_path):
+    """`compare --config best` runs best.toml's klt+gtsam, as `run --config best` would."""
+    from eas_vo.config import resolve
+
+    out = tmp_path / "cmp"
+    assert main(["compare", "--dataset", str(short_sequence), "--frontends", "eas", "--config", "best", "--duration", "0.5",
+                 "--out", str(out), "--jobs", "1", "--quiet"]) == 0
+    (row,) = json.loads((out / "table.json").read_text())
+    run = resolve("best", {"dataset": str(short_sequence)}).run
+    assert (row["tracker"], row["backend"]) == (run.tracker, run.backend) == ("klt", "gtsam")
