@@ -9,6 +9,8 @@ import hashlib
 import io
 import itertools
 import json
+import signal
+import sys
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -165,7 +167,7 @@ def run_grid(
                 results[cell] = run_cell(cell, *args)
                 bar.update(1)
         else:
-            pool = ProcessPoolExecutor(min(jobs, len(todo)))  # never more workers than cells to run
+            pool = ProcessPoolExecutor(min(jobs, len(todo)), initializer=_end_with_parent)
             futures = {pool.submit(run_cell, cell, *args): cell for cell in todo}
             try:
                 for future in as_completed(futures):
@@ -179,6 +181,19 @@ def run_grid(
                 raise
             pool.shutdown()
     return results, len(todo)
+
+
+def _end_with_parent() -> None:
+    """A pool worker's start: on Linux the kernel kills it when the process that started it dies
+    (after a `kill -9` of compare its workers ran on through the queue, then waited forever).
+    The cell it was running is left as a crashed run's folder, which the next compare takes over."""
+    if sys.platform.startswith("linux"):
+        import ctypes
+
+        try:
+            ctypes.CDLL(None, use_errno=True).prctl(1, int(signal.SIGKILL))  # PR_SET_PDEATHSIG
+        except (OSError, AttributeError):
+            pass
 
 
 def _stop(pool: ProcessPoolExecutor, futures: dict, results: dict) -> None:

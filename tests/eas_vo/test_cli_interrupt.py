@@ -3,6 +3,7 @@
 import json
 import os
 import signal
+import sys
 
 import numpy as np
 import pytest
@@ -111,3 +112,26 @@ def test_sigterm_to_a_parallel_compare_stops_it_at_once_without_orphans(short_se
     time.sleep(0.5)
     survivors = subprocess.run(["pgrep", "-f", str(out)], capture_output=True, text=True).stdout.split()
     assert survivors == [], survivors
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="workers end with their parent through Linux's prctl")
+def test_kill_9_of_a_parallel_compare_leaves_no_worker_and_the_rerun_completes(short_sequence, tmp_path):
+    import subprocess
+    import tempfile
+    import time
+
+    out = tmp_path / "cmp"
+    argv = [sys.executable, "-m", "eas_vo", "compare", "--dataset", str(short_sequence), "--frontends", "original,slice,eas",
+            "--sweep", "tracker.max_corners=100,200,300,400", "--out", str(out), "--jobs", "2", "--quiet"]
+    parent = subprocess.Popen(argv, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, cwd=tempfile.gettempdir())
+    deadline = time.monotonic() + 120
+    while not [f for f in out.glob("*/*/metrics.json") if not f.parent.name.startswith(".")] and time.monotonic() < deadline:
+        time.sleep(0.05)
+    parent.kill()
+    parent.wait(timeout=10)
+    time.sleep(1.0)
+    survivors = subprocess.run(["pgrep", "-f", str(out)], capture_output=True, text=True).stdout.split()
+    assert survivors == [], survivors
+    rerun = subprocess.run(argv, capture_output=True, text=True, cwd=tempfile.gettempdir(), timeout=300)
+    assert rerun.returncode == 0, rerun.stderr
+    assert "12 cells (" in rerun.stdout and "0 failed" in rerun.stdout
