@@ -24,7 +24,13 @@ import cv2
 import numpy as np
 
 from eas_vo.datasets import ecd_catalogue
-from eas_vo.datasets.recording import StreamConfig, check_increasing, event_sample_times, pose_series
+from eas_vo.datasets.recording import (
+    StreamConfig,
+    calibration_problem,
+    check_increasing,
+    event_sample_times,
+    pose_series,
+)
 from eas_vo.datasets.sources import MARKERS, open_source
 from eas_vo.errors import DataError, DataWarnings
 from eas_vo.eventfile import load_event_text, write_events_text
@@ -32,6 +38,10 @@ from eas_vo.io import atomic_path, data_line, parse_table, write_text_atomic
 from eas_vo.plugins import Dataset
 from eas_vo.types import CameraModel, ImuSeries, PoseSeries, empty_events
 from eas_vo.validation import check_range
+
+
+#: The largest sensor side [px] a dataset may have (the largest event sensors are a few thousand).
+MAX_SENSOR_PX = 16384
 
 
 @dataclass(frozen=True)
@@ -44,8 +54,8 @@ class EcdConfig(StreamConfig):
 
     def validate(self) -> None:
         super().validate()
-        check_range(self, "width", 1, 16384)  # the largest event sensors are a few thousand pixels wide
-        check_range(self, "height", 1, 16384)
+        check_range(self, "width", 1, MAX_SENSOR_PX)
+        check_range(self, "height", 1, MAX_SENSOR_PX)
 
 
 def _leaves_folder(name: str) -> bool:
@@ -194,6 +204,11 @@ class EcdFolderDataset(Dataset):
         if not self._frame_names:
             return self.config.width, self.config.height
         sizes = [self._frame_size(k) for k in range(min(3, len(self._frame_names)))]
+        for k, size in enumerate(sizes):
+            if not (1 <= size[0] <= MAX_SENSOR_PX and 1 <= size[1] <= MAX_SENSOR_PX):
+                raise DataError(self.source.label(self._frame_names[k]),
+                                f"frame {k} is {size[0]}x{size[1]}, not an event camera's frame (at most "
+                                f"{MAX_SENSOR_PX} px a side; images.txt line {self._frame_lines[k]})")
         common = max(set(sizes), key=sizes.count)
         for k, size in enumerate(sizes):
             if size != common:
@@ -238,9 +253,9 @@ class EcdFolderDataset(Dataset):
             raise DataError(where, f"expected 4, 8 or 9 values (fx fy cx cy k1 k2 p1 p2 k3), found {len(values)}", 1)
         if not all(map(math.isfinite, values)):
             raise DataError(where, "calibration values must be finite (found NaN or infinity)", 1)
-        fx, fy = values[:2]
-        if not (0 < fx < 1e6 and 0 < fy < 1e6):
-            raise DataError(where, f"focal lengths fx = {fx:g}, fy = {fy:g} must be positive and below 1e6 px", 1)
+        problem = calibration_problem(values, width, height)
+        if problem:
+            raise DataError(where, problem, 1)
         return CameraModel.from_calib(values, width, height)
 
     def _read_timed_table(self, name: str, ncols: int, what: str) -> tuple[np.ndarray, Callable] | None:

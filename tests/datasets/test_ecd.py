@@ -83,8 +83,16 @@ def test_a_frame_of_the_wrong_size_is_refused_by_its_header(sequence_copy):
 
 
 def test_an_odd_first_frame_is_blamed_not_the_good_ones(sequence_copy):
-    (sequence_copy / "images" / "frame_00000000.png").write_bytes(png_header(20000, 20000))
-    with pytest.raises(DataError, match=r"frame_00000000.png: frame 0 is 20000x20000 where the frames after it are 240x180"):
+    (sequence_copy / "images" / "frame_00000000.png").write_bytes(png_header(346, 260))
+    with pytest.raises(DataError, match=r"frame_00000000.png: frame 0 is 346x260 where the frames after it are 240x180"):
+        EcdFolderDataset(sequence_copy)
+
+
+def test_frames_no_event_camera_has_are_refused_from_the_first(sequence_copy):
+    """Two huge first frames outvote the good third: the size limit blames frame 0, not frame 2."""
+    for k in (0, 1):
+        (sequence_copy / "images" / f"frame_{k:08d}.png").write_bytes(png_header(20000, 20000))
+    with pytest.raises(DataError, match=r"frame_00000000.png: frame 0 is 20000x20000, not an event camera's frame"):
         EcdFolderDataset(sequence_copy)
 
 

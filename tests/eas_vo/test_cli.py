@@ -230,6 +230,18 @@ def damage(seq, what):
         (seq / "calib.txt").write_text("1e308 1e308 120 90\n")
     elif what == "calib nan":
         (seq / "calib.txt").write_text("200 nan 120 90\n")
+    elif what == "calib tiny focal":
+        (seq / "calib.txt").write_text("1e-6 1e-6 120 90\n")
+    elif what == "calib principal point":
+        (seq / "calib.txt").write_text("200 200 1e308 90\n")
+    elif what == "calib negative principal point":
+        (seq / "calib.txt").write_text("200 200 -5000 90 0 0 0 0 0\n")
+    elif what == "calib distortion":
+        (seq / "calib.txt").write_text("200 200 120 90 1e308 0 0 0 0\n")
+    elif what == "huge frames":  # every frame a 20000x20000 PNG (its header: nothing is decoded)
+        header = b"\x89PNG\r\n\x1a\n" + b"\0\0\0\rIHDR" + (20000).to_bytes(4, "big") * 2 + bytes(20)
+        for png in (seq / "images").iterdir():
+            png.write_bytes(header)
     elif what == "empty groundtruth":
         (seq / "groundtruth.txt").write_text("")
     elif what == "one-line imu":
@@ -237,8 +249,13 @@ def damage(seq, what):
 
 
 @pytest.mark.parametrize("what, says", [
-    ("calib zeros", "focal lengths fx = 0, fy = 0 must be positive"),
-    ("calib huge focal", "must be positive and below 1e6 px"),
+    ("calib zeros", "focal lengths fx = 0, fy = 0 px are not those of a 240x180 camera"),
+    ("calib huge focal", "are not those of a 240x180 camera (24 to 24000 px)"),
+    ("calib tiny focal", "focal lengths fx = 1e-06"),
+    ("calib principal point", "principal point cx = 1e+308, cy = 90 px lies off the 240x180 sensor"),
+    ("calib negative principal point", "principal point cx = -5000"),
+    ("calib distortion", "out of range (|k| <= 10, |p| <= 1)"),
+    ("huge frames", "frame 0 is 20000x20000, not an event camera's frame"),
     ("calib nan", "must be finite"),
     ("empty groundtruth", "groundtruth.txt: holds 0 row(s)"),
     ("one-line imu", "imu.txt: holds 1 row(s)"),
