@@ -34,7 +34,7 @@ from eas_vo.datasets.recording import (
 from eas_vo.datasets.sources import MARKERS, open_source
 from eas_vo.errors import DataError, DataWarnings
 from eas_vo.eventfile import load_event_text, write_events_text
-from eas_vo.io import atomic_path, data_line, parse_table, write_text_atomic
+from eas_vo.io import atomic_path, data_line, parse_table, silenced_stderr, write_text_atomic
 from eas_vo.plugins import Dataset
 from eas_vo.types import CameraModel, ImuSeries, PoseSeries, empty_events
 from eas_vo.validation import check_range
@@ -235,7 +235,9 @@ class EcdFolderDataset(Dataset):
 
     def _decode_frame(self, k: int) -> np.ndarray:
         name = self._frame_names[k]
-        image = cv2.imdecode(np.frombuffer(self.source.read_bytes(name), np.uint8), cv2.IMREAD_GRAYSCALE)
+        data = np.frombuffer(self.source.read_bytes(name), np.uint8)
+        with silenced_stderr():  # a damaged PNG: libpng's own line would come before ours
+            image = cv2.imdecode(data, cv2.IMREAD_GRAYSCALE)
         if image is None:
             raise DataError(self.source.label(name), f"cannot decode frame {k} (images.txt line {self._frame_lines[k]})")
         return image

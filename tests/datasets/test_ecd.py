@@ -164,3 +164,20 @@ def test_table_errors_name_the_file_line_past_comments_and_blanks(sequence_copy,
     path.write_text("\n".join(["# a header", "", "# another"] + damaged) + "\n")
     with pytest.raises(DataError, match=rf"{name}:7: .*{message}"):
         EcdFolderDataset(sequence_copy)
+
+
+@pytest.mark.parametrize("damage", ["cut", "crc"])
+def test_a_damaged_png_is_one_line_on_stderr_not_libpngs_too(sequence_copy, tmp_path, damage):
+    from helpers import run_eas_vo
+
+    frame = sequence_copy / "images" / "frame_00000003.png"
+    data = bytearray(frame.read_bytes())
+    if damage == "cut":
+        data = data[: len(data) // 2]
+    else:
+        data[len(data) // 2] ^= 0xFF  # inside the image data: its CRC fails
+    frame.write_bytes(bytes(data))
+    done = run_eas_vo("run", "--dataset", str(sequence_copy), "--frontend", "original", "--duration", "1",
+                      "--out", str(tmp_path / "out"), "--quiet")
+    assert done.returncode == 2 and done.stderr.count("\n") == 1, done.stderr
+    assert "frame_00000003.png: cannot decode frame 3" in done.stderr
