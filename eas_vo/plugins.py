@@ -103,8 +103,9 @@ class Dataset:
         times = self.frame_times()
         if len(times) == 0:
             return np.arange(0)
-        lo = times[0] + start_s
-        return np.flatnonzero((times >= lo) & (times < lo + duration_s))
+        with np.errstate(over="ignore"):  # --start 1e308 --duration 1e308: an empty window, not a warning
+            lo = times[0] + start_s
+            return np.flatnonzero((times >= lo) & (times < lo + duration_s))
 
     def samples(self, start_s: float = 0.0, duration_s: float = np.inf) -> Iterator[Sample]:
         """Yield the samples of the window, each with a view of the event stream."""

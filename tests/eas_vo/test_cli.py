@@ -286,3 +286,9 @@ def test_simulate_overwrite_replaces_the_folder_whole(tmp_path):
     listed = len((out / "images.txt").read_text().splitlines())
     assert len(list((out / "images").iterdir())) == listed  # no stale frames of the longer run
     assert not list(tmp_path.glob(".*.tmp"))
+
+
+def test_an_absurd_window_is_one_line_without_numpy_warnings(short_sequence, tmp_path, capsys):
+    err = one_line_failure(["run", "--dataset", str(short_sequence), "--start", "1e308", "--duration", "1e308",
+                            "--out", str(tmp_path / "out")], capsys)
+    assert "holds 0 sample(s); at least 2 are needed" in err
