@@ -17,9 +17,10 @@ import re
 import sys
 from importlib import resources
 from pathlib import Path
+from urllib.parse import urlsplit
 
 from eas_vo.errors import DataError, EasVoError
-from eas_vo.io import cache_dir
+from eas_vo.io import cache_dir, current_umask
 
 BASE_URL = "https://rpg.ifi.uzh.ch/datasets/davis/"
 _MD5 = re.compile(r"[0-9a-fA-F]{32}")
@@ -79,22 +80,27 @@ def fetch(name: str, folder: str | Path | None = None, progress: bool = False) -
     if name not in md5s:
         raise EasVoError(f"{name}: not an Event Camera Dataset sequence (known: {', '.join(sorted(md5s))})")
     target = local_path(name, folder)
+    if target.parent.exists() and not target.parent.is_dir():
+        raise EasVoError(f"{target.parent}: the data folder (--dir or EAS_VO_DATA_DIR) is a file")
     known = f"md5:{md5s[name]}"
     if target.is_file() and pooch.file_hash(str(target), alg="md5") == md5s[name]:
         return target
     url = os.environ.get("EAS_VO_DATA_URL", BASE_URL).rstrip("/") + "/"
+    if urlsplit(url).scheme not in ("http", "https", "ftp"):
+        raise EasVoError(f"EAS_VO_DATA_URL={url!r}: expected an http://, https:// or ftp:// address")
     print(f"eas-vo: fetching {name}.zip ({_size_text(url + name + '.zip')}) from {url} into {target.parent}",
           file=sys.stderr)
     pooch.get_logger().setLevel(logging.WARNING)  # our notice above replaces its own
     store = pooch.create(path=target.parent, base_url=url, registry={target.name: known}, retry_if_failed=2)
     try:
         store.fetch(target.name, progressbar=progress)
-    except ValueError as exc:  # pooch: the downloaded file's hash is not the registry's
-        raise EasVoError(f"{url}{target.name}: downloaded file does not match its MD5 {md5s[name]} "
-                         f"(tried 3 times; nothing was kept): {str(exc).splitlines()[0]}") from None
-    except (requests.RequestException, OSError) as exc:  # connection dropped, HTTP status, disk
-        raise EasVoError(f"{url}{target.name}: download failed, nothing was kept ({type(exc).__name__}: "
-                         f"{str(exc).splitlines()[0] if str(exc) else 'no detail'})") from None
+    except (ValueError, requests.RequestException, OSError) as exc:  # hash, connection, HTTP status, disk
+        detail = str(exc).splitlines()[0] if str(exc) else "no detail"
+        if isinstance(exc, ValueError) and "hash" in detail.lower():
+            raise EasVoError(f"{url}{target.name}: downloaded file does not match its MD5 {md5s[name]} "
+                             f"(tried 3 times; nothing was kept)") from None
+        raise EasVoError(f"{url}{target.name}: download failed, nothing was kept ({type(exc).__name__}: {detail})") from None
+    os.chmod(target, 0o666 & ~current_umask())  # pooch's temporary file was private
     return target
 
 
@@ -104,6 +110,8 @@ def _size_text(url: str) -> str:
 
     try:
         answer = requests.head(url, allow_redirects=True, timeout=10)
+        if not answer.ok:
+            return f"size unknown: HTTP {answer.status_code}"
         size = int(answer.headers["Content-Length"])
     except (requests.RequestException, KeyError, ValueError):
         return "size unknown"

@@ -151,7 +151,8 @@ def build_parser() -> argparse.ArgumentParser:
     evaluate.add_argument("--max-diff", type=float, default=0.01, metavar="S",
                           help="largest time difference of an associated pose pair (default 0.01 s, evo's)")
     evaluate.add_argument("--label", metavar="TEXT", help="the row's name in table2_row.md (default: the file's name)")
-    evaluate.add_argument("--out", metavar="DIR", help="output folder (replaced)")
+    evaluate.add_argument("--out", metavar="DIR", help="output folder (new, or replaced with --overwrite)")
+    evaluate.add_argument("--overwrite", action="store_true", help="replace an existing non-empty --out")
     evaluate.set_defaults(func=cmd_evaluate)
 
     reproduce = sub.add_parser(
@@ -429,8 +430,12 @@ def cmd_evaluate(args) -> int:
     if not math.isfinite(args.max_diff) or args.max_diff < 0:
         raise EasVoError(f"--max-diff must be a non-negative number of seconds, got {args.max_diff}")
     if args.out:
-        check_output_folder(args.out, replace=True)
-    m = evaluate_estimate(args.dataset, args.estimate, args.align, args.max_diff, args.out, args.label)
+        out = check_output_folder(args.out, replace=args.overwrite)
+        _refuse_dataset_inside(out, args.dataset)
+        if Path(args.estimate).expanduser().resolve().is_relative_to(out):
+            raise EasVoError(f"--out {out} holds the --estimate {args.estimate}; writing there would replace it")
+    m = evaluate_estimate(args.dataset, args.estimate, args.align, args.max_diff, args.out, args.label,
+                          replace=args.overwrite)
     print(f"{args.estimate} vs {m['dataset']} ({m['align']}, {m['matched_poses']} of {m['estimate_poses']} poses matched, "
           f"scale {m['scale']:.4f}): translation APE mean {m['ape_trans_mean_m']:.4f} m, RMSE {m['ape_trans_rmse_m']:.4f} m; "
           f"rotation APE mean {m['ape_rot_mean_rad']:.4f} rad" + (f" -> {args.out}" if args.out else ""))

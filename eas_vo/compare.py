@@ -19,7 +19,7 @@ import numpy as np
 
 from eas_vo.config import parse_set
 from eas_vo.errors import EasVoError, Interrupted, sigterm_as_interrupt
-from eas_vo.io import json_text, slug, write_text_atomic
+from eas_vo.io import json_text, output_folder, slug, write_text_atomic
 
 
 @dataclass(frozen=True)
@@ -111,8 +111,11 @@ def run_cell(cell: Cell, out_root: str, config_file, assignments: list[str], run
         return {"status": "ok", **metrics}
     except EasVoError as exc:
         message = str(exc).splitlines()[0]
-        folder.mkdir(parents=True, exist_ok=True)
-        write_text_atomic(folder / "error.txt", message + "\n")
+        try:
+            with output_folder(folder, replace=True) as staging:  # the cell's folder says why, and stays compare's own
+                write_text_atomic(staging / "error.txt", message + "\n")
+        except EasVoError:
+            pass  # a folder compare may not replace: the table carries the message
         return {"status": "failed", "error": message}
 
 

@@ -33,7 +33,7 @@ def cache_dir() -> Path:
 # ----------------------------------------------------------------------------- atomic writes
 
 
-def _umask() -> int:
+def current_umask() -> int:
     """The process's umask (read by setting it and putting it back)."""
     mask = os.umask(0o022)
     os.umask(mask)
@@ -65,7 +65,7 @@ def atomic_path(path: str | Path):
     os.close(fd)
     try:
         yield Path(tmp)
-        os.chmod(tmp, 0o666 & ~_umask())
+        os.chmod(tmp, 0o666 & ~current_umask())
         os.replace(tmp, path)
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
@@ -75,6 +75,9 @@ def atomic_path(path: str | Path):
 #: The file that marks a folder as an eas-vo output (a run, an export, an evaluation): only
 #: such a folder, or an empty one, is ever replaced.
 OUTPUT_MARKER = ".eas-vo-output"
+#: What a run folder of eas-vo before the marker held (it is replaced like a marked one).
+_LEGACY_RUN_FILES = {"config.toml", "identity.json", "frames.csv", "trajectory.tum", "trajectory_causal.tum",
+                     "groundtruth.tum", "metrics.json", "rotation.png", "error.txt"}
 
 
 def check_writable_folder(out: str | Path) -> Path:
@@ -100,10 +103,22 @@ def check_output_folder(out: str | Path, replace: bool) -> Path:
     if out.is_dir() and any(out.iterdir()):
         if not replace:
             raise EasVoError(f"--out {out} is not empty; choose another folder or add --overwrite")
-        if not ((out / OUTPUT_MARKER).exists() or (out / "identity.json").exists()):
-            raise EasVoError(f"--out {out} holds files eas-vo did not write; it replaces only its own output "
-                             "folders: choose another folder")
+        foreign = _foreign_file(out)
+        if foreign is not None:
+            raise EasVoError(f"--out {out} holds {foreign}, which eas-vo did not write; it replaces only "
+                             "folders of its own outputs: move that away or choose another folder")
     return out
+
+
+def _foreign_file(folder: Path) -> str | None:
+    """The first file in `folder` (relative path) that its marker does not list as eas-vo's own,
+    or None. A folder without the marker is eas-vo's only if it is an older run's."""
+    present = sorted(p.relative_to(folder).as_posix() for p in folder.rglob("*") if not p.is_dir())
+    try:
+        listed = set((folder / OUTPUT_MARKER).read_text(encoding="utf-8").splitlines()[1:]) | {OUTPUT_MARKER}
+    except (OSError, UnicodeDecodeError):
+        listed = _LEGACY_RUN_FILES if (folder / "identity.json").exists() else set()
+    return next((name for name in present if name not in listed), None)
 
 
 @contextmanager
@@ -123,7 +138,6 @@ def output_folder(out: str | Path, replace: bool = False, keep_partial: bool = T
         check_output_folder(out, replace)  # again, under the lock: another writer may have come first
         shutil.rmtree(staging, ignore_errors=True)
         staging.mkdir()
-        (staging / OUTPUT_MARKER).write_text("written by eas-vo; replaced only by eas-vo --overwrite\n")
         try:
             yield staging
         except KeyboardInterrupt:
@@ -210,7 +224,10 @@ def _alive(pid: int) -> bool:
 
 
 def _move_into_place(staging: Path, out: Path) -> None:
-    """Rename `staging` to `out`, the old `out` (if any) set aside first and then removed."""
+    """Write the marker listing every file of `staging` (what a later --overwrite may replace),
+    rename `staging` to `out`, the old `out` (if any) set aside first and then removed."""
+    files = sorted(p.relative_to(staging).as_posix() for p in staging.rglob("*") if not p.is_dir())
+    (staging / OUTPUT_MARKER).write_text("".join(f"{line}\n" for line in ["written by eas-vo (--overwrite replaces only these):", *files]))
     old = out.with_name(f".{out.name}.{os.getpid()}.old")
     if out.exists():
         os.replace(out, old)

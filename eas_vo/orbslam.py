@@ -118,7 +118,7 @@ def read_estimate(path: str | Path) -> PoseSeries:
 
 
 def evaluate_estimate(dataset_spec: str, estimate_path: str | Path, align: str, max_diff_s: float,
-                      out: str | Path | None = None, label: str | None = None) -> dict:
+                      out: str | Path | None = None, label: str | None = None, replace: bool = False) -> dict:
     """Score an external trajectory against a dataset's ground truth (evaluation.trajectory_ape);
     with `out`, write metrics.json, table2_row.md, groundtruth.tum (what it was compared with)
     and estimate_aligned.tum. Returns the metrics."""
@@ -142,7 +142,7 @@ def evaluate_estimate(dataset_spec: str, estimate_path: str | Path, align: str, 
     metrics = {"estimate": str(estimate_path), "dataset": dataset.label, "align": align, "max_diff_s": max_diff_s,
                "estimate_poses": int(len(estimate.t)), **ape.summary()}
     if out is not None:
-        with output_folder(out, replace=True) as staging:
+        with output_folder(out, replace) as staging:
             write_text_atomic(staging / "metrics.json", json_text(metrics))
             write_text_atomic(staging / "table2_row.md", table2_row(label, metrics))
             write_text_atomic(staging / "groundtruth.tum", format_tum(gt.t, gt.p_w_c, matrices_from_quats(gt.q_w_c)))

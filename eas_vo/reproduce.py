@@ -155,16 +155,17 @@ def table2(out: Path, estimates: dict[tuple[str, str], str], duration_s: float =
     """ORB features and matches per image (original and EAS, both sequences) and, for each
     ORB-SLAM2 keyframe trajectory given as {(sequence, source): file}, its APE after Sim(3)
     alignment (written under OUT/slam/SEQUENCE_SOURCE); table2.md beside the paper's."""
-    from eas_vo.orbslam import evaluate_estimate
+    from eas_vo.orbslam import evaluate_estimate, read_estimate
 
-    for seq, source in estimates:
+    for (seq, source), path in estimates.items():
         if seq not in SEQUENCES or source not in ("original", "eas"):
             raise EasVoError(f"--estimate {seq}:{source}: the paper's Table 2 has {', '.join(SEQUENCES)} x original, eas")
+        read_estimate(path)  # a missing or malformed file is an error before any work
     specs = fetch_sequences(progress)
     cells = _cells(specs, ("original", "eas"), ("chain",))
     rows, n_run = _run(cells, out, config, duration_s, jobs, progress, orb=True)
     slam = {key: evaluate_estimate(specs[key[0]], path, "sim3", 0.01, out / "slam" / f"{key[0]}_{key[1]}",
-                                   label=f"{key[0]} {key[1]}")
+                                   label=f"{key[0]} {key[1]}", replace=True)
             for key, path in estimates.items()}
     markdown = table2_markdown(rows, slam, duration_s)
     write_text_atomic(out / "table2.md", markdown)

@@ -124,3 +124,26 @@ def test_a_bad_registry_line_is_named(tmp_path, monkeypatch, text, line):
 def test_the_suite_cannot_reach_the_internet():
     with pytest.raises(OSError, match="no network outside loopback"):
         socket.create_connection(("93.184.216.34", 80), timeout=1)
+
+
+def test_a_wrong_data_folder_or_url_is_one_line_before_any_download(site, tmp_path, monkeypatch):
+    _, _, _, hits = site
+    (tmp_path / "a_file").write_text("x")
+    with pytest.raises(EasVoError, match="the data folder .* is a file"):
+        ecd_catalogue.fetch("seq_a", tmp_path / "a_file")
+    monkeypatch.setenv("EAS_VO_DATA_URL", "ftpx://127.0.0.1/")
+    with pytest.raises(EasVoError, match="expected an http://, https:// or ftp:// address"):
+        ecd_catalogue.fetch("seq_a")
+    assert hits["seq_a.zip"] == 0
+
+
+def test_a_fetched_file_gets_the_users_umask(site):
+    import os
+    import stat
+
+    old = os.umask(0o022)
+    try:
+        path = ecd_catalogue.fetch("seq_a")
+    finally:
+        os.umask(old)
+    assert stat.S_IMODE(path.stat().st_mode) == 0o644

@@ -63,6 +63,10 @@ def test_a_failing_cell_is_reported_the_rest_complete_and_the_exit_says_so(short
     assert rows["run.start_s=100"]["ape_mean_rad"] is None  # strict JSON: null, never NaN
     assert "slice (run.start_s=0)" in (out / "table.md").read_text()
     assert (out / "ape_sweep.png").exists()  # a numeric sweep: APE and NC against it
+    failed = out / rows["run.start_s=100"]["folder"]
+    assert (failed / "error.txt").read_text().strip() == rows["run.start_s=100"]["error"]
+    assert main(argv) == 1  # the failed cell runs again into its own folder (no "did not write" refusal)
+    assert "2 cells (1 run, 1 already complete, 1 failed)" in capsys.readouterr().out
 
 
 def test_a_configuration_error_stops_compare_before_any_work(short_sequence, tmp_path, capsys):

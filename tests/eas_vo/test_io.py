@@ -109,10 +109,27 @@ def test_a_folder_is_replaced_only_if_asked_and_only_if_eas_vo_wrote_it(tmp_path
     mine.mkdir()
     (mine / "thesis.tex").write_text("years of work")
     for replace in (False, True):
-        with pytest.raises(EasVoError, match="holds files eas-vo did not write|is not empty"):
+        with pytest.raises(EasVoError, match="holds thesis.tex, which eas-vo did not write|is not empty"):
             with output_folder(mine, replace=replace):
                 pass
     assert (mine / "thesis.tex").read_text() == "years of work"
+
+
+def test_a_file_added_to_an_eas_vo_folder_keeps_it_from_being_replaced(tmp_path):
+    """The marker lists what eas-vo wrote; a user's notes (or ORB-SLAM2's trajectory) added to
+    an export folder make --overwrite refuse it, naming the file."""
+    out = tmp_path / "export"
+    with output_folder(out) as staging:
+        (staging / "rgb").mkdir()
+        (staging / "rgb" / "0.png").write_bytes(b"png")
+        (staging / "settings.yaml").write_text("%YAML:1.0\n")
+    with output_folder(out, replace=True) as staging:  # its own files only: replaced
+        (staging / "settings.yaml").write_text("%YAML:1.0\n")
+    (out / "KeyFrameTrajectory.txt").write_text("1 0 0 0 0 0 0 1\n")
+    with pytest.raises(EasVoError, match="holds KeyFrameTrajectory.txt, which eas-vo did not write"):
+        with output_folder(out, replace=True):
+            pass
+    assert (out / "KeyFrameTrajectory.txt").exists()
 
 
 def test_dot_dotdot_and_symlinks_name_the_folder_they_resolve_to(tmp_path, monkeypatch):
@@ -151,10 +168,9 @@ def test_a_lock_left_by_a_pid_now_used_by_another_process_is_taken_over(tmp_path
 
 
 def test_run_refuses_to_write_over_its_own_dataset(sequence_copy):
-    from eas_vo.io import OUTPUT_MARKER
-    from helpers import run_eas_vo
+    from helpers import mark_as_eas_vo_output, run_eas_vo
 
-    (sequence_copy / OUTPUT_MARKER).write_text("")  # as `eas-vo simulate` leaves it: an eas-vo output, yet a dataset
+    mark_as_eas_vo_output(sequence_copy)  # as `eas-vo simulate` leaves it: an eas-vo output, yet a dataset
     done = run_eas_vo("run", "--dataset", str(sequence_copy), "--duration", "0.5", "--out", str(sequence_copy), "--overwrite")
     assert done.returncode == 2 and "holds the dataset" in done.stderr
     assert (sequence_copy / "events.txt").exists()

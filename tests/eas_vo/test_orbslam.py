@@ -17,7 +17,7 @@ from eas_vo.geometry.rotations import matrices_from_quats
 from eas_vo.orbslam import read_estimate
 from eas_vo.pipeline import format_tum
 from eas_vo.types import PoseSeries
-from helpers import run_eas_vo
+from helpers import mark_as_eas_vo_output, run_eas_vo
 
 
 def _frontend_pixels(sequence, frames, frontend):
@@ -180,3 +180,20 @@ def test_a_bad_estimate_file_names_its_line(tmp_path, text, line, message):
     path.write_text(text)
     with pytest.raises(DataError, match=f"est.txt:{line}.*{message}"):
         read_estimate(path)
+
+
+def test_evaluate_never_writes_over_its_dataset_or_its_estimate(short_sequence, tmp_path):
+    """An --out holding the dataset or the --estimate is refused (with --overwrite too), both kept."""
+    import shutil
+
+    dataset = tmp_path / "seq"
+    shutil.copytree(short_sequence, dataset)
+    estimate = tmp_path / "slam" / "KeyFrameTrajectory.txt"
+    estimate.parent.mkdir()
+    gt = np.loadtxt(dataset / "groundtruth.txt")[::10]
+    estimate.write_text("".join(" ".join(f"{v:.9f}" for v in row) + "\n" for row in gt))
+    for out, says in ((dataset, "holds the dataset"), (estimate.parent, "holds the --estimate")):
+        mark_as_eas_vo_output(out)  # as if eas-vo wrote all of it
+        done = run_eas_vo("evaluate", "--dataset", str(dataset), "--estimate", str(estimate), "--out", str(out), "--overwrite")
+        assert done.returncode == 2 and says in done.stderr and done.stderr.count("\n") == 1, done.stderr
+    assert (dataset / "events.txt").exists() and estimate.exists()

@@ -91,7 +91,12 @@ def test_table2_orb_statistics_and_a_slam_trajectorys_ape(paper_site, short_sequ
     assert lines["matches (paper)"] == [str(PAPER_TABLE2[s][f]["matches"]) for s in ("hdr_boxes", "hdr_poster") for f in ("original", "eas")]
 
 
-def test_an_estimate_outside_the_papers_table2_is_refused_before_any_work(paper_site, tmp_path, capsys):
-    assert main(["reproduce", "table2", "--out", str(tmp_path / "t2"), "--estimate", "hdr_boxes:ts=x.txt"]) == 2
-    assert "the paper's Table 2 has hdr_boxes, hdr_poster x original, eas" in capsys.readouterr().err
-    assert paper_site["hdr_boxes.zip"] == 0
+@pytest.mark.parametrize("estimate, says", [("hdr_boxes:ts={tmp}/x.txt", "the paper's Table 2 has hdr_boxes, hdr_poster x original, eas"),
+                                             ("hdr_boxes:eas={tmp}/missing.txt", "missing.txt: cannot read"),
+                                             ("hdr_poster:original={tmp}/empty.txt", "empty.txt: holds no pose")])
+def test_a_bad_estimate_is_refused_before_any_work(paper_site, tmp_path, capsys, estimate, says):
+    (tmp_path / "empty.txt").write_text("# nothing\n")
+    out = tmp_path / "t2"
+    assert main(["reproduce", "table2", "--out", str(out), "--estimate", estimate.replace("{tmp}", str(tmp_path))]) == 2
+    assert says in capsys.readouterr().err
+    assert paper_site["hdr_boxes.zip"] == 0 and not out.exists()
