@@ -225,13 +225,23 @@ def _add_common_options(parser, evaluated: bool = True) -> None:
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
 
 
-def _refuse_dataset_inside(out: Path, dataset_spec: str) -> None:
-    """An output folder that is, or holds, the dataset it is made from would replace it."""
+def _names(option: str, text: str) -> list[str]:
+    """A comma-separated list of names; one naming nothing is an error."""
+    listed = [v.strip() for v in text.split(",") if v.strip()]
+    if not listed:
+        raise EasVoError(f"{option} {text!r} names nothing; give comma-separated names")
+    return listed
+
+
+def _refuse_inputs_inside(out: Path, dataset_spec: str, *others: tuple[str, str]) -> None:
+    """An output folder that is, or holds, the dataset (or another input: (what, path)) it is
+    made from would replace it."""
     from eas_vo.registry import resolve_dataset
 
-    location = Path(resolve_dataset(dataset_spec)[1]).expanduser()
-    if location.exists() and location.resolve().is_relative_to(out):
-        raise EasVoError(f"--out {out} holds the dataset {location}; writing there would replace it")
+    for what, path in [("the dataset", resolve_dataset(dataset_spec)[1]), *others]:
+        path = Path(path).expanduser()
+        if path.exists() and path.resolve().is_relative_to(out):
+            raise EasVoError(f"--out {out} holds {what} {path}; writing there would replace it")
 
 
 def _positive_int(text: str) -> int:
@@ -287,7 +297,7 @@ def cmd_run(args) -> int:
     rc = config.run
     if args.out:
         out = check_output_folder(args.out, replace=args.overwrite)
-        _refuse_dataset_inside(out, rc.dataset)
+        _refuse_inputs_inside(out, rc.dataset)
     else:
         import time
 
@@ -313,19 +323,13 @@ def cmd_compare(args) -> int:
     from eas_vo.gallery import PAPER_ORDER
     from eas_vo.io import check_writable_folder
 
-    def names(text, default):
-        listed = [v.strip() for v in (text or default).split(",") if v.strip()]
-        if not listed:
-            raise EasVoError(f"{text!r} names nothing; give comma-separated names")
-        return listed
-
     out = check_writable_folder(args.out)
     run_defaults = config_mod.run_section(args.config, args.assignments)  # e.g. best.toml's tracker and backend
     cells = compare.plan(
         args.datasets or [run_defaults.dataset],
-        names(args.frontends, ",".join(PAPER_ORDER)),
-        names(args.trackers, run_defaults.tracker),
-        names(args.backends, run_defaults.backend),
+        _names("--frontends", args.frontends or ",".join(PAPER_ORDER)),
+        _names("--trackers", args.trackers or run_defaults.tracker),
+        _names("--backends", args.backends or run_defaults.backend),
         args.sweeps,
     )
     if args.executor == "dask" and not args.scheduler:
@@ -414,7 +418,7 @@ def cmd_export(args) -> int:
         args.assignments,
     )
     out = check_output_folder(args.out, replace=args.overwrite)
-    _refuse_dataset_inside(out, config.run.dataset)
+    _refuse_inputs_inside(out, config.run.dataset)
     done = export(config, out, args.format, progress=not args.quiet and sys.stderr.isatty(), replace=args.overwrite)
     print(f"wrote {done['frames']} {done['frontend']} images of {done['dataset']} ({done['format']} layout, "
           f"{done['fps']:.2f} frames/s) and settings.yaml to {out}")
@@ -431,9 +435,7 @@ def cmd_evaluate(args) -> int:
         raise EasVoError(f"--max-diff must be a non-negative number of seconds, got {args.max_diff}")
     if args.out:
         out = check_output_folder(args.out, replace=args.overwrite)
-        _refuse_dataset_inside(out, args.dataset)
-        if Path(args.estimate).expanduser().resolve().is_relative_to(out):
-            raise EasVoError(f"--out {out} holds the --estimate {args.estimate}; writing there would replace it")
+        _refuse_inputs_inside(out, args.dataset, ("the --estimate", args.estimate))
     m = evaluate_estimate(args.dataset, args.estimate, args.align, args.max_diff, args.out, args.label,
                           replace=args.overwrite)
     print(f"{args.estimate} vs {m['dataset']} ({m['align']}, {m['matched_poses']} of {m['estimate_poses']} poses matched, "
@@ -462,10 +464,8 @@ def cmd_reproduce(args) -> int:
     out = check_writable_folder(args.out or f"reproduce/{args.table}")
     progress = not args.quiet and sys.stderr.isatty()
     if args.table == "table1":
-        backends = [b.strip() for b in args.backends.split(",") if b.strip()]
-        if not backends:
-            raise EasVoError(f"--backends {args.backends!r} names nothing")
-        rows, n_run, markdown = reproduce.table1(out, args.duration, backends, args.config, args.jobs, progress)
+        rows, n_run, markdown = reproduce.table1(out, args.duration, _names("--backends", args.backends), args.config,
+                                                 args.jobs, progress)
     else:
         rows, n_run, markdown = reproduce.table2(out, estimates, args.duration, args.config, args.jobs, progress)
     return _report_cells(rows, n_run, out / f"{args.table}.md", markdown)

@@ -153,6 +153,10 @@ class TrajectoryApe:
     trans_error_m: np.ndarray
     rot_error_rad: np.ndarray
 
+    def aligned(self, p_w_c: np.ndarray, R_w_c: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Estimate poses (N, 3) [m], (N, 3, 3) mapped by the alignment into the ground truth's world."""
+        return similarity_transform(self.R_align, self.t_align, self.scale, p_w_c, R_w_c)
+
     def summary(self) -> dict:
         e, r = self.trans_error_m, self.rot_error_rad
         return {
@@ -197,6 +201,11 @@ def umeyama(x: np.ndarray, y: np.ndarray, with_scale: bool) -> tuple[np.ndarray,
     return R, mean_y - s * R @ mean_x, s
 
 
+def similarity_transform(R_a: np.ndarray, t_a: np.ndarray, s: float, p_w_c: np.ndarray, R_w_c: np.ndarray):
+    """Poses (N, 3) [m], (N, 3, 3) under x -> s R_a x + t_a: (s p R_a^T + t_a, R_a R)."""
+    return s * p_w_c @ R_a.T + t_a, R_a @ R_w_c
+
+
 def trajectory_ape(ground_truth: PoseSeries, estimate: PoseSeries, align: str = "sim3", max_diff_s: float = 0.01):
     """Translation and rotation APE of `estimate` (camera-to-world poses) after `align`:
     sim3 (Umeyama with scale: evo_ape -as, for monocular SLAM), se3 (-a) or origin (first
@@ -214,7 +223,6 @@ def trajectory_ape(ground_truth: PoseSeries, estimate: PoseSeries, align: str = 
         if solved is None:
             raise ValueError(f"{len(i_gt)} matched poses do not span a plane; {align} alignment is not defined")
         R_a, t_a, s = solved
-    p_aligned = s * p_est @ R_a.T + t_a
-    R_aligned = R_a @ R_est
+    p_aligned, R_aligned = similarity_transform(R_a, t_a, s, p_est, R_est)
     return TrajectoryApe(estimate.t[i_est], R_a, t_a, s, np.linalg.norm(p_gt - p_aligned, axis=1),
                          geodesic_angle(R_gt, R_aligned))

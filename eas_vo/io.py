@@ -16,9 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-from eas_vo.errors import EasVoError
-
-from eas_vo.errors import DataError
+from eas_vo.errors import DataError, EasVoError
 
 
 def cache_dir() -> Path:
@@ -72,12 +70,10 @@ def atomic_path(path: str | Path):
         raise
 
 
-#: The file that marks a folder as an eas-vo output (a run, an export, an evaluation): only
-#: such a folder, or an empty one, is ever replaced.
+#: The file that marks a folder as an eas-vo output (a run, an export, an evaluation) and lists
+#: the files eas-vo wrote there: only such a folder, holding nothing else, or an empty one, is
+#: ever replaced.
 OUTPUT_MARKER = ".eas-vo-output"
-#: What a run folder of eas-vo before the marker held (it is replaced like a marked one).
-_LEGACY_RUN_FILES = {"config.toml", "identity.json", "frames.csv", "trajectory.tum", "trajectory_causal.tum",
-                     "groundtruth.tum", "metrics.json", "rotation.png", "error.txt"}
 
 
 def check_writable_folder(out: str | Path) -> Path:
@@ -97,8 +93,8 @@ def check_writable_folder(out: str | Path) -> Path:
 def check_output_folder(out: str | Path, replace: bool) -> Path:
     """The absolute output folder (symlinks followed), or a one-line error, before any work:
     a file or the root is refused, so is a folder that cannot be written, and a non-empty one
-    unless `replace`; even then only a folder that eas-vo wrote (its marker, or an older run's
-    identity.json) is replaced, never one holding someone's other files."""
+    unless `replace`; even then only a folder holding nothing but the files its marker lists is
+    replaced, never one holding someone's other files."""
     out = check_writable_folder(out)
     if out.is_dir() and any(out.iterdir()):
         if not replace:
@@ -111,14 +107,18 @@ def check_output_folder(out: str | Path, replace: bool) -> Path:
 
 
 def _foreign_file(folder: Path) -> str | None:
-    """The first file in `folder` (relative path) that its marker does not list as eas-vo's own,
-    or None. A folder without the marker is eas-vo's only if it is an older run's."""
-    present = sorted(p.relative_to(folder).as_posix() for p in folder.rglob("*") if not p.is_dir())
+    """The first file in `folder` (relative path) that its marker does not list as eas-vo's own
+    (every file, without a readable marker), or None."""
     try:
         listed = set((folder / OUTPUT_MARKER).read_text(encoding="utf-8").splitlines()[1:]) | {OUTPUT_MARKER}
     except (OSError, UnicodeDecodeError):
-        listed = _LEGACY_RUN_FILES if (folder / "identity.json").exists() else set()
-    return next((name for name in present if name not in listed), None)
+        listed = set()
+    return next((name for name in _files_in(folder) if name not in listed), None)
+
+
+def _files_in(folder: Path) -> list[str]:
+    """Every file under `folder`, as sorted relative POSIX paths."""
+    return sorted(p.relative_to(folder).as_posix() for p in folder.rglob("*") if not p.is_dir())
 
 
 @contextmanager
@@ -156,7 +156,7 @@ def _acquire(lock: Path, out: Path) -> None:
             fd = os.open(lock, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o666)
         except FileExistsError:
             if _lock_is_held(lock):
-                raise EasVoError(f"{out} is being written by another eas-vo process (pid {_lock_pid(lock) or '?'}); "
+                raise EasVoError(f"{out} is being written by another eas-vo process (pid {_lock_owner(lock)[0] or '?'}); "
                                  "wait for it or choose another --out") from None
             lock.unlink(missing_ok=True)  # its writer is gone: a crash left it, and maybe a staging folder
             for stale in out.parent.glob(f".{out.name}.*.tmp"):
@@ -177,10 +177,6 @@ def _lock_owner(lock: Path) -> tuple[int, str | None]:
         return int(fields[0]) if fields else 0, fields[1] if len(fields) > 1 else None
     except (OSError, ValueError):
         return 0, None
-
-
-def _lock_pid(lock: Path) -> int:
-    return _lock_owner(lock)[0]
 
 
 def _lock_is_held(lock: Path) -> bool:
@@ -226,8 +222,8 @@ def _alive(pid: int) -> bool:
 def _move_into_place(staging: Path, out: Path) -> None:
     """Write the marker listing every file of `staging` (what a later --overwrite may replace),
     rename `staging` to `out`, the old `out` (if any) set aside first and then removed."""
-    files = sorted(p.relative_to(staging).as_posix() for p in staging.rglob("*") if not p.is_dir())
-    (staging / OUTPUT_MARKER).write_text("".join(f"{line}\n" for line in ["written by eas-vo (--overwrite replaces only these):", *files]))
+    listing = ["written by eas-vo (--overwrite replaces only these):", *_files_in(staging)]
+    (staging / OUTPUT_MARKER).write_text("".join(f"{line}\n" for line in listing))
     old = out.with_name(f".{out.name}.{os.getpid()}.old")
     if out.exists():
         os.replace(out, old)
@@ -304,14 +300,15 @@ def parse_table(data: bytes, where: str, ncols: int, what: str) -> np.ndarray:
 def data_line(data: bytes, row: int) -> int:
     """The file line (from 1) of data row `row` (from 0) of a table, blank and comment lines
     skipped as parse_table skips them."""
-    seen = -1
+    return next((lineno for k, (lineno, _) in enumerate(_data_lines(data)) if k == row), row + 1)
+
+
+def _data_lines(data: bytes):
+    """(file line from 1, stripped text) of each line of a table that is neither blank nor a `#` comment."""
     for lineno, line in enumerate(data.split(b"\n"), start=1):
         text = line.strip()
         if text and not text.startswith(b"#"):
-            seen += 1
-            if seen == row:
-                return lineno
-    return row + 1
+            yield lineno, text
 
 
 def _count_lines(data: bytes) -> int:
@@ -321,10 +318,7 @@ def _count_lines(data: bytes) -> int:
 
 def _parse_table_slow(path: str, data: bytes, ncols: int, what: str) -> np.ndarray:
     rows = []
-    for lineno, line in enumerate(data.split(b"\n"), start=1):
-        text = line.strip()
-        if not text or text.startswith(b"#"):
-            continue
+    for lineno, text in _data_lines(data):
         parts = text.split()
         if len(parts) != ncols:
             raise DataError(path, f"expected {ncols} columns ({what}), found {len(parts)}", lineno)

@@ -146,16 +146,9 @@ def evaluate_estimate(dataset_spec: str, estimate_path: str | Path, align: str, 
             write_text_atomic(staging / "metrics.json", json_text(metrics))
             write_text_atomic(staging / "table2_row.md", table2_row(label, metrics))
             write_text_atomic(staging / "groundtruth.tum", format_tum(gt.t, gt.p_w_c, matrices_from_quats(gt.q_w_c)))
-            aligned = _aligned(estimate, ape)
+            aligned = ape.aligned(estimate.p_w_c, matrices_from_quats(estimate.q_w_c))
             write_text_atomic(staging / "estimate_aligned.tum", format_tum(estimate.t, *aligned))
     return metrics
-
-
-def _aligned(estimate: PoseSeries, ape) -> tuple[np.ndarray, np.ndarray]:
-    from eas_vo.geometry.rotations import matrices_from_quats
-
-    p = ape.scale * estimate.p_w_c @ ape.R_align.T + ape.t_align
-    return p, ape.R_align @ matrices_from_quats(estimate.q_w_c)
 
 
 def table2_row(label: str, metrics: dict) -> str:

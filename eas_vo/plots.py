@@ -32,19 +32,9 @@ def plot_rotation(path: str | Path, result, title: str = "") -> None:
     fig = _figure(figsize=(8, 6.5), layout="constrained")
     axes = fig.subplots(3, 1, sharex=True)
     if errors is not None and errors.valid.any():
-        t = result.t[errors.valid] - t0
-        est = np.unwrap(euler_zyx_deg(errors.R_w_c_aligned), period=360, axis=0)
-        gt = np.unwrap(euler_zyx_deg(errors.R_w_c_gt), period=360, axis=0)
+        _draw_euler(axes, result.t[errors.valid] - t0, errors.R_w_c_aligned, errors.R_w_c_gt)
     else:
-        t = result.t - t0
-        est = np.unwrap(euler_zyx_deg(result.R_w_c), period=360, axis=0)
-        gt = None
-    for k, (ax, label) in enumerate(zip(axes, ("roll", "pitch", "yaw"))):
-        if gt is not None:
-            ax.plot(t, gt[:, k], color="0.2", lw=1.5, label="ground truth")
-        ax.plot(t, est[:, k], color="tab:red", lw=1.0, label="estimate")
-        ax.set_ylabel(f"{label} [deg]")
-        ax.grid(alpha=0.3)
+        _draw_euler(axes, result.t - t0, result.R_w_c)
     axes[0].legend(loc="best", fontsize="small")
     axes[-1].set_xlabel("time [s]")
     m = result.metrics
@@ -52,6 +42,19 @@ def plot_rotation(path: str | Path, result, title: str = "") -> None:
         title += f"\naverage APE {m['ape_mean_rad']:.4f} rad, average NC {m['nc_mean']:.1f}"
     fig.suptitle(title, fontsize="medium")
     fig.savefig(path, dpi=110, format="png")
+
+
+def _draw_euler(column, t: np.ndarray, R_est: np.ndarray, R_gt: np.ndarray | None = None, labels: bool = True) -> None:
+    """Roll, pitch, yaw [deg] over t [s] into three axes: the estimate over the ground truth (if any)."""
+    est = np.unwrap(euler_zyx_deg(R_est), period=360, axis=0)
+    gt = None if R_gt is None else np.unwrap(euler_zyx_deg(R_gt), period=360, axis=0)
+    for k, (ax, name) in enumerate(zip(column, ("roll", "pitch", "yaw"))):
+        if gt is not None:
+            ax.plot(t, gt[:, k], color="0.2", lw=1.4, label="ground truth")
+        ax.plot(t, est[:, k], color="tab:red", lw=1.0, label="estimate")
+        ax.grid(alpha=0.3)
+        if labels:
+            ax.set_ylabel(f"{name} [deg]")
 
 
 def plot_gallery(path: str | Path, names: list[str], images: dict, frame_indices: list[int], title: str = "") -> None:
@@ -152,15 +155,7 @@ def plot_euler_grid(path: str | Path, panels: list[tuple[str, np.ndarray, np.nda
     fig = _figure(figsize=(2.6 * len(panels) + 0.8, 6.0), layout="constrained")
     axes = fig.subplots(3, len(panels), sharex=True, squeeze=False)
     for c, (label, t, R_gt, R_est) in enumerate(panels):
-        gt = np.unwrap(euler_zyx_deg(R_gt), period=360, axis=0)
-        est = np.unwrap(euler_zyx_deg(R_est), period=360, axis=0)
-        for r, name in enumerate(("roll", "pitch", "yaw")):
-            ax = axes[r][c]
-            ax.plot(t - t[0], gt[:, r], color="0.2", lw=1.2, label="ground truth")
-            ax.plot(t - t[0], est[:, r], color="tab:red", lw=0.9, label="estimate")
-            ax.grid(alpha=0.3)
-            if c == 0:
-                ax.set_ylabel(f"{name} [deg]")
+        _draw_euler(axes[:, c], t - t[0], R_est, R_gt, labels=c == 0)
         axes[0][c].set_title(label, fontsize="medium")
         axes[-1][c].set_xlabel("time [s]")
     axes[0][0].legend(loc="best", fontsize="x-small")

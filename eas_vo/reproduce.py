@@ -89,6 +89,7 @@ def table1_markdown(rows: list[dict], config: str, duration_s: float) -> str:
     paper's, and their Spearman rank correlation."""
     lines = [f"# Table 1: ours (`--config {config}`, first {duration_s:g} s, time offset estimated) beside the paper's", ""]
     by_key = {(r["dataset_name"], r["method"], r["frontend"]): r for r in rows}
+    ape = {key: r["ape_mean_rad"] for key, r in by_key.items() if r["status"] == "ok" and r["ape_mean_rad"] is not None}
     for method in dict.fromkeys(r["method"] for r in rows):
         head = ["Source"] + [f"{s} {h}" for s in SEQUENCES for h in ("NC", "NC paper", "APE", "APE paper", "APE ours/paper")]
         lines += [f"## {method}", "", "| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
@@ -96,17 +97,15 @@ def table1_markdown(rows: list[dict], config: str, duration_s: float) -> str:
             cells = [source]
             for seq in SEQUENCES:
                 nc_paper, ape_paper = PAPER_TABLE1[seq][source]
-                r = by_key.get((seq, method, source))
-                ok = r is not None and r["status"] == "ok" and r["ape_mean_rad"] is not None
-                cells += [f"{r['nc_mean']:.0f}" if ok else (r or {}).get("status", "-"), str(nc_paper),
-                          f"{r['ape_mean_rad']:.3f}" if ok else "-", f"{ape_paper:.2f}",
-                          f"{r['ape_mean_rad'] / ape_paper:.2f}" if ok else "-"]
+                key = (seq, method, source)
+                ours = ape.get(key)
+                cells += [f"{by_key[key]['nc_mean']:.0f}" if ours is not None else by_key.get(key, {}).get("status", "-"),
+                          str(nc_paper), f"{ours:.3f}" if ours is not None else "-", f"{ape_paper:.2f}",
+                          f"{ours / ape_paper:.2f}" if ours is not None else "-"]
             lines.append("| " + " | ".join(cells) + " |")
         lines.append("")
         for seq in SEQUENCES:
-            ours = {s: by_key[(seq, method, s)]["ape_mean_rad"] for s in PAPER_ORDER
-                    if (seq, method, s) in by_key and by_key[(seq, method, s)]["status"] == "ok"
-                    and by_key[(seq, method, s)]["ape_mean_rad"] is not None}
+            ours = {s: ape[(seq, method, s)] for s in PAPER_ORDER if (seq, method, s) in ape}
             paper = {s: PAPER_TABLE1[seq][s][1] for s in PAPER_ORDER}
             lines.append(f"- {seq}, sources by APE (best first): ours {_ordering(ours)}; paper {_ordering(paper)}; "
                          f"Spearman rank correlation {_spearman(ours, paper)}")
