@@ -202,21 +202,31 @@ def _lock_is_held(lock: Path) -> bool:
 def _started(pid: int) -> str | None:
     """When process `pid` started (clock ticks since boot, Linux /proc), or None if unknown:
     a pid reused by another process has another start time."""
+    fields = _proc_stat(pid)
+    return fields[19] if fields and len(fields) > 19 else None
+
+
+def _proc_stat(pid: int) -> list[str] | None:
+    """The fields of /proc/PID/stat after the command name (state first), or None off Linux or
+    once the process is gone."""
     try:
         stat = Path(f"/proc/{pid}/stat").read_text()
-        return stat[stat.rindex(")") + 2:].split()[19]
-    except (OSError, ValueError, IndexError):
+        return stat[stat.rindex(")") + 2:].split()
+    except (OSError, ValueError):
         return None
 
 
 def _alive(pid: int) -> bool:
+    """Whether process `pid` runs: it exists and (where /proc tells) is not a zombie, as a
+    killed writer stays until its new parent reaps it (in containers, maybe never)."""
     try:
         os.kill(pid, 0)
     except ProcessLookupError:
         return False
     except PermissionError:
-        return True
-    return True
+        pass
+    fields = _proc_stat(pid)
+    return not fields or fields[0] != "Z"
 
 
 def _move_into_place(staging: Path, out: Path) -> None:

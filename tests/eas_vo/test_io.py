@@ -204,3 +204,24 @@ def test_twenty_races_of_two_runs_into_one_folder_leave_one_whole_run(short_sequ
         duration = 0.5 if "duration_s = 0.5" in config else 1.0
         assert abs(metrics["frames"] - 20 * duration) <= 1, (duration, metrics["frames"])
         assert sorted(p.name for p in folder.parent.iterdir() if p.name.startswith(f".race{round_}.")) == []
+
+
+@pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="process states are read from Linux's /proc")
+def test_a_lock_held_by_a_zombie_is_taken_over(tmp_path):
+    """A writer killed while its parent does not reap it stays a zombie: it holds nothing."""
+    import signal
+
+    out = tmp_path / "out"
+    child = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(60)"])
+    try:
+        started = Path(f"/proc/{child.pid}/stat").read_text()
+        (tmp_path / ".out.lock").write_text(f"{child.pid} {started[started.rindex(')') + 2:].split()[19]}\n")
+        os.kill(child.pid, signal.SIGKILL)
+        deadline = time.monotonic() + 10
+        while Path(f"/proc/{child.pid}/stat").read_text().split(") ")[1][0] != "Z" and time.monotonic() < deadline:
+            time.sleep(0.01)  # not reaped (no wait() yet): a zombie
+        with output_folder(out) as staging:
+            (staging / "metrics.json").write_text("{}\n")
+    finally:
+        child.wait()
+    assert (out / "metrics.json").exists()
