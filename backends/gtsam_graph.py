@@ -8,6 +8,7 @@ from typing import Sequence
 
 import numpy as np
 
+from eas_vo.errors import ConfigError
 from eas_vo.geometry.rotations import rotvec_to_matrix
 from eas_vo.plugins import Backend
 from eas_vo.types import ImuSeries, RelativeRotation
@@ -34,9 +35,9 @@ class GtsamConfig:
             identity edge this loose (the chain's "keep the previous rotation").
         robust, robust_k: robust kernel (`none`, `huber`, `cauchy`) and its threshold in sigmas.
         iterations: Levenberg-Marquardt iterations (batch) or extra iSAM2 updates at the end.
-        gyro: fuse the dataset's gyro (a dataset without an IMU is refused): readings
-            preintegrated between frames (PreintegratedAhrsMeasurements) in AHRSFactors
-            sharing one bias variable.
+        gyro: fuse the dataset's gyro: `true` (a dataset without an IMU is refused), `false`,
+            or `auto` (when the dataset has an IMU): readings preintegrated between frames
+            (PreintegratedAhrsMeasurements) in AHRSFactors sharing one bias variable.
         gyro_noise: gyro white-noise density [rad/s/sqrt(Hz)].
         gyro_bias_sigma: prior on the gyro bias [rad/s].
         imu_rotvec_cam: rotation from the camera to the IMU frame, R_imu_cam as a rotation vector [rad].
@@ -52,13 +53,15 @@ class GtsamConfig:
     robust: str = "none"
     robust_k: float = 2.0
     iterations: int = 50
-    gyro: bool = False
+    gyro: bool | str = False
     gyro_noise: float = 0.003
     gyro_bias_sigma: float = 0.05
     imu_rotvec_cam: tuple = (0.0, 0.0, 0.0)
     imu_time_offset_s: float = 0.0
 
     def validate(self) -> None:
+        if not (isinstance(self.gyro, bool) or self.gyro == "auto"):
+            raise ConfigError(f"gyro = {self.gyro!r}; allowed: true, false, auto")
         check_vector(self, "imu_rotvec_cam", 3, "rad")
         check_range(self, "imu_time_offset_s", -1.0, 1.0)
         check_range(self, "gyro_noise", 0.0, 10.0, lo_open=True)
@@ -83,7 +86,7 @@ class GtsamBackend(Backend):
 
     @property
     def needs_imu(self) -> bool:
-        return self.config.gyro
+        return self.config.gyro is True
 
     def edge_sigma(self, edge: RelativeRotation) -> float:
         """The isotropic noise [rad] of a measured edge, from its quality (see edge_noise)."""
@@ -144,9 +147,9 @@ class GtsamBackend(Backend):
 
         initial_R = chain_rotations(n_frames, edges)
         by_frame = self._factors(gtsam, n_frames, edges)
-        if self.config.gyro and imu is not None and times is None:
+        self._with_bias = self.config.gyro in (True, "auto") and imu is not None
+        if self._with_bias and times is None:
             raise ValueError("gyro fusion needs the frame times")
-        self._with_bias = self.config.gyro and imu is not None
         if self._with_bias:
             self._gyro_factors(gtsam, by_frame, np.asarray(times), imu)
         if self.config.mode == "batch":

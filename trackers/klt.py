@@ -35,6 +35,8 @@ class KltConfig(LoopClosureConfig, TwoViewConfig):
     Attributes:
         max_corners, quality_level, min_distance_px, block_size: Shi-Tomasi detection.
         lk_win_size, lk_max_level: pyramidal Lucas-Kanade window [px] and pyramid levels.
+        lk_max_iterations, lk_epsilon_px: each pyramid level stops after this many iterations
+            or once a step is shorter than this [px] (OpenCV's defaults 30 and 0.01).
         threshold1: with fewer correspondences the previous rotation is kept.
         threshold2: with fewer correspondences corners are detected again in the frame.
         keyframe_interval: 0 (the paper) or N: also measure the rotation from a keyframe to
@@ -64,6 +66,8 @@ class KltConfig(LoopClosureConfig, TwoViewConfig):
     block_size: int = 7
     lk_win_size: int = 21
     lk_max_level: int = 3
+    lk_max_iterations: int = 30
+    lk_epsilon_px: float = 0.01
     threshold1: int = 10
     threshold2: int = 150
     keyframe_interval: int = 0
@@ -89,6 +93,8 @@ class KltConfig(LoopClosureConfig, TwoViewConfig):
         check_range(self, "block_size", 3, 99)
         check_range(self, "lk_win_size", 3, 201)
         check_range(self, "lk_max_level", 0, 10)
+        check_range(self, "lk_max_iterations", 1, 1000)
+        check_range(self, "lk_epsilon_px", 0.0, 10.0, lo_open=True)
         check_range(self, "threshold1", 5, 100_000)
         check_range(self, "threshold2", 5, 100_000)
         check_range(self, "keyframe_interval", 0, 100_000)
@@ -111,7 +117,7 @@ class KltTracker(Tracker):
     def __init__(self, config: KltConfig | None = None, camera: CameraModel | None = None, *, imu: ImuSeries | None = None):
         super().__init__(config, camera, imu=imu)
         c = self.config
-        self._lk_params = lk_params(c.lk_win_size, c.lk_max_level)
+        self._lk_params = lk_params(c.lk_win_size, c.lk_max_level, c.lk_max_iterations, c.lk_epsilon_px)
         self._R_imu_cam = rotvec_to_matrix(np.asarray(c.imu_rotvec_cam, float))
         self._predict = c.predict if c.predict != "auto" else ("gyro" if imu is not None else "velocity")
         self._matching = RefinedMatching(Features(c.fallback_detector), camera, c, c.min_inliers) if c.fallback == "match" else None

@@ -34,10 +34,11 @@ def scaled_rotation(R: np.ndarray, factor: float) -> np.ndarray:
     return cv2.Rodrigues(rotvec * factor)[0]
 
 
-def lk_params(win_size: int = 21, max_level: int = 3) -> dict:
-    """Pyramidal Lucas-Kanade settings: window [px], pyramid levels, 30 iterations or 0.01 px."""
+def lk_params(win_size: int = 21, max_level: int = 3, max_iterations: int = 30, epsilon_px: float = 0.01) -> dict:
+    """Pyramidal Lucas-Kanade settings: window [px], pyramid levels, and when each level stops:
+    after `max_iterations` or once a step is below `epsilon_px` [px] (OpenCV's defaults)."""
     return dict(winSize=(win_size, win_size), maxLevel=max_level,
-                criteria=(cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 30, 0.01))
+                criteria=(cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, max_iterations, epsilon_px))
 
 
 def lk_track(

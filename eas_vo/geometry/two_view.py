@@ -52,20 +52,9 @@ def rotation_ransac(
     n = len(f_prev)
     if n < 2:
         return None
-    rng = np.random.default_rng(seed)
+    pairs = np.random.default_rng(seed).integers(0, n, (-(-max_hypotheses // batch) * batch, 2))
     cos_threshold = np.cos(threshold_rad)  # an angle below the threshold is a cosine above its cosine
-    drawn, needed, best_count = 0, max_hypotheses, -1
-    while drawn < needed:
-        pairs = rng.integers(0, n, (batch, 2))
-        pairs = pairs[pairs[:, 0] != pairs[:, 1]]
-        drawn += batch
-        if len(pairs) == 0:
-            continue
-        R, counts = _two_point_hypotheses(f_prev, f_cur, pairs, cos_threshold)
-        best = int(np.argmax(counts))
-        if counts[best] > best_count:
-            best_count, R_best = int(counts[best]), R[best]
-            needed = min(max_hypotheses, _samples_needed(best_count / n, confidence))
+    R_best, best_count, _ = _best_two_point_rotation(f_prev, f_cur, pairs, cos_threshold, confidence, batch)
     if best_count < 0:
         return None
     mask = np.einsum("ij,nj,ni->n", R_best, f_prev, f_cur) > cos_threshold
@@ -75,6 +64,28 @@ def rotation_ransac(
         R_best = kabsch(f_prev[mask], f_cur[mask])
         mask = angular_residuals(R_best, f_prev, f_cur) < threshold_rad
     return R_best, mask
+
+
+@numba.njit(cache=True, nogil=True)
+def _best_two_point_rotation(f_prev, f_cur, pairs, cos_threshold, confidence, batch):
+    """The RANSAC loop of rotation_ransac over the drawn `pairs` (M, 2), a batch at a time
+    (pairs of one point twice are skipped): the rotation with the most inliers, their
+    number (-1 if no pair defined a rotation) and how many samples were drawn."""
+    n = f_prev.shape[0]
+    drawn, needed, best_count = 0, pairs.shape[0], -1
+    R_best = np.eye(3)
+    while drawn < needed:
+        chosen = pairs[drawn:drawn + batch]
+        drawn += batch
+        chosen = chosen[chosen[:, 0] != chosen[:, 1]]
+        if chosen.shape[0] == 0:
+            continue
+        R, counts = _two_point_hypotheses(f_prev, f_cur, chosen, cos_threshold)
+        best = np.argmax(counts)
+        if counts[best] > best_count:
+            best_count, R_best = counts[best], R[best].copy()
+            needed = min(pairs.shape[0], _samples_needed(best_count / n, confidence))
+    return R_best, best_count, drawn
 
 
 @numba.njit(cache=True, nogil=True)
@@ -128,13 +139,16 @@ def _two_point_hypotheses(f_prev, f_cur, pairs, cos_threshold):
     return R, counts
 
 
-def _samples_needed(inlier_ratio: float, confidence: float) -> int:
+@numba.njit(cache=True, nogil=True)
+def _samples_needed(inlier_ratio, confidence):
     """2-point samples needed to draw one all-inlier sample with probability `confidence`."""
     all_inliers = inlier_ratio**2
+    if confidence >= 1.0 and all_inliers < 1.0:
+        return 2**31 - 1
     if all_inliers >= 1.0:
         return 1
     if all_inliers <= 0.0:
-        return np.iinfo(np.int32).max
+        return 2**31 - 1
     return int(np.ceil(np.log(1.0 - confidence) / np.log(1.0 - all_inliers)))
 
 

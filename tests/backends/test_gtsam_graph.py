@@ -7,6 +7,7 @@ from scipy.spatial.transform import Rotation
 from helpers import assert_rotations_close
 from eas_vo.backends.chain import ChainBackend
 from eas_vo.backends.gtsam_graph import GtsamBackend, GtsamConfig
+from eas_vo.errors import ConfigError
 from eas_vo.geometry.rotations import geodesic_angle
 from eas_vo.types import RelativeRotation
 
@@ -120,6 +121,13 @@ def test_gyro_fusion_cuts_the_error_of_the_chain():
         fused = ape(GtsamBackend(gyro).solve(len(R), with_keyframes, times=t_imu[frames], imu=imu), R)
         vision_only = ape(GtsamBackend(GtsamConfig(mode=mode)).solve(len(R), with_keyframes), R)
         assert fused <= 0.3 * chain and fused < vision_only, (mode, fused, vision_only, chain)
+    # `auto` fuses the gyro when there is one, and is the vision-only graph without
+    auto = GtsamBackend(GtsamConfig(gyro="auto"))
+    assert not auto.needs_imu
+    np.testing.assert_array_equal(auto.solve(len(R), with_keyframes, times=t_imu[frames], imu=imu),
+                                  GtsamBackend(GtsamConfig(gyro=True)).solve(len(R), with_keyframes, times=t_imu[frames], imu=imu))
+    np.testing.assert_array_equal(auto.solve(len(R), with_keyframes, times=t_imu[frames], imu=None),
+                                  GtsamBackend(GtsamConfig()).solve(len(R), with_keyframes))
 
 
 def test_edge_quality_sets_the_noise_and_a_weak_edge_yields():
@@ -133,3 +141,10 @@ def test_edge_quality_sets_the_noise_and_a_weak_edge_yields():
     assert_rotations_close(backend.solve(2, edges)[1], good, np.radians(0.2))
     by_inliers = GtsamBackend(GtsamConfig(edge_noise="inliers")).solve(2, edges)[1]  # today's default trusts the count
     assert_rotations_close(by_inliers, bad, np.radians(1.0))
+
+
+@pytest.mark.parametrize("value", [1, 0, "yes", "on"])
+def test_gyro_takes_true_false_or_auto(value):
+    """1 and 0 are not booleans here (TOML keeps them apart), and no other word is taken."""
+    with pytest.raises(ConfigError, match="gyro = .*; allowed: true, false, auto"):
+        GtsamConfig(gyro=value).validate()

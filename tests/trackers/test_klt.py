@@ -155,3 +155,13 @@ def test_prediction_options_are_checked():
         KltConfig(predict="psychic").validate()
     with pytest.raises(ConfigError, match="imu_rotvec_cam"):
         KltConfig(imu_rotvec_cam=(0.0, float("nan"), 0.0)).validate()
+
+
+def test_lk_stops_where_configured():
+    """lk_max_iterations and lk_epsilon_px reach OpenCV's termination criteria; nonsense is refused."""
+    tracker = KltTracker(KltConfig(lk_max_iterations=10, lk_epsilon_px=0.03), CAMERA)
+    assert tracker._lk_params["criteria"][1:] == (10, 0.03)
+    assert KltTracker(KltConfig(), CAMERA)._lk_params["criteria"][1:] == (30, 0.01)  # OpenCV's defaults: the paper
+    for key, value in (("lk_max_iterations", 0), ("lk_epsilon_px", 0.0)):
+        with pytest.raises(ConfigError, match=key):
+            KltConfig(**{key: value}).validate()
