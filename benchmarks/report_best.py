@@ -1,0 +1,67 @@
+"""configs/best.toml reported on data that did not choose it (README "Fast motion"), beside
+`paper.toml` and v0.1's `best.toml`: average APE [rad] on the real excerpt's last 10 and 5 s
+and whole 30 s (`histeq`, time offset 0.01 s) and on simulator seeds (`eas`) that
+benchmarks/select_best.py never sees; then frames/s and real-time factor of `best.toml`
+(best of 3 runs).
+
+    python benchmarks/report_best.py [--real DIR] [--seeds 41 42 43] [--set SECTION.KEY=VALUE ...]
+
+Seeds are simulated once into $EAS_VO_CACHE_DIR/simulated/seed-N (about 40 s each).
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+from select_best import SELECTION_SEEDS, seed_folder
+
+from eas_vo import config, pipeline
+
+#: v0.1's configs/best.toml, as `--set` assignments on top of the defaults.
+V01_BEST = ["tracker.geometry=rotation", "tracker.max_corners=1000", "tracker.lk_max_level=5",
+            "tracker.threshold2=300", "backend.robust=huber"]
+CONFIGS = {"paper.toml": ("paper", []), "v0.1's best.toml": (None, V01_BEST), "best.toml": ("best", [])}
+REAL_WINDOWS = {"real 20-30 s": (20.0, 10.0), "real 25-30 s": (25.0, 5.0), "real 0-30 s": (0.0, 30.0)}
+
+
+def run(name: str, dataset: str, frontend: str, extra: dict, best_sets: list[str]) -> dict:
+    file, assignments = CONFIGS[name]
+    backend = {} if file else {"backend": "gtsam"}
+    assignments = assignments + (best_sets if name == "best.toml" else [])
+    cfg = config.resolve(file, {"dataset": dataset, "frontend": frontend, **backend, **extra}, assignments)
+    return pipeline.run(cfg).metrics
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--real", default="../shared/data/ecd/shapes_rotation_0-30s", help="the real excerpt's folder")
+    parser.add_argument("--seeds", type=int, nargs="+", default=[41, 42, 43], help="simulator seeds not used to choose")
+    parser.add_argument("--set", action="append", default=[], metavar="SECTION.KEY=VALUE",
+                        help="report best.toml with this value changed (repeatable)")
+    args = parser.parse_args()
+    if set(args.seeds) & set(SELECTION_SEEDS):
+        raise SystemExit(f"seeds {sorted(set(args.seeds) & set(SELECTION_SEEDS))} took part in a selection (select_best.py): report on others")
+    columns = {}
+    if Path(args.real).is_dir():
+        columns.update({label: (args.real, "histeq", {"start_s": s, "duration_s": d, "time_offset_s": 0.01})
+                        for label, (s, d) in REAL_WINDOWS.items()})
+    else:
+        print(f"{args.real}: not found, real columns skipped", file=sys.stderr)
+    columns.update({f"seed {n}": (str(seed_folder(n)), "eas", {}) for n in args.seeds})
+    print("| | " + " | ".join(columns) + " |")
+    print("|---" * (len(columns) + 1) + "|")
+    for name in CONFIGS:
+        cells = [f"{run(name, *column, args.set)['ape_mean_rad']:.4f}" for column in columns.values()]
+        print(f"| {name} | " + " | ".join(cells) + " |", flush=True)
+    speed = {"synthetic:default": ("synthetic:default", "eas", {})}
+    if "real 0-30 s" in columns:
+        speed["real 0-30 s"] = columns["real 0-30 s"]
+    for label, column in speed.items():
+        m = max((run("best.toml", *column, args.set) for _ in range(3)), key=lambda m: m["realtime_factor"])
+        print(f"best.toml on {label} (best of 3): {m['frames_per_s']:.0f} frames/s, {m['realtime_factor']:.1f}x real time")
+
+
+if __name__ == "__main__":
+    main()
