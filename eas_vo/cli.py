@@ -9,6 +9,7 @@ Heavy modules are imported inside the commands, so `--help` is instant.
 from __future__ import annotations
 
 import argparse
+import math
 import os
 import sys
 from pathlib import Path
@@ -148,7 +149,7 @@ def build_parser() -> argparse.ArgumentParser:
     evaluate.add_argument("--dataset", required=True, metavar="SPEC", help="the dataset the estimate was made on")
     evaluate.add_argument("--estimate", required=True, metavar="FILE", help="TUM trajectory: t tx ty tz qx qy qz qw")
     evaluate.add_argument("--align", choices=("sim3", "se3", "origin"), default="sim3", help="default sim3 (evo_ape -as)")
-    evaluate.add_argument("--max-diff", type=float, default=0.01, metavar="S",
+    evaluate.add_argument("--max-diff", type=_seconds(allow_zero=True), default=0.01, metavar="S",
                           help="largest time difference of an associated pose pair (default 0.01 s, evo's)")
     evaluate.add_argument("--label", metavar="TEXT", help="the row's name in table2_row.md (default: the file's name)")
     evaluate.add_argument("--out", metavar="DIR", help="output folder (new, or replaced with --overwrite)")
@@ -167,7 +168,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     reproduce.add_argument("table", choices=("table1", "table2"))
     reproduce.add_argument("--out", metavar="DIR", help="output folder (default: reproduce/TABLE)")
-    reproduce.add_argument("--duration", type=float, default=25.0, metavar="S", help="seconds of each sequence (default 25, the paper's)")
+    reproduce.add_argument("--duration", type=_seconds(allow_zero=False), default=25.0, metavar="S", help="seconds of each sequence (default 25, the paper's)")
     reproduce.add_argument("--config", default="paper", metavar="FILE", help="configuration (default paper, the paper's)")
     reproduce.add_argument("--backends", default="chain,gtsam", metavar="A,B", help="table1's backends (default chain,gtsam)")
     reproduce.add_argument("--estimate", dest="estimates", action="append", default=[], metavar="SEQUENCE:SOURCE=FILE",
@@ -217,8 +218,8 @@ def _add_common_options(parser, evaluated: bool = True) -> None:
     parser.add_argument("--config", metavar="FILE", help="TOML config file, or the name of a bundled one (e.g. paper)")
     parser.add_argument("--set", dest="assignments", action="append", default=[], metavar="SECTION.KEY=VALUE",
                         help="override one config value, e.g. frontend.n=8000 (repeatable)")
-    parser.add_argument("--start", type=float, metavar="S", help="skip the first S seconds of the sequence")
-    parser.add_argument("--duration", type=float, metavar="S", help="process S seconds (default: all)")
+    parser.add_argument("--start", type=_seconds(allow_zero=True), metavar="S", help="skip the first S seconds of the sequence")
+    parser.add_argument("--duration", type=_seconds(allow_zero=False), metavar="S", help="process S seconds (default: all)")
     if evaluated:
         parser.add_argument("--time-offset", metavar="S|auto",
                             help="ground truth is sampled at frame time + S seconds (default 0); 'auto' estimates S from the data")
@@ -253,6 +254,19 @@ def _positive_int(text: str) -> int:
     if value < 1:
         raise argparse.ArgumentTypeError(f"must be at least 1, got {value}")
     return value
+
+
+def _seconds(allow_zero: bool):
+    """argparse type: a finite number of seconds, positive (or, with `allow_zero`, not negative)."""
+    def parse(text: str) -> float:
+        try:
+            value = float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected a number of seconds, got {text!r}") from None
+        if not math.isfinite(value) or value < 0 or (value == 0 and not allow_zero):
+            raise argparse.ArgumentTypeError(f"must be {'at least 0' if allow_zero else 'more than 0'} seconds, got {text}")
+        return value
+    return parse
 
 
 def _shared_overrides(args) -> dict:
@@ -426,13 +440,9 @@ def cmd_export(args) -> int:
 
 
 def cmd_evaluate(args) -> int:
-    import math
-
     from eas_vo.io import check_output_folder
     from eas_vo.orbslam import evaluate_estimate
 
-    if not math.isfinite(args.max_diff) or args.max_diff < 0:
-        raise EasVoError(f"--max-diff must be a non-negative number of seconds, got {args.max_diff}")
     if args.out:
         out = check_output_folder(args.out, replace=args.overwrite)
         _refuse_inputs_inside(out, args.dataset, ("the --estimate", args.estimate))
@@ -445,13 +455,9 @@ def cmd_evaluate(args) -> int:
 
 
 def cmd_reproduce(args) -> int:
-    import math
-
     from eas_vo import reproduce
     from eas_vo.io import check_writable_folder
 
-    if not (math.isfinite(args.duration) and args.duration > 0):
-        raise EasVoError(f"--duration must be a positive number of seconds, got {args.duration}")
     estimates = {}
     for text in args.estimates:
         key, sep, path = text.partition("=")

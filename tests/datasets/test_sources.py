@@ -80,6 +80,12 @@ def test_damaged_zip_entry_is_named(short_sequence, tmp_path):
         EcdFolderDataset(path).events()
 
 
+def test_a_zip_nesting_its_sequence_two_folders_deep_says_where_it_is(short_sequence, tmp_path):
+    path = make_zip(short_sequence, tmp_path / "deep.zip", prefix="downloads/shapes/")
+    with pytest.raises(DataError, match="deep.zip: holds its sequence in downloads/shapes/, more than one folder deep"):
+        open_dataset(str(path))
+
+
 def test_not_a_zip(tmp_path):
     (tmp_path / "x.zip").write_bytes(b"hello")
     with pytest.raises(DataError, match="x.zip: not a readable zip archive"):

@@ -6,6 +6,7 @@ import re
 import shutil
 import subprocess
 import sys
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -206,6 +207,11 @@ def one_line_failure(argv, capsys) -> str:
     (["run", "--set", "backend.imu_rotvec_cam=[0.0, nan, 0.0]", "--backend", "gtsam"], "imu_rotvec_cam"),
     (["simulate", "--seed", "-1", "--out", "{tmp}/sim"], "seed = -1 is out of range"),
     (["compare", "--jobs", "0", "--out", "{tmp}/cmp"], "--jobs: must be at least 1"),
+    (["run", "--duration", "0", "--out", "{tmp}/run"], "argument --duration: must be more than 0 seconds, got 0"),
+    (["compare", "--start", "-1", "--out", "{tmp}/cmp"], "argument --start: must be at least 0 seconds, got -1"),
+    (["run", "--start", "inf", "--out", "{tmp}/run"], "argument --start: must be at least 0 seconds, got inf"),
+    (["reproduce", "table1", "--duration", "nan", "--out", "{tmp}/rep"], "argument --duration: must be more than 0 seconds"),
+    (["evaluate", "--dataset", "{tmp}", "--estimate", "{tmp}/e.txt", "--max-diff", "-0.1"], "argument --max-diff: must be at least 0"),
     (["run", "--frobnicate"], "unrecognized arguments: --frobnicate"),
     (["rn"], "invalid choice: 'rn'"),
 ])
@@ -244,6 +250,10 @@ def damage(seq, what):
             png.write_bytes(header)
     elif what == "empty groundtruth":
         (seq / "groundtruth.txt").write_text("")
+    elif what == "huge quaternion":
+        rows = (seq / "groundtruth.txt").read_text().splitlines()
+        rows[3] = " ".join(rows[3].split()[:4] + ["1e300", "0", "0", "1"])
+        (seq / "groundtruth.txt").write_text("\n".join(rows) + "\n")
     elif what == "one-line imu":
         (seq / "imu.txt").write_text((seq / "imu.txt").read_text().splitlines()[0] + "\n")
 
@@ -258,11 +268,15 @@ def damage(seq, what):
     ("huge frames", "frame 0 is 20000x20000, not an event camera's frame"),
     ("calib nan", "must be finite"),
     ("empty groundtruth", "groundtruth.txt: holds 0 row(s)"),
+    ("huge quaternion", "groundtruth.txt:4: quaternion norm inf is not 1"),
     ("one-line imu", "imu.txt: holds 1 row(s)"),
 ])
 def test_damaged_datasets_are_one_line_before_any_work(sequence_copy, tmp_path, capsys, what, says):
+    """No warning either: a numpy RuntimeWarning would print its own lines."""
     damage(sequence_copy, what)
-    err = one_line_failure(["run", "--dataset", str(sequence_copy), "--out", str(tmp_path / "out"), "--quiet"], capsys)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        err = one_line_failure(["run", "--dataset", str(sequence_copy), "--out", str(tmp_path / "out"), "--quiet"], capsys)
     assert says in err and not (tmp_path / "out").exists()
 
 
