@@ -256,11 +256,28 @@ def summarise(config: ResolvedConfig, dataset: Dataset, tracked: Tracked, errors
         metrics.update(errors.summary())
     metrics["time_offset_s"] = offset
     metrics["time_offset_estimated"] = config.run.time_offset_auto and dataset.ground_truth is not None
-    metrics["data_warnings"] = dataset.data_warnings()
+    metrics["data_warnings"] = dataset.data_warnings() + _events_end_early(config, dataset, np.array([r.t for r in records]))
     metrics["partial"] = tracked.interrupted is not None
     if tracked.orb is not None:
         metrics.update(tracked.orb.summary())
     return metrics
+
+
+def _events_end_early(config: ResolvedConfig, dataset: Dataset, times: np.ndarray) -> list[str]:
+    """A warning when an event frontend's frames outlast the events, or there are none (a
+    still camera without noise; more often events that were not recorded or not found)."""
+    frontend = config.run.frontend
+    if not registry.get("frontends", frontend).needs_events:
+        return []
+    events = dataset.events()
+    if len(events) == 0:
+        return [f"{dataset.label} holds no events: the {frontend} images of its {len(times)} frames hold none"]
+    last = float(events["t"][-1])
+    late = int(np.sum(times > last))
+    if late == 0:
+        return []
+    return [f"{dataset.label}: the events end at {last:.3f} s, before {late} of the {len(times)} frames: "
+            f"their {frontend} images hold no events"]
 
 
 def write_outputs(out: Path, result: RunResult, label: str) -> None:

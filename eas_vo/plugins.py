@@ -133,8 +133,8 @@ class Frontend:
     """Turns a Sample into one grayscale uint8 image of sensor size (height, width).
 
     Required: `__call__(sample)`. Optional: `needs_frames` (default False: the frontend
-    reads only events), `reset()` (default: nothing to forget). Stateful frontends
-    consume `sample.events_since_previous` incrementally.
+    reads only events), `needs_events` (default False), `reset()` (default: nothing to
+    forget). Stateful frontends consume `sample.events_since_previous` incrementally.
     """
 
     name: ClassVar[str] = "frontend"
@@ -142,6 +142,9 @@ class Frontend:
     Config: ClassVar[type] = NoConfig
     #: True if `__call__` reads `sample.frame` (the run refuses event-only datasets).
     needs_frames: ClassVar[bool] = False
+    #: True if `__call__` reads events (the run warns when there are none, or when they end
+    #: before the window's last frames).
+    needs_events: ClassVar[bool] = False
 
     def __init__(self, config=None, camera: CameraModel | None = None):
         self.config = config if config is not None else self.Config()

@@ -91,6 +91,7 @@ class SliceFrontend(Frontend):
     name = "slice"
     description = "event slice: the N events after the frame, binary, polarity ignored (Eq. 1)"
     Config = SliceConfig
+    needs_events = True
 
     def __call__(self, sample: Sample) -> np.ndarray:
         es = event_slice(sample.events_after, self.config.n, self.camera.width, self.camera.height)
@@ -104,6 +105,7 @@ class EasFrontend(Frontend):
     description = "EAS: frame + alpha * Gaussian(event slice) where the frame is darker than beta (Eq. 2)"
     Config = EasConfig
     needs_frames = True
+    needs_events = True
 
     def __call__(self, sample: Sample) -> np.ndarray:
         c = self.config

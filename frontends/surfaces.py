@@ -26,6 +26,8 @@ def _channels(events: np.ndarray, split: bool) -> np.ndarray:
 class _SurfaceFrontend(Frontend):
     """A surface updated by the events since the previous sample, then rendered at its time."""
 
+    needs_events = True
+
     def __init__(self, config=None, camera=None):
         super().__init__(config, camera)
         self.reset()

@@ -107,3 +107,29 @@ def test_a_run_made_to_fail_says_so_frame_by_frame(sequence_copy, tmp_path):
     assert all(r["status"] in ("weak", "lost") and r["reason"] for r in rows), [r for r in rows if r["status"] == "ok"][:3]
     weak = [r for r in rows if r["status"] == "weak"]
     assert all(float(r["inlier_ratio"]) < 0.5 or float(r["residual_px"]) > 0.5 or int(r["inliers"]) < 15 for r in weak)
+
+
+def test_event_frontends_say_when_the_events_end_or_there_are_none(sequence_copy, tmp_path, capsys):
+    """Events that stop half way: the run completes and warns how many frames got none; no
+    events at all: every event frontend runs (a still camera) and warns; the frames do not."""
+    events = sequence_copy / "events.txt"
+    rows = events.read_text().splitlines()
+    frame_times = [float(line.split()[0]) for line in (sequence_copy / "images.txt").read_text().splitlines()]
+    middle = frame_times[len(frame_times) // 2]
+    events.write_text("\n".join(r for r in rows if float(r.split()[0]) < middle) + "\n")
+    late = sum(t >= middle for t in frame_times)  # the last event is just before `middle`
+    ends = f"before {late} of the {len(frame_times)} frames: their eas images hold no events"
+
+    def warnings(frontend):
+        out = tmp_path / f"{frontend}{len(list(tmp_path.iterdir()))}"
+        assert main(["run", "--dataset", str(sequence_copy), "--frontend", frontend, "--out", str(out), "--quiet"]) == 0
+        said = json.loads((out / "metrics.json").read_text())["data_warnings"]
+        assert capsys.readouterr().err == "".join(f"eas-vo: warning: {line}\n" for line in said)
+        return said
+
+    said = warnings("eas")
+    assert len(said) == 1 and ends in said[0]
+    events.write_text("")
+    for frontend in ("slice", "ts", "sits", "eas"):
+        assert warnings(frontend) == [f"{sequence_copy} holds no events: the {frontend} images of its {len(frame_times)} frames hold none"]
+    assert warnings("original") == []
