@@ -70,8 +70,7 @@ def build_parser() -> argparse.ArgumentParser:
         action="store_true",
         help="drop malformed lines, out-of-order or out-of-sensor events and missing frames, with counted warnings",
     )
-    run.add_argument("--out", metavar="DIR", help="output folder (default: runs/DATASET_FRONTEND_TRACKER_BACKEND_TIME)")
-    run.add_argument("--overwrite", action="store_true", help="write into --out even if it holds results")
+    _add_output_options(run, required=False, default="runs/DATASET_FRONTEND_TRACKER_BACKEND_TIME")
     run.set_defaults(func=cmd_run)
 
     compare = sub.add_parser(
@@ -134,8 +133,7 @@ def build_parser() -> argparse.ArgumentParser:
     export.add_argument("--format", choices=("tum", "euroc"), default="tum",
                         help="tum: rgb.txt + rgb/T.png (mono_tum); euroc: mav0/cam0/data/T_NS.png + timestamps.txt (mono_euroc)")
     _add_common_options(export, evaluated=False)
-    export.add_argument("--out", required=True, metavar="DIR", help="output folder (new, or replaced with --overwrite)")
-    export.add_argument("--overwrite", action="store_true", help="replace an existing non-empty --out")
+    _add_output_options(export, required=True)
     export.set_defaults(func=cmd_export)
 
     evaluate = sub.add_parser(
@@ -152,8 +150,7 @@ def build_parser() -> argparse.ArgumentParser:
     evaluate.add_argument("--max-diff", type=_seconds(allow_zero=True), default=0.01, metavar="S",
                           help="largest time difference of an associated pose pair (default 0.01 s, evo's)")
     evaluate.add_argument("--label", metavar="TEXT", help="the row's name in table2_row.md (default: the file's name)")
-    evaluate.add_argument("--out", metavar="DIR", help="output folder (new, or replaced with --overwrite)")
-    evaluate.add_argument("--overwrite", action="store_true", help="replace an existing non-empty --out")
+    _add_output_options(evaluate, required=False)
     evaluate.set_defaults(func=cmd_evaluate)
 
     reproduce = sub.add_parser(
@@ -197,8 +194,7 @@ def build_parser() -> argparse.ArgumentParser:
         description="Simulate a textured HDR room seen by a hand-held DAVIS240: APS frames, events, "
         "ground truth (200 Hz), IMU (200 Hz), calib.txt, in the Event Camera Dataset text layout.",
     )
-    sim.add_argument("--out", required=True, metavar="DIR", help="output folder (new, or replaced with --overwrite)")
-    sim.add_argument("--overwrite", action="store_true", help="replace an existing --out folder")
+    _add_output_options(sim, required=True)
     sim.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     sim.add_argument("--duration", type=float, default=10.0, metavar="S", help="length in seconds (default 10)")
     sim.add_argument("--illumination", type=float, default=1.0, metavar="X",
@@ -224,6 +220,14 @@ def _add_common_options(parser, evaluated: bool = True) -> None:
         parser.add_argument("--time-offset", metavar="S|auto",
                             help="ground truth is sampled at frame time + S seconds (default 0); 'auto' estimates S from the data")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
+
+
+def _add_output_options(parser, required: bool, default: str | None = None) -> None:
+    """--out and --overwrite, as every command writing one output folder has them."""
+    where = f"default: {default}" if default else "new, or replaced with --overwrite"
+    parser.add_argument("--out", required=required, metavar="DIR", help=f"output folder ({where})")
+    parser.add_argument("--overwrite", action="store_true",
+                        help="replace a non-empty --out that holds only an earlier eas-vo output")
 
 
 def _names(option: str, text: str) -> list[str]:

@@ -3,6 +3,7 @@ atomic writes, folder names."""
 
 from __future__ import annotations
 
+import itertools
 import json
 import math
 import os
@@ -310,7 +311,7 @@ def parse_table(data: bytes, where: str, ncols: int, what: str) -> np.ndarray:
 def data_line(data: bytes, row: int) -> int:
     """The file line (from 1) of data row `row` (from 0) of a table, blank and comment lines
     skipped as parse_table skips them."""
-    return next((lineno for k, (lineno, _) in enumerate(_data_lines(data)) if k == row), row + 1)
+    return next(itertools.islice(_data_lines(data), row, None), (row + 1, b""))[0]
 
 
 def _data_lines(data: bytes):

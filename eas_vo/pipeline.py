@@ -256,7 +256,7 @@ def summarise(config: ResolvedConfig, dataset: Dataset, tracked: Tracked, errors
         metrics.update(errors.summary())
     metrics["time_offset_s"] = offset
     metrics["time_offset_estimated"] = config.run.time_offset_auto and dataset.ground_truth is not None
-    metrics["data_warnings"] = dataset.data_warnings() + _events_end_early(config, dataset, np.array([r.t for r in records]))
+    metrics["data_warnings"] = dataset.data_warnings() + _events_end_early(config, dataset, tracked.times)
     metrics["partial"] = tracked.interrupted is not None
     if tracked.orb is not None:
         metrics.update(tracked.orb.summary())

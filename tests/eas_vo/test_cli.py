@@ -228,22 +228,22 @@ def test_an_option_that_needs_an_imu_refuses_a_dataset_without_one(sequence_copy
     assert "needs an IMU" in err and not (tmp_path / "out").exists()
 
 
+#: calib.txt lines a careless user might write.
+BAD_CALIBRATIONS = {
+    "calib zeros": "0 0 0 0",
+    "calib huge focal": "1e308 1e308 120 90",
+    "calib nan": "200 nan 120 90",
+    "calib tiny focal": "1e-6 1e-6 120 90",
+    "calib principal point": "200 200 1e308 90",
+    "calib negative principal point": "200 200 -5000 90 0 0 0 0 0",
+    "calib distortion": "200 200 120 90 1e308 0 0 0 0",
+}
+
+
 def damage(seq, what):
     """Damage a private copy of the short sequence as a careless user might."""
-    if what == "calib zeros":
-        (seq / "calib.txt").write_text("0 0 0 0\n")
-    elif what == "calib huge focal":
-        (seq / "calib.txt").write_text("1e308 1e308 120 90\n")
-    elif what == "calib nan":
-        (seq / "calib.txt").write_text("200 nan 120 90\n")
-    elif what == "calib tiny focal":
-        (seq / "calib.txt").write_text("1e-6 1e-6 120 90\n")
-    elif what == "calib principal point":
-        (seq / "calib.txt").write_text("200 200 1e308 90\n")
-    elif what == "calib negative principal point":
-        (seq / "calib.txt").write_text("200 200 -5000 90 0 0 0 0 0\n")
-    elif what == "calib distortion":
-        (seq / "calib.txt").write_text("200 200 120 90 1e308 0 0 0 0\n")
+    if what in BAD_CALIBRATIONS:
+        (seq / "calib.txt").write_text(BAD_CALIBRATIONS[what] + "\n")
     elif what == "huge frames":  # every frame a 20000x20000 PNG (its header: nothing is decoded)
         header = b"\x89PNG\r\n\x1a\n" + b"\0\0\0\rIHDR" + (20000).to_bytes(4, "big") * 2 + bytes(20)
         for png in (seq / "images").iterdir():
