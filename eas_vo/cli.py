@@ -21,7 +21,8 @@ outputs (in --out):
   trajectory.tum   estimated camera-to-world rotation per frame (TUM: t tx ty tz qx qy qz qw)
   groundtruth.tum  ground truth at the same timestamps (when the dataset has it)
   metrics.json     average APE (Eq. 3, rad), RMSE, max, average NC, frames, timing
-  frames.csv       per frame: index, t, NC, inliers, status, redetected
+  frames.csv       per frame: index, t, NC, inliers, status (ok, weak, lost), redetected,
+                   inlier ratio, residual [px], why the frame is weak or lost
   config.toml      the resolved configuration (re-run with --config config.toml)
   rotation.png     estimated and true roll/pitch/yaw over time
 
@@ -328,8 +329,11 @@ def cmd_run(args) -> int:
     ape_text = f"average APE {ape:.4f} rad ({ape * 57.29577951:.2f} deg)" if ape is not None else "no ground truth"
     if m["time_offset_estimated"]:
         ape_text += f" (time offset {m['time_offset_s'] * 1e3:+.1f} ms, estimated)"
+    counts = m["status_counts"]
+    measured = ", ".join(f"{counts[s]} {s}" for s in ("ok", "weak", "lost") if counts.get(s))
     print(
-        f"{rc.frontend}+{rc.tracker}+{rc.backend} on {rc.dataset}: {m['frames']} frames, average NC {m['nc_mean']:.1f}, "
+        f"{rc.frontend}+{rc.tracker}+{rc.backend} on {rc.dataset}: {m['frames']} frames ({measured or 'none measured'}), "
+        f"average NC {m['nc_mean']:.1f}, "
         f"{ape_text}, {m['frames_per_s']:.1f} frames/s -> {out}"
     )
     return 0

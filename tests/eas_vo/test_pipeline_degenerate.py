@@ -96,9 +96,10 @@ def test_frame_timestamps_going_back(sequence_copy, tmp_path, capsys):
     assert "1 dropped: timestamp going back (first at line 6)" in metrics["data_warnings"][0]
 
 
-def test_a_run_made_to_fail_says_so_frame_by_frame(sequence_copy, tmp_path):
+def test_a_run_made_to_fail_says_so_frame_by_frame(sequence_copy, tmp_path, capsys):
     """Every frame replaced by an unrelated texture: LK still 'tracks' something, but no model
-    explains it. frames.csv must show weak or lost frames with a reason, not `ok`."""
+    explains it. frames.csv must show weak or lost frames with a reason, not `ok`, and the
+    summary line counts them."""
     rng = np.random.default_rng(0)
     rewrite_frames(sequence_copy, lambda im: cv2.GaussianBlur(rng.integers(0, 256, im.shape).astype(np.uint8), (5, 5), 1.5))
     out = tmp_path / "failing"
@@ -107,6 +108,9 @@ def test_a_run_made_to_fail_says_so_frame_by_frame(sequence_copy, tmp_path):
     assert all(r["status"] in ("weak", "lost") and r["reason"] for r in rows), [r for r in rows if r["status"] == "ok"][:3]
     weak = [r for r in rows if r["status"] == "weak"]
     assert all(float(r["inlier_ratio"]) < 0.5 or float(r["residual_px"]) > 0.5 or int(r["inliers"]) < 15 for r in weak)
+    lost = len(rows) - len(weak)
+    counted = ", ".join(f"{n} {s}" for n, s in ((len(weak), "weak"), (lost, "lost")) if n)
+    assert f"{len(rows) + 1} frames ({counted})," in capsys.readouterr().out
 
 
 def test_event_frontends_say_when_the_events_end_or_there_are_none(sequence_copy, tmp_path, capsys):
