@@ -9,10 +9,9 @@ from typing import Sequence
 import numpy as np
 
 from eas_vo.errors import ConfigError
-from eas_vo.geometry.rotations import rotvec_to_matrix
 from eas_vo.plugins import Backend
 from eas_vo.types import ImuSeries, RelativeRotation
-from eas_vo.validation import check_choice, check_range, check_vector
+from eas_vo.validation import check_choice, check_range
 
 MODES = ("batch", "online")
 ROBUST = ("none", "huber", "cauchy")
@@ -37,11 +36,10 @@ class GtsamConfig:
         iterations: Levenberg-Marquardt iterations (batch) or extra iSAM2 updates at the end.
         gyro: fuse the dataset's gyro: `true` (a dataset without an IMU is refused), `false`,
             or `auto` (when the dataset has an IMU): readings preintegrated between frames
-            (PreintegratedAhrsMeasurements) in AHRSFactors sharing one bias variable.
+            (PreintegratedAhrsMeasurements) in AHRSFactors sharing one bias variable; the
+            readings come in the camera frame (the run's `imu_rotvec_cam`).
         gyro_noise: gyro white-noise density [rad/s/sqrt(Hz)].
         gyro_bias_sigma: prior on the gyro bias [rad/s].
-        imu_rotvec_cam: rotation from the camera to the IMU frame, R_imu_cam as a rotation vector [rad].
-        imu_time_offset_s: IMU time = frame time + this [s].
     """
 
     mode: str = "batch"
@@ -56,14 +54,10 @@ class GtsamConfig:
     gyro: bool | str = False
     gyro_noise: float = 0.003
     gyro_bias_sigma: float = 0.05
-    imu_rotvec_cam: tuple = (0.0, 0.0, 0.0)
-    imu_time_offset_s: float = 0.0
 
     def validate(self) -> None:
         if not (isinstance(self.gyro, bool) or self.gyro == "auto"):
             raise ConfigError(f"gyro = {self.gyro!r}; allowed: true, false, auto")
-        check_vector(self, "imu_rotvec_cam", 3, "rad")
-        check_range(self, "imu_time_offset_s", -1.0, 1.0)
         check_range(self, "gyro_noise", 0.0, 10.0, lo_open=True)
         check_range(self, "gyro_bias_sigma", 0.0, 10.0, lo_open=True)
         check_choice(self, "mode", MODES)
@@ -124,9 +118,7 @@ class GtsamBackend(Backend):
         c = self.config
         params = gtsam.PreintegratedRotationParams()
         params.setGyroscopeCovariance(c.gyro_noise**2 * np.eye(3))
-        R_imu_cam = rotvec_to_matrix(np.asarray(c.imu_rotvec_cam, float))
-        params.setBodyPSensor(gtsam.Pose3(gtsam.Rot3(R_imu_cam.T), np.zeros(3)))
-        t_imu = imu.t - c.imu_time_offset_s
+        t_imu = imu.t
         bias = gtsam.symbol("b", 0)
         by_frame[0].append(gtsam.PriorFactorVector(bias, np.zeros(3), gtsam.noiseModel.Isotropic.Sigma(3, c.gyro_bias_sigma)))
         for k in range(1, len(times)):
@@ -134,7 +126,7 @@ class GtsamBackend(Backend):
             if a < t_imu[0] or b > t_imu[-1] + 0.1:
                 continue  # no gyro over this interval
             pim = gtsam.PreintegratedAhrsMeasurements(params, np.zeros(3))
-            for s, dt in imu.readings_between(a, b, c.imu_time_offset_s):
+            for s, dt in imu.readings_between(a, b):
                 pim.integrateMeasurement(imu.gyro[s], dt)
             by_frame[k].append(gtsam.AHRSFactor(k - 1, k, bias, pim))
 

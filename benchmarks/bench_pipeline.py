@@ -21,17 +21,15 @@ def stage_times(cfg) -> dict:
     """Seconds spent in each stage over one pass of the sequence."""
     rc = cfg.run
     t0 = time.perf_counter()
-    dataset = registry.open_dataset(rc.dataset, cfg.dataset)
-    samples = list(dataset.samples(rc.start_s, rc.duration_s))
+    parts = pipeline.open_pipeline(cfg)
+    samples = list(parts.dataset.samples(rc.start_s, rc.duration_s))
     t1 = time.perf_counter()
-    frontend = registry.get("frontends", rc.frontend)(cfg.frontend, dataset.camera)
-    images = [frontend(s) for s in samples]
+    images = [parts.frontend(s) for s in samples]
     t2 = time.perf_counter()
-    tracker = registry.get("trackers", rc.tracker)(cfg.tracker, dataset.camera, imu=dataset.imu)
-    edges = [e for img, s in zip(images, samples) for e in tracker.process(img, s.t)[1]]
+    edges = [e for img, s in zip(images, samples) for e in parts.tracker.process(img, s.t)[1]]
     t3 = time.perf_counter()
     times = np.array([s.t for s in samples])
-    registry.get("backends", rc.backend)(cfg.backend).solve(len(samples), edges, times=times, imu=dataset.imu)
+    parts.backend.solve(len(samples), edges, times=times, imu=parts.imu)
     t4 = time.perf_counter()
     n = getattr(cfg.frontend, "n", 0)
     n_events = sum(min(n, len(s.events) - s.event_index) for s in samples)

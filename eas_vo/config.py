@@ -17,7 +17,7 @@ from typing import Any, get_type_hints
 
 from eas_vo import registry
 from eas_vo.errors import ConfigError
-from eas_vo.validation import check_range
+from eas_vo.validation import check_range, check_vector
 
 SECTIONS = ("run", "dataset", "frontend", "tracker", "backend")
 
@@ -36,6 +36,11 @@ class RunConfig:
             against ground truth); the estimate is reported in metrics.json.
         orb_stats: also count ORB keypoints per image and matches between adjacent images
             (the paper's Table 2), reported in metrics.json.
+        imu_rotvec_cam: the rig's camera-to-IMU rotation R_imu_cam as a rotation vector [rad]
+            (v_imu = R_imu_cam v_cam): trackers and backends get the IMU's readings rotated
+            into the camera frame by it. Identity: the DAVIS240C of the Event Camera Dataset
+            and the simulator.
+        imu_time_offset_s: IMU time = frame time + this [s].
     """
 
     dataset: str = "synthetic:default"
@@ -47,8 +52,12 @@ class RunConfig:
     time_offset_s: float = 0.0
     time_offset_auto: bool = False
     orb_stats: bool = False
+    imu_rotvec_cam: tuple = (0.0, 0.0, 0.0)
+    imu_time_offset_s: float = 0.0
 
     def validate(self) -> None:
+        check_vector(self, "imu_rotvec_cam", 3, "rad")
+        check_range(self, "imu_time_offset_s", -1.0, 1.0)
         check_range(self, "start_s", 0.0, math.inf)
         check_range(self, "time_offset_s", -10.0, 10.0)
         check_range(self, "duration_s", 0.0, math.inf, lo_open=True)
@@ -89,11 +98,17 @@ def _toml_value(value) -> str:
     return '"' + str(value).replace("\\", "\\\\").replace('"', '\\"') + '"'
 
 
+#: Keys that left a plugin's section for [run] (an older config file is told where they went).
+MOVED_TO_RUN = ("imu_rotvec_cam", "imu_time_offset_s")
+
+
 def build(cls, values: dict, section: str):
     """Instantiate the frozen dataclass `cls` from `values`, rejecting unknown keys and bad types."""
     hints = get_type_hints(cls)
     known = {f.name for f in fields(cls)}
     unknown = sorted(set(values) - known)
+    if unknown and unknown[0] in MOVED_TO_RUN and section != "run":
+        raise ConfigError(f"{section}.{unknown[0]} is now run.{unknown[0]}: the rig's, one for the tracker and the backend")
     if unknown:
         raise ConfigError(
             f"unknown key {section}.{unknown[0]}; allowed keys: {', '.join(sorted(known)) or 'none'}"

@@ -18,20 +18,21 @@ from eas_vo import registry
 from eas_vo.config import ResolvedConfig
 from eas_vo.errors import EasVoError, Interrupted
 from eas_vo.evaluation import RotationErrors, estimate_time_offset, rotation_errors
-from eas_vo.geometry.rotations import quats_from_matrices
+from eas_vo.geometry.rotations import quats_from_matrices, rotvec_to_matrix
 from eas_vo.io import atomic_path, json_text, output_folder, write_text_atomic
 from eas_vo.orb import OrbStats
 from eas_vo.plugins import Backend, Dataset, Frontend, Tracker
-from eas_vo.types import FrameRecord, RelativeRotation
+from eas_vo.types import FrameRecord, ImuSeries, RelativeRotation
 
 FRAMES_CSV_FIELDS = ("index", "t", "nc", "inliers", "status", "redetected", "inlier_ratio", "residual_px", "reason")
 
 
 @dataclass
 class Pipeline:
-    """The opened dataset and the plugins built for it."""
+    """The opened dataset, its IMU in the camera frame (None without one) and the plugins built for it."""
 
     dataset: Dataset
+    imu: ImuSeries | None
     frontend: Frontend
     tracker: Tracker
     backend: Backend
@@ -94,7 +95,7 @@ def _run_into(parts: Pipeline, config: ResolvedConfig, out: Path | None, progres
     try:
         tracked = track(parts, config, out / "frames.csv" if out else None, progress)
         t = tracked.times
-        R_w_c = parts.backend.solve(len(t), tracked.edges, times=t, imu=parts.dataset.imu)
+        R_w_c = parts.backend.solve(len(t), tracked.edges, times=t, imu=parts.imu)
         errors, offset = evaluate(config, parts.dataset, t, R_w_c, tracked.edges)
         metrics = summarise(config, parts.dataset, tracked, errors, offset, time.perf_counter() - started, load_s)
         result = RunResult(t, R_w_c, tracked.records, tracked.edges, errors, metrics, parts.backend.causal_R_w_c)
@@ -158,10 +159,12 @@ def open_pipeline(config: ResolvedConfig) -> Pipeline:
             f"holds {n_window} sample(s); at least 2 are needed"
         )
     _check_ground_truth_overlap(dataset, config.run, n_window)
+    imu = None if dataset.imu is None else dataset.imu.in_camera_frame(rotvec_to_matrix(rc.imu_rotvec_cam), rc.imu_time_offset_s)
     parts = Pipeline(
         dataset=dataset,
+        imu=imu,
         frontend=frontend_cls(config.frontend, dataset.camera),
-        tracker=registry.get("trackers", rc.tracker)(config.tracker, dataset.camera, imu=dataset.imu),
+        tracker=registry.get("trackers", rc.tracker)(config.tracker, dataset.camera, imu=imu),
         backend=registry.get("backends", rc.backend)(config.backend),
     )
     for kind, plugin in (("tracker", parts.tracker), ("backend", parts.backend)):

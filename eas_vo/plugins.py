@@ -171,7 +171,8 @@ class Tracker:
     Config: ClassVar[type] = NoConfig
 
     def __init__(self, config=None, camera: CameraModel | None = None, *, imu: ImuSeries | None = None):
-        """`camera`: the images' intrinsics and distortion; `imu`: the dataset's, when it has one."""
+        """`camera`: the images' intrinsics and distortion; `imu`: the dataset's, when it has one,
+        in the camera frame on the frames' clock (ImuSeries.in_camera_frame)."""
         self.config = config if config is not None else self.Config()
         self.camera = camera
         self.imu = imu
@@ -228,5 +229,5 @@ class Backend:
     ) -> np.ndarray:
         """(n_frames, 3, 3) rotations R_w_c, frame 0 at the identity, from the edges and, where
         the backend uses them, the frame times [s] (the pipeline always gives them) and the
-        dataset's IMU (None when it has none)."""
+        dataset's IMU in the camera frame on the frames' clock (None when it has none)."""
         raise NotImplementedError

@@ -96,16 +96,24 @@ class PoseSeries:
 
 @dataclass(frozen=True)
 class ImuSeries:
-    """IMU readings in the IMU frame: t [s], accelerometer [m/s^2], gyro [rad/s]."""
+    """IMU readings: t [s], accelerometer [m/s^2], gyro [rad/s]. A dataset gives them in the
+    IMU's frame and clock; trackers and backends get them in the camera frame, on the frames'
+    clock (in_camera_frame, applied by the pipeline with the run's camera-IMU rotation)."""
 
     t: np.ndarray
     acc: np.ndarray
     gyro: np.ndarray
 
-    def readings_between(self, t0: float, t1: float, time_offset_s: float = 0.0) -> list[tuple[int, float]]:
-        """(index, duration [s]) of each reading that holds within frame times [t0, t1], a reading
-        held until the next one (the last until t1); IMU time = frame time + time_offset_s."""
-        t = self.t - time_offset_s
+    def in_camera_frame(self, R_imu_cam: np.ndarray, time_offset_s: float) -> "ImuSeries":
+        """The readings rotated into the camera frame (v_cam = R_imu_cam^T v_imu) and timed on
+        the frames' clock (IMU time = frame time + time_offset_s [s])."""
+        R = np.asarray(R_imu_cam, float)
+        return ImuSeries(self.t - time_offset_s, self.acc @ R, self.gyro @ R)
+
+    def readings_between(self, t0: float, t1: float) -> list[tuple[int, float]]:
+        """(index, duration [s]) of each reading that holds within times [t0, t1], a reading
+        held until the next one (the last until t1)."""
+        t = self.t
         out = []
         for s in range(max(int(np.searchsorted(t, t0, side="right")) - 1, 0), len(t)):
             start, end = max(t[s], t0), min(t[s + 1] if s + 1 < len(t) else t1, t1)

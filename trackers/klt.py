@@ -14,14 +14,14 @@ import cv2
 import numpy as np
 
 from eas_vo.errors import ConfigError
-from eas_vo.geometry.rotations import rotvec_to_matrix
+from eas_vo.geometry.rotations import gyro_rotation
 from eas_vo.plugins import Tracker
 from eas_vo.trackers.features import DETECTORS, Features, RefinedMatching
 from eas_vo.trackers.loops import LoopClosureConfig, LoopCloser
 from eas_vo.trackers.measurement import TwoViewConfig, frame_record, measure
-from eas_vo.trackers.motion import gyro_rotation, lk_params, lk_track, scaled_rotation
+from eas_vo.trackers.motion import lk_params, lk_track, scaled_rotation
 from eas_vo.types import CameraModel, FrameRecord, ImuSeries, RelativeRotation
-from eas_vo.validation import check_choice, check_range, check_vector
+from eas_vo.validation import check_choice, check_range
 
 PREDICTIONS = ("none", "gyro", "velocity", "auto")
 FALLBACKS = ("none", "match")
@@ -45,9 +45,8 @@ class KltConfig(LoopClosureConfig, TwoViewConfig):
         predict: where LK starts each corner: `none` (where it was: the paper), `gyro` (moved
             by the rotation the gyro measured since the previous frame), `velocity` (by the
             last measured rotation, scaled to this frame interval) or `auto` (gyro when the
-            dataset has an IMU, else velocity).
-        imu_rotvec_cam, imu_time_offset_s: (gyro) R_imu_cam as a rotation vector [rad]; IMU
-            time = frame time + offset [s].
+            dataset has an IMU, else velocity); the gyro in the camera frame as the run's
+            `imu_rotvec_cam` puts it.
         fb_max_px: 0 (the paper) or the forward-backward check: a corner tracked back into the
             previous frame must land within this many pixels of where it started.
         fallback: `none` (the paper) or `match`: when LK lost the track (no measurement, or
@@ -72,8 +71,6 @@ class KltConfig(LoopClosureConfig, TwoViewConfig):
     threshold2: int = 150
     keyframe_interval: int = 0
     predict: str = "none"
-    imu_rotvec_cam: tuple = (0.0, 0.0, 0.0)
-    imu_time_offset_s: float = 0.0
     fb_max_px: float = 0.0
     fallback: str = "none"
     fallback_detector: str = "orb"
@@ -82,8 +79,6 @@ class KltConfig(LoopClosureConfig, TwoViewConfig):
         TwoViewConfig.validate(self)
         LoopClosureConfig.validate(self)
         check_choice(self, "predict", PREDICTIONS)
-        check_vector(self, "imu_rotvec_cam", 3, "rad")
-        check_range(self, "imu_time_offset_s", -1.0, 1.0)
         check_range(self, "fb_max_px", 0.0, 100.0)
         check_choice(self, "fallback", FALLBACKS)
         check_choice(self, "fallback_detector", DETECTORS)
@@ -118,7 +113,6 @@ class KltTracker(Tracker):
         super().__init__(config, camera, imu=imu)
         c = self.config
         self._lk_params = lk_params(c.lk_win_size, c.lk_max_level, c.lk_max_iterations, c.lk_epsilon_px)
-        self._R_imu_cam = rotvec_to_matrix(np.asarray(c.imu_rotvec_cam, float))
         self._predict = c.predict if c.predict != "auto" else ("gyro" if imu is not None else "velocity")
         self._matching = RefinedMatching(Features(c.fallback_detector), camera, c, c.min_inliers) if c.fallback == "match" else None
 
@@ -153,7 +147,7 @@ class KltTracker(Tracker):
     def predicted_rotation(self, t_prev: float, t: float) -> np.ndarray | None:
         """R_{k-1}_{k} expected before measuring it (None: no prediction, as the paper)."""
         if self._predict == "gyro" and self.imu is not None:
-            return gyro_rotation(self.imu, t_prev, t, self._R_imu_cam, self.config.imu_time_offset_s)
+            return gyro_rotation(self.imu, t_prev, t)
         if self._predict == "velocity" and self._last_step is not None:
             R_last, dt_last = self._last_step
             return scaled_rotation(R_last, (t - t_prev) / dt_last)

@@ -4,28 +4,10 @@ derotated image. Not a plugin."""
 
 from __future__ import annotations
 
-from functools import reduce
-
 import cv2
 import numpy as np
 
-from eas_vo.geometry.rotations import rotvec_to_matrix
-from eas_vo.types import CameraModel, ImuSeries
-
-
-def gyro_rotation(imu: ImuSeries, t0: float, t1: float, R_imu_cam: np.ndarray, time_offset_s: float = 0.0) -> np.ndarray | None:
-    """R_c0_c1 from the gyro between frame times t0 < t1 [s] (IMU time = frame time + offset),
-    readings held constant over their intervals and rotated into the camera frame; None when
-    the IMU does not cover the interval."""
-    t = imu.t - time_offset_s
-    if len(t) < 2 or t0 < t[0] or t1 > t[-1]:
-        return None
-    held = imu.readings_between(t0, t1, time_offset_s)
-    if not held:
-        return np.eye(3)
-    index, dt = (np.array(column) for column in zip(*held))
-    omega_cam = imu.gyro[index] @ R_imu_cam  # rows: R_imu_cam^T omega_imu
-    return reduce(np.matmul, rotvec_to_matrix(omega_cam * dt[:, None]), np.eye(3))
+from eas_vo.types import CameraModel
 
 
 def scaled_rotation(R: np.ndarray, factor: float) -> np.ndarray:

@@ -2,10 +2,12 @@
 
 from __future__ import annotations
 
+from functools import reduce
+
 import numpy as np
 from scipy.spatial.transform import Rotation, Slerp
 
-from eas_vo.types import PoseSeries
+from eas_vo.types import ImuSeries, PoseSeries
 
 
 def matrices_from_quats(q_xyzw: np.ndarray) -> np.ndarray:
@@ -21,6 +23,18 @@ def quats_from_matrices(R: np.ndarray) -> np.ndarray:
 def rotvec_to_matrix(rotvec: np.ndarray) -> np.ndarray:
     """Axis-angle vectors [rad] (..., 3) -> rotation matrices (..., 3, 3)."""
     return Rotation.from_rotvec(np.asarray(rotvec, dtype=float)).as_matrix()
+
+
+def gyro_rotation(imu: ImuSeries, t0: float, t1: float) -> np.ndarray | None:
+    """R_0_1, the rotation of the IMU's frame from t0 to t1 > t0 [s, its clock] by its gyro,
+    readings held constant over their intervals; None when the IMU does not cover [t0, t1]."""
+    if len(imu.t) < 2 or t0 < imu.t[0] or t1 > imu.t[-1]:
+        return None
+    held = imu.readings_between(t0, t1)
+    if not held:
+        return np.eye(3)
+    index, dt = (np.array(column) for column in zip(*held))
+    return reduce(np.matmul, rotvec_to_matrix(imu.gyro[index] * dt[:, None]), np.eye(3))
 
 
 def geodesic_angle(R_a: np.ndarray, R_b: np.ndarray) -> np.ndarray:
