@@ -7,8 +7,8 @@ from pathlib import Path
 
 import numpy as np
 
-from eas_vo.geometry.rotations import geodesic_angle, interpolate_poses, matrices_from_quats
-from eas_vo.types import PoseSeries
+from eas_vo.geometry.rotations import geodesic_angle, gyro_rotation, interpolate_poses, matrices_from_quats, matrix_to_rotvec
+from eas_vo.types import ImuSeries, PoseSeries
 
 
 @dataclass(frozen=True)
@@ -127,6 +127,53 @@ def estimate_time_offset(t: np.ndarray, edges, ground_truth: PoseSeries, search_
     best = coarse[np.argmin([cost(d) for d in coarse])]
     fine = best + np.arange(-0.002, 0.002 + 1e-9, 0.0001)
     return float(fine[np.argmin([cost(d) for d in fine])])
+
+
+@dataclass(frozen=True)
+class ImuAgreement:
+    """How the gyro's frame-to-frame rotations agree with the tracker's.
+
+    Attributes:
+        R: the rotation that best maps the tracker's rotation vectors onto the gyro's, g = R v
+            (the identity when the IMU's configured place on the rig is right).
+        pairs: consecutive frame pairs compared (the gyro turned at least MIN_TURN_RAD).
+        agreeing: those within half the gyro's rotation of R v, from which R was fitted.
+    """
+
+    R: np.ndarray
+    pairs: int
+    agreeing: int
+
+
+#: Frame pairs over which the gyro turned less carry no direction to compare [rad] (0.5 deg).
+MIN_TURN_RAD = np.radians(0.5)
+
+
+def imu_agreement(t: np.ndarray, edges, imu: ImuSeries) -> ImuAgreement | None:
+    """Compare the rotation vectors of the consecutive edges (camera frame) with the gyro's
+    over the same frame times [s] (`imu` in the camera frame, on the frames' clock): Kabsch
+    on all pairs, then twice on those within half the gyro's rotation of the fit (robust to
+    failed measurements and a few percent of scale). None without 20 pairs to compare."""
+    from eas_vo.geometry.two_view import kabsch
+
+    tracked, gyro = [], []
+    for e in edges:
+        if e.j != e.i + 1 or not 0 <= e.i < len(t) - 1:
+            continue
+        R_gyro = gyro_rotation(imu, t[e.i], t[e.j])
+        if R_gyro is not None and geodesic_angle(np.eye(3), R_gyro) >= MIN_TURN_RAD:
+            tracked.append(e.R_i_j)
+            gyro.append(R_gyro)
+    if len(tracked) < 20:
+        return None
+    v, g = matrix_to_rotvec(np.stack(tracked)), matrix_to_rotvec(np.stack(gyro))
+    agree = np.ones(len(v), bool)
+    for _ in range(3):
+        R = kabsch(v[agree], g[agree])
+        agree = np.linalg.norm(g - v @ R.T, axis=1) < 0.5 * np.linalg.norm(g, axis=1)
+        if agree.sum() < 3:
+            break
+    return ImuAgreement(R, len(v), int(agree.sum()))
 
 
 # ----------------------------------------------------------------------------- external trajectories

@@ -25,6 +25,11 @@ def rotvec_to_matrix(rotvec: np.ndarray) -> np.ndarray:
     return Rotation.from_rotvec(np.asarray(rotvec, dtype=float)).as_matrix()
 
 
+def matrix_to_rotvec(R: np.ndarray) -> np.ndarray:
+    """Rotation matrices (..., 3, 3) -> axis-angle vectors [rad] (..., 3)."""
+    return Rotation.from_matrix(np.asarray(R, dtype=float)).as_rotvec()
+
+
 def gyro_rotation(imu: ImuSeries, t0: float, t1: float) -> np.ndarray | None:
     """R_0_1, the rotation of the IMU's frame from t0 to t1 > t0 [s, its clock] by its gyro,
     readings held constant over their intervals; None when the IMU does not cover [t0, t1]."""

@@ -6,6 +6,7 @@ import json
 
 import cv2
 import numpy as np
+import pytest
 
 from eas_vo.cli import main
 
@@ -137,3 +138,36 @@ def test_event_frontends_say_when_the_events_end_or_there_are_none(sequence_copy
     for frontend in ("slice", "ts", "sits", "eas"):
         assert warnings(frontend) == [f"{sequence_copy} holds no events: the {frontend} images of its {len(frame_times)} frames hold none"]
     assert warnings("original") == []
+
+
+def test_an_imu_mounted_otherwise_than_configured_is_named(sequence_copy, tmp_path, capsys):
+    """The IMU rewritten as if mounted upside down (a half turn about x): run as configured
+    (the identity), the gyro disagrees and the warning names the half turn; with
+    run.imu_rotvec_cam set to it, no warning and the run of the untouched sequence again."""
+    import re
+
+    from scipy.spatial.transform import Rotation
+
+    def best(dataset, name, *extra):
+        out = tmp_path / name
+        assert main(["run", "--config", "best", "--dataset", str(dataset), "--out", str(out), "--quiet", *extra]) == 0
+        return json.loads((out / "metrics.json").read_text())
+
+    untouched = best(sequence_copy, "untouched")
+    assert untouched["data_warnings"] == []
+    R_imu_cam = np.diag([1.0, -1.0, -1.0])
+    imu = np.loadtxt(sequence_copy / "imu.txt", ndmin=2)
+    imu[:, 1:4] = imu[:, 1:4] @ R_imu_cam.T
+    imu[:, 4:7] = imu[:, 4:7] @ R_imu_cam.T
+    np.savetxt(sequence_copy / "imu.txt", imu, fmt="%.9f")
+    capsys.readouterr()
+
+    flipped = best(sequence_copy, "flipped")
+    assert len(flipped["data_warnings"]) == 1 and flipped["data_warnings"][0] in capsys.readouterr().err
+    said = re.search(r"run.imu_rotvec_cam = \[([^]]+)\] \(axes swapped or flipped\), not \[0, 0, 0\]", flipped["data_warnings"][0])
+    suggested = Rotation.from_rotvec([float(x) for x in said.group(1).split(",")]).as_matrix()
+    assert np.allclose(suggested, R_imu_cam, atol=1e-4)
+
+    configured = best(sequence_copy, "configured", "--set", f"run.imu_rotvec_cam=[{np.pi}, 0.0, 0.0]")
+    assert configured["data_warnings"] == []
+    assert configured["ape_mean_rad"] == pytest.approx(untouched["ape_mean_rad"], abs=1e-6)
