@@ -364,10 +364,18 @@ def cmd_compare(args) -> int:
 
 
 def _report_cells(rows: list[dict], n_run: int, table: Path, markdown: str) -> int:
-    """Each failed cell in one line on stderr, the count and the table on stdout; exit 1 if a cell failed."""
+    """Each failed cell in one line on stderr, then each data warning once with the cells it
+    came from; the count and the table on stdout; exit 1 if a cell failed."""
     failed = [r for r in rows if r["status"] != "ok"]
     for r in failed:
         print(f"eas-vo: cell {r['folder']} failed: {r['error']}", file=sys.stderr)
+    warned: dict[str, list[str]] = {}
+    for r in rows:
+        for line in r["data_warnings"]:
+            warned.setdefault(line, []).append(r["folder"])
+    for line, folders in warned.items():
+        cells = ", ".join(folders[:3]) + (f" and {len(folders) - 3} more" if len(folders) > 3 else "")
+        print(f"eas-vo: warning: {line} (cell{'s' if len(folders) > 1 else ''} {cells})", file=sys.stderr)
     print(f"{len(rows)} cells ({n_run} run, {len(rows) - n_run} already complete, {len(failed)} failed) -> {table}")
     print(markdown, end="")
     return 1 if failed else 0

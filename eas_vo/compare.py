@@ -289,6 +289,7 @@ def table_rows(cells: list[Cell], results: dict) -> list[dict]:
             "ape_mean_rad": results.get(cell, {}).get("ape_mean_rad"),
             "orb_keypoints_mean": results.get(cell, {}).get("orb_keypoints_mean"),
             "orb_matches_mean": results.get(cell, {}).get("orb_matches_mean"),
+            "data_warnings": results.get(cell, {}).get("data_warnings", []),
         }
         for cell in cells
     ]

@@ -290,6 +290,9 @@ def _events_end_early(config: ResolvedConfig, dataset: Dataset, times: np.ndarra
 #: simulated IMUs the fit found 0.6-3.7 deg (ten sequences, best.toml and paper.toml); a wrong
 #: axis convention is 90 or 180 deg.
 IMU_DISAGREEMENT_DEG = 10.0
+#: A fit this close [deg] to an axis swap or flip is taken for it (those are 90 deg apart; a
+#: quarter turn misread on a 2 s sequence was fitted 10 deg off).
+AXES_SNAP_DEG = 20.0
 
 
 def _axis_rotations() -> list[np.ndarray]:
@@ -317,16 +320,19 @@ def _imu_disagrees(config: ResolvedConfig, imu: ImuSeries | None, tracked: Track
         return []
     R_imu_cam = rotvec_to_matrix(config.run.imu_rotvec_cam) @ agreement.R
     axes = min(_axis_rotations(), key=lambda R: geodesic_angle(R, R_imu_cam))
-    snapped = np.degrees(geodesic_angle(axes, R_imu_cam)) < IMU_DISAGREEMENT_DEG
-    kind = (" (the identity)" if np.allclose(axes, np.eye(3)) else " (axes swapped or flipped)") if snapped else ""
+    off = np.degrees(geodesic_angle(axes, R_imu_cam))
+    if off < AXES_SNAP_DEG:
+        kind = "the identity" if np.allclose(axes, np.eye(3)) else "axes swapped or flipped"
+        looks, how = axes, f"{kind}, {off:.1f} deg from the fit"
+    else:
+        looks, how = R_imu_cam, "fitted"
 
     def vector(v) -> str:
         return "[" + ", ".join(f"{round(float(x), 4) + 0.0:g}" for x in v) + "]"
 
     return [f"the gyro agrees with the tracked rotations only turned by {turned:.1f} deg ({agreement.agreeing} of "
-            f"{agreement.pairs} frame pairs): the IMU looks mounted as run.imu_rotvec_cam = "
-            f"{vector(matrix_to_rotvec(axes if snapped else R_imu_cam))}{kind}, not {vector(config.run.imu_rotvec_cam)}; "
-            "check it and the camera calibration"]
+            f"{agreement.pairs} frame pairs): the IMU looks mounted as run.imu_rotvec_cam = {vector(matrix_to_rotvec(looks))} "
+            f"({how}), not {vector(config.run.imu_rotvec_cam)}; check it and the camera calibration"]
 
 
 def write_outputs(out: Path, result: RunResult, label: str) -> None:

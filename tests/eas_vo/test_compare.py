@@ -69,6 +69,21 @@ def test_a_failing_cell_is_reported_the_rest_complete_and_the_exit_says_so(short
     assert "2 cells (1 run, 1 already complete, 1 failed)" in capsys.readouterr().out
 
 
+def test_a_data_warning_is_said_once_with_the_cells_it_came_from(short_sequence, tmp_path, capsys):
+    """The IMU configured a quarter turn off: both backends' cells see the same gyro against the
+    same tracks, and stderr says it once naming both, on the run and on the resume."""
+    out = tmp_path / "imu"
+    argv = ["compare", "--dataset", str(short_sequence), "--frontends", "eas", "--backends", "chain,gtsam", "--config", "best",
+            "--set", "run.imu_rotvec_cam=[0.0, 0.0, 1.5708]", "--out", str(out), "--jobs", "1", "--quiet"]
+    for _ in range(2):
+        assert main(argv) == 0
+        lines = [line for line in capsys.readouterr().err.splitlines() if "warning" in line]
+        assert len(lines) == 1 and "the IMU looks mounted as run.imu_rotvec_cam = [0, 0, 0] (the identity, " in lines[0]
+        rows = json.loads((out / "table.json").read_text())
+        assert lines[0].endswith(f"(cells {rows[0]['folder']}, {rows[1]['folder']})")
+        assert rows[0]["data_warnings"] == rows[1]["data_warnings"] and len(rows[0]["data_warnings"]) == 1
+
+
 def test_a_configuration_error_stops_compare_before_any_work(short_sequence, tmp_path, capsys):
     out = tmp_path / "bad"
     argv = ["compare", "--dataset", str(short_sequence), "--frontends", "slice", "--sweep", "frontend.n=2000,0",

@@ -164,7 +164,8 @@ def test_an_imu_mounted_otherwise_than_configured_is_named(sequence_copy, tmp_pa
 
     flipped = best(sequence_copy, "flipped")
     assert len(flipped["data_warnings"]) == 1 and flipped["data_warnings"][0] in capsys.readouterr().err
-    said = re.search(r"run.imu_rotvec_cam = \[([^]]+)\] \(axes swapped or flipped\), not \[0, 0, 0\]", flipped["data_warnings"][0])
+    said = re.search(r"run.imu_rotvec_cam = \[([^]]+)\] \(axes swapped or flipped, [0-9.]+ deg from the fit\), not \[0, 0, 0\]",
+                     flipped["data_warnings"][0])
     suggested = Rotation.from_rotvec([float(x) for x in said.group(1).split(",")]).as_matrix()
     assert np.allclose(suggested, R_imu_cam, atol=1e-4)
 
