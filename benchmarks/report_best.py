@@ -4,7 +4,7 @@ and whole 30 s (`histeq`, time offset 0.01 s) and on simulator seeds (`eas`) tha
 benchmarks/select_best.py never sees; then frames/s and real-time factor of `best.toml`
 (best of 3 runs).
 
-    python benchmarks/report_best.py [--real DIR] [--seeds 41 42 43] [--set SECTION.KEY=VALUE ...]
+    python benchmarks/report_best.py [--real DIR] [--seeds 41 42 43] [--sequence DIR ...] [--set SECTION.KEY=VALUE ...]
 
 Seeds are simulated once into $EAS_VO_CACHE_DIR/simulated/seed-N (about 40 s each).
 """
@@ -36,25 +36,31 @@ def run(name: str, dataset: str, frontend: str, extra: dict, best_sets: list[str
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--real", default="../shared/data/ecd/shapes_rotation_0-30s", help="the real excerpt's folder")
-    parser.add_argument("--seeds", type=int, nargs="+", default=[41, 42, 43], help="simulator seeds not used to choose")
+    parser.add_argument("--real", default="../shared/data/ecd/shapes_rotation_0-30s", help="the real excerpt's folder ('' to leave it out)")
+    parser.add_argument("--seeds", type=int, nargs="*", default=[41, 42, 43], help="simulator seeds not used to choose")
+    parser.add_argument("--sequence", action="append", default=[], metavar="DIR",
+                        help="also report on this sequence with eas (repeatable; e.g. eas-vo simulate --illumination 0.1)")
+    parser.add_argument("--no-speed", action="store_true", help="skip the speed measurement")
     parser.add_argument("--set", action="append", default=[], metavar="SECTION.KEY=VALUE",
                         help="report best.toml with this value changed (repeatable)")
     args = parser.parse_args()
     if set(args.seeds) & set(SELECTION_SEEDS):
         raise SystemExit(f"seeds {sorted(set(args.seeds) & set(SELECTION_SEEDS))} took part in a selection (select_best.py): report on others")
     columns = {}
-    if Path(args.real).is_dir():
+    if args.real and Path(args.real).is_dir():
         columns.update({label: (args.real, "histeq", {"start_s": s, "duration_s": d, "time_offset_s": 0.01})
                         for label, (s, d) in REAL_WINDOWS.items()})
-    else:
+    elif args.real:
         print(f"{args.real}: not found, real columns skipped", file=sys.stderr)
     columns.update({f"seed {n}": (str(seed_folder(n)), "eas", {}) for n in args.seeds})
+    columns.update({Path(d).name: (d, "eas", {}) for d in args.sequence})
     print("| | " + " | ".join(columns) + " |")
     print("|---" * (len(columns) + 1) + "|")
     for name in CONFIGS:
         cells = [f"{run(name, *column, args.set)['ape_mean_rad']:.4f}" for column in columns.values()]
         print(f"| {name} | " + " | ".join(cells) + " |", flush=True)
+    if args.no_speed:
+        return
     speed = {"synthetic:default": ("synthetic:default", "eas", {})}
     if "real 0-30 s" in columns:
         speed["real 0-30 s"] = columns["real 0-30 s"]

@@ -287,7 +287,7 @@ def _events_end_early(config: ResolvedConfig, dataset: Dataset, times: np.ndarra
 
 
 #: Above this angle [deg] the gyro and the tracker disagree on the axes: on correctly mounted
-#: simulated IMUs the fit found 0.6-3.7 deg (ten sequences, best.toml and paper.toml); a wrong
+#: simulated IMUs the fit found 0.6-3.7 deg (twelve sequences, best.toml and paper.toml); a wrong
 #: axis convention is 90 or 180 deg.
 IMU_DISAGREEMENT_DEG = 10.0
 #: A fit this close [deg] to an axis swap or flip is taken for it (those are 90 deg apart; a

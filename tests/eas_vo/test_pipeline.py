@@ -48,7 +48,7 @@ def test_original_frames_on_the_real_excerpt():
 
 def test_best_config_beats_the_paper_config():
     """configs/best.toml against configs/paper.toml. Measured: synthetic eas 0.0114 vs
-    0.166 rad; the real excerpt (histeq, 25 s) 0.0448 vs 0.486 rad."""
+    0.166 rad; the real excerpt (histeq, 25 s) 0.0444 vs 0.486 rad."""
     paper = pipeline.run(config.resolve("paper", {"frontend": "eas"})).metrics
     best = pipeline.run(config.resolve("best", {"frontend": "eas"})).metrics
     assert best["ape_mean_rad"] < 0.5 * paper["ape_mean_rad"]
