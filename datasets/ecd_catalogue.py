@@ -68,8 +68,9 @@ def fetch(name: str, folder: str | Path | None = None, progress: bool = False) -
     """The verified zip of sequence `name`, downloaded first unless already there and whole.
 
     A one-line notice (with the size) goes to stderr before a download. Raises EasVoError
-    for an unknown name, a failed download or a checksum mismatch (nothing is left under the
-    final name in either case).
+    for an unknown name, a server that cannot be reached or does not have the file (before
+    any notice), a failed download or a checksum mismatch (nothing is left under the final
+    name in either case).
     """
     import logging
 
@@ -88,7 +89,7 @@ def fetch(name: str, folder: str | Path | None = None, progress: bool = False) -
     url = os.environ.get("EAS_VO_DATA_URL", BASE_URL).rstrip("/") + "/"
     if urlsplit(url).scheme not in ("http", "https", "ftp"):
         raise EasVoError(f"EAS_VO_DATA_URL={url!r}: expected an http://, https:// or ftp:// address")
-    print(f"eas-vo: fetching {name}.zip ({_size_text(url + name + '.zip')}) from {url} into {target.parent}",
+    print(f"eas-vo: fetching {name}.zip ({_size_text(url + target.name)}) from {url} into {target.parent}",
           file=sys.stderr)
     pooch.get_logger().setLevel(logging.WARNING)  # our notice above replaces its own
     store = pooch.create(path=target.parent, base_url=url, registry={target.name: known}, retry_if_failed=2)
@@ -105,14 +106,22 @@ def fetch(name: str, folder: str | Path | None = None, progress: bool = False) -
 
 
 def _size_text(url: str) -> str:
-    """The size the server announces for `url` (HEAD), as text; 'size unknown' if it does not say."""
+    """The size the server announces for `url` (HEAD), as text; 'size unknown' if it does not
+    say. EasVoError when the server cannot be reached or answers that it has no such file."""
     import requests
 
     try:
         answer = requests.head(url, allow_redirects=True, timeout=10)
-        if not answer.ok:
-            return f"size unknown: HTTP {answer.status_code}"
-        size = int(answer.headers["Content-Length"])
-    except (requests.RequestException, KeyError, ValueError):
+    except (requests.ConnectionError, requests.Timeout) as exc:
+        raise EasVoError(f"{url}: cannot reach the server, nothing was downloaded ({type(exc).__name__})") from None
+    except requests.RequestException:
         return "size unknown"
+    if answer.status_code in (404, 410):
+        raise EasVoError(f"{url}: the server has no such file (HTTP {answer.status_code}), nothing was downloaded")
+    try:
+        size = int(answer.headers["Content-Length"]) if answer.ok else None
+    except (KeyError, ValueError):
+        size = None
+    if size is None:
+        return "size unknown" if answer.ok else f"size unknown: HTTP {answer.status_code}"
     return f"{size / 1e9:.2f} GB" if size >= 1e9 else f"{size / 1e6:.1f} MB"

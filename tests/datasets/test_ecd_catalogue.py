@@ -137,6 +137,26 @@ def test_a_wrong_data_folder_or_url_is_one_line_before_any_download(site, tmp_pa
     assert hits["seq_a.zip"] == 0
 
 
+def test_a_file_the_server_lacks_or_a_server_down_is_one_line_before_any_notice(site, tmp_path, monkeypatch):
+    import os
+
+    data, md5s, _, hits = site
+    registry = tmp_path / "with_missing.txt"
+    registry.write_text(f"seq_a {md5s['seq_a']}\nseq_gone 0123456789abcdef0123456789abcdef\n")
+    monkeypatch.setenv("EAS_VO_DATA_REGISTRY", str(registry))
+    missing = run_eas_vo("fetch", "seq_gone", env=dict(os.environ))
+    assert missing.returncode == 2 and missing.stderr.count("\n") == 1, missing.stderr
+    assert "seq_gone.zip: the server has no such file (HTTP 404), nothing was downloaded" in missing.stderr
+    with socket.socket() as probe:  # a port nothing listens on
+        probe.bind(("127.0.0.1", 0))
+        port = probe.getsockname()[1]
+    monkeypatch.setenv("EAS_VO_DATA_URL", f"http://127.0.0.1:{port}/")
+    down = run_eas_vo("fetch", "seq_a", env=dict(os.environ))
+    assert down.returncode == 2 and down.stderr.count("\n") == 1, down.stderr
+    assert "cannot reach the server, nothing was downloaded (ConnectionError)" in down.stderr
+    assert _leftovers(data) == [] and hits["seq_a.zip"] == 0
+
+
 def test_a_fetched_file_gets_the_users_umask(site):
     import os
     import stat
