@@ -189,6 +189,17 @@ def build_parser() -> argparse.ArgumentParser:
     fetch.add_argument("--dir", metavar="DIR", help="where to keep them (default: $EAS_VO_DATA_DIR, else the cache's data/)")
     fetch.set_defaults(func=cmd_fetch)
 
+    cache = sub.add_parser(
+        "cache",
+        help="show, or clear, what eas-vo keeps in its cache folder",
+        description="List each folder of the cache (event caches, simulated sequences, downloads, ...) with "
+        "its entries and size; --clear NAME empties one (repeatable). Everything there is rebuilt, simulated "
+        "or downloaded again when next needed; clear it while no eas-vo run is using it.",
+        epilog="environment: EAS_VO_CACHE_DIR (the cache folder; default $XDG_CACHE_HOME/eas-vo or ~/.cache/eas-vo)",
+    )
+    cache.add_argument("--clear", action="append", default=[], metavar="NAME", help="empty this cache folder (e.g. events)")
+    cache.set_defaults(func=cmd_cache)
+
     sim = sub.add_parser(
         "simulate",
         help="write a synthetic dim-scene DAVIS sequence (ECD layout)",
@@ -501,6 +512,33 @@ def cmd_fetch(args) -> int:
         path = plugin.fetch(name, args.dir, progress=sys.stderr.isatty())
         print(f"{name}: {path} (verified)")
     return 0
+
+
+def cmd_cache(args) -> int:
+    from eas_vo.io import CACHE_KINDS, cache_dir, cache_usage, clear_cache
+
+    usage = cache_usage()
+    unknown = [name for name in args.clear if name not in usage]
+    if unknown:  # every name checked before anything is removed
+        raise EasVoError(f"cache {unknown[0]!r}: not in {cache_dir()} (there: {', '.join(usage) or 'nothing'})")
+    for name in dict.fromkeys(args.clear):
+        print(f"{name}: cleared, {_size(clear_cache(name))} freed")
+    if args.clear:
+        return 0
+    print(f"{cache_dir()}:")
+    for name, (entries, size) in usage.items():
+        print(f"  {name:10s} {entries:5d} entries {_size(size):>9s}  {CACHE_KINDS.get(name, '')}")
+    total = sum(size for _, size in usage.values())
+    print(f"  total {_size(total)}" + ("; eas-vo cache --clear NAME empties one" if usage else " (empty)"))
+    return 0
+
+
+def _size(n_bytes: int) -> str:
+    """Bytes as text in B, kB, MB or GB."""
+    for unit, scale in (("GB", 1e9), ("MB", 1e6), ("kB", 1e3)):
+        if n_bytes >= scale:
+            return f"{n_bytes / scale:.1f} {unit}"
+    return f"{n_bytes} B"
 
 
 def cmd_simulate(args) -> int:

@@ -29,6 +29,42 @@ def cache_dir() -> Path:
     return Path(base) / "eas-vo"
 
 
+#: What eas-vo itself keeps in the cache folder, and what clearing it costs.
+CACHE_KINDS = {
+    "events": "binary event caches; rebuilt from their source when next read",
+    "synthetic": "simulated sequences; simulated again when next needed (about 40 s each)",
+    "data": "downloaded recordings (eas-vo fetch); downloaded again when next needed",
+    "simulated": "simulator seeds of benchmarks/select_best.py and report_best.py",
+    "bench": "inputs of benchmarks/bench_events.py and bench_memory.py",
+}
+
+
+def cache_usage() -> dict[str, tuple[int, int]]:
+    """(entries, bytes) of each folder in the cache folder, by name (not following links)."""
+    root = cache_dir()
+    usage = {}
+    for folder in sorted(p for p in root.iterdir() if p.is_dir() and not p.is_symlink()) if root.is_dir() else []:
+        entries = [p for p in folder.iterdir() if not p.name.startswith(".")]
+        files = (f for f in folder.rglob("*") if f.is_file() and not f.is_symlink())
+        usage[folder.name] = (len(entries), sum(f.lstat().st_size for f in files))
+    return usage
+
+
+def clear_cache(name: str) -> int:
+    """Remove everything in cache folder `name` (see cache_usage); the bytes freed."""
+    import shutil
+
+    usage = cache_usage()
+    if name not in usage:
+        raise EasVoError(f"cache {name!r}: not in {cache_dir()} (there: {', '.join(usage) or 'nothing'})")
+    for entry in (cache_dir() / name).iterdir():
+        if entry.is_dir() and not entry.is_symlink():
+            shutil.rmtree(entry)
+        else:
+            entry.unlink()
+    return usage[name][1]
+
+
 # ----------------------------------------------------------------------------- atomic writes
 
 

@@ -38,6 +38,25 @@ def test_run_writes_every_output(eas_run):
     assert (eas_run / "rotation.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
 
+def test_cache_lists_clears_and_a_run_rebuilds_what_was_cleared(short_sequence, tmp_path, monkeypatch, capsys):
+    monkeypatch.setenv("EAS_VO_CACHE_DIR", str(tmp_path / "cache"))
+    first = tmp_path / "first"
+    assert main(["run", "--dataset", str(short_sequence), "--out", str(first), "--quiet"]) == 0
+    capsys.readouterr()
+    assert main(["cache"]) == 0
+    listed = capsys.readouterr().out
+    assert re.search(r"events +1 entries +[0-9.]+ MB +binary event caches", listed), listed
+    assert main(["cache", "--clear", "events", "--clear", "nothing_here"]) == 2  # every name checked first
+    assert "cache 'nothing_here': not in" in capsys.readouterr().err and len(list((tmp_path / "cache" / "events").iterdir())) == 1
+    assert main(["cache", "--clear", "events"]) == 0
+    assert re.fullmatch(r"events: cleared, [0-9.]+ MB freed\n", capsys.readouterr().out)
+    assert list((tmp_path / "cache" / "events").iterdir()) == []
+    again = tmp_path / "again"
+    assert main(["run", "--dataset", str(short_sequence), "--out", str(again), "--quiet"]) == 0
+    assert len(list((tmp_path / "cache" / "events").iterdir())) == 1
+    assert json.loads((again / "metrics.json").read_text())["ape_mean_rad"] == json.loads((first / "metrics.json").read_text())["ape_mean_rad"]
+
+
 def test_evo_reports_the_same_average_ape(eas_run):
     beside = Path(sys.executable).parent / "evo_ape"  # the evo of this interpreter, venv or not
     evo_ape = str(beside) if beside.exists() else shutil.which("evo_ape")
