@@ -118,12 +118,11 @@ class GtsamBackend(Backend):
         c = self.config
         params = gtsam.PreintegratedRotationParams()
         params.setGyroscopeCovariance(c.gyro_noise**2 * np.eye(3))
-        t_imu = imu.t
         bias = gtsam.symbol("b", 0)
         by_frame[0].append(gtsam.PriorFactorVector(bias, np.zeros(3), gtsam.noiseModel.Isotropic.Sigma(3, c.gyro_bias_sigma)))
         for k in range(1, len(times)):
             a, b = times[k - 1], times[k]
-            if a < t_imu[0] or b > t_imu[-1] + 0.1:
+            if a < imu.t[0] or b > imu.t[-1] + 0.1:
                 continue  # no gyro over this interval
             pim = gtsam.PreintegratedAhrsMeasurements(params, np.zeros(3))
             for s, dt in imu.readings_between(a, b):

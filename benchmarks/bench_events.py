@@ -32,15 +32,16 @@ def make_file(n_events: int) -> Path:
     """The first n_events of a simulated sequence long enough to hold them, as events.txt."""
     from eas_vo.datasets.simulator import SimConfig, simulate
     from eas_vo.eventfile import write_events_text
-    from eas_vo.io import cache_dir
+    from eas_vo.io import cache_folder
     from eas_vo.registry import open_dataset
 
-    path = cache_dir() / "bench" / f"events_{n_events}.txt"
+    bench = cache_folder("bench", "inputs of benchmarks/bench_events.py and bench_memory.py")
+    path = bench / f"events_{n_events}.txt"
     if path.exists():
         return path
     duration = 25.0
     while True:
-        folder = cache_dir() / "bench" / f"sim_{duration:g}s"
+        folder = bench / f"sim_{duration:g}s"
         if not (folder / "images.txt").exists():
             print(f"simulating {duration:g} s ...", file=sys.stderr)
             simulate(SimConfig(duration_s=duration, seed=11), folder)

@@ -17,10 +17,10 @@ import numpy as np
 
 def make_folder(n_events: int):
     from eas_vo.eventfile import format_events
-    from eas_vo.io import atomic_path, cache_dir, write_text_atomic
+    from eas_vo.io import atomic_path, cache_folder, write_text_atomic
     from eas_vo.registry import open_dataset
 
-    folder = cache_dir() / "bench" / f"events_only_{n_events}"
+    folder = cache_folder("bench", "inputs of benchmarks/bench_events.py and bench_memory.py") / f"events_only_{n_events}"
     if (folder / "events.txt").exists():
         return folder
     base = open_dataset("synthetic:default")

@@ -78,12 +78,13 @@ def main() -> None:
     print(f"  APE {best.get('ape_mean_rad', np.nan):.4f} rad, NC {best['nc_mean']:.1f}")
 
     result = pipeline.run(cfg)
+    imu = pipeline.open_pipeline(cfg).imu  # as the run gives it (the gyro fused where configured)
     n = len(result.t)
     print(f"backends on the same {len(result.edges)} edges ({n} frames):")
     for name, changes in (("chain", []), ("gtsam", ["backend.mode=batch"]), ("gtsam", ["backend.mode=online"])):
         bcfg = config.resolve(args.config, {**chosen, "backend": name}, changes)
         backend = registry.get("backends", name)(bcfg.backend)
-        seconds = min(_timed(lambda: backend.solve(n, result.edges, times=result.t)) for _ in range(args.repeat))
+        seconds = min(_timed(lambda: backend.solve(n, result.edges, times=result.t, imu=imu)) for _ in range(args.repeat))
         label = name + (f" ({changes[0].split('=')[1]})" if changes else "")
         print(f"  {label:16s} {1e3 * seconds / n:7.3f} ms/frame  (+{100 * seconds / best['elapsed_s']:5.1f} % of the whole run)")
 

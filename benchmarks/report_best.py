@@ -4,7 +4,8 @@ and whole 30 s (`histeq`, time offset 0.01 s) and on simulator seeds (`eas`) tha
 benchmarks/select_best.py never sees; then frames/s and real-time factor of `best.toml`
 (best of 3 runs).
 
-    python benchmarks/report_best.py [--real DIR] [--seeds 41 42 43] [--sequence DIR ...] [--set SECTION.KEY=VALUE ...]
+    python benchmarks/report_best.py [--real DIR | --real ''] [--seeds 41 42 43] [--sequence DIR ...] [--no-speed]
+                                     [--set SECTION.KEY=VALUE ...]
 
 Seeds are simulated once into $EAS_VO_CACHE_DIR/simulated/seed-N (about 40 s each).
 """
@@ -53,7 +54,8 @@ def main() -> None:
     elif args.real:
         print(f"{args.real}: not found, real columns skipped", file=sys.stderr)
     columns.update({f"seed {n}": (str(seed_folder(n)), "eas", {}) for n in args.seeds})
-    columns.update({Path(d).name: (d, "eas", {}) for d in args.sequence})
+    names = [Path(d).name for d in args.sequence]
+    columns.update({(name if names.count(name) == 1 else d): (d, "eas", {}) for name, d in zip(names, args.sequence)})
     print("| | " + " | ".join(columns) + " |")
     print("|---" * (len(columns) + 1) + "|")
     for name in CONFIGS:

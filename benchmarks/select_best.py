@@ -28,7 +28,7 @@ from pathlib import Path
 
 from eas_vo import config, pipeline
 from eas_vo.config import parse_set
-from eas_vo.io import cache_dir
+from eas_vo.io import cache_folder
 
 #: The values tried by default (every other value is best.toml's).
 CANDIDATES = {
@@ -46,7 +46,7 @@ WITHIN = 0.02
 
 def seed_folder(seed: int) -> Path:
     """The default sequence simulated with `seed` (simulated once)."""
-    folder = cache_dir() / "simulated" / f"seed-{seed}"
+    folder = cache_folder("simulated", "simulator seeds of benchmarks/select_best.py and report_best.py") / f"seed-{seed}"
     if not (folder / "images.txt").exists():
         subprocess.run([sys.executable, "-m", "eas_vo", "simulate", "--seed", str(seed), "--out", str(folder), "--overwrite"],
                        check=True)

@@ -20,7 +20,7 @@ from pathlib import Path
 from urllib.parse import urlsplit
 
 from eas_vo.errors import DataError, EasVoError
-from eas_vo.io import cache_dir, current_umask
+from eas_vo.io import cache_folder, current_umask
 
 BASE_URL = "https://rpg.ifi.uzh.ch/datasets/davis/"
 _MD5 = re.compile(r"[0-9a-fA-F]{32}")
@@ -29,7 +29,7 @@ _MD5 = re.compile(r"[0-9a-fA-F]{32}")
 def data_dir() -> Path:
     """Where fetched sequences live: $EAS_VO_DATA_DIR, else the cache folder's `data/`."""
     env = os.environ.get("EAS_VO_DATA_DIR")
-    return Path(env) if env else cache_dir() / "data"
+    return Path(env) if env else cache_folder("data", "recordings from eas-vo fetch; downloaded again when next needed")
 
 
 def registry() -> dict[str, str]:

@@ -14,7 +14,7 @@ from eas_vo.datasets.ecd import EcdFolderDataset
 from eas_vo.datasets.simulator import SimConfig, simulate
 from eas_vo.datasets.simulator.sensor import DvsModel
 from eas_vo.errors import EasVoError
-from eas_vo.io import cache_dir
+from eas_vo.io import cache_folder
 from eas_vo.validation import check_range
 
 #: Named sequences. `default` is the embedded sequence `eas-vo run` uses.
@@ -62,7 +62,7 @@ def sequence_folder(name: str, config: SyntheticConfig | None = None, progress: 
         raise EasVoError(f"unknown synthetic sequence {name!r}; available: {', '.join(PRESETS)}")
     config = (config or SyntheticConfig()).applied_to(PRESETS[name])
     digest = hashlib.sha1(config.fingerprint().encode()).hexdigest()[:12]
-    folder = cache_dir() / "synthetic" / f"{name}-{digest}"
+    folder = cache_folder("synthetic", "simulated sequences; simulated again when next needed (about 40 s each)") / f"{name}-{digest}"
     if not (folder / "images.txt").exists():
         if progress:
             print(f"eas-vo: simulating synthetic:{name} ({config.duration_s:g} s) into {folder} (once)", file=sys.stderr)

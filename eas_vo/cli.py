@@ -21,7 +21,7 @@ outputs (in --out):
   trajectory.tum   estimated camera-to-world rotation per frame (TUM: t tx ty tz qx qy qz qw)
   groundtruth.tum  ground truth at the same timestamps (when the dataset has it)
   metrics.json     average APE (Eq. 3, rad), RMSE, max, average NC, frames, timing
-  frames.csv       per frame: index, t, NC, inliers, status (ok, weak, lost), redetected,
+  frames.csv       per frame: index, t, NC, inliers, status (first, ok, weak, lost, same_time), redetected,
                    inlier ratio, residual [px], why the frame is weak or lost
   config.toml      the resolved configuration (re-run with --config config.toml)
   rotation.png     estimated and true roll/pitch/yaw over time
@@ -341,9 +341,9 @@ def cmd_run(args) -> int:
     if m["time_offset_estimated"]:
         ape_text += f" (time offset {m['time_offset_s'] * 1e3:+.1f} ms, estimated)"
     counts = m["status_counts"]
-    measured = ", ".join(f"{counts[s]} {s}" for s in ("ok", "weak", "lost") if counts.get(s))
+    statuses = ", ".join(f"{counts[s]} {s}" for s in ("first", "ok", "weak", "lost", "same_time") if counts.get(s))
     print(
-        f"{rc.frontend}+{rc.tracker}+{rc.backend} on {rc.dataset}: {m['frames']} frames ({measured or 'none measured'}), "
+        f"{rc.frontend}+{rc.tracker}+{rc.backend} on {rc.dataset}: {m['frames']} frames ({statuses}), "
         f"average NC {m['nc_mean']:.1f}, "
         f"{ape_text}, {m['frames_per_s']:.1f} frames/s -> {out}"
     )
@@ -515,7 +515,7 @@ def cmd_fetch(args) -> int:
 
 
 def cmd_cache(args) -> int:
-    from eas_vo.io import CACHE_KINDS, cache_dir, cache_usage, clear_cache
+    from eas_vo.io import cache_dir, cache_usage, clear_cache
 
     usage = cache_usage()
     unknown = [name for name in args.clear if name not in usage]
@@ -526,9 +526,9 @@ def cmd_cache(args) -> int:
     if args.clear:
         return 0
     print(f"{cache_dir()}:")
-    for name, (entries, size) in usage.items():
-        print(f"  {name:10s} {entries:5d} entries {_size(size):>9s}  {CACHE_KINDS.get(name, '')}")
-    total = sum(size for _, size in usage.values())
+    for name, part in usage.items():
+        print(f"  {name:10s} {part.entries:5d} entries {_size(part.size):>9s}  {part.about}")
+    total = sum(part.size for part in usage.values())
     print(f"  total {_size(total)}" + ("; eas-vo cache --clear NAME empties one" if usage else " (empty)"))
     return 0
 

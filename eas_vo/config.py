@@ -38,8 +38,8 @@ class RunConfig:
             (the paper's Table 2), reported in metrics.json.
         imu_rotvec_cam: the rig's camera-to-IMU rotation R_imu_cam as a rotation vector [rad]
             (v_imu = R_imu_cam v_cam): trackers and backends get the IMU's readings rotated
-            into the camera frame by it. Identity: the DAVIS240C of the Event Camera Dataset
-            and the simulator.
+            into the camera frame by it. The identity: the simulator's (and, as reported, the
+            Event Camera Dataset's). Every run checks it against the images (a warning).
         imu_time_offset_s: IMU time = frame time + this [s].
     """
 
@@ -98,7 +98,7 @@ def _toml_value(value) -> str:
     return '"' + str(value).replace("\\", "\\\\").replace('"', '\\"') + '"'
 
 
-#: Keys that left a plugin's section for [run] (an older config file is told where they went).
+#: Keys that left [tracker] and [backend] for [run] (moved there when an older file holds them).
 MOVED_TO_RUN = ("imu_rotvec_cam", "imu_time_offset_s")
 
 
@@ -107,8 +107,6 @@ def build(cls, values: dict, section: str):
     hints = get_type_hints(cls)
     known = {f.name for f in fields(cls)}
     unknown = sorted(set(values) - known)
-    if unknown and unknown[0] in MOVED_TO_RUN and section != "run":
-        raise ConfigError(f"{section}.{unknown[0]} is now run.{unknown[0]}: the rig's, one for the tracker and the backend")
     if unknown:
         raise ConfigError(
             f"unknown key {section}.{unknown[0]}; allowed keys: {', '.join(sorted(known)) or 'none'}"
@@ -220,6 +218,7 @@ def resolve(
                 raise ConfigError(f"--set {assignment!r}: {k} is not a table")
         table[keys[-1]] = value
 
+    _move_to_run(raw)
     run = build(RunConfig, raw["run"], "run")
     dataset_cls, _ = registry.resolve_dataset(run.dataset)
     chosen = {
@@ -230,6 +229,33 @@ def resolve(
     }
     sections = {name: build(cls.Config, _plugin_table(raw[name], name, cls.name), name) for name, cls in chosen.items()}
     return ResolvedConfig(run=run, **sections)
+
+
+def _move_to_run(raw: dict) -> None:
+    """Move MOVED_TO_RUN keys found in [tracker] or [backend] (or their plugin tables), as
+    every config.toml written before they moved holds them, into [run]; places that disagree
+    (the rig has one IMU) are an error naming them."""
+    for key in MOVED_TO_RUN:
+        found = {}
+        for section in ("tracker", "backend"):
+            tables = [(section, raw[section])] + [(f"{section}.{k}", t) for k, t in raw[section].items() if isinstance(t, dict)]
+            found.update({f"{where}.{key}": table.pop(key) for where, table in tables if key in table})
+        if key in raw["run"]:
+            found[f"run.{key}"] = raw["run"][key]
+        values = {repr(_as_numbers(v)) for v in found.values()}
+        if len(values) > 1:
+            places = ", ".join(f"{where} = {_toml_value(v)}" for where, v in found.items())
+            raise ConfigError(f"{places}: the rig has one IMU; set run.{key} only")
+        if found:
+            raw["run"][key] = next(iter(found.values()))
+
+
+def _as_numbers(value):
+    """A number, or a list of them, as floats (to compare values written 0 or 0.0); else as is."""
+    try:
+        return tuple(float(x) for x in value) if isinstance(value, (list, tuple)) else float(value)
+    except (TypeError, ValueError):
+        return value
 
 
 def _plugin_table(table: dict, section: str, name: str) -> dict:

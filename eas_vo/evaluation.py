@@ -137,16 +137,29 @@ class ImuAgreement:
         R: the rotation that best maps the tracker's rotation vectors onto the gyro's, g = R v
             (the identity when the IMU's configured place on the rig is right).
         pairs: consecutive frame pairs compared (the gyro turned at least MIN_TURN_RAD).
-        agreeing: those within half the gyro's rotation of R v, from which R was fitted.
+        agreeing: those within half the gyro's rotation of R v (R fitted on the agreeing
+            pairs of the previous round).
+        spread: the second singular value of the agreeing rotation vectors over the first: near
+            0 when the camera turned about one axis only, and R is then free about that axis.
+        clock_shift_s: the gyro read this much later [s] explains the agreeing pairs best
+            (0 when the IMU's configured time offset is right); searched within CLOCK_SEARCH_S.
+        residual_rad, residual_unshifted_rad: the median |g - R v| [rad] over the agreeing
+            pairs with the gyro read clock_shift_s later, and as configured.
     """
 
     R: np.ndarray
     pairs: int
     agreeing: int
+    spread: float
+    clock_shift_s: float = 0.0
+    residual_rad: float = 0.0
+    residual_unshifted_rad: float = 0.0
 
 
 #: Frame pairs over which the gyro turned less carry no direction to compare [rad] (0.5 deg).
 MIN_TURN_RAD = np.radians(0.5)
+#: How far the IMU's clock is searched [s], in 1 ms steps: about a DAVIS frame interval.
+CLOCK_SEARCH_S = 0.05
 
 
 def imu_agreement(t: np.ndarray, edges, imu: ImuSeries) -> ImuAgreement | None:
@@ -156,7 +169,7 @@ def imu_agreement(t: np.ndarray, edges, imu: ImuSeries) -> ImuAgreement | None:
     failed measurements and a few percent of scale). None without 20 pairs to compare."""
     from eas_vo.geometry.two_view import kabsch
 
-    tracked, gyro = [], []
+    tracked, gyro, spans = [], [], []
     for e in edges:
         if e.j != e.i + 1 or not 0 <= e.i < len(t) - 1:
             continue
@@ -164,6 +177,7 @@ def imu_agreement(t: np.ndarray, edges, imu: ImuSeries) -> ImuAgreement | None:
         if R_gyro is not None and geodesic_angle(np.eye(3), R_gyro) >= MIN_TURN_RAD:
             tracked.append(e.R_i_j)
             gyro.append(R_gyro)
+            spans.append((t[e.i], t[e.j]))
     if len(tracked) < 20:
         return None
     v, g = matrix_to_rotvec(np.stack(tracked)), matrix_to_rotvec(np.stack(gyro))
@@ -173,7 +187,42 @@ def imu_agreement(t: np.ndarray, edges, imu: ImuSeries) -> ImuAgreement | None:
         agree = np.linalg.norm(g - v @ R.T, axis=1) < 0.5 * np.linalg.norm(g, axis=1)
         if agree.sum() < 3:
             break
-    return ImuAgreement(R, len(v), int(agree.sum()))
+    singular = np.linalg.svd(v[agree], compute_uv=False) if agree.sum() >= 3 else np.zeros(3)
+    t0, t1 = np.array(spans)[agree].T
+    shift, residual, unshifted = _best_clock_shift(t0, t1, v[agree] @ R.T, imu)
+    return ImuAgreement(R, len(v), int(agree.sum()), float(singular[1] / max(singular[0], 1e-12)), shift, residual, unshifted)
+
+
+def _best_clock_shift(t0: np.ndarray, t1: np.ndarray, expected: np.ndarray, imu: ImuSeries) -> tuple[float, float, float]:
+    """The shift d [s] of the gyro's clock (read at t + d) whose rotation vectors over frame
+    times t0 < t1 best match `expected` (N, 3) [rad], by the median distance on a 1 ms grid
+    within CLOCK_SEARCH_S, refined by a parabola; returns (d, the median at d, the median at
+    0). The gyro's rotation vector is taken as its integrated rate: exact for held readings
+    up to the composition of rotations within one frame interval (second order), and cheap
+    enough for a hundred shifts."""
+    T = imu.t
+    integral = np.vstack([np.zeros(3), np.cumsum(imu.gyro[:-1] * np.diff(T)[:, None], axis=0)])
+    covered = (t0 - CLOCK_SEARCH_S >= T[0]) & (t1 + CLOCK_SEARCH_S <= T[-1])
+    t0, t1, expected = t0[covered], t1[covered], expected[covered]
+
+    def medians(shifts: np.ndarray) -> np.ndarray:
+        """The median distance for each shift (S,) [s], all at once."""
+        a, b = t0[None, :] + shifts[:, None], t1[None, :] + shifts[:, None]
+        turned = np.stack([np.interp(b, T, integral[:, k]) - np.interp(a, T, integral[:, k]) for k in range(3)], -1)
+        return np.median(np.linalg.norm(turned - expected, axis=-1), axis=1)
+
+    if len(t0) < 20:
+        return 0.0, np.nan, np.nan
+    shifts = np.arange(-round(CLOCK_SEARCH_S * 1e3), round(CLOCK_SEARCH_S * 1e3) + 1) * 1e-3
+    costs = medians(shifts)
+    k = int(np.argmin(costs))
+    best = shifts[k]
+    if 0 < k < len(shifts) - 1:
+        curvature = costs[k - 1] - 2 * costs[k] + costs[k + 1]
+        if curvature > 0:
+            best += 0.5e-3 * (costs[k - 1] - costs[k + 1]) / curvature
+    at_best, at_zero = medians(np.array([best, 0.0]))
+    return float(best), float(at_best), float(at_zero)
 
 
 # ----------------------------------------------------------------------------- external trajectories

@@ -13,6 +13,7 @@ import sys
 import tempfile
 import time
 from contextlib import contextmanager
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -29,40 +30,61 @@ def cache_dir() -> Path:
     return Path(base) / "eas-vo"
 
 
-#: What eas-vo itself keeps in the cache folder, and what clearing it costs.
-CACHE_KINDS = {
-    "events": "binary event caches; rebuilt from their source when next read",
-    "synthetic": "simulated sequences; simulated again when next needed (about 40 s each)",
-    "data": "downloaded recordings (eas-vo fetch); downloaded again when next needed",
-    "simulated": "simulator seeds of benchmarks/select_best.py and report_best.py",
-    "bench": "inputs of benchmarks/bench_events.py and bench_memory.py",
-}
+#: The file in each cache folder saying what it holds (cache_folder, cache_usage).
+CACHE_ABOUT = ".about"
 
 
-def cache_usage() -> dict[str, tuple[int, int]]:
-    """(entries, bytes) of each folder in the cache folder, by name (not following links)."""
+def cache_folder(name: str, about: str) -> Path:
+    """The cache folder's part `name` (created when possible), with a line saying what it
+    holds and what clearing it costs (`eas-vo cache` shows it)."""
+    folder = cache_dir() / name
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+        if not (folder / CACHE_ABOUT).exists():
+            (folder / CACHE_ABOUT).write_text(about + "\n")
+    except OSError:
+        pass  # a read-only cache: whoever writes there says why
+    return folder
+
+
+@dataclass(frozen=True)
+class CachePart:
+    """One folder of the cache: its entries (not counting hidden files), bytes (not following
+    links) and what it holds (its CACHE_ABOUT line, "" without one)."""
+
+    entries: int
+    size: int
+    about: str
+
+
+def cache_usage() -> dict[str, CachePart]:
+    """Each folder of the cache folder, by name."""
     root = cache_dir()
     usage = {}
     for folder in sorted(p for p in root.iterdir() if p.is_dir() and not p.is_symlink()) if root.is_dir() else []:
         entries = [p for p in folder.iterdir() if not p.name.startswith(".")]
-        files = (f for f in folder.rglob("*") if f.is_file() and not f.is_symlink())
-        usage[folder.name] = (len(entries), sum(f.lstat().st_size for f in files))
+        files = (f for f in folder.rglob("*") if f.is_file() and not f.is_symlink() and f.name != CACHE_ABOUT)
+        about = folder / CACHE_ABOUT
+        usage[folder.name] = CachePart(len(entries), sum(f.lstat().st_size for f in files),
+                                       about.read_text(errors="replace").strip() if about.is_file() else "")
     return usage
 
 
 def clear_cache(name: str) -> int:
-    """Remove everything in cache folder `name` (see cache_usage); the bytes freed."""
+    """Remove everything in cache folder `name` but its CACHE_ABOUT line; the bytes freed."""
     import shutil
 
     usage = cache_usage()
     if name not in usage:
         raise EasVoError(f"cache {name!r}: not in {cache_dir()} (there: {', '.join(usage) or 'nothing'})")
     for entry in (cache_dir() / name).iterdir():
+        if entry.name == CACHE_ABOUT:
+            continue
         if entry.is_dir() and not entry.is_symlink():
             shutil.rmtree(entry)
         else:
             entry.unlink()
-    return usage[name][1]
+    return usage[name].size
 
 
 # ----------------------------------------------------------------------------- atomic writes

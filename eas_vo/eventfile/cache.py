@@ -20,7 +20,7 @@ import numpy as np
 
 from eas_vo.errors import DataError, DataWarnings
 from eas_vo.eventfile.convert import convert_text_to_cache
-from eas_vo.io import atomic_path, cache_dir
+from eas_vo.io import atomic_path, cache_folder
 from eas_vo.types import EVENT_DTYPE
 
 CACHE_MAGIC = b"EASVOEV3"
@@ -54,7 +54,7 @@ def records_checksum(payload) -> int:
 
 
 def cache_path(key: str) -> Path:
-    return cache_dir() / "events" / f"{key}.ev"
+    return cache_folder("events", "binary event caches; rebuilt from their source when next read") / f"{key}.ev"
 
 
 def open_cache(path: Path) -> np.ndarray | None:

@@ -2,6 +2,7 @@
 
 import math
 import tomllib
+from dataclasses import fields
 
 import pytest
 from hypothesis import given
@@ -128,3 +129,18 @@ def test_hostile_config_files_are_one_line_errors_or_taken_exactly(tmp_path_fact
         for key, value in table.items():
             if not isinstance(value, dict):
                 assert resolved_value(cfg, section, key) == value
+
+
+def test_a_config_written_before_the_imu_moved_to_run_still_resolves(tmp_path):
+    """config.toml files written before run.imu_* existed hold the IMU's place in [tracker]
+    and [backend] (or their plugin tables): it moves to [run]; two places that disagree are
+    one error naming both."""
+    old = tmp_path / "old.toml"
+    old.write_text('[run]\ntracker = "klt"\nbackend = "gtsam"\n[tracker]\nimu_rotvec_cam = [0.0, 0.0, 1.5]\n'
+                   'imu_time_offset_s = 0.004\n[backend.gtsam]\nimu_rotvec_cam = [0, 0, 1.5]\nimu_time_offset_s = 0.004\n')
+    cfg = resolve(old)
+    assert cfg.run.imu_rotvec_cam == (0.0, 0.0, 1.5) and cfg.run.imu_time_offset_s == 0.004
+    assert not any("imu_" in f.name for f in fields(cfg.tracker))
+    with pytest.raises(ConfigError, match=r"tracker.imu_time_offset_s = 0.004, backend.gtsam.imu_time_offset_s = 0.005: "
+                                          r"the rig has one IMU; set run.imu_time_offset_s only"):
+        resolve(old, assignments=["backend.gtsam.imu_time_offset_s=0.005"])

@@ -115,6 +115,50 @@ def test_imu_agreement_finds_how_the_gyro_is_turned(R_imu_cam):
     assert imu_agreement(t[:15], edges[:14], imu) is None  # too few frame pairs to tell
 
 
+def test_a_pan_about_one_axis_never_claims_the_imu_is_turned():
+    """A camera that only pans (yaw, 0.2 deg noise, IMU placed right): the fit is free about
+    the pan axis and lands anywhere; spread says so and the run stays silent. The same with
+    hand-held three-axis motion spreads widely."""
+    from eas_vo import config
+    from eas_vo.pipeline import Tracked, _imu_disagrees
+    from eas_vo.types import FrameRecord
+
+    rng = np.random.default_rng(8)
+    t_imu = np.arange(0.0, 10.0, 0.005)
+    pan = np.convolve(rng.normal(0, 2.0, len(t_imu)), np.ones(40) / 40 * 6, mode="same")
+    for axes, spread_ok in ((np.array([0.0, 1.0, 0.0]), False), (None, True)):
+        omega = pan[:, None] * axes if axes is not None else np.stack([np.roll(pan, 300 * k) for k in range(3)], 1)
+        imu = ImuSeries(t_imu, np.zeros_like(omega), omega + rng.normal(0, 0.003 * np.sqrt(200), omega.shape))
+        t = np.arange(0.2, 9.8, 0.05)
+        noise = Rotation.from_rotvec(rng.normal(0, np.radians(0.2) / np.sqrt(3), (len(t), 3))).as_matrix()
+        truth = ImuSeries(t_imu, np.zeros_like(omega), omega)
+        edges = [RelativeRotation(k - 1, k, gyro_rotation(truth, t[k - 1], t[k]) @ noise[k]) for k in range(1, len(t))]
+        agreement = imu_agreement(t, edges, imu)
+        assert (agreement.spread >= 0.2) == spread_ok, agreement.spread
+        tracked = Tracked([FrameRecord(k, tk, 100, 100, "ok", False) for k, tk in enumerate(t)], edges)
+        assert _imu_disagrees(config.resolve(None), imu, tracked) == []
+
+
+@pytest.mark.parametrize("late_s", [0.0, 0.012, -0.02])
+def test_imu_agreement_finds_how_late_the_gyro_is_stamped(late_s):
+    """The gyro's readings stamped `late_s` after the frames' clock, read as if on time: the
+    search finds the offset within 1.5 ms, and says reading it so explains the tracked rotations
+    clearly better (only when it is off)."""
+    rng = np.random.default_rng(5)
+    t_true = np.arange(0.0, 10.0, 0.001)
+    omega = np.stack([np.convolve(rng.normal(0, 2.0, len(t_true)), np.ones(200) / 200 * 14, mode="same") for _ in range(3)], 1)
+    truth = ImuSeries(t_true, np.zeros_like(omega), omega)
+    gyro = omega + rng.normal(0, 0.003 * np.sqrt(1000), omega.shape)
+    imu = ImuSeries(t_true + late_s, np.zeros_like(gyro), gyro).in_camera_frame(np.eye(3), 0.0)
+    t = np.arange(0.3, 9.7, 0.045)
+    noise = Rotation.from_rotvec(rng.normal(0, np.radians(0.2) / np.sqrt(3), (len(t), 3))).as_matrix()
+    edges = [RelativeRotation(k - 1, k, gyro_rotation(truth, t[k - 1], t[k]) @ noise[k]) for k in range(1, len(t))]
+    agreement = imu_agreement(t, edges, imu)
+    assert agreement.clock_shift_s == pytest.approx(late_s, abs=0.0015)
+    gain = agreement.residual_rad / agreement.residual_unshifted_rad
+    assert gain < 0.7 if late_s else gain > 0.95
+
+
 def test_auto_time_offset_on_the_real_excerpt(tmp_path):
     folder = str(require(SHAPES_ROTATION))
     out = tmp_path / "auto"

@@ -228,24 +228,26 @@ def test_a_lock_held_by_a_zombie_is_taken_over(tmp_path):
 
 
 def test_the_cache_is_listed_and_cleared_folder_by_folder(tmp_path, monkeypatch):
-    """Sizes count every file below a cache folder, never what a link points to; clearing one
-    folder empties it, keeps the folder, the others and any link's target."""
-    from eas_vo.io import cache_usage, clear_cache
+    """Sizes count every file below a cache folder, never what a link points to; each folder
+    says what it holds; clearing one empties it but for that line, keeps the others and any
+    link's target."""
+    from eas_vo.io import CachePart, cache_folder, cache_usage, clear_cache
 
     cache = tmp_path / "cache"
     monkeypatch.setenv("EAS_VO_CACHE_DIR", str(cache))
     assert cache_usage() == {}
-    (cache / "events").mkdir(parents=True)
-    (cache / "events" / "a.ev").write_bytes(b"x" * 100)
+    events = cache_folder("events", "event caches")
+    (events / "a.ev").write_bytes(b"x" * 100)
     outside = tmp_path / "precious.ev"
     outside.write_bytes(b"y" * 1000)
-    (cache / "events" / "link.ev").symlink_to(outside)
+    (events / "link.ev").symlink_to(outside)
     (cache / "synthetic" / "default-1" / "images").mkdir(parents=True)
     (cache / "synthetic" / "default-1" / "images.txt").write_bytes(b"z" * 50)
     (cache / "synthetic" / "default-1" / "images" / "f.png").write_bytes(b"z" * 7)
-    (cache / "data").mkdir()
-    assert cache_usage() == {"data": (0, 0), "events": (2, 100), "synthetic": (1, 57)}
+    assert cache_folder("events", "something else") == events  # the first description stays
+    assert cache_usage() == {"events": CachePart(2, 100, "event caches"), "synthetic": CachePart(1, 57, "")}
     assert clear_cache("events") == 100
-    assert cache_usage() == {"data": (0, 0), "events": (0, 0), "synthetic": (1, 57)} and outside.read_bytes() == b"y" * 1000
-    with pytest.raises(EasVoError, match="cache 'bench': not in .*cache .there: data, events, synthetic"):
+    assert cache_usage() == {"events": CachePart(0, 0, "event caches"), "synthetic": CachePart(1, 57, "")}
+    assert outside.read_bytes() == b"y" * 1000
+    with pytest.raises(EasVoError, match="cache 'bench': not in .*cache .there: events, synthetic"):
         clear_cache("bench")

@@ -110,7 +110,7 @@ def test_a_run_made_to_fail_says_so_frame_by_frame(sequence_copy, tmp_path, caps
     weak = [r for r in rows if r["status"] == "weak"]
     assert all(float(r["inlier_ratio"]) < 0.5 or float(r["residual_px"]) > 0.5 or int(r["inliers"]) < 15 for r in weak)
     lost = len(rows) - len(weak)
-    counted = ", ".join(f"{n} {s}" for n, s in ((len(weak), "weak"), (lost, "lost")) if n)
+    counted = ", ".join(f"{n} {s}" for n, s in ((1, "first"), (len(weak), "weak"), (lost, "lost")) if n)
     assert f"{len(rows) + 1} frames ({counted})," in capsys.readouterr().out
 
 
@@ -141,9 +141,10 @@ def test_event_frontends_say_when_the_events_end_or_there_are_none(sequence_copy
 
 
 def test_an_imu_mounted_otherwise_than_configured_is_named(sequence_copy, tmp_path, capsys):
-    """The IMU rewritten as if mounted upside down (a half turn about x): run as configured
-    (the identity), the gyro disagrees and the warning names the half turn; with
-    run.imu_rotvec_cam set to it, no warning and the run of the untouched sequence again."""
+    """The IMU rewritten as if mounted with its axes permuted (x<-z, y<-x, z<-y: no symmetry
+    to hide a transposition): run with the identity, or another quarter turn that does not
+    commute with it, the gyro disagrees and the warning names that permutation; run with it,
+    no warning and the untouched sequence's result again."""
     import re
 
     from scipy.spatial.transform import Rotation
@@ -155,20 +156,23 @@ def test_an_imu_mounted_otherwise_than_configured_is_named(sequence_copy, tmp_pa
 
     untouched = best(sequence_copy, "untouched")
     assert untouched["data_warnings"] == []
-    R_imu_cam = np.diag([1.0, -1.0, -1.0])
+    R_imu_cam = np.array([[0.0, -1.0, 0.0], [0.0, 0.0, -1.0], [1.0, 0.0, 0.0]])
     imu = np.loadtxt(sequence_copy / "imu.txt", ndmin=2)
     imu[:, 1:4] = imu[:, 1:4] @ R_imu_cam.T
     imu[:, 4:7] = imu[:, 4:7] @ R_imu_cam.T
     np.savetxt(sequence_copy / "imu.txt", imu, fmt="%.9f")
     capsys.readouterr()
 
-    flipped = best(sequence_copy, "flipped")
-    assert len(flipped["data_warnings"]) == 1 and flipped["data_warnings"][0] in capsys.readouterr().err
-    said = re.search(r"run.imu_rotvec_cam = \[([^]]+)\] \(axes swapped or flipped, [0-9.]+ deg from the fit\), not \[0, 0, 0\]",
-                     flipped["data_warnings"][0])
-    suggested = Rotation.from_rotvec([float(x) for x in said.group(1).split(",")]).as_matrix()
-    assert np.allclose(suggested, R_imu_cam, atol=1e-4)
+    for configured in ("[0.0, 0.0, 0.0]", "[0.0, 1.5707963267948966, 0.0]"):
+        moved = best(sequence_copy, f"moved{len(list(tmp_path.iterdir()))}", "--set", f"run.imu_rotvec_cam={configured}")
+        assert len(moved["data_warnings"]) == 1 and moved["data_warnings"][0] in capsys.readouterr().err
+        said = re.search(r"run.imu_rotvec_cam = \[([^]]+)\] \(axes swapped or flipped, [0-9.]+ deg from the fit\), not",
+                         moved["data_warnings"][0])
+        assert said, moved["data_warnings"][0]
+        suggested = Rotation.from_rotvec([float(x) for x in said.group(1).split(",")]).as_matrix()
+        assert np.allclose(suggested, R_imu_cam, atol=1e-9)
 
-    configured = best(sequence_copy, "configured", "--set", f"run.imu_rotvec_cam=[{np.pi}, 0.0, 0.0]")
+    exact = ", ".join(repr(float(x)) for x in Rotation.from_matrix(R_imu_cam).as_rotvec())
+    configured = best(sequence_copy, "configured", "--set", f"run.imu_rotvec_cam=[{exact}]")
     assert configured["data_warnings"] == []
     assert configured["ape_mean_rad"] == pytest.approx(untouched["ape_mean_rad"], abs=1e-6)
