@@ -292,13 +292,13 @@ def _events_end_early(config: ResolvedConfig, dataset: Dataset, times: np.ndarra
 IMU_DISAGREEMENT_DEG = 10.0
 #: The gyro's clock is off when reading it this much later or earlier [s] explains the tracked
 #: rotations clearly better (CLOCK_GAIN: the median residual at most 90 % of the configured
-#: clock's): on twelve simulated IMUs read on time (best.toml and paper.toml) the search found
-#: 0.8-5.8 ms at 94-100 %; on the real excerpt with a gyro made from its ground truth (9 ms
-#: behind its frames) 8.7 ms at 60 %.
+#: clock's): on twelve simulated IMUs read on time (best.toml and paper.toml) the search
+#: found 0.8-5.4 ms at 94 % or more; on the real excerpt with a gyro made from its ground
+#: truth (9 ms behind its frames) 8.7 ms at 60 %.
 CLOCK_OFF_S = 0.002
 CLOCK_GAIN = 0.9
 #: Below this spread (ImuAgreement.spread) the camera turned about one axis only and the fit
-#: cannot tell how the gyro is turned about it: under 0.05 for a pure pan (a test), 0.5-0.6 on
+#: cannot tell how the gyro is turned about it: under 0.05 for a pure pan (a test), 0.5-0.65 on
 #: hand-held sequences (synthetic:default, seed 41, a 30 s one, the real excerpt).
 MIN_SPREAD = 0.2
 #: A fit this close [deg] to an axis swap or flip is taken for it (those are 90 deg apart; a
