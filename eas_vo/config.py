@@ -41,6 +41,9 @@ class RunConfig:
             into the camera frame by it. The identity: the simulator's (and, as reported, the
             Event Camera Dataset's). Every run checks it against the images (a warning).
         imu_time_offset_s: IMU time = frame time + this [s].
+        imu_time_offset_auto: the backend reads the gyro on the clock the images ask for when
+            they clearly ask for another (the run's IMU check; metrics.json reports the offset
+            used); the tracker's prediction keeps imu_time_offset_s.
     """
 
     dataset: str = "synthetic:default"
@@ -54,6 +57,7 @@ class RunConfig:
     orb_stats: bool = False
     imu_rotvec_cam: tuple = (0.0, 0.0, 0.0)
     imu_time_offset_s: float = 0.0
+    imu_time_offset_auto: bool = False
 
     def validate(self) -> None:
         check_vector(self, "imu_rotvec_cam", 3, "rad")

@@ -18,7 +18,7 @@ import numpy as np
 from eas_vo import registry
 from eas_vo.config import ResolvedConfig
 from eas_vo.errors import EasVoError, Interrupted
-from eas_vo.evaluation import RotationErrors, estimate_time_offset, imu_agreement, rotation_errors
+from eas_vo.evaluation import ImuAgreement, RotationErrors, estimate_time_offset, imu_agreement, rotation_errors
 from eas_vo.geometry.rotations import geodesic_angle, matrix_to_rotvec, quats_from_matrices, rotvec_to_matrix
 from eas_vo.io import atomic_path, json_text, output_folder, write_text_atomic
 from eas_vo.orb import OrbStats
@@ -96,9 +96,12 @@ def _run_into(parts: Pipeline, config: ResolvedConfig, out: Path | None, progres
     try:
         tracked = track(parts, config, out / "frames.csv" if out else None, progress)
         t = tracked.times
-        R_w_c = parts.backend.solve(len(t), tracked.edges, times=t, imu=parts.imu)
+        agreement = None if parts.imu is None else imu_agreement(t, tracked.edges, parts.imu)
+        imu, imu_offset = _backend_imu(config, parts.imu, agreement)
+        R_w_c = parts.backend.solve(len(t), tracked.edges, times=t, imu=imu)
         errors, offset = evaluate(config, parts.dataset, t, R_w_c, tracked.edges)
-        metrics = summarise(config, parts.dataset, tracked, errors, offset, time.perf_counter() - started, load_s, parts.imu)
+        metrics = summarise(config, parts.dataset, tracked, errors, offset, time.perf_counter() - started, load_s,
+                            agreement, imu_offset)
         result = RunResult(t, R_w_c, tracked.records, tracked.edges, errors, metrics, parts.backend.causal_R_w_c)
         if out is not None:
             write_outputs(out, result, parts.dataset.label)
@@ -233,9 +236,10 @@ def evaluate(config: ResolvedConfig, dataset: Dataset, t: np.ndarray, R_w_c: np.
 
 
 def summarise(config: ResolvedConfig, dataset: Dataset, tracked: Tracked, errors, offset: float, elapsed: float, load_s: float,
-              imu: ImuSeries | None = None) -> dict:
+              agreement: ImuAgreement | None = None, imu_offset: float | None = None) -> dict:
     """metrics.json: accuracy, tracking and speed figures; speed is measured over the
-    processing, after the dataset was opened. `imu`: the dataset's in the camera frame."""
+    processing, after the dataset was opened. With an IMU: its check against the tracked
+    rotations (`agreement`) and the time offset [s] the backend read it with."""
     records = tracked.records
     pairs = records[1:]
     span = records[-1].t - records[0].t
@@ -261,8 +265,11 @@ def summarise(config: ResolvedConfig, dataset: Dataset, tracked: Tracked, errors
         metrics.update(errors.summary())
     metrics["time_offset_s"] = offset
     metrics["time_offset_estimated"] = config.run.time_offset_auto and dataset.ground_truth is not None
+    if imu_offset is not None:
+        metrics["imu_time_offset_s"] = imu_offset
+        metrics["imu_time_offset_estimated"] = imu_offset != config.run.imu_time_offset_s
     metrics["data_warnings"] = (dataset.data_warnings() + _events_end_early(config, dataset, tracked.times)
-                                + _imu_disagrees(config, imu, tracked))
+                                + _imu_disagrees(config, agreement))
     metrics["partial"] = tracked.interrupted is not None
     if tracked.orb is not None:
         metrics.update(tracked.orb.summary())
@@ -318,22 +325,44 @@ def _axis_rotations() -> list[np.ndarray]:
     return rotations
 
 
-def _imu_disagrees(config: ResolvedConfig, imu: ImuSeries | None, tracked: Tracked) -> list[str]:
+def _conclusive(agreement: ImuAgreement | None) -> bool:
+    """Whether the check can say anything: at least half the frame pairs (and 20) agree."""
+    return agreement is not None and agreement.agreeing >= max(20, agreement.pairs / 2)
+
+
+def _clock_is_off(agreement: ImuAgreement | None) -> bool:
+    """Whether the images clearly ask for the gyro read CLOCK_OFF_S or more off its clock."""
+    return (_conclusive(agreement) and abs(agreement.clock_shift_s) >= CLOCK_OFF_S
+            and agreement.residual_rad <= CLOCK_GAIN * agreement.residual_unshifted_rad)
+
+
+def _backend_imu(config: ResolvedConfig, imu: ImuSeries | None, agreement: ImuAgreement | None) -> tuple[ImuSeries | None, float | None]:
+    """The IMU the backend gets and the time offset [s] it is read with: as configured, or
+    (run.imu_time_offset_auto) on the clock the images clearly ask for."""
+    if imu is None:
+        return None, None
+    configured = config.run.imu_time_offset_s
+    if not (config.run.imu_time_offset_auto and _clock_is_off(agreement)):
+        return imu, configured
+    shift = agreement.clock_shift_s
+    return ImuSeries(imu.t - shift, imu.acc, imu.gyro), configured + shift
+
+
+def _imu_disagrees(config: ResolvedConfig, agreement: ImuAgreement | None) -> list[str]:
     """Warnings when the gyro's rotations agree with the tracker's only once turned by more
-    than IMU_DISAGREEMENT_DEG (and the motion turned about more than one axis), or clearly
-    better read CLOCK_OFF_S or more off its configured clock (evaluation.imu_agreement),
-    naming the run.imu_rotvec_cam (an axis swap or flip within AXES_SNAP_DEG of the fit) or
-    run.imu_time_offset_s the data suggest. Silent when fewer than half the frame pairs agree
-    with any rotation, which says nothing either way."""
-    agreement = None if imu is None else imu_agreement(tracked.times, tracked.edges, imu)
-    if agreement is None or agreement.agreeing < max(20, agreement.pairs / 2):
+    than IMU_DISAGREEMENT_DEG (and the motion turned about more than one axis), or (unless
+    run.imu_time_offset_auto took care of it) clearly better read CLOCK_OFF_S or more off its
+    configured clock, naming the run.imu_rotvec_cam (an axis swap or flip within AXES_SNAP_DEG
+    of the fit) or run.imu_time_offset_s the data suggest. Silent when fewer than half the
+    frame pairs agree with any rotation, which says nothing either way."""
+    if not _conclusive(agreement):
         return []
     warnings = []
     turned = np.degrees(geodesic_angle(np.eye(3), agreement.R))
     if turned > IMU_DISAGREEMENT_DEG and agreement.spread >= MIN_SPREAD:
         warnings.append(_imu_axes_warning(config, agreement))
     shift = agreement.clock_shift_s
-    if abs(shift) >= CLOCK_OFF_S and agreement.residual_rad <= CLOCK_GAIN * agreement.residual_unshifted_rad:
+    if _clock_is_off(agreement) and not config.run.imu_time_offset_auto:
         configured = config.run.imu_time_offset_s
         warnings.append(
             f"the gyro agrees best with the tracked rotations read {abs(shift) * 1e3:.1f} ms "

@@ -78,9 +78,9 @@ def test_a_gyro_on_another_clock_is_found_on_real_images(tmp_path):
     gyro = (R[:-1].inv() * R[1:]).as_rotvec() / 0.001 + rng.normal(0, 0.01, 3) + rng.normal(0, 0.003 * np.sqrt(1000), (len(t) - 1, 3))
     np.savetxt(rig / "imu.txt", np.column_stack([t[:-1], np.zeros((len(t) - 1, 3)), gyro]), fmt="%.9f")
 
-    def best(imu_offset_s):
+    def best(imu_offset_s, *changes):
         cfg = config.resolve("best", {"dataset": str(rig), "frontend": "histeq", "start_s": 20.0, "duration_s": 10.0,
-                                      "time_offset_s": 0.01}, [f"run.imu_time_offset_s={imu_offset_s}"])
+                                      "time_offset_s": 0.01}, [f"run.imu_time_offset_s={imu_offset_s}", *changes])
         return pipeline.run(cfg).metrics
 
     on_frames_clock, on_its_clock = best(0.0), best(0.009)
@@ -88,4 +88,15 @@ def test_a_gyro_on_another_clock_is_found_on_real_images(tmp_path):
     assert len(said) == 1 and "ms later than configured" in said[0], said
     suggested = float(said[0].split("run.imu_time_offset_s = ")[1].split(",")[0])
     assert suggested == pytest.approx(0.0091, abs=0.002)
+    assert on_frames_clock["imu_time_offset_s"] == 0.0 and not on_frames_clock["imu_time_offset_estimated"]
     assert on_its_clock["data_warnings"] == []
+    auto = best(0.0, "run.imu_time_offset_auto=true")  # the backend reads it on the clock found
+    assert auto["data_warnings"] == [] and auto["imu_time_offset_estimated"]
+    assert auto["imu_time_offset_s"] == pytest.approx(suggested, abs=1e-4)
+
+
+def test_an_automatic_imu_clock_changes_nothing_when_the_images_ask_for_nothing():
+    """synthetic:default's IMU is read on time: with run.imu_time_offset_auto the run is the same."""
+    runs = [pipeline.run(config.resolve("best", {}, changes)) for changes in ([], ["run.imu_time_offset_auto=true"])]
+    assert runs[1].metrics["imu_time_offset_s"] == 0.0 and not runs[1].metrics["imu_time_offset_estimated"]
+    np.testing.assert_array_equal(runs[0].R_w_c, runs[1].R_w_c)
