@@ -396,19 +396,21 @@ def cmd_list(args) -> int:
     from dataclasses import MISSING, fields
 
     from eas_vo import registry
+    from eas_vo.config import RunConfig
 
+    def config_keys(cls) -> str:
+        keys = [f"{f.name}={f.default!r}" if f.default is not MISSING else f.name
+                for f in fields(cls) if f.default is not MISSING or f.default_factory is MISSING]
+        return " ".join(keys) if keys else "(none)"
+
+    print(f"run (every run, [run] or --set run.KEY=VALUE):\n  {'':10s} config: {config_keys(RunConfig)}")
     for kind in registry.KINDS:
         for name, why in registry.broken_builtins(kind).items():
             print(f"eas-vo: warning: built-in {kind[:-1]} {name!r} failed to import: {why}", file=sys.stderr)
         print(f"{kind} (entry-point group eas_vo.{kind}):")
         for name, cls in registry.available(kind).items():
             print(f"  {name:10s} {cls.description}")
-            keys = [
-                f"{f.name}={f.default!r}" if f.default is not MISSING else f.name
-                for f in fields(cls.Config)
-                if f.default is not MISSING or f.default_factory is MISSING
-            ]
-            print(f"  {'':10s} config: {' '.join(keys) if keys else '(none)'}")
+            print(f"  {'':10s} config: {config_keys(cls.Config)}")
             if kind == "datasets" and cls.catalogue():
                 print(f"  {'':10s} fetch: {' '.join(sorted(cls.catalogue()))}")
     return 0

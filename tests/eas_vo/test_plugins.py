@@ -26,6 +26,7 @@ def test_list_shows_every_plugin_with_description_and_keys(capsys):
         for name, cls in registry.available(kind).items():
             assert f"  {name:10s} {cls.description}" in out
     assert "n=4000 sigma_px=1.0 beta=60.0 gamma=100.0" in out and "r=4 polarity='merged' dv_compatible=False" in out
+    assert out.startswith("run (every run") and "imu_rotvec_cam=(0.0, 0.0, 0.0) imu_time_offset_s=0.0" in out
 
 
 def readme_plugin_guide() -> tuple[str, dict]:
