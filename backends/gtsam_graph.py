@@ -82,6 +82,10 @@ class GtsamBackend(Backend):
     def needs_imu(self) -> bool:
         return self.config.gyro is True
 
+    @property
+    def uses_imu(self) -> bool:
+        return self.config.gyro in (True, "auto")
+
     def edge_sigma(self, edge: RelativeRotation) -> float:
         """The isotropic noise [rad] of a measured edge, from its quality (see edge_noise)."""
         c = self.config

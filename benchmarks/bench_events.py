@@ -28,6 +28,9 @@ def peak_rss_mb() -> float:
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
 
 
+#: What the benchmarks keep in the cache's `bench` part (eas-vo cache shows it).
+BENCH_ABOUT = "inputs of benchmarks/bench_events.py and bench_memory.py"
+
 def make_file(n_events: int) -> Path:
     """The first n_events of a simulated sequence long enough to hold them, as events.txt."""
     from eas_vo.datasets.simulator import SimConfig, simulate
@@ -35,7 +38,7 @@ def make_file(n_events: int) -> Path:
     from eas_vo.io import cache_folder
     from eas_vo.registry import open_dataset
 
-    bench = cache_folder("bench", "inputs of benchmarks/bench_events.py and bench_memory.py")
+    bench = cache_folder("bench", BENCH_ABOUT)
     path = bench / f"events_{n_events}.txt"
     if path.exists():
         return path

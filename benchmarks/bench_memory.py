@@ -13,6 +13,7 @@ import sys
 import time
 
 import numpy as np
+from bench_events import BENCH_ABOUT
 
 
 def make_folder(n_events: int):
@@ -20,7 +21,7 @@ def make_folder(n_events: int):
     from eas_vo.io import atomic_path, cache_folder, write_text_atomic
     from eas_vo.registry import open_dataset
 
-    folder = cache_folder("bench", "inputs of benchmarks/bench_events.py and bench_memory.py") / f"events_only_{n_events}"
+    folder = cache_folder("bench", BENCH_ABOUT) / f"events_only_{n_events}"
     if (folder / "events.txt").exists():
         return folder
     base = open_dataset("synthetic:default")

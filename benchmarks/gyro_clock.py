@@ -55,7 +55,8 @@ def main() -> None:
                                               "duration_s": duration, "time_offset_s": 0.01}, changes)
                 metrics = pipeline.run(cfg).metrics
                 cells.append(f"{metrics['ape_mean_rad']:.4f}")
-                said += [line.split(": the IMU's clock looks like ")[-1] for line in metrics["data_warnings"]]
+                said += ["looks like " + line.split("run.imu_time_offset_s = ")[-1].split(" would")[0]
+                         for line in metrics["data_warnings"]]
                 if metrics["imu_time_offset_estimated"]:
                     said.append(f"read at {metrics['imu_time_offset_s']:.4f}")
             print(f"| {label} | " + " | ".join(cells) + f" | {'; '.join(said) or '-'} |", flush=True)

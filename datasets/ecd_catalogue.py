@@ -112,7 +112,7 @@ def _size_text(url: str) -> str:
 
     try:
         answer = requests.head(url, allow_redirects=True, timeout=10)
-    except (requests.ConnectionError, requests.Timeout) as exc:
+    except requests.ConnectionError as exc:  # refused, unknown host, or no answer to connect (not a slow one)
         raise EasVoError(f"{url}: cannot reach the server, nothing was downloaded ({type(exc).__name__})") from None
     except requests.RequestException:
         return "size unknown"

@@ -519,17 +519,15 @@ def cmd_fetch(args) -> int:
 def cmd_cache(args) -> int:
     from eas_vo.io import cache_dir, cache_usage, clear_cache
 
-    usage = cache_usage()
-    unknown = [name for name in args.clear if name not in usage]
-    if unknown:  # every name checked before anything is removed
-        raise EasVoError(f"cache {unknown[0]!r}: not in {cache_dir()} (there: {', '.join(usage) or 'nothing'})")
-    for name in dict.fromkeys(args.clear):
-        print(f"{name}: cleared, {_size(clear_cache(name))} freed")
     if args.clear:
+        for name, freed in clear_cache(args.clear).items():
+            print(f"{name}: cleared, {_size(freed)} freed")
         return 0
+    usage = cache_usage()
     print(f"{cache_dir()}:")
     for name, part in usage.items():
-        print(f"  {name:10s} {part.entries:5d} entries {_size(part.size):>9s}  {part.about}")
+        where = f" (a link to {(cache_dir() / name).resolve()})" if part.link else ""
+        print(f"  {name:10s} {part.entries:5d} entries {_size(part.size):>9s}  {part.about}{where}")
     total = sum(part.size for part in usage.values())
     print(f"  total {_size(total)}" + ("; eas-vo cache --clear NAME empties one" if usage else " (empty)"))
     return 0

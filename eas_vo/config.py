@@ -236,21 +236,23 @@ def resolve(
 
 
 def _move_to_run(raw: dict) -> None:
-    """Move MOVED_TO_RUN keys found in [tracker] or [backend] (or their plugin tables), as
-    every config.toml written before they moved holds them, into [run]; places that disagree
-    (the rig has one IMU) are an error naming them."""
+    """Move MOVED_TO_RUN keys found in [tracker] or [backend] (or the chosen plugin's table
+    there), as every config.toml written before they moved holds them, into [run] unless [run]
+    (or --set run.KEY) sets them; old places that disagree (the rig has one IMU) are an error
+    naming them. Other plugins' tables lose the keys unread."""
     for key in MOVED_TO_RUN:
         found = {}
         for section in ("tracker", "backend"):
-            tables = [(section, raw[section])] + [(f"{section}.{k}", t) for k, t in raw[section].items() if isinstance(t, dict)]
-            found.update({f"{where}.{key}": table.pop(key) for where, table in tables if key in table})
-        if key in raw["run"]:
-            found[f"run.{key}"] = raw["run"][key]
-        values = {repr(_as_numbers(v)) for v in found.values()}
-        if len(values) > 1:
+            chosen = raw["run"].get(section, getattr(RunConfig, section))
+            for name, table in [(section, raw[section])] + [(f"{section}.{k}", t) for k, t in raw[section].items()
+                                                            if isinstance(t, dict)]:
+                if key in table and name in (section, f"{section}.{chosen}"):
+                    found[f"{name}.{key}"] = table.pop(key)
+                table.pop(key, None)
+        if len({repr(_as_numbers(v)) for v in found.values()}) > 1:
             places = ", ".join(f"{where} = {_toml_value(v)}" for where, v in found.items())
             raise ConfigError(f"{places}: the rig has one IMU; set run.{key} only")
-        if found:
+        if found and key not in raw["run"]:
             raw["run"][key] = next(iter(found.values()))
 
 

@@ -136,13 +136,16 @@ class ImuAgreement:
     Attributes:
         R: the rotation that best maps the tracker's rotation vectors onto the gyro's, g = R v
             (the identity when the IMU's configured place on the rig is right).
-        pairs: consecutive frame pairs compared (the gyro turned at least MIN_TURN_RAD).
-        agreeing: those within half the gyro's rotation of R v (R fitted on the agreeing
-            pairs of the previous round).
+        pairs: consecutive frame pairs compared (the gyro turned at least MIN_TURN_RAD), with
+            the gyro on the clock of the last round (within 1 ms of clock_shift_s unless the
+            rounds ran out).
+        agreeing: those within half the gyro's rotation of R v.
         spread: the second singular value of the agreeing rotation vectors over the first: near
             0 when the camera turned about one axis only, and R is then free about that axis.
-        clock_shift_s: the gyro read this much later [s] explains the agreeing pairs best
-            (0 when the IMU's configured time offset is right); searched within CLOCK_SEARCH_S.
+        clock_shift_s: the gyro read this much later [s] explains the agreeing pairs best (0
+            when the images and the gyro's configured clock agree).
+        shift_at_limit: the best shift lies on the edge of the last search (CLOCK_SEARCH_S
+            around the previous estimate): the offset may be larger still.
         residual_rad, residual_unshifted_rad: the median |g - R v| [rad] over the agreeing
             pairs with the gyro read clock_shift_s later, and as configured.
     """
@@ -151,42 +154,64 @@ class ImuAgreement:
     pairs: int
     agreeing: int
     spread: float
-    clock_shift_s: float = 0.0
-    residual_rad: float = 0.0
-    residual_unshifted_rad: float = 0.0
+    clock_shift_s: float
+    shift_at_limit: bool
+    residual_rad: float
+    residual_unshifted_rad: float
 
 
 #: Frame pairs over which the gyro turned less carry no direction to compare [rad] (0.5 deg).
 MIN_TURN_RAD = np.radians(0.5)
-#: How far the IMU's clock is searched [s], in 1 ms steps: about a DAVIS frame interval.
+#: How far around its last estimate the IMU's clock is searched [s], in 1 ms steps (about a
+#: DAVIS frame interval), and how many times the fit and the search are redone at the new
+#: estimate (the pairs that agree depend on the clock: a 30 ms error is read 21 ms the first time).
 CLOCK_SEARCH_S = 0.05
+CLOCK_ROUNDS = 4
 
 
 def imu_agreement(t: np.ndarray, edges, imu: ImuSeries) -> ImuAgreement | None:
     """Compare the rotation vectors of the consecutive edges (camera frame) with the gyro's
-    over the same frame times [s] (`imu` in the camera frame, on the frames' clock): Kabsch
-    on all pairs, then twice on those within half the gyro's rotation of the fit (robust to
-    failed measurements and a few percent of scale), then the gyro's clock (_best_clock_shift).
-    None without 20 pairs to compare."""
+    over the same frame times [s] (`imu` in the camera frame, on the frames' clock): the
+    rotation between them (_fit_axes) and the gyro's clock (_best_clock_shift), redone at the
+    new clock until it moves less than 1 ms. None without 20 pairs to compare."""
+    steps = [e for e in edges if e.j == e.i + 1 and 0 <= e.i < len(t) - 1]
+    t0 = np.array([t[e.i] for e in steps], float)
+    t1 = np.array([t[e.j] for e in steps], float)
+    v_all = matrix_to_rotvec(np.stack([e.R_i_j for e in steps])) if steps else np.empty((0, 3))
+    turned = _gyro_turn(imu)
+    shift, found = 0.0, None
+    for _ in range(CLOCK_ROUNDS):
+        g = turned(t1 + shift) - turned(t0 + shift)
+        keep = (t0 + shift >= imu.t[0]) & (t1 + shift <= imu.t[-1]) & (np.linalg.norm(g, axis=-1) >= MIN_TURN_RAD)
+        if keep.sum() < 20:
+            break
+        v, g = v_all[keep], g[keep]
+        R, agree = _fit_axes(v, g)
+        if agree.sum() < 20:
+            break
+        best, limit, residual, unshifted = _best_clock_shift(t0[keep][agree], t1[keep][agree], v[agree] @ R.T, turned, imu, shift)
+        singular = np.linalg.svd(v[agree], compute_uv=False)
+        spread = float(singular[1] / max(singular[0], 1e-12))
+        moved, shift = abs(best - shift), best
+        found = ImuAgreement(R, len(v), int(agree.sum()), spread, best, limit, residual, unshifted)
+        if moved < 1e-3:
+            break
+    return found
+
+
+def _fit_axes(v: np.ndarray, g: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """R with g = R v for rotation vectors v, g (N, 3): Kabsch on all, then twice on the pairs
+    within half the gyro's rotation of the fit (robust to failed measurements and a few percent
+    of scale); returns R and that agreeing mask."""
     from eas_vo.geometry.two_view import kabsch
 
-    steps = [e for e in edges if e.j == e.i + 1 and 0 <= e.i < len(t) - 1]
-    t0, t1 = (np.array([t[k] for k in ks], float) for ks in ([e.i for e in steps], [e.j for e in steps]))
-    turned = _gyro_turn(imu)
-    g = turned(t1) - turned(t0)
-    keep = (t0 >= imu.t[0]) & (t1 <= imu.t[-1]) & (np.linalg.norm(g, axis=-1) >= MIN_TURN_RAD)
-    if keep.sum() < 20:
-        return None
-    v, g, t0, t1 = matrix_to_rotvec(np.stack([e.R_i_j for e, k in zip(steps, keep) if k])), g[keep], t0[keep], t1[keep]
     agree = np.ones(len(v), bool)
     for _ in range(3):
         R = kabsch(v[agree], g[agree])
         agree = np.linalg.norm(g - v @ R.T, axis=1) < 0.5 * np.linalg.norm(g, axis=1)
         if agree.sum() < 3:
             break
-    singular = np.linalg.svd(v[agree], compute_uv=False) if agree.sum() >= 3 else np.zeros(3)
-    shift, residual, unshifted = _best_clock_shift(t0[agree], t1[agree], v[agree] @ R.T, imu, turned)
-    return ImuAgreement(R, len(v), int(agree.sum()), float(singular[1] / max(singular[0], 1e-12)), shift, residual, unshifted)
+    return R, agree
 
 
 def _gyro_turn(imu: ImuSeries):
@@ -199,31 +224,31 @@ def _gyro_turn(imu: ImuSeries):
     return lambda times: np.stack([np.interp(times, T, integral[:, k]) for k in range(3)], -1)
 
 
-def _best_clock_shift(t0: np.ndarray, t1: np.ndarray, expected: np.ndarray, imu: ImuSeries, turned) -> tuple[float, float, float]:
+def _best_clock_shift(t0: np.ndarray, t1: np.ndarray, expected: np.ndarray, turned, imu: ImuSeries,
+                      around: float) -> tuple[float, bool, float, float]:
     """The shift d [s] of the gyro's clock (read at t + d) whose rotation vectors over frame
     times t0 < t1 (`turned`: _gyro_turn) best match `expected` (N, 3) [rad], by the median
-    distance on a 1 ms grid within CLOCK_SEARCH_S, refined by a parabola; returns (d, the
-    median at d, the median at 0)."""
-    covered = (t0 - CLOCK_SEARCH_S >= imu.t[0]) & (t1 + CLOCK_SEARCH_S <= imu.t[-1])
+    distance on a 1 ms grid within CLOCK_SEARCH_S of `around`, refined by a parabola. Returns
+    d, whether it lies on the grid's edge, the median at d and the median at 0 (pairs the
+    gyro covers at every shift only)."""
+    span = CLOCK_SEARCH_S + abs(around)
+    covered = (t0 - span >= imu.t[0]) & (t1 + span <= imu.t[-1])
     t0, t1, expected = t0[covered], t1[covered], expected[covered]
     if len(t0) < 20:
-        return 0.0, np.nan, np.nan
+        return around, False, np.nan, np.nan
 
-    def medians(shifts: np.ndarray) -> np.ndarray:
-        """The median distance for each shift (S,) [s], all at once."""
-        g = turned(t1[None, :] + shifts[:, None]) - turned(t0[None, :] + shifts[:, None])
-        return np.median(np.linalg.norm(g - expected, axis=-1), axis=1)
+    def median(d: float) -> float:
+        return float(np.median(np.linalg.norm(turned(t1 + d) - turned(t0 + d) - expected, axis=-1)))
 
-    shifts = np.arange(-round(CLOCK_SEARCH_S * 1e3), round(CLOCK_SEARCH_S * 1e3) + 1) * 1e-3
-    costs = medians(shifts)
+    shifts = around + np.arange(-round(CLOCK_SEARCH_S * 1e3), round(CLOCK_SEARCH_S * 1e3) + 1) * 1e-3
+    costs = np.array([median(d) for d in shifts])  # one shift at a time: memory stays O(pairs)
     k = int(np.argmin(costs))
     best = shifts[k]
     if 0 < k < len(shifts) - 1:
         curvature = costs[k - 1] - 2 * costs[k] + costs[k + 1]
         if curvature > 0:
             best += 0.5e-3 * (costs[k - 1] - costs[k + 1]) / curvature
-    at_best, at_zero = medians(np.array([best, 0.0]))
-    return float(best), float(at_best), float(at_zero)
+    return float(best), k in (0, len(shifts) - 1), median(best), median(0.0)
 
 
 # ----------------------------------------------------------------------------- external trajectories

@@ -36,12 +36,13 @@ CACHE_ABOUT = ".about"
 
 def cache_folder(name: str, about: str) -> Path:
     """The cache folder's part `name` (created when possible), with a line saying what it
-    holds and what clearing it costs (`eas-vo cache` shows it)."""
+    holds and what clearing it costs (`eas-vo cache` shows it; rewritten when it differs)."""
     folder = cache_dir() / name
+    line = folder / CACHE_ABOUT
     try:
         folder.mkdir(parents=True, exist_ok=True)
-        if not (folder / CACHE_ABOUT).exists():
-            (folder / CACHE_ABOUT).write_text(about + "\n")
+        if not line.is_file() or line.read_text(errors="replace") != about + "\n":
+            write_text_atomic(line, about + "\n")
     except OSError:
         pass  # a read-only cache: whoever writes there says why
     return folder
@@ -49,42 +50,53 @@ def cache_folder(name: str, about: str) -> Path:
 
 @dataclass(frozen=True)
 class CachePart:
-    """One folder of the cache: its entries (not counting hidden files), bytes (not following
-    links) and what it holds (its CACHE_ABOUT line, "" without one)."""
+    """One folder of the cache: its entries and bytes (hidden files, such as writes under way
+    and CACHE_ABOUT, left out; links inside never followed), what it holds (its CACHE_ABOUT
+    line, "" without one), and whether the part itself is a link to a folder elsewhere."""
 
     entries: int
     size: int
     about: str
+    link: bool = False
+
+
+def _visible(folder: Path) -> list[Path]:
+    return [p for p in folder.iterdir() if not p.name.startswith(".")]
 
 
 def cache_usage() -> dict[str, CachePart]:
-    """Each folder of the cache folder, by name."""
+    """Each folder of the cache folder (a link to a folder counts as one), by name."""
     root = cache_dir()
+    if root.exists() and not root.is_dir():
+        raise EasVoError(f"{root}: the cache folder (EAS_VO_CACHE_DIR) is not a folder")
     usage = {}
-    for folder in sorted(p for p in root.iterdir() if p.is_dir() and not p.is_symlink()) if root.is_dir() else []:
-        entries = [p for p in folder.iterdir() if not p.name.startswith(".")]
-        files = (f for f in folder.rglob("*") if f.is_file() and not f.is_symlink() and f.name != CACHE_ABOUT)
+    for folder in sorted(p for p in root.iterdir() if p.is_dir()) if root.is_dir() else []:
+        entries = _visible(folder)
+        files = [f for e in entries for f in ([e] if not e.is_dir() or e.is_symlink() else e.rglob("*"))
+                 if f.is_file() and not f.is_symlink() and not f.name.startswith(".")]
         about = folder / CACHE_ABOUT
         usage[folder.name] = CachePart(len(entries), sum(f.lstat().st_size for f in files),
-                                       about.read_text(errors="replace").strip() if about.is_file() else "")
+                                       about.read_text(errors="replace").strip() if about.is_file() else "",
+                                       folder.is_symlink())
     return usage
 
 
-def clear_cache(name: str) -> int:
-    """Remove everything in cache folder `name` but its CACHE_ABOUT line; the bytes freed."""
+def clear_cache(names: list[str]) -> dict[str, int]:
+    """Empty the cache folders `names` (all checked first), leaving hidden files (writes under
+    way, CACHE_ABOUT) and what links point to; the bytes freed by each."""
     import shutil
 
     usage = cache_usage()
-    if name not in usage:
-        raise EasVoError(f"cache {name!r}: not in {cache_dir()} (there: {', '.join(usage) or 'nothing'})")
-    for entry in (cache_dir() / name).iterdir():
-        if entry.name == CACHE_ABOUT:
-            continue
-        if entry.is_dir() and not entry.is_symlink():
-            shutil.rmtree(entry)
-        else:
-            entry.unlink()
-    return usage[name].size
+    unknown = [name for name in names if name not in usage]
+    if unknown:
+        raise EasVoError(f"cache {unknown[0]!r}: not in {cache_dir()} (there: {', '.join(usage) or 'nothing'})")
+    for name in dict.fromkeys(names):
+        for entry in _visible(cache_dir() / name):
+            if entry.is_dir() and not entry.is_symlink():
+                shutil.rmtree(entry)
+            else:
+                entry.unlink()
+    return {name: usage[name].size for name in dict.fromkeys(names)}
 
 
 # ----------------------------------------------------------------------------- atomic writes

@@ -97,7 +97,7 @@ def _run_into(parts: Pipeline, config: ResolvedConfig, out: Path | None, progres
         tracked = track(parts, config, out / "frames.csv" if out else None, progress)
         t = tracked.times
         agreement = None if parts.imu is None else imu_agreement(t, tracked.edges, parts.imu)
-        imu, imu_offset = _backend_imu(config, parts.imu, agreement)
+        imu, imu_offset = _backend_imu(config, parts.backend, parts.imu, agreement)
         R_w_c = parts.backend.solve(len(t), tracked.edges, times=t, imu=imu)
         errors, offset = evaluate(config, parts.dataset, t, R_w_c, tracked.edges)
         metrics = summarise(config, parts.dataset, tracked, errors, offset, time.perf_counter() - started, load_s,
@@ -265,11 +265,12 @@ def summarise(config: ResolvedConfig, dataset: Dataset, tracked: Tracked, errors
         metrics.update(errors.summary())
     metrics["time_offset_s"] = offset
     metrics["time_offset_estimated"] = config.run.time_offset_auto and dataset.ground_truth is not None
+    reclocked = imu_offset is not None and imu_offset != config.run.imu_time_offset_s
     if imu_offset is not None:
         metrics["imu_time_offset_s"] = imu_offset
-        metrics["imu_time_offset_estimated"] = imu_offset != config.run.imu_time_offset_s
+        metrics["imu_time_offset_estimated"] = reclocked
     metrics["data_warnings"] = (dataset.data_warnings() + _events_end_early(config, dataset, tracked.times)
-                                + _imu_disagrees(config, agreement))
+                                + _imu_disagrees(config, agreement, reclocked))
     metrics["partial"] = tracked.interrupted is not None
     if tracked.orb is not None:
         metrics.update(tracked.orb.summary())
@@ -299,9 +300,9 @@ def _events_end_early(config: ResolvedConfig, dataset: Dataset, times: np.ndarra
 IMU_DISAGREEMENT_DEG = 10.0
 #: The gyro's clock is off when reading it this much later or earlier [s] explains the tracked
 #: rotations clearly better (CLOCK_GAIN: the median residual at most 90 % of the configured
-#: clock's): on twelve simulated IMUs read on time (best.toml and paper.toml) the search
-#: found 0.8-5.4 ms at 94 % or more; on the real excerpt with a gyro made from its ground
-#: truth (9 ms behind its frames) 8.7 ms at 60 %.
+#: clock's): on twelve simulated IMUs read on time (best.toml and paper.toml, eas) the search
+#: found 0.2-4.5 ms at 93 % or more; on the real excerpt with a gyro made from its ground
+#: truth (9 ms behind its frames) 9.0-9.4 ms at about 60 %.
 CLOCK_OFF_S = 0.002
 CLOCK_GAIN = 0.9
 #: Below this spread (ImuAgreement.spread) the camera turned about one axis only and the fit
@@ -336,22 +337,31 @@ def _clock_is_off(agreement: ImuAgreement | None) -> bool:
             and agreement.residual_rad <= CLOCK_GAIN * agreement.residual_unshifted_rad)
 
 
-def _backend_imu(config: ResolvedConfig, imu: ImuSeries | None, agreement: ImuAgreement | None) -> tuple[ImuSeries | None, float | None]:
+def _reclocked(config: ResolvedConfig, backend: Backend, agreement: ImuAgreement | None) -> bool:
+    """Whether run.imu_time_offset_auto re-times the IMU for this backend: it reads the IMU,
+    and the images clearly ask for another clock, found within the search."""
+    return (config.run.imu_time_offset_auto and backend.uses_imu and _clock_is_off(agreement)
+            and not agreement.shift_at_limit)
+
+
+def _backend_imu(config: ResolvedConfig, backend: Backend, imu: ImuSeries | None,
+                 agreement: ImuAgreement | None) -> tuple[ImuSeries | None, float | None]:
     """The IMU the backend gets and the time offset [s] it is read with: as configured, or
-    (run.imu_time_offset_auto) on the clock the images clearly ask for."""
+    (_reclocked) on the clock the images ask for. With an online backend that clock was found
+    over the whole sequence, so its causal estimates are no longer strictly causal."""
     if imu is None:
         return None, None
     configured = config.run.imu_time_offset_s
-    if not (config.run.imu_time_offset_auto and _clock_is_off(agreement)):
+    if not _reclocked(config, backend, agreement):
         return imu, configured
     shift = agreement.clock_shift_s
     return ImuSeries(imu.t - shift, imu.acc, imu.gyro), configured + shift
 
 
-def _imu_disagrees(config: ResolvedConfig, agreement: ImuAgreement | None) -> list[str]:
+def _imu_disagrees(config: ResolvedConfig, agreement: ImuAgreement | None, reclocked: bool) -> list[str]:
     """Warnings when the gyro's rotations agree with the tracker's only once turned by more
     than IMU_DISAGREEMENT_DEG (and the motion turned about more than one axis), or (unless
-    run.imu_time_offset_auto took care of it) clearly better read CLOCK_OFF_S or more off its
+    `reclocked`: _reclocked took care of it) clearly better read CLOCK_OFF_S or more off its
     configured clock, naming the run.imu_rotvec_cam (an axis swap or flip within AXES_SNAP_DEG
     of the fit) or run.imu_time_offset_s the data suggest. Silent when fewer than half the
     frame pairs agree with any rotation, which says nothing either way."""
@@ -361,15 +371,22 @@ def _imu_disagrees(config: ResolvedConfig, agreement: ImuAgreement | None) -> li
     turned = np.degrees(geodesic_angle(np.eye(3), agreement.R))
     if turned > IMU_DISAGREEMENT_DEG and agreement.spread >= MIN_SPREAD:
         warnings.append(_imu_axes_warning(config, agreement))
-    shift = agreement.clock_shift_s
-    if _clock_is_off(agreement) and not config.run.imu_time_offset_auto:
-        configured = config.run.imu_time_offset_s
-        warnings.append(
-            f"the gyro agrees best with the tracked rotations read {abs(shift) * 1e3:.1f} ms "
-            f"{'later' if shift > 0 else 'earlier'} than configured (median residual {np.degrees(agreement.residual_rad):.2f} "
-            f"against {np.degrees(agreement.residual_unshifted_rad):.2f} deg): the IMU's clock looks like "
-            f"run.imu_time_offset_s = {configured + shift:.4f}, not {configured:.10g}")
+    if _clock_is_off(agreement) and not reclocked:
+        warnings.append(_imu_clock_warning(config, agreement))
     return warnings
+
+
+def _imu_clock_warning(config: ResolvedConfig, agreement: ImuAgreement) -> str:
+    """What the clock check says. The shift is between the gyro and the time the images show:
+    the IMU's clock, or a frontend whose image shows the past (a time surface: `ts` on a gyro
+    read on time was found 9-16 ms early)."""
+    shift, configured = agreement.clock_shift_s, config.run.imu_time_offset_s
+    at_least = "at least " if agreement.shift_at_limit else ""
+    return (f"the gyro agrees best with the tracked rotations read {at_least}{abs(shift) * 1e3:.1f} ms "
+            f"{'later' if shift > 0 else 'earlier'} than configured (median residual {np.degrees(agreement.residual_rad):.2f} "
+            f"against {np.degrees(agreement.residual_unshifted_rad):.2f} deg): the IMU's clock, or the time the "
+            f"{config.run.frontend} images show, is off by that; run.imu_time_offset_s = {at_least}{configured + shift:.4f} "
+            f"would match them, not {configured:.10g}")
 
 
 def _imu_axes_warning(config: ResolvedConfig, agreement) -> str:

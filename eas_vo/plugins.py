@@ -199,7 +199,7 @@ class Tracker:
 class Backend:
     """Turns relative rotations into absolute camera-to-world rotations, one per frame.
 
-    Required: `solve(n_frames, edges, *, times, imu)`. Optional: `causal_R_w_c`, `needs_imu`.
+    Required: `solve(n_frames, edges, *, times, imu)`. Optional: `causal_R_w_c`, `needs_imu`, `uses_imu`.
     """
 
     name: ClassVar[str] = "backend"
@@ -217,6 +217,12 @@ class Backend:
     def needs_imu(self) -> bool:
         """Whether this configuration cannot work without the dataset's IMU: the pipeline then
         refuses a dataset that has none, before any work (default: False)."""
+        return False
+
+    @property
+    def uses_imu(self) -> bool:
+        """Whether this configuration reads the IMU when the dataset has one (the pipeline then
+        may re-time it for the backend: run.imu_time_offset_auto; default: False)."""
         return False
 
     def solve(

@@ -224,8 +224,8 @@ def one_line_failure(argv, capsys) -> str:
 @pytest.mark.parametrize("argv, says", [
     (["run", "--set", "run.imu_time_offset_s=nan"], "imu_time_offset_s = nan is out of range"),
     (["run", "--set", "run.imu_rotvec_cam=[0.0, nan, 0.0]"], "imu_rotvec_cam"),
-    (["run", "--set", "backend.imu_rotvec_cam=[0.0, 0.1, 0.0]", "--set", "run.imu_rotvec_cam=[0, 0, 0]", "--backend", "gtsam"],
-     "backend.imu_rotvec_cam = [0.0, 0.1, 0.0], run.imu_rotvec_cam = [0, 0, 0]: the rig has one IMU; set run.imu_rotvec_cam only"),
+    (["run", "--set", "backend.imu_rotvec_cam=[0.0, 0.1, 0.0]", "--set", "tracker.imu_rotvec_cam=[0, 0, 0]", "--backend", "gtsam"],
+     "tracker.imu_rotvec_cam = [0, 0, 0], backend.imu_rotvec_cam = [0.0, 0.1, 0.0]: the rig has one IMU; set run.imu_rotvec_cam only"),
     (["simulate", "--seed", "-1", "--out", "{tmp}/sim"], "seed = -1 is out of range"),
     (["compare", "--jobs", "0", "--out", "{tmp}/cmp"], "--jobs: must be at least 1"),
     (["run", "--duration", "0", "--out", "{tmp}/run"], "argument --duration: must be more than 0 seconds, got 0"),

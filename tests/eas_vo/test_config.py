@@ -133,8 +133,8 @@ def test_hostile_config_files_are_one_line_errors_or_taken_exactly(tmp_path_fact
 
 def test_a_config_written_before_the_imu_moved_to_run_still_resolves(tmp_path):
     """config.toml files written before run.imu_* existed hold the IMU's place in [tracker]
-    and [backend] (or their plugin tables): it moves to [run]; two places that disagree are
-    one error naming both."""
+    and [backend] (or the chosen plugin's table): it moves to [run] unless [run] or --set
+    run.KEY says otherwise; two old places that disagree are one error naming both."""
     old = tmp_path / "old.toml"
     old.write_text('[run]\ntracker = "klt"\nbackend = "gtsam"\n[tracker]\nimu_rotvec_cam = [0.0, 0.0, 1.5]\n'
                    'imu_time_offset_s = 0.004\n[backend.gtsam]\nimu_rotvec_cam = [0, 0, 1.5]\nimu_time_offset_s = 0.004\n')
@@ -144,3 +144,6 @@ def test_a_config_written_before_the_imu_moved_to_run_still_resolves(tmp_path):
     with pytest.raises(ConfigError, match=r"tracker.imu_time_offset_s = 0.004, backend.gtsam.imu_time_offset_s = 0.005: "
                                           r"the rig has one IMU; set run.imu_time_offset_s only"):
         resolve(old, assignments=["backend.gtsam.imu_time_offset_s=0.005"])
+    # what the run's IMU warning asks for wins over the old places; other plugins' tables are not read
+    assert resolve(old, assignments=["run.imu_time_offset_s=0.009"]).run.imu_time_offset_s == 0.009
+    assert resolve(old, assignments=["backend.chain.imu_time_offset_s=0.5"]).run.imu_time_offset_s == 0.004

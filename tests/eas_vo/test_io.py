@@ -228,26 +228,38 @@ def test_a_lock_held_by_a_zombie_is_taken_over(tmp_path):
 
 
 def test_the_cache_is_listed_and_cleared_folder_by_folder(tmp_path, monkeypatch):
-    """Sizes count every file below a cache folder, never what a link points to; each folder
-    says what it holds; clearing one empties it but for that line, keeps the others and any
-    link's target."""
+    """Sizes count every visible file below a cache folder, never what a link inside points
+    to; each folder says what it holds (the latest words); a part that is itself a link to a
+    folder elsewhere is listed and cleared there; clearing keeps hidden files (a write under
+    way), the folders, the others and any link's target; every name is checked first."""
     from eas_vo.io import CachePart, cache_folder, cache_usage, clear_cache
 
     cache = tmp_path / "cache"
     monkeypatch.setenv("EAS_VO_CACHE_DIR", str(cache))
     assert cache_usage() == {}
-    events = cache_folder("events", "event caches")
+    events = cache_folder("events", "event caches, old words")
+    assert cache_folder("events", "event caches") == events
     (events / "a.ev").write_bytes(b"x" * 100)
+    (events / ".a.ev.123.tmp").write_bytes(b"w" * 30)  # a write under way
     outside = tmp_path / "precious.ev"
     outside.write_bytes(b"y" * 1000)
     (events / "link.ev").symlink_to(outside)
     (cache / "synthetic" / "default-1" / "images").mkdir(parents=True)
     (cache / "synthetic" / "default-1" / "images.txt").write_bytes(b"z" * 50)
     (cache / "synthetic" / "default-1" / "images" / "f.png").write_bytes(b"z" * 7)
-    assert cache_folder("events", "something else") == events  # the first description stays
-    assert cache_usage() == {"events": CachePart(2, 100, "event caches"), "synthetic": CachePart(1, 57, "")}
-    assert clear_cache("events") == 100
-    assert cache_usage() == {"events": CachePart(0, 0, "event caches"), "synthetic": CachePart(1, 57, "")}
-    assert outside.read_bytes() == b"y" * 1000
-    with pytest.raises(EasVoError, match="cache 'bench': not in .*cache .there: events, synthetic"):
-        clear_cache("bench")
+    elsewhere = tmp_path / "other_disk" / "data"
+    elsewhere.mkdir(parents=True)
+    (elsewhere / "seq.zip").write_bytes(b"d" * 9)
+    (cache / "data").symlink_to(elsewhere)
+    assert cache_usage() == {"data": CachePart(1, 9, "", True), "events": CachePart(2, 100, "event caches"),
+                             "synthetic": CachePart(1, 57, "")}
+    with pytest.raises(EasVoError, match="cache 'bench': not in .*cache .there: data, events, synthetic"):
+        clear_cache(["events", "bench"])
+    assert cache_usage()["events"].entries == 2  # nothing removed
+    assert clear_cache(["events", "data", "events"]) == {"events": 100, "data": 9}
+    assert cache_usage() == {"data": CachePart(0, 0, "", True), "events": CachePart(0, 0, "event caches"),
+                             "synthetic": CachePart(1, 57, "")}
+    assert outside.read_bytes() == b"y" * 1000 and (events / ".a.ev.123.tmp").exists() and elsewhere.is_dir()
+    monkeypatch.setenv("EAS_VO_CACHE_DIR", str(outside))
+    with pytest.raises(EasVoError, match="precious.ev: the cache folder .EAS_VO_CACHE_DIR. is not a folder"):
+        cache_usage()

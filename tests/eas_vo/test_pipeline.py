@@ -4,8 +4,8 @@ and the frame path on the real Event Camera Dataset excerpt."""
 import numpy as np
 import pytest
 
-from helpers import SHAPES_ROTATION, require
-from eas_vo import config, pipeline
+from helpers import REPOSITORY, SHAPES_ROTATION, require
+from eas_vo import config, pipeline, registry
 
 
 def run(dataset, frontend, **run_overrides):
@@ -61,22 +61,16 @@ def test_best_config_beats_the_paper_config():
 def test_a_gyro_on_another_clock_is_found_on_real_images(tmp_path):
     """The real excerpt given a 1 kHz gyro made from its ground truth (white noise and a bias;
     on the ground truth's clock, about 9 ms behind the frames: --time-offset auto finds +9.1
-    ms): read as if on the frames' clock, the run over the last, fastest 10 s says so and
-    names the offset; read with it, no warning. (What the offset is worth in APE moves with
-    its exact value, 0.023-0.041 rad at 8-11 ms against 0.052 at 0: README, not asserted.)"""
-    from scipy.spatial.transform import Rotation, Slerp
+    ms; made as benchmarks/gyro_clock.py makes it): read as if on the frames' clock, the run
+    over the last, fastest 10 s says so and names the offset; read with it, no warning; with
+    run.imu_time_offset_auto the backend reads it there. (What the offset is worth in APE
+    moves with its exact value: README, not asserted.)"""
+    import importlib.util
 
-    folder = require(SHAPES_ROTATION)
-    rig = tmp_path / "with_gyro"
-    rig.mkdir()
-    for name in ("calib.txt", "events.txt", "groundtruth.txt", "images.txt", "images"):
-        (rig / name).symlink_to(folder / name)
-    gt = np.loadtxt(folder / "groundtruth.txt")
-    t = np.arange(gt[0, 0], gt[-1, 0], 0.001)
-    R = Slerp(gt[:, 0], Rotation.from_quat(gt[:, 4:8]))(t)
-    rng = np.random.default_rng(0)
-    gyro = (R[:-1].inv() * R[1:]).as_rotvec() / 0.001 + rng.normal(0, 0.01, 3) + rng.normal(0, 0.003 * np.sqrt(1000), (len(t) - 1, 3))
-    np.savetxt(rig / "imu.txt", np.column_stack([t[:-1], np.zeros((len(t) - 1, 3)), gyro]), fmt="%.9f")
+    spec = importlib.util.spec_from_file_location("gyro_clock", REPOSITORY / "benchmarks" / "gyro_clock.py")
+    gyro_clock = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(gyro_clock)
+    rig = gyro_clock.with_gyro_from_ground_truth(require(SHAPES_ROTATION), tmp_path / "with_gyro", seed=0)
 
     def best(imu_offset_s, *changes):
         cfg = config.resolve("best", {"dataset": str(rig), "frontend": "histeq", "start_s": 20.0, "duration_s": 10.0,
@@ -86,7 +80,7 @@ def test_a_gyro_on_another_clock_is_found_on_real_images(tmp_path):
     on_frames_clock, on_its_clock = best(0.0), best(0.009)
     said = on_frames_clock["data_warnings"]
     assert len(said) == 1 and "ms later than configured" in said[0], said
-    suggested = float(said[0].split("run.imu_time_offset_s = ")[1].split(",")[0])
+    suggested = float(said[0].split("run.imu_time_offset_s = ")[1].split()[0])
     assert suggested == pytest.approx(0.0091, abs=0.002)
     assert on_frames_clock["imu_time_offset_s"] == 0.0 and not on_frames_clock["imu_time_offset_estimated"]
     assert on_its_clock["data_warnings"] == []
@@ -100,3 +94,28 @@ def test_an_automatic_imu_clock_changes_nothing_when_the_images_ask_for_nothing(
     runs = [pipeline.run(config.resolve("best", {}, changes)) for changes in ([], ["run.imu_time_offset_auto=true"])]
     assert runs[1].metrics["imu_time_offset_s"] == 0.0 and not runs[1].metrics["imu_time_offset_estimated"]
     np.testing.assert_array_equal(runs[0].R_w_c, runs[1].R_w_c)
+
+
+@pytest.mark.parametrize("backend, at_limit, reclocked", [("gtsam", False, True), ("chain", False, False), ("gtsam", True, False)])
+def test_the_gyro_is_reclocked_only_for_a_backend_that_reads_it_and_a_shift_found(backend, at_limit, reclocked):
+    """A check that found the gyro 12 ms late, the configured offset 5 ms: with auto, a backend
+    that reads the IMU gets it 12 ms earlier, read at 17 ms, and no clock warning; one that
+    does not (chain), or a shift on the search's edge, keeps the configured clock and warns."""
+    from eas_vo.evaluation import ImuAgreement
+    from eas_vo.pipeline import _backend_imu, _imu_disagrees
+    from eas_vo.types import ImuSeries
+
+    cfg = config.resolve("best", {"backend": backend}, ["run.imu_time_offset_s=0.005", "run.imu_time_offset_auto=true"])
+    plugin = registry.get("backends", backend)(cfg.backend)
+    found = ImuAgreement(np.eye(3), 100, 90, 0.6, 0.012, at_limit, 0.004, 0.008)
+    imu = ImuSeries(np.arange(0.0, 1.0, 0.005), np.zeros((200, 3)), np.ones((200, 3)))
+    given, offset = _backend_imu(cfg, plugin, imu, found)
+    if reclocked:
+        np.testing.assert_allclose(given.t, imu.t - 0.012)
+        assert offset == pytest.approx(0.017) and _imu_disagrees(cfg, found, reclocked=True) == []
+    else:
+        assert given is imu and offset == 0.005
+        said = _imu_disagrees(cfg, found, reclocked=False)
+        limit = "at least " if at_limit else ""
+        assert len(said) == 1 and f"read {limit}12.0 ms later" in said[0]
+        assert f"run.imu_time_offset_s = {limit}0.0170 would match them, not 0.005" in said[0]
