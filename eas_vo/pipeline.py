@@ -331,9 +331,18 @@ def _conclusive(agreement: ImuAgreement | None) -> bool:
     return agreement is not None and agreement.agreeing >= max(20, agreement.pairs / 2)
 
 
+def _axes_off(agreement: ImuAgreement | None) -> bool:
+    """Whether the gyro agrees with the images only turned by more than IMU_DISAGREEMENT_DEG
+    (about more than one axis: MIN_SPREAD)."""
+    return (_conclusive(agreement) and agreement.spread >= MIN_SPREAD
+            and np.degrees(geodesic_angle(np.eye(3), agreement.R)) > IMU_DISAGREEMENT_DEG)
+
+
 def _clock_is_off(agreement: ImuAgreement | None) -> bool:
-    """Whether the images clearly ask for the gyro read CLOCK_OFF_S or more off its clock."""
-    return (_conclusive(agreement) and abs(agreement.clock_shift_s) >= CLOCK_OFF_S
+    """Whether the images clearly ask for the gyro read CLOCK_OFF_S or more off its clock.
+    Not judged while the axes are off: a tracker predicting from a wrongly turned gyro leans
+    its tracks towards it, which reads as a clock offset (12 ms on a 2 s test sequence)."""
+    return (_conclusive(agreement) and not _axes_off(agreement) and abs(agreement.clock_shift_s) >= CLOCK_OFF_S
             and agreement.residual_rad <= CLOCK_GAIN * agreement.residual_unshifted_rad)
 
 
@@ -362,14 +371,11 @@ def _imu_disagrees(config: ResolvedConfig, agreement: ImuAgreement | None, reclo
     """Warnings when the gyro's rotations agree with the tracker's only once turned by more
     than IMU_DISAGREEMENT_DEG (and the motion turned about more than one axis), or (unless
     `reclocked`: _reclocked took care of it) clearly better read CLOCK_OFF_S or more off its
-    configured clock, naming the run.imu_rotvec_cam (an axis swap or flip within AXES_SNAP_DEG
-    of the fit) or run.imu_time_offset_s the data suggest. Silent when fewer than half the
-    frame pairs agree with any rotation, which says nothing either way."""
-    if not _conclusive(agreement):
-        return []
+    configured clock (judged once the axes agree), naming the run.imu_rotvec_cam (an axis swap
+    or flip within AXES_SNAP_DEG of the fit) or run.imu_time_offset_s the data suggest. Silent
+    when fewer than half the frame pairs agree with any rotation, which says nothing either way."""
     warnings = []
-    turned = np.degrees(geodesic_angle(np.eye(3), agreement.R))
-    if turned > IMU_DISAGREEMENT_DEG and agreement.spread >= MIN_SPREAD:
+    if _axes_off(agreement):
         warnings.append(_imu_axes_warning(config, agreement))
     if _clock_is_off(agreement) and not reclocked:
         warnings.append(_imu_clock_warning(config, agreement))
