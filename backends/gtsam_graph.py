@@ -142,7 +142,7 @@ class GtsamBackend(Backend):
 
         initial_R = chain_rotations(n_frames, edges)
         by_frame = self._factors(gtsam, n_frames, edges)
-        self._with_bias = self.config.gyro in (True, "auto") and imu is not None
+        self._with_bias = self.uses_imu and imu is not None
         if self._with_bias and times is None:
             raise ValueError("gyro fusion needs the frame times")
         if self._with_bias:

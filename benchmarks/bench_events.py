@@ -31,6 +31,7 @@ def peak_rss_mb() -> float:
 #: What the benchmarks keep in the cache's `bench` part (eas-vo cache shows it).
 BENCH_ABOUT = "inputs of benchmarks/bench_events.py and bench_memory.py"
 
+
 def make_file(n_events: int) -> Path:
     """The first n_events of a simulated sequence long enough to hold them, as events.txt."""
     from eas_vo.datasets.simulator import SimConfig, simulate

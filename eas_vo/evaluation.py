@@ -159,6 +159,11 @@ class ImuAgreement:
     residual_rad: float
     residual_unshifted_rad: float
 
+    @property
+    def turned_deg(self) -> float:
+        """How far [deg] the gyro's axes are turned from the images' (R's angle)."""
+        return float(np.degrees(geodesic_angle(np.eye(3), self.R)))
+
 
 #: Frame pairs over which the gyro turned less carry no direction to compare [rad] (0.5 deg).
 MIN_TURN_RAD = np.radians(0.5)

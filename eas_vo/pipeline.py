@@ -334,8 +334,7 @@ def _conclusive(agreement: ImuAgreement | None) -> bool:
 def _axes_off(agreement: ImuAgreement | None) -> bool:
     """Whether the gyro agrees with the images only turned by more than IMU_DISAGREEMENT_DEG
     (about more than one axis: MIN_SPREAD)."""
-    return (_conclusive(agreement) and agreement.spread >= MIN_SPREAD
-            and np.degrees(geodesic_angle(np.eye(3), agreement.R)) > IMU_DISAGREEMENT_DEG)
+    return _conclusive(agreement) and agreement.spread >= MIN_SPREAD and agreement.turned_deg > IMU_DISAGREEMENT_DEG
 
 
 def _clock_is_off(agreement: ImuAgreement | None) -> bool:
@@ -397,7 +396,6 @@ def _imu_clock_warning(config: ResolvedConfig, agreement: ImuAgreement) -> str:
 
 def _imu_axes_warning(config: ResolvedConfig, agreement) -> str:
     """What the axes check says: how far the gyro is turned and the place that explains it."""
-    turned = np.degrees(geodesic_angle(np.eye(3), agreement.R))
     R_configured = rotvec_to_matrix(config.run.imu_rotvec_cam)
     R_imu_cam = R_configured @ agreement.R
     axes = min(_axis_rotations(), key=lambda R: geodesic_angle(R, R_imu_cam))
@@ -411,7 +409,7 @@ def _imu_axes_warning(config: ResolvedConfig, agreement) -> str:
     def vector(v) -> str:
         return "[" + ", ".join(f"{float(x) + 0.0:.10g}" if abs(x) > 1e-12 else "0" for x in v) + "]"
 
-    return (f"the gyro agrees with the tracked rotations only turned by {turned:.1f} deg ({agreement.agreeing} of "
+    return (f"the gyro agrees with the tracked rotations only turned by {agreement.turned_deg:.1f} deg ({agreement.agreeing} of "
             f"{agreement.pairs} frame pairs): the IMU looks mounted as run.imu_rotvec_cam = {vector(matrix_to_rotvec(looks))} "
             f"({how}), not {vector(config.run.imu_rotvec_cam)}; check it and the camera calibration")
 
