@@ -26,16 +26,21 @@ PRESETS = {
 
 @dataclass(frozen=True)
 class SyntheticConfig(DvsModel):
-    """The scene's light and the DVS pixel (DvsModel's fields, same units and defaults).
+    """The scene's light, the camera's speed and the DVS pixel (DvsModel's fields, same units
+    and defaults).
 
     Attributes:
         illumination: scale of the scene's light (1.0: the default dim room, 0.1: ten times darker).
+        speed: scale of the motion's speed (1.0: hand-held, 44 deg/s mean; 4.0: about the real
+            excerpt's fast end); the same path, travelled faster.
     """
 
     illumination: float = 1.0
+    speed: float = 1.0
 
     def validate(self) -> None:
         check_range(self, "illumination", 0.0, 1e6, lo_open=True)
+        check_range(self, "speed", 0.0, 20.0, lo_open=True)
         check_range(self, "contrast_threshold", 0.01, 5.0)
         check_range(self, "threshold_sigma", 0.0, 1.0)
         check_range(self, "refractory_s", 0.0, 1.0)
@@ -50,9 +55,9 @@ class SyntheticConfig(DvsModel):
         check_range(self, "hot_pixel_rate_hz", 0.0, 1e6)
 
     def applied_to(self, preset: SimConfig) -> SimConfig:
-        """The preset seen under this light by this pixel."""
+        """The preset seen under this light by this pixel, at this speed."""
         dvs = DvsModel(**{f.name: getattr(self, f.name) for f in dataclasses.fields(DvsModel)})
-        return dataclasses.replace(preset, illumination=self.illumination, dvs=dvs)
+        return dataclasses.replace(preset, illumination=self.illumination, speed=self.speed, dvs=dvs)
 
 
 def sequence_folder(name: str, config: SyntheticConfig | None = None, progress: bool = True) -> Path:

@@ -211,6 +211,9 @@ def build_parser() -> argparse.ArgumentParser:
     sim.add_argument("--duration", type=float, default=10.0, metavar="S", help="length in seconds (default 10)")
     sim.add_argument("--illumination", type=float, default=1.0, metavar="X",
                      help="scale of the scene's light (default 1.0, the dim room; 0.1 is ten times darker)")
+    sim.add_argument("--speed", type=float, default=1.0, metavar="X",
+                     help="scale of the camera's speed (default 1.0, hand-held: 44 deg/s mean; 4 is about the "
+                     "real shapes_rotation's fast end): the same path, travelled X times as fast")
     sim.add_argument("--set", dest="assignments", action="append", default=[], metavar="dataset.KEY=VALUE",
                      help="a DVS pixel value, as for run (see `eas-vo list`: the synthetic dataset's keys)")
     sim.add_argument("--stats", action="store_true",
@@ -553,12 +556,13 @@ def cmd_simulate(args) -> int:
         if keys[0] != "dataset" or len(keys) != 2:
             raise EasVoError(f"--set {assignment!r}: simulate takes dataset.KEY=VALUE (the synthetic dataset's keys)")
         pixel[keys[1]] = value
-    sensor = build(SyntheticConfig, {**pixel, "illumination": args.illumination}, "dataset")
+    sensor = build(SyntheticConfig, {**pixel, "illumination": args.illumination, "speed": args.speed}, "dataset")
     config = sensor.applied_to(build(SimConfig, {"seed": args.seed, "duration_s": args.duration}, "simulate"))
     check_output_folder(args.out, replace=args.overwrite)
     with output_folder(args.out, replace=args.overwrite, keep_partial=False) as staging:  # whole, or not at all
         stats = simulate(config, staging, progress=sys.stderr.isatty())
-    print(f"wrote a {config.duration_s:g} s synthetic sequence (seed {config.seed}, illumination {config.illumination:g}) to {args.out}")
+    print(f"wrote a {config.duration_s:g} s synthetic sequence (seed {config.seed}, illumination {config.illumination:g}, "
+          f"speed {config.speed:g}) to {args.out}")
     if args.stats:
         print("\n".join("  " + line for line in stats.lines()))
     return 0

@@ -17,21 +17,24 @@ TRANSLATION_TERMS = (((0.04, 0.20), (0.01, 0.7)), ((0.03, 0.25), (0.01, 0.9)), (
 
 
 class HandHeldMotion:
-    """Smooth random motion; frequencies (hence speeds) grow linearly by `speed_growth` over `duration_s`.
+    """Smooth random motion; frequencies (hence speeds) grow linearly by `speed_growth` over
+    `duration_s`, all scaled by `speed` (the same path, travelled `speed` times as fast).
 
     Poses are camera-to-world: R_w_c(t) = R_w_c0 Exp(rotvec(t)), p_w_c(t).
     """
 
-    def __init__(self, rng: np.random.Generator, duration_s: float, speed_growth: float = 1.5):
+    def __init__(self, rng: np.random.Generator, duration_s: float, speed_growth: float = 1.5, speed: float = 1.0):
         self.duration_s = duration_s
         self.speed_growth = speed_growth
+        self.speed = speed
         self.rot_phase = rng.uniform(0, 2 * np.pi, (3, len(ROTATION_TERMS[0])))
         self.trans_phase = rng.uniform(0, 2 * np.pi, (3, len(TRANSLATION_TERMS[0])))
         self.R_w_c0 = rotvec_to_matrix(np.array([0.05, 0.15, -0.03]))
 
     def _warped_time(self, t: np.ndarray) -> np.ndarray:
-        """phi(t) = t + g t^2 / (2 T): instantaneous frequency grows by factor (1 + g) over T."""
-        return t + self.speed_growth * t**2 / (2.0 * self.duration_s)
+        """phi(t) = v (t + g t^2 / (2 T)): instantaneous frequency grows by factor (1 + g) over T,
+        times the speed v."""
+        return self.speed * (t + self.speed_growth * t**2 / (2.0 * self.duration_s))
 
     @staticmethod
     def _sines(phi: np.ndarray, terms, phases) -> np.ndarray:

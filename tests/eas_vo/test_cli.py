@@ -134,10 +134,19 @@ def test_subprocess_entry_point_help_and_error():
 
 
 def test_simulate_command(tmp_path, capsys):
-    out = tmp_path / "sim"
-    assert main(["simulate", "--out", str(out), "--seed", "2", "--duration", "0.4"]) == 0
-    assert (out / "images.txt").exists() and (out / "imu.txt").exists()
-    assert "wrote a 0.4 s synthetic sequence" in capsys.readouterr().out
+    """A sequence is written; with --speed 3 the camera turns three times as far in the ground
+    truth's first 5 ms (the same path, faster: test_motion has the exact relation)."""
+    from scipy.spatial.transform import Rotation
+
+    turned = {}
+    for speed in ("1", "3"):
+        out = tmp_path / speed
+        assert main(["simulate", "--out", str(out), "--seed", "2", "--duration", "0.4", "--speed", speed]) == 0
+        assert (out / "images.txt").exists()
+        assert f"wrote a 0.4 s synthetic sequence (seed 2, illumination 1, speed {speed})" in capsys.readouterr().out
+        q = Rotation.from_quat(np.loadtxt(out / "groundtruth.txt")[:2, 4:8])
+        turned[speed] = (q[0].inv() * q[1]).magnitude()
+    assert turned["3"] / turned["1"] == pytest.approx(3.0, rel=0.02), turned
 
 
 def stats_of(capsys, tmp_path, illumination):

@@ -12,3 +12,16 @@ def test_motion_speed_grows_and_is_mostly_rotation():
     _, p = motion.pose(t)
     assert np.ptp(p, axis=0).max() < 0.2  # centimetres, not metres
 
+
+
+def test_a_faster_motion_is_the_same_path_travelled_faster():
+    """Without speed growth, speed v at time t is speed 1 at v t: the same poses, v times the
+    angular velocity."""
+    t = np.linspace(0, 2.5, 501)
+    slow = HandHeldMotion(np.random.default_rng(4), 10.0, speed_growth=0.0)
+    fast = HandHeldMotion(np.random.default_rng(4), 10.0, speed_growth=0.0, speed=4.0)
+    R_fast, p_fast = fast.pose(t)
+    R_slow, p_slow = slow.pose(4.0 * t)
+    np.testing.assert_allclose(R_fast, R_slow, atol=1e-12)
+    np.testing.assert_allclose(p_fast, p_slow, atol=1e-12)
+    np.testing.assert_allclose(fast.angular_velocity(t), 4.0 * slow.angular_velocity(4.0 * t), atol=1e-4)  # central differences
