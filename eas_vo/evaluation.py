@@ -221,11 +221,12 @@ def _fit_axes(v: np.ndarray, g: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 def _gyro_turn(imu: ImuSeries):
     """times (any shape) [s] -> the gyro's integrated rate since its first reading (..., 3)
-    [rad]: differences of it are the rotation vectors between two times, exactly for readings
-    held constant up to the composition of the rotations in between (second order in the
-    angle: under 0.05 deg for 10 deg between frames). Vectorised, for many pairs at once."""
+    [rad]: differences of it are the rotation vectors between two times, up to the composition
+    of the rotations in between (second order in the angle: under 0.05 deg for 10 deg between
+    frames); rates linear between readings (trapezoids), as ImuSeries.rates_between.
+    Vectorised, for many pairs at once."""
     T = imu.t
-    integral = np.vstack([np.zeros(3), np.cumsum(imu.gyro[:-1] * np.diff(T)[:, None], axis=0)])
+    integral = np.vstack([np.zeros(3), np.cumsum(0.5 * (imu.gyro[:-1] + imu.gyro[1:]) * np.diff(T)[:, None], axis=0)])
     return lambda times: np.stack([np.interp(times, T, integral[:, k]) for k in range(3)], -1)
 
 

@@ -110,18 +110,16 @@ class ImuSeries:
         R = np.asarray(R_imu_cam, float)
         return ImuSeries(self.t - time_offset_s, self.acc @ R, self.gyro @ R)
 
-    def readings_between(self, t0: float, t1: float) -> list[tuple[int, float]]:
-        """(index, duration [s]) of each reading that holds within times [t0, t1], a reading
-        held until the next one (the last until t1)."""
+    def rates_between(self, t0: float, t1: float) -> tuple[np.ndarray, np.ndarray]:
+        """[t0, t1] cut at the readings' times: the mean gyro rate over each piece (K, 3)
+        [rad/s] and its duration (K,) [s]. Each reading is the rate at its time, linear in
+        between (the midpoint rule of VINS-Mono's preintegration): holding a reading until the
+        next one instead would read the gyro half a sample late (2.5 ms at 200 Hz: 0.6 deg per
+        frame interval at 240 deg/s). Before the first and after the last reading, held."""
         t = self.t
-        out = []
-        for s in range(max(int(np.searchsorted(t, t0, side="right")) - 1, 0), len(t)):
-            start, end = max(t[s], t0), min(t[s + 1] if s + 1 < len(t) else t1, t1)
-            if start >= t1:
-                break
-            if end > start:
-                out.append((s, end - start))
-        return out
+        cuts = np.concatenate([[t0], t[(t > t0) & (t < t1)], [t1]])
+        middle = 0.5 * (cuts[:-1] + cuts[1:])
+        return np.stack([np.interp(middle, t, self.gyro[:, k]) for k in range(3)], -1), np.diff(cuts)
 
 
 @dataclass(frozen=True)

@@ -8,17 +8,21 @@ from eas_vo.geometry.rotations import geodesic_angle, gyro_rotation
 from eas_vo.types import ImuSeries
 
 
-def test_gyro_rotation_integrates_held_readings():
-    """A constant rate over 0.05 s turns by rate * 0.05 whatever the sampling; readings are held
-    until the next one, so a rate that changes mid-interval counts for its share only."""
+def test_gyro_rotation_takes_each_reading_as_the_rate_at_its_time():
+    """A constant rate over 0.05 s turns by rate * 0.05 whatever the sampling; a rate growing
+    linearly about a fixed axis turns by its exact integral (a reading held until the next one
+    would lag half a sample: 0.0025 s * rate here); a step between two readings is a ramp."""
     t = np.arange(0.0, 1.0, 0.005)
     rate = np.array([0.3, -1.2, 2.0])  # rad/s
     constant = ImuSeries(t, np.zeros((len(t), 3)), np.tile(rate, (len(t), 1)))
-    expected = Rotation.from_rotvec(rate * 0.05).as_matrix()
-    assert geodesic_angle(gyro_rotation(constant, 0.1012, 0.1512), expected) < 1e-12
-    step = np.where(t[:, None] < 0.2, 0.0, rate)  # still until 0.2 s, then turning
+    assert geodesic_angle(gyro_rotation(constant, 0.1012, 0.1512), Rotation.from_rotvec(rate * 0.05).as_matrix()) < 1e-12
+    ramp = ImuSeries(t, np.zeros((len(t), 3)), 20.0 * t[:, None] * rate)  # 20 rate/s
+    t0, t1 = 0.4013, 0.4511
+    exact = Rotation.from_rotvec(10.0 * (t1**2 - t0**2) * rate).as_matrix()
+    assert geodesic_angle(gyro_rotation(ramp, t0, t1), exact) < 1e-12
+    step = np.where(t[:, None] < 0.2, 0.0, rate)  # still until 0.195 s, turning from 0.2 s
     stepped = ImuSeries(t, np.zeros((len(t), 3)), step)
-    assert geodesic_angle(gyro_rotation(stepped, 0.18, 0.23), Rotation.from_rotvec(rate * 0.03).as_matrix()) < 1e-12
+    assert geodesic_angle(gyro_rotation(stepped, 0.18, 0.23), Rotation.from_rotvec(rate * 0.0325).as_matrix()) < 1e-12
     assert gyro_rotation(constant, -0.01, 0.04) is None and gyro_rotation(constant, 0.97, 1.02) is None
 
 
