@@ -6,6 +6,7 @@ best.toml and the gyro read at several `run.imu_time_offset_s`, then from 0 with
 any (for auto: the offsets the backend used).
 
     python benchmarks/gyro_clock.py [--real DIR] [--offsets 0 0.008 0.009 0.01 0.011] [--seed 0]
+                                    [--bias 0.01] [--set SECTION.KEY=VALUE ...]
 """
 
 from __future__ import annotations
@@ -22,8 +23,9 @@ from eas_vo import config, pipeline
 WINDOWS = {"20-30 s": (20.0, 10.0), "25-30 s": (25.0, 5.0), "0-30 s": (0.0, 30.0)}
 
 
-def with_gyro_from_ground_truth(real: Path, out: Path, seed: int) -> Path:
-    """`out`: the excerpt's files linked, and an imu.txt integrating to its ground truth."""
+def with_gyro_from_ground_truth(real: Path, out: Path, seed: int, bias_rad_s: float = 0.01) -> Path:
+    """`out`: the excerpt's files linked, and an imu.txt integrating to its ground truth, with a
+    constant bias drawn with standard deviation `bias_rad_s` per axis [rad/s]."""
     out.mkdir(parents=True, exist_ok=True)
     for name in ("calib.txt", "events.txt", "groundtruth.txt", "images.txt", "images"):
         (out / name).symlink_to(real.resolve() / name)
@@ -31,9 +33,9 @@ def with_gyro_from_ground_truth(real: Path, out: Path, seed: int) -> Path:
     t = np.arange(gt[0, 0], gt[-1, 0], 0.001)
     R = Slerp(gt[:, 0], Rotation.from_quat(gt[:, 4:8]))(t)
     rng = np.random.default_rng(seed)
-    rate = (R[:-1].inv() * R[1:]).as_rotvec() / 0.001  # held over each millisecond
-    gyro = rate + rng.normal(0, 0.01, 3) + rng.normal(0, 0.003 * np.sqrt(1000), rate.shape)
-    np.savetxt(out / "imu.txt", np.column_stack([t[:-1], np.zeros_like(gyro), gyro]), fmt="%.9f")
+    rate = (R[:-1].inv() * R[1:]).as_rotvec() / 0.001  # the mean rate over each millisecond, at its middle
+    gyro = rate + rng.normal(0, bias_rad_s, 3) + rng.normal(0, 0.003 * np.sqrt(1000), rate.shape)
+    np.savetxt(out / "imu.txt", np.column_stack([t[:-1] + 0.0005, np.zeros_like(gyro), gyro]), fmt="%.9f")
     return out
 
 
@@ -42,9 +44,11 @@ def main() -> None:
     parser.add_argument("--real", type=Path, default=Path("../shared/data/ecd/shapes_rotation_0-30s"))
     parser.add_argument("--offsets", type=float, nargs="+", default=[0.0, 0.008, 0.009, 0.01, 0.011])
     parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--bias", type=float, default=0.01, help="standard deviation of the gyro's bias per axis [rad/s]")
+    parser.add_argument("--set", action="append", default=[], metavar="SECTION.KEY=VALUE", help="change best.toml (repeatable)")
     args = parser.parse_args()
     with tempfile.TemporaryDirectory() as tmp:
-        rig = with_gyro_from_ground_truth(args.real, Path(tmp) / "rig", args.seed)
+        rig = with_gyro_from_ground_truth(args.real, Path(tmp) / "rig", args.seed, args.bias)
         print("| run.imu_time_offset_s | " + " | ".join(WINDOWS) + " | warning |")
         print("|---" * (len(WINDOWS) + 2) + "|")
         rows = [(f"{offset:g}", [f"run.imu_time_offset_s={offset}"]) for offset in args.offsets]
@@ -52,7 +56,7 @@ def main() -> None:
             cells, said = [], []
             for start, duration in WINDOWS.values():
                 cfg = config.resolve("best", {"dataset": str(rig), "frontend": "histeq", "start_s": start,
-                                              "duration_s": duration, "time_offset_s": 0.01}, changes)
+                                              "duration_s": duration, "time_offset_s": 0.01}, changes + args.set)
                 metrics = pipeline.run(cfg).metrics
                 cells.append(f"{metrics['ape_mean_rad']:.4f}")
                 said += ["looks like " + line.split("run.imu_time_offset_s = ")[-1].split(" would")[0]
