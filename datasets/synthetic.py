@@ -31,8 +31,8 @@ class SyntheticConfig(DvsModel):
 
     Attributes:
         illumination: scale of the scene's light (1.0: the default dim room, 0.1: ten times darker).
-        speed: scale of the motion's speed (1.0: hand-held, 44 deg/s mean; 4.0: about the real
-            excerpt's fast end); the same path, travelled faster.
+        speed: scale of the motion's speed (1.0: hand-held, 44 deg/s mean; 4.0: 177 deg/s, more
+            than the real excerpt's 147 over its 30 s); the same path, travelled faster.
     """
 
     illumination: float = 1.0

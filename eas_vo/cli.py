@@ -209,11 +209,11 @@ def build_parser() -> argparse.ArgumentParser:
     _add_output_options(sim, required=True)
     sim.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     sim.add_argument("--duration", type=float, default=10.0, metavar="S", help="length in seconds (default 10)")
-    sim.add_argument("--illumination", type=float, default=1.0, metavar="X",
+    sim.add_argument("--illumination", type=float, metavar="X",
                      help="scale of the scene's light (default 1.0, the dim room; 0.1 is ten times darker)")
-    sim.add_argument("--speed", type=float, default=1.0, metavar="X",
-                     help="scale of the camera's speed (default 1.0, hand-held: 44 deg/s mean; 4 is about the "
-                     "real shapes_rotation's fast end): the same path, travelled X times as fast")
+    sim.add_argument("--speed", type=float, metavar="X",
+                     help="scale of the camera's speed (default 1.0, hand-held: 44 deg/s mean; 4 gives 177 deg/s, "
+                     "more than the real shapes_rotation's 147): the same path, travelled X times as fast")
     sim.add_argument("--set", dest="assignments", action="append", default=[], metavar="dataset.KEY=VALUE",
                      help="a DVS pixel value, as for run (see `eas-vo list`: the synthetic dataset's keys)")
     sim.add_argument("--stats", action="store_true",
@@ -556,7 +556,10 @@ def cmd_simulate(args) -> int:
         if keys[0] != "dataset" or len(keys) != 2:
             raise EasVoError(f"--set {assignment!r}: simulate takes dataset.KEY=VALUE (the synthetic dataset's keys)")
         pixel[keys[1]] = value
-    sensor = build(SyntheticConfig, {**pixel, "illumination": args.illumination, "speed": args.speed}, "dataset")
+    flags = {key: value for key, value in (("illumination", args.illumination), ("speed", args.speed)) if value is not None}
+    for key in sorted(flags.keys() & pixel.keys()):
+        raise EasVoError(f"--{key} and --set dataset.{key} both given: give one")
+    sensor = build(SyntheticConfig, {**pixel, **flags}, "dataset")
     config = sensor.applied_to(build(SimConfig, {"seed": args.seed, "duration_s": args.duration}, "simulate"))
     check_output_folder(args.out, replace=args.overwrite)
     with output_folder(args.out, replace=args.overwrite, keep_partial=False) as staging:  # whole, or not at all

@@ -169,7 +169,7 @@ class ImuAgreement:
 MIN_TURN_RAD = np.radians(0.5)
 #: How far around its last estimate the IMU's clock is searched [s], in 1 ms steps (about a
 #: DAVIS frame interval), and how many times the fit and the search are redone at the new
-#: estimate (the pairs that agree depend on the clock: a 30 ms error is read 21 ms the first time).
+#: estimate (the pairs that agree depend on the clock: a 30 ms error is under-read the first time).
 CLOCK_SEARCH_S = 0.05
 CLOCK_ROUNDS = 4
 
@@ -223,11 +223,21 @@ def _gyro_turn(imu: ImuSeries):
     """times (any shape) [s] -> the gyro's integrated rate since its first reading (..., 3)
     [rad]: differences of it are the rotation vectors between two times, up to the composition
     of the rotations in between (second order in the angle: under 0.05 deg for 10 deg between
-    frames); rates linear between readings (trapezoids), as ImuSeries.rates_between.
-    Vectorised, for many pairs at once."""
-    T = imu.t
-    integral = np.vstack([np.zeros(3), np.cumsum(0.5 * (imu.gyro[:-1] + imu.gyro[1:]) * np.diff(T)[:, None], axis=0)])
-    return lambda times: np.stack([np.interp(times, T, integral[:, k]) for k in range(3)], -1)
+    frames). The rate is linear between readings and held outside them, as in
+    ImuSeries.rates_between: a trapezoid sum up to the last reading before each time, and the
+    quadratic piece after it. Vectorised, for many pairs at once."""
+    T, w = imu.t, imu.gyro
+    dT = np.diff(T)[:, None]
+    at_readings = np.vstack([np.zeros(3), np.cumsum(0.5 * (w[:-1] + w[1:]) * dT, axis=0)])
+    slope = np.vstack([np.diff(w, axis=0) / dT, np.zeros((1, 3))])  # [rad/s^2]; none after the last
+
+    def turned(times):
+        times = np.asarray(times, float)
+        k = np.clip(np.searchsorted(T, times, side="right") - 1, 0, len(T) - 1)
+        since = (times - T[k])[..., None]  # negative only before the first reading, where it is held
+        return at_readings[k] + w[k] * since + 0.5 * slope[k] * np.maximum(since, 0.0) ** 2
+
+    return turned
 
 
 def _best_clock_shift(t0: np.ndarray, t1: np.ndarray, expected: np.ndarray, turned, imu: ImuSeries,

@@ -384,7 +384,7 @@ def _imu_disagrees(config: ResolvedConfig, agreement: ImuAgreement | None, reclo
 def _imu_clock_warning(config: ResolvedConfig, agreement: ImuAgreement) -> str:
     """What the clock check says. The shift is between the gyro and the time the images show:
     the IMU's clock, or a frontend whose image shows the past (a time surface: `ts` on a gyro
-    read on time was found 13-17 ms early)."""
+    read on time was found 14-18 ms early)."""
     shift, configured = agreement.clock_shift_s, config.run.imu_time_offset_s
     at_least = "at least " if agreement.shift_at_limit else ""
     return (f"the gyro agrees best with the tracked rotations read {at_least}{abs(shift) * 1e3:.1f} ms "

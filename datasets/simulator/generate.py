@@ -29,8 +29,8 @@ class SimConfig:
         max_flow_px: largest image motion between two render steps [px] (ESIM's adaptive step).
         speed_growth: the motion's speed grows by the factor (1 + speed_growth) over the sequence.
         speed: the motion's speed scale: 1 is the hand-held default (44 deg/s mean, 90 deg/s p95
-            over 10 s), 4 is about the real excerpt's fast end (176 / 360); the same path and
-            scene, travelled faster.
+            over 10 s), 4 gives 177 / 343-353 (seeds 71, 72; the real excerpt: 147 / 380 over its
+            30 s); the same path and scene, travelled faster.
         exposure_samples: renders averaged over a frame's exposure at speed 1 (motion blur);
             `speed` times as many at other speeds, so each sample moves as far as at speed 1.
         illumination: scale of the scene's light (1.0: the default dim room); the APS and the
@@ -58,7 +58,15 @@ class SimConfig:
         check_range(self, "speed", 0.0, 20.0, lo_open=True)
 
     def fingerprint(self) -> str:
-        return repr((SIMULATOR_VERSION, dataclasses.asdict(self)))
+        """The simulator version and every value, float fields as floats (speed=4 and 4.0 are
+        one sequence)."""
+        return repr((SIMULATOR_VERSION, _as_typed_dict(self)))
+
+
+def _as_typed_dict(config) -> dict:
+    """dataclasses.asdict, with the values of fields annotated `float` converted to float."""
+    return {f.name: _as_typed_dict(v) if dataclasses.is_dataclass(v) else float(v) if f.type == "float" else v
+            for f in dataclasses.fields(config) for v in [getattr(config, f.name)]}
 
 
 DAVIS240_CAMERA = CameraModel(

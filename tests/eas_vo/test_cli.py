@@ -147,6 +147,11 @@ def test_simulate_command(tmp_path, capsys):
         q = Rotation.from_quat(np.loadtxt(out / "groundtruth.txt")[:2, 4:8])
         turned[speed] = (q[0].inv() * q[1]).magnitude()
     assert turned["3"] / turned["1"] == pytest.approx(3.0, rel=0.02), turned
+    assert main(["simulate", "--out", str(tmp_path / "set"), "--duration", "0.3", "--set", "dataset.speed=2",
+                 "--set", "dataset.illumination=0.5"]) == 0
+    assert "(seed 0, illumination 0.5, speed 2)" in capsys.readouterr().out
+    line = user_error(["simulate", "--out", str(tmp_path / "both"), "--speed", "2", "--set", "dataset.speed=3"], capsys)
+    assert line == "eas-vo: error: --speed and --set dataset.speed both given: give one"
 
 
 def stats_of(capsys, tmp_path, illumination):

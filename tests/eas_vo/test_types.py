@@ -1,6 +1,7 @@
-"""Core types: window lookups in an event stream."""
+"""Core types: window lookups in an event stream, the gyro's rates between two times."""
 
 import numpy as np
+import pytest
 
 from helpers import random_events
 
@@ -14,3 +15,20 @@ def test_search_times_equals_searchsorted_without_copying(tmp_path):
     np.testing.assert_array_equal(search_times(ev, queries), np.searchsorted(ev["t"], queries, side="left"))
     assert len(search_times(ev[:0], [1.0])) == 1 and search_times(ev[:0], [1.0])[0] == 0
 
+
+
+def test_gyro_rates_between_cut_at_readings_and_are_held_outside():
+    """Readings every 5 ms of a rate growing 10 rad/s per s: pieces end on readings (none of
+    zero length), each piece's rate is its mean, and before or after the readings they are held."""
+    from eas_vo.types import ImuSeries
+
+    t = np.arange(0.0, 0.1, 0.005)
+    imu = ImuSeries(t, np.zeros((len(t), 3)), np.column_stack([10.0 * t, np.zeros(len(t)), -t]))
+    rates, dt = imu.rates_between(0.02, 0.035)
+    np.testing.assert_allclose(dt, [0.005, 0.005, 0.005])
+    np.testing.assert_allclose(rates[:, 0], [0.225, 0.275, 0.325])
+    rates, dt = imu.rates_between(0.0212, 0.0212)
+    assert dt.tolist() == [0.0] and rates[0, 0] == pytest.approx(0.212)
+    rates, dt = imu.rates_between(0.09, 0.2)  # the last reading is at 0.095 s
+    np.testing.assert_allclose(dt, [0.005, 0.105])
+    np.testing.assert_allclose(rates[:, 0], [0.925, 0.95])

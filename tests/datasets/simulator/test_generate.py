@@ -16,6 +16,17 @@ def test_same_seed_same_sequence_other_seed_differs(tmp_path):
     assert (tmp_path / "a" / "events.txt").read_bytes() != (tmp_path / "c" / "events.txt").read_bytes()
 
 
+def test_a_sequence_is_cached_under_its_values_not_their_python_types():
+    import dataclasses
+
+    from eas_vo.datasets.simulator.generate import SIMULATOR_VERSION
+
+    assert SimConfig(speed=4).fingerprint() == SimConfig(speed=4.0).fingerprint() != SimConfig(speed=4.5).fingerprint()
+    assert SimConfig(seed=3).fingerprint() != SimConfig(seed=4).fingerprint()
+    # the default's key is what it was before types were normalised: its cached folder stays valid
+    assert SimConfig().fingerprint() == repr((SIMULATOR_VERSION, dataclasses.asdict(SimConfig())))
+
+
 def test_event_times_are_float64_and_sorted_late_in_a_long_sequence():
     model = DvsModel(contrast_threshold=0.3, threshold_sigma=0.0, cutoff_hz=0.0, shot_noise_rate_hz=0.0, leak_rate_hz=0.0,
                      hot_pixel_fraction=0.0, refractory_s=0.0)
