@@ -4,10 +4,11 @@ and whole 30 s (`histeq`, time offset 0.01 s) and on simulator seeds (`eas`) tha
 benchmarks/select_best.py never sees; then frames/s and real-time factor of `best.toml`
 (best of 3 runs).
 
-    python benchmarks/report_best.py [--real DIR | --real ''] [--seeds 41 42 43] [--sequence DIR ...] [--no-speed]
-                                     [--set SECTION.KEY=VALUE ...]
+    python benchmarks/report_best.py [--real DIR | --real ''] [--seeds 41 42 43] [--fast-seeds 74 75 76]
+                                     [--sequence DIR ...] [--no-speed] [--set SECTION.KEY=VALUE ...]
 
-Seeds are simulated once into $EAS_VO_CACHE_DIR/simulated/seed-N (about 40 s each).
+Seeds are simulated once into $EAS_VO_CACHE_DIR/simulated/seed-N (about 40 s each; at speed 4,
+seed-N-speed-4, about 5 minutes each).
 """
 
 from __future__ import annotations
@@ -16,7 +17,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from select_best import SELECTION_SEEDS, seed_folder
+from select_best import DEVELOPMENT_FAST_SEEDS, SELECTION_SEEDS, seed_folder
 
 from eas_vo import config, pipeline
 
@@ -39,6 +40,9 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--real", default="../shared/data/ecd/shapes_rotation_0-30s", help="the real excerpt's folder ('' to leave it out)")
     parser.add_argument("--seeds", type=int, nargs="*", default=[41, 42, 43], help="simulator seeds not used to choose")
+    parser.add_argument("--fast-seeds", type=int, nargs="*", default=[], metavar="N",
+                        help="also seeds simulated at --fast-speed (e.g. 74 75 76; not 71-73, which the gyro model was corrected on)")
+    parser.add_argument("--fast-speed", type=float, default=4.0, help="the speed of --fast-seeds (default 4)")
     parser.add_argument("--sequence", action="append", default=[], metavar="DIR",
                         help="also report on this sequence with eas (repeatable; e.g. eas-vo simulate --illumination 0.1)")
     parser.add_argument("--no-speed", action="store_true", help="skip the speed measurement")
@@ -47,6 +51,8 @@ def main() -> None:
     args = parser.parse_args()
     if set(args.seeds) & set(SELECTION_SEEDS):
         raise SystemExit(f"seeds {sorted(set(args.seeds) & set(SELECTION_SEEDS))} took part in a selection (select_best.py): report on others")
+    if args.fast_speed == 4.0 and set(args.fast_seeds) & set(DEVELOPMENT_FAST_SEEDS):
+        raise SystemExit(f"seeds {sorted(set(args.fast_seeds) & set(DEVELOPMENT_FAST_SEEDS))} at speed 4 were developed on: report on others")
     columns = {}
     if args.real and Path(args.real).is_dir():
         columns.update({label: (args.real, "histeq", {"start_s": s, "duration_s": d, "time_offset_s": 0.01})
@@ -54,6 +60,7 @@ def main() -> None:
     elif args.real:
         print(f"{args.real}: not found, real columns skipped", file=sys.stderr)
     columns.update({f"seed {n}": (str(seed_folder(n)), "eas", {}) for n in args.seeds})
+    columns.update({f"seed {n} (speed {args.fast_speed:g})": (str(seed_folder(n, args.fast_speed)), "eas", {}) for n in args.fast_seeds})
     names = [Path(d).name for d in args.sequence]
     columns.update({(name if names.count(name) == 1 else d): (d, "eas", {}) for name, d in zip(names, args.sequence)})
     print("| | " + " | ".join(columns) + " |")
