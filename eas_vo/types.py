@@ -118,7 +118,7 @@ class ImuSeries:
         simulated sequence its rotation between frames was 0.47 deg off the truth, median;
         0.075 deg so). Before the first and after the last reading, held."""
         t = self.t
-        cuts = np.concatenate([[t0], t[(t > t0) & (t < t1)], [t1]])
+        cuts = np.concatenate([[t0], t[np.searchsorted(t, t0, side="right"):np.searchsorted(t, t1, side="left")], [t1]])
         middle = 0.5 * (cuts[:-1] + cuts[1:])
         return np.stack([np.interp(middle, t, self.gyro[:, k]) for k in range(3)], -1), np.diff(cuts)
 
