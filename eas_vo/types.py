@@ -118,9 +118,11 @@ class ImuSeries:
         simulated sequence its rotation between frames was 0.47 deg off the truth, median;
         0.075 deg so). Before the first and after the last reading, held."""
         t = self.t
-        cuts = np.concatenate([[t0], t[np.searchsorted(t, t0, side="right"):np.searchsorted(t, t1, side="left")], [t1]])
+        first, end = np.searchsorted(t, t0, side="right"), np.searchsorted(t, t1, side="left")
+        cuts = np.concatenate([[t0], t[first:end], [t1]])
         middle = 0.5 * (cuts[:-1] + cuts[1:])
-        return np.stack([np.interp(middle, t, self.gyro[:, k]) for k in range(3)], -1), np.diff(cuts)
+        near = slice(max(first - 1, 0), end + 1)  # the readings around [t0, t1]: interpolation needs no others
+        return np.stack([np.interp(middle, t[near], self.gyro[near, k]) for k in range(3)], -1), np.diff(cuts)
 
 
 @dataclass(frozen=True)
