@@ -133,8 +133,9 @@ class Frontend:
     """Turns a Sample into one grayscale uint8 image of sensor size (height, width).
 
     Required: `__call__(sample)`. Optional: `needs_frames` (default False: the frontend
-    reads only events), `needs_events` (default False), `reset()` (default: nothing to
-    forget). Stateful frontends consume `sample.events_since_previous` incrementally.
+    reads only events), `needs_events` (default False), `shows_the_past` (default False),
+    `reset()` (default: nothing to forget). Stateful frontends consume
+    `sample.events_since_previous` incrementally.
     """
 
     name: ClassVar[str] = "frontend"
@@ -145,6 +146,11 @@ class Frontend:
     #: True if `__call__` reads events (the run warns when there are none, or when they end
     #: before the window's last frames).
     needs_events: ClassVar[bool] = False
+    #: True if the image remembers events from before the frame's time (a time surface): it
+    #: shows the scene some ms in the past, so a clock shift the run's IMU check finds is taken
+    #: for the image's lag, not the IMU's clock (no run.imu_time_offset_s is suggested, and
+    #: run.imu_time_offset_auto keeps the configured clock).
+    shows_the_past: ClassVar[bool] = False
 
     def __init__(self, config=None, camera: CameraModel | None = None):
         self.config = config if config is not None else self.Config()

@@ -27,6 +27,7 @@ class _SurfaceFrontend(Frontend):
     """A surface updated by the events since the previous sample, then rendered at its time."""
 
     needs_events = True
+    shows_the_past = True
 
     def __init__(self, config=None, camera=None):
         super().__init__(config, camera)

@@ -96,16 +96,20 @@ def test_an_automatic_imu_clock_changes_nothing_when_the_images_ask_for_nothing(
     np.testing.assert_array_equal(runs[0].R_w_c, runs[1].R_w_c)
 
 
-@pytest.mark.parametrize("backend, at_limit, reclocked", [("gtsam", False, True), ("chain", False, False), ("gtsam", True, False)])
-def test_the_gyro_is_reclocked_only_for_a_backend_that_reads_it_and_a_shift_found(backend, at_limit, reclocked):
+@pytest.mark.parametrize("backend, frontend, at_limit, reclocked",
+                         [("gtsam", "eas", False, True), ("chain", "eas", False, False), ("gtsam", "eas", True, False),
+                          ("gtsam", "ts", False, False)])
+def test_the_gyro_is_reclocked_only_for_a_backend_that_reads_it_and_a_shift_found(backend, frontend, at_limit, reclocked):
     """A check that found the gyro 12 ms late, the configured offset 5 ms: with auto, a backend
     that reads the IMU gets it 12 ms earlier, read at 17 ms, and no clock warning; one that
-    does not (chain), or a shift on the search's edge, keeps the configured clock and warns."""
+    does not (chain), or a shift on the search's edge, keeps the configured clock and warns;
+    with images that show the past (ts) the shift is their lag: the clock is kept, none suggested."""
     from eas_vo.evaluation import ImuAgreement
     from eas_vo.pipeline import _backend_imu, _imu_disagrees
     from eas_vo.types import ImuSeries
 
-    cfg = config.resolve("best", {"backend": backend}, ["run.imu_time_offset_s=0.005", "run.imu_time_offset_auto=true"])
+    cfg = config.resolve("best", {"backend": backend, "frontend": frontend},
+                         ["run.imu_time_offset_s=0.005", "run.imu_time_offset_auto=true"])
     plugin = registry.get("backends", backend)(cfg.backend)
     found = ImuAgreement(np.eye(3), 100, 90, 0.6, 0.012, at_limit, 0.004, 0.008)
     imu = ImuSeries(np.arange(0.0, 1.0, 0.005), np.zeros((200, 3)), np.ones((200, 3)))
@@ -118,4 +122,8 @@ def test_the_gyro_is_reclocked_only_for_a_backend_that_reads_it_and_a_shift_foun
         said = _imu_disagrees(cfg, found, reclocked=False)
         limit = "at least " if at_limit else ""
         assert len(said) == 1 and f"read {limit}12.0 ms later" in said[0]
-        assert f"run.imu_time_offset_s = {limit}0.0170 would match them, not 0.005" in said[0]
+        if frontend == "ts":
+            assert "the ts images show the past, so this is taken for their lag" in said[0]
+            assert "run.imu_time_offset_s" not in said[0]
+        else:
+            assert f"run.imu_time_offset_s = {limit}0.0170 would match them, not 0.005" in said[0]
