@@ -183,7 +183,7 @@ def imu_agreement(t: np.ndarray, edges, imu: ImuSeries) -> ImuAgreement | None:
     t0 = np.array([t[e.i] for e in steps], float)
     t1 = np.array([t[e.j] for e in steps], float)
     v_all = matrix_to_rotvec(np.stack([e.R_i_j for e in steps])) if steps else np.empty((0, 3))
-    turned = _gyro_turn(imu)
+    turned = imu.turned_since_start()
     shift, found = 0.0, None
     for _ in range(CLOCK_ROUNDS):
         g = turned(t1 + shift) - turned(t0 + shift)
@@ -219,31 +219,10 @@ def _fit_axes(v: np.ndarray, g: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return R, agree
 
 
-def _gyro_turn(imu: ImuSeries):
-    """times (any shape) [s] -> the gyro's integrated rate since its first reading (..., 3)
-    [rad]: differences of it are the rotation vectors between two times, up to the composition
-    of the rotations in between (second order in the angle: under 0.05 deg for 10 deg between
-    frames). The rate is linear between readings and held outside them, as in
-    ImuSeries.rates_between: a trapezoid sum up to the last reading before each time, and the
-    quadratic piece after it. Vectorised, for many pairs at once."""
-    T, w = imu.t, imu.gyro
-    dT = np.diff(T)[:, None]
-    at_readings = np.vstack([np.zeros(3), np.cumsum(0.5 * (w[:-1] + w[1:]) * dT, axis=0)])
-    slope = np.vstack([np.diff(w, axis=0) / dT, np.zeros((1, 3))])  # [rad/s^2]; none after the last
-
-    def turned(times):
-        times = np.asarray(times, float)
-        k = np.clip(np.searchsorted(T, times, side="right") - 1, 0, len(T) - 1)
-        since = (times - T[k])[..., None]  # negative only before the first reading, where it is held
-        return at_readings[k] + w[k] * since + 0.5 * slope[k] * np.maximum(since, 0.0) ** 2
-
-    return turned
-
-
 def _best_clock_shift(t0: np.ndarray, t1: np.ndarray, expected: np.ndarray, turned, imu: ImuSeries,
                       around: float) -> tuple[float, bool, float, float]:
     """The shift d [s] of the gyro's clock (read at t + d) whose rotation vectors over frame
-    times t0 < t1 (`turned`: _gyro_turn) best match `expected` (N, 3) [rad], by the median
+    times t0 < t1 (`turned`: ImuSeries.turned_since_start) best match `expected` (N, 3) [rad], by the median
     distance on a 1 ms grid within CLOCK_SEARCH_S of `around`, refined by a parabola. Returns
     d, whether it lies on the grid's edge, the median at d and the median at 0 (pairs the
     gyro covers at every shift only)."""

@@ -124,6 +124,26 @@ class ImuSeries:
         near = slice(max(first - 1, 0), end + 1)  # the readings around [t0, t1]: interpolation needs no others
         return np.stack([np.interp(middle, t[near], self.gyro[near, k]) for k in range(3)], -1), np.diff(cuts)
 
+    def turned_since_start(self):
+        """times (any shape) [s] -> the gyro's integrated rate since its first reading (..., 3)
+        [rad]: differences of it are the rotation vectors between two times, up to the
+        composition of the rotations in between (second order in the angle: under 0.05 deg for
+        10 deg between frames). Rates as in rates_between (linear between readings, held
+        outside them): a trapezoid sum up to the last reading before each time, and the
+        quadratic piece after it. Vectorised, for many pairs at once."""
+        T, w = self.t, self.gyro
+        dT = np.diff(T)[:, None]
+        at_readings = np.vstack([np.zeros(3), np.cumsum(0.5 * (w[:-1] + w[1:]) * dT, axis=0)])
+        slope = np.vstack([np.diff(w, axis=0) / dT, np.zeros((1, 3))])  # [rad/s^2]; none after the last
+
+        def turned(times):
+            times = np.asarray(times, float)
+            k = np.clip(np.searchsorted(T, times, side="right") - 1, 0, len(T) - 1)
+            since = (times - T[k])[..., None]  # negative only before the first reading, where it is held
+            return at_readings[k] + w[k] * since + 0.5 * slope[k] * np.maximum(since, 0.0) ** 2
+
+        return turned
+
 
 @dataclass(frozen=True)
 class Sample:

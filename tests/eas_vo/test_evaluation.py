@@ -88,20 +88,6 @@ def test_time_offset_known_answer():
     assert estimate_time_offset(t_frames, edges, gt) == pytest.approx(true_offset, abs=0.0005)
 
 
-def test_the_check_integrates_the_gyro_as_the_tracker_and_the_graph_do():
-    """evaluation's vectorised integral between any two times equals the sum over
-    ImuSeries.rates_between (rates linear between readings, held outside them)."""
-    from eas_vo.evaluation import _gyro_turn
-
-    rng = np.random.default_rng(3)
-    t = np.cumsum(rng.uniform(0.003, 0.007, 200))
-    imu = ImuSeries(t, np.zeros((len(t), 3)), rng.normal(0, 2.0, (len(t), 3)))
-    turned = _gyro_turn(imu)
-    for t0, t1 in [(t[10], t[20]), (t[10] + 0.001, t[20] - 0.002), (t[0] - 0.02, t[3] + 0.001), (t[-3] - 0.001, t[-1] + 0.03)]:
-        rates, dt = imu.rates_between(t0, t1)
-        np.testing.assert_allclose(turned(t1) - turned(t0), (rates * dt[:, None]).sum(axis=0), atol=1e-12)
-
-
 @pytest.mark.parametrize("R_imu_cam", [np.eye(3), Rotation.from_rotvec([0, 0, np.pi / 2]).as_matrix(),
                                        Rotation.from_rotvec([0.1, -0.25, 0.05]).as_matrix()])
 def test_imu_agreement_finds_how_the_gyro_is_turned(R_imu_cam):

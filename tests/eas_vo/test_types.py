@@ -32,3 +32,17 @@ def test_gyro_rates_between_cut_at_readings_and_are_held_outside():
     rates, dt = imu.rates_between(0.09, 0.2)  # the last reading is at 0.095 s
     np.testing.assert_allclose(dt, [0.005, 0.105])
     np.testing.assert_allclose(rates[:, 0], [0.925, 0.95])
+
+
+def test_the_integral_since_start_agrees_with_rates_between():
+    """The vectorised integral (the IMU check's) between any two times equals the sum over
+    ImuSeries.rates_between (rates linear between readings, held outside them)."""
+    from eas_vo.types import ImuSeries
+
+    rng = np.random.default_rng(3)
+    t = np.cumsum(rng.uniform(0.003, 0.007, 200))
+    imu = ImuSeries(t, np.zeros((len(t), 3)), rng.normal(0, 2.0, (len(t), 3)))
+    turned = imu.turned_since_start()
+    for t0, t1 in [(t[10], t[20]), (t[10] + 0.001, t[20] - 0.002), (t[0] - 0.02, t[3] + 0.001), (t[-3] - 0.001, t[-1] + 0.03)]:
+        rates, dt = imu.rates_between(t0, t1)
+        np.testing.assert_allclose(turned(t1) - turned(t0), (rates * dt[:, None]).sum(axis=0), atol=1e-12)
