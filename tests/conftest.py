@@ -9,13 +9,11 @@ installed package, whose plugins live in `eas_vo.frontends` etc.
 
 from __future__ import annotations
 
-import atexit
 import ipaddress
 import os
 import shutil
 import socket
 import sys
-import tempfile
 from pathlib import Path
 
 import pytest
@@ -27,11 +25,6 @@ try:
 except ImportError:
     raise pytest.UsageError("eas-vo is not installed in this Python: pip install -e '.[test]' (see README)") from None
 
-# Keep the user's cache out of the tests (and the tests' sequences out of the user's cache).
-if "EAS_VO_CACHE_DIR" not in os.environ:
-    _cache = tempfile.mkdtemp(prefix="eas-vo-test-cache-")
-    os.environ["EAS_VO_CACHE_DIR"] = _cache
-    atexit.register(shutil.rmtree, _cache, ignore_errors=True)
 # No test reaches the internet: downloads go to a closed loopback port unless a test serves them,
 # and this process's sockets refuse any address but loopback.
 os.environ["EAS_VO_DATA_URL"] = "http://127.0.0.1:9/"
@@ -51,6 +44,22 @@ def _loopback_only(sock, address):
 socket.socket.connect = _loopback_only
 
 
+@pytest.fixture(scope="session", autouse=True)
+def isolated_cache(tmp_path_factory):
+    """Keep the user's cache out of the tests (and the tests' sequences out of the user's cache).
+
+    The cache lives in pytest's base temporary folder, so it goes with it: at once after a
+    passing session (tmp_path_retention_policy = "failed"), and after a failed or killed one
+    when later sessions prune all but the newest few (about 0.6 GB each).
+    """
+    if "EAS_VO_CACHE_DIR" in os.environ:
+        yield
+        return
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setenv("EAS_VO_CACHE_DIR", str(tmp_path_factory.mktemp("cache")))
+        yield
+
+
 @pytest.fixture(scope="session")
 def short_sequence(tmp_path_factory) -> Path:
     """A 2-second simulated sequence (seed 3), written once per test session."""
@@ -64,8 +73,6 @@ def short_sequence(tmp_path_factory) -> Path:
 @pytest.fixture
 def sequence_copy(short_sequence, tmp_path) -> Path:
     """A private copy of the short sequence that a test may damage."""
-    import shutil
-
     dst = tmp_path / "seq"
     shutil.copytree(short_sequence, dst)
     return dst
