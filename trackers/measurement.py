@@ -18,7 +18,8 @@ class TwoViewConfig:
 
     Attributes:
         geometry: `essential` (the paper: five-point essential matrix), `rotation` (rotation-only
-            2-point RANSAC and least squares on bearings) or `auto` (the better by GRIC).
+            2-point RANSAC and least squares on bearings), `auto` (the better by GRIC) or
+            `homography` (a plane's homography: for loops, whose views lie centimetres apart).
         essential_method: robust estimator around OpenCV's five-point solver: `usac` (RANSAC
             with local optimisation, the default), `ransac` (plain), `magsac`, `lmeds`.
         ransac_threshold_px: inlier threshold [px].

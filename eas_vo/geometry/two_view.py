@@ -198,6 +198,34 @@ def essential_rotation(
     return E, R, mask
 
 
+def homography_rotation(
+    x_prev: np.ndarray, x_cur: np.ndarray, threshold: float, confidence: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+    """The rotation of a plane's homography H ~ R + t n^T / d: (R_cur_prev, inlier mask, transfer
+    residuals [normalised units]) or None.
+
+    H holds exactly for a planar scene seen from two places, and for a pure rotation (H = R),
+    so the camera's translation is kept out of R where a rotation-only model would turn its
+    parallax into rotation. Of the decompositions that keep the inliers in front of both views
+    the one whose plane faces the first view most directly is taken (its normal closest to the
+    optical axis): the other is the dual whose normal lies along the translation, and a
+    textured plane seen edge-on gives few corners.
+    """
+    H, mask = cv2.findHomography(x_prev, x_cur, cv2.RANSAC, threshold, confidence=confidence)
+    if H is None or mask is None:
+        return None
+    mask = mask.ravel().astype(bool)
+    _, rotations, _, normals = cv2.decomposeHomographyMat(H, np.eye(3))
+    inliers_prev = x_prev[mask].reshape(-1, 1, 2).astype(np.float32)
+    inliers_cur = x_cur[mask].reshape(-1, 1, 2).astype(np.float32)
+    visible = cv2.filterHomographyDecompByVisibleRefpoints(rotations, normals, inliers_prev, inliers_cur)
+    if visible is None:
+        return None
+    facing = max(np.ravel(visible), key=lambda k: normals[int(k)][2, 0])
+    transferred = cv2.perspectiveTransform(np.asarray(x_prev, np.float64).reshape(-1, 1, 2), H).reshape(-1, 2)
+    return rotations[int(facing)], mask, np.linalg.norm(transferred - x_cur, axis=1)
+
+
 #: Robust estimators around the five-point solver, by config name.
 ESSENTIAL_METHODS = {
     "usac": cv2.USAC_DEFAULT,
@@ -207,7 +235,7 @@ ESSENTIAL_METHODS = {
 }
 
 #: How the rotation of a frame pair is measured (see rotation_from_correspondences).
-GEOMETRIES = ("essential", "rotation", "auto")
+GEOMETRIES = ("essential", "rotation", "auto", "homography")
 
 
 class TwoViewRotation(NamedTuple):
@@ -235,9 +263,12 @@ def rotation_from_correspondences(
         confidence: robust estimator confidence.
         method: a key of ESSENTIAL_METHODS (the five-point estimator's robust loop).
         geometry: `essential` (the paper: five-point essential matrix, rotation by cheirality),
-            `rotation` (rotation-only: 2-point RANSAC and least squares on bearings), or `auto`
+            `rotation` (rotation-only: 2-point RANSAC and least squares on bearings), `auto`
             (both, the better by GRIC; the essential matrix's rotation is then the candidate
-            closest to the rotation-only one, so a cheirality flip cannot get through).
+            closest to the rotation-only one, so a cheirality flip cannot get through), or
+            `homography` (a plane's homography and its rotation, see homography_rotation;
+            rotation-only when none is found or none of its decompositions puts the inliers in
+            front of both views, as with the noise of a pure rotation).
 
     Returns:
         The rotation, its inlier count, the model used and the median inlier residual, or
@@ -257,6 +288,12 @@ def rotation_from_correspondences(
     rot_residuals = angular_residuals(R_rot, f_prev, f_cur)
     if geometry == "rotation":
         return _result(R_rot, rot_mask, "rotation", rot_residuals, dims=2)
+    if geometry == "homography":
+        found = homography_rotation(pts_prev_n, pts_cur_n, threshold, confidence)
+        if found is None:
+            return _result(R_rot, rot_mask, "rotation", rot_residuals, dims=2)
+        R_hom, hom_mask, hom_residuals = found
+        return _result(R_hom, hom_mask, "homography", hom_residuals, dims=2)
     found = essential_rotation(pts_prev_n, pts_cur_n, threshold, confidence, ESSENTIAL_METHODS[method], R_hint=R_rot)
     if found is None:
         return _result(R_rot, rot_mask, "rotation", rot_residuals, dims=2)

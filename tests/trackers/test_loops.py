@@ -103,3 +103,24 @@ def test_queries_wait_for_motion_and_catch_a_return():
             assert not queried, "a still camera queried"
     returned = [j for i, j in queried if i == 0]
     assert returned and min(returned) <= 64 + closer.config.loop_every, queried
+
+
+@pytest.mark.parametrize("geometry", ["rotation", "homography"])
+def test_a_homography_loop_keeps_the_cameras_translation_out_of_the_rotation(geometry):
+    """A keyframe of a textured wall 1 m away and a later view 7 degrees turned and 5 cm moved
+    (as a hand-held camera drifts between a keyframe and its loop): with `loop_geometry =
+    "homography"` the loop edge is within 0.3 degrees of the truth, rotation-only turns the
+    parallax into about 2.5 degrees."""
+    wall = textured_image(11, shapes=200)
+    R_cur_prev = Rotation.from_euler("yx", [6, 3], degrees=True).as_matrix()
+    t = np.array([0.04, 0.02, 0.02])  # [m], the wall n^T X = 1 m with n the optical axis
+    H = K @ (R_cur_prev + np.outer(t, [0.0, 0.0, 1.0])) @ np.linalg.inv(K)
+    moved = cv2.warpPerspective(wall, H, (240, 180), flags=cv2.INTER_LINEAR)
+    matching = LoopCloser(LoopClosureConfig(loop_closure=True, loop_geometry=geometry), CAMERA).matching
+    corners = cv2.goodFeaturesToTrack(wall, 300, 0.01, 7.0, blockSize=7).reshape(-1, 2)
+    edge, _ = matching.rotation(wall, corners, matching.features.detect(wall), moved, matching.features.detect(moved), 0, 25)
+    error_deg = np.degrees(geodesic_angle(edge.R_i_j, R_cur_prev.T))
+    if geometry == "homography":
+        assert error_deg < 0.3, error_deg
+    else:
+        assert error_deg > 1.5, error_deg
