@@ -12,11 +12,12 @@ import cv2
 import numpy as np
 
 from eas_vo.geometry.rotations import geodesic_angle
-from eas_vo.geometry.two_view import GEOMETRIES
 from eas_vo.trackers.features import DETECTORS, Features, RefinedMatching
 from eas_vo.trackers.measurement import TwoViewConfig
 from eas_vo.types import CameraModel, RelativeRotation
 from eas_vo.validation import check_choice, check_range
+
+LOOP_GEOMETRIES = ("rotation", "homography")
 
 
 @dataclass(frozen=True)
@@ -35,11 +36,12 @@ class LoopClosureConfig:
         loop_min_inliers: a loop is accepted with at least this many rotation-only inliers
             (and not weak): twice the support a frame-to-frame edge needs, since a wrong loop
             costs more than a missed one.
-        loop_geometry: the geometry of the LK refinement (one of two_view.GEOMETRIES):
-            `rotation`, or `homography`, which keeps the parallax of the camera's translation
-            out of the rotation. A loop spans seconds in which a hand-held camera moves by centimetres:
-            over the real excerpt a rotation-only loop is off by about 0.6 deg per cm the
-            camera moved (its scene about 1 m away), the error of the chain it should correct.
+        loop_geometry: the geometry of the LK refinement: `rotation`, or `homography`, which
+            keeps the parallax of the camera's translation out of the rotation where the
+            homography determines it (else the loop is measured rotation-only). A loop spans seconds in which a hand-held camera moves by
+            centimetres: over the real excerpt a rotation-only loop is off by about 0.6 deg
+            per cm the camera moved (its scene about 1 m away), the error of the chain it
+            should correct.
     """
 
     loop_closure: bool = False
@@ -58,7 +60,7 @@ class LoopClosureConfig:
         check_range(self, "loop_overlap_deg", 0.0, 180.0, lo_open=True)
         check_range(self, "loop_every", 1, 10**6)
         check_range(self, "loop_min_inliers", 5, 10**6)
-        check_choice(self, "loop_geometry", GEOMETRIES)
+        check_choice(self, "loop_geometry", LOOP_GEOMETRIES)
 
 
 @dataclass
@@ -77,8 +79,8 @@ class LoopCloser:
     def __init__(self, config: LoopClosureConfig, camera: CameraModel):
         self.config, self.camera = config, camera
         self.features = Features(config.loop_detector)
-        self.matching = RefinedMatching(self.features, camera, TwoViewConfig(geometry=config.loop_geometry, min_inliers=config.loop_min_inliers),
-                                        config.loop_min_inliers)
+        fine = TwoViewConfig(geometry=config.loop_geometry, min_inliers=config.loop_min_inliers)
+        self.matching = RefinedMatching(self.features, camera, fine, config.loop_min_inliers)
         self.keyframes: list[_Keyframe] = []
         self._axes = np.empty((0, 3))  # each keyframe's optical axis in the world frame
         self.R_w_c = np.eye(3)

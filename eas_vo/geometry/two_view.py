@@ -1,5 +1,6 @@
 """Relative rotation from bearing correspondences: a rotation-only solver (2-point RANSAC,
-then least squares), the five-point essential matrix, and GRIC to choose between them.
+then least squares), the five-point essential matrix, GRIC to choose between them, and a
+plane's homography.
 
 Conventions: `f_prev`, `f_cur` are (N, 3) unit bearings; the models map previous-frame
 bearings into the current frame: f_cur ~ R_cur_prev f_prev (+ translation for E).
@@ -12,6 +13,8 @@ from typing import NamedTuple
 import cv2
 import numba
 import numpy as np
+
+from eas_vo.geometry.rotations import geodesic_angle
 
 
 def bearings(pts_n: np.ndarray) -> np.ndarray:
@@ -198,19 +201,21 @@ def essential_rotation(
     return E, R, mask
 
 
-def homography_rotation(
+def homography_rotations(
     x_prev: np.ndarray, x_cur: np.ndarray, threshold: float, confidence: float
-) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
-    """The rotation of a plane's homography H ~ R + t n^T / d: (R_cur_prev, inlier mask, transfer
-    residuals [normalised units]) or None.
+) -> tuple[list[np.ndarray], np.ndarray, np.ndarray] | None:
+    """The rotations of a plane's homography H ~ R + t n^T / d: (each decomposition's R_cur_prev
+    that keeps the inliers in front of both views, inlier mask, transfer residuals [normalised
+    units]), or None with fewer than 4 points or no homography.
 
-    H holds exactly for a planar scene seen from two places, and for a pure rotation (H = R),
-    so the camera's translation is kept out of R where a rotation-only model would turn its
-    parallax into rotation. Of the decompositions that keep the inliers in front of both views
-    the one whose plane faces the first view most directly is taken (its normal closest to the
-    optical axis): the other is the dual whose normal lies along the translation, and a
-    textured plane seen edge-on gives few corners.
+    H holds exactly for the points of a plane seen from two places, and for a pure rotation
+    (H = R), so the camera's translation is kept out of R where a rotation-only model would
+    turn its parallax into rotation. Up to two decompositions keep the points in front: the
+    true one and its dual, whose normal lies along the translation; none when t ~ 0 leaves
+    the normal undetermined.
     """
+    if len(x_prev) < 4:
+        return None
     H, mask = cv2.findHomography(x_prev, x_cur, cv2.RANSAC, threshold, confidence=confidence)
     if H is None or mask is None:
         return None
@@ -219,11 +224,9 @@ def homography_rotation(
     inliers_prev = x_prev[mask].reshape(-1, 1, 2).astype(np.float32)
     inliers_cur = x_cur[mask].reshape(-1, 1, 2).astype(np.float32)
     visible = cv2.filterHomographyDecompByVisibleRefpoints(rotations, normals, inliers_prev, inliers_cur)
-    if visible is None:
-        return None
-    facing = max(np.ravel(visible), key=lambda k: normals[int(k)][2, 0])
     transferred = cv2.perspectiveTransform(np.asarray(x_prev, np.float64).reshape(-1, 1, 2), H).reshape(-1, 2)
-    return rotations[int(facing)], mask, np.linalg.norm(transferred - x_cur, axis=1)
+    in_front = [] if visible is None else [rotations[int(k)] for k in np.ravel(visible)]
+    return in_front, mask, np.linalg.norm(transferred - x_cur, axis=1)
 
 
 #: Robust estimators around the five-point solver, by config name.
@@ -243,7 +246,7 @@ class TwoViewRotation(NamedTuple):
 
     R_prev_cur: np.ndarray  #: maps current-frame vectors into the previous frame
     inliers: int  #: correspondences the model explains
-    model: str  #: `essential` or `rotation`
+    model: str  #: `essential`, `rotation` or `homography`
     residual: float  #: robust per-axis noise of the inliers [normalised image units ~ rad], see _result
 
 
@@ -266,9 +269,11 @@ def rotation_from_correspondences(
             `rotation` (rotation-only: 2-point RANSAC and least squares on bearings), `auto`
             (both, the better by GRIC; the essential matrix's rotation is then the candidate
             closest to the rotation-only one, so a cheirality flip cannot get through), or
-            `homography` (a plane's homography and its rotation, see homography_rotation;
-            rotation-only when none is found or none of its decompositions puts the inliers in
-            front of both views, as with the noise of a pure rotation).
+            `homography` (a plane's homography and its rotation where it determines one, see
+            homography_rotations; else rotation-only: when no homography is found, when no
+            decomposition puts the inliers in front of both views, as with a pure rotation's
+            noise, or when the true one and its dual both do and differ by more than
+            `threshold`, as nothing in two views tells them apart).
 
     Returns:
         The rotation, its inlier count, the model used and the median inlier residual, or
@@ -289,11 +294,11 @@ def rotation_from_correspondences(
     if geometry == "rotation":
         return _result(R_rot, rot_mask, "rotation", rot_residuals, dims=2)
     if geometry == "homography":
-        found = homography_rotation(pts_prev_n, pts_cur_n, threshold, confidence)
-        if found is None:
+        found = homography_rotations(pts_prev_n, pts_cur_n, threshold, confidence)
+        in_front = found[0] if found is not None else []
+        if not in_front or any(geodesic_angle(in_front[0], R) > threshold for R in in_front[1:]):
             return _result(R_rot, rot_mask, "rotation", rot_residuals, dims=2)
-        R_hom, hom_mask, hom_residuals = found
-        return _result(R_hom, hom_mask, "homography", hom_residuals, dims=2)
+        return _result(in_front[0], found[1], "homography", found[2], dims=2)
     found = essential_rotation(pts_prev_n, pts_cur_n, threshold, confidence, ESSENTIAL_METHODS[method], R_hint=R_rot)
     if found is None:
         return _result(R_rot, rot_mask, "rotation", rot_residuals, dims=2)

@@ -85,6 +85,8 @@ def test_false_loops_do_not_wreck_a_robust_graph(sweep, mode):
 def test_loop_options_are_checked():
     with pytest.raises(ConfigError, match="loop_min_inliers = 1 is out of range"):
         LoopClosureConfig(loop_min_inliers=1).validate()
+    with pytest.raises(ConfigError, match="loop_geometry"):
+        LoopClosureConfig(loop_geometry="essential").validate()
 
 
 def test_queries_wait_for_motion_and_catch_a_return():

@@ -104,16 +104,16 @@ def test_gric_prefers_the_model_the_data_has():
     assert chosen["pure"].count("rotation") >= 16 and chosen["parallax"].count("essential") >= 16, chosen
 
 
-def plane_view_pair(rng, baseline_m, n=200, noise_px=0.5, outliers=0.1):
-    """Matched normalised points on a plane 1 m away (tilted 20 degrees), seen from two places
-    `baseline_m` apart (sideways and forward) and 8 degrees of rotation apart. Returns (x_prev,
-    x_cur, R_cur_prev)."""
+def plane_view_pair(rng, t_m, tilt_deg, n=200, noise_px=0.2, outliers=0.1):
+    """Matched normalised points on a plane 1 m away (its normal tilted `tilt_deg` about x),
+    seen from two places `t_m` [m] (second view in the first's frame) and 8 degrees of rotation
+    apart. Returns (x_prev, x_cur, R_cur_prev)."""
     x_prev = rng.uniform(-0.55, 0.55, (n, 2))
-    normal = Rotation.from_euler("x", 20, degrees=True).apply([0.0, 0.0, 1.0])  # n^T X = 1 m
+    normal = Rotation.from_euler("x", tilt_deg, degrees=True).apply([0.0, 0.0, 1.0])  # n^T X = 1 m
     X = np.column_stack([x_prev, np.ones(n)])
     X /= (X @ normal)[:, None]
     R = Rotation.from_rotvec(np.radians(8) * np.array([0.6, 0.8, 0.0])).as_matrix()
-    Xc = X @ R.T + baseline_m * np.array([0.8, 0.0, 0.6])
+    Xc = (X - np.asarray(t_m)) @ R.T
     x_cur = Xc[:, :2] / Xc[:, 2:] + rng.normal(0, noise_px / F_PX, (n, 2))
     x_prev = x_prev + rng.normal(0, noise_px / F_PX, (n, 2))
     bad = rng.random(n) < outliers
@@ -121,23 +121,42 @@ def plane_view_pair(rng, baseline_m, n=200, noise_px=0.5, outliers=0.1):
     return x_prev, x_cur, R
 
 
-def test_a_homography_keeps_a_planes_parallax_out_of_the_rotation():
-    """5 cm sideways and forward in front of a plane 1 m away, LK-like noise (0.2 px): the
-    rotation-only model turns the parallax into over 2 degrees of rotation, the homography's
-    rotation (the decomposition facing the camera, not its dual) is within 0.2 degrees; with
-    no baseline it pays for its 8 parameters with some noise (or, when no decomposition puts
-    the points in front of both views, is the rotation-only one), within 0.2 degrees."""
+@pytest.mark.parametrize("direction", [(1, 0, 0), (0.8, 0, 0.6), (0, 0.6, -0.8), (0, 0, 1)])
+@pytest.mark.parametrize("tilt_deg", [0, 20, 40])
+def test_a_homography_keeps_a_planes_parallax_out_of_the_rotation_or_measures_nothing(direction, tilt_deg):
+    """5 cm (sideways, forward, backward) in front of a plane 1 m away, LK-like noise (0.2 px):
+    rotation-only turns the parallax into rotation; the homography's rotation is within 0.2
+    degrees whenever it gives one, and when the true decomposition and its dual (normal along
+    the translation) both fit, the result is the rotation-only one: never the dual."""
     rng = np.random.default_rng(5)
-    for baseline_m in (0.05, 0.0):
-        errors = {"homography": [], "rotation": []}
-        for _ in range(10):
-            x_prev, x_cur, R = plane_view_pair(rng, baseline_m, noise_px=0.2)
-            for geometry, found in errors.items():
-                found_rotation = rotation_from_correspondences(x_prev, x_cur, 1.0 / F_PX, 0.999, "usac", geometry)
-                assert found_rotation.model == geometry or not baseline_m  # (a pure rotation's H may not decompose)
-                found.append(np.degrees(geodesic_angle(R.T, found_rotation.R_prev_cur)))
-        assert np.median(errors["homography"]) < 0.2, errors
-        if baseline_m:
-            assert np.median(errors["rotation"]) > 2.0, errors
+    t_m = 0.05 * np.asarray(direction, float)
+    measured, rotation_only = [], []
+    for _ in range(5):
+        x_prev, x_cur, R = plane_view_pair(rng, t_m, tilt_deg)
+        found = rotation_from_correspondences(x_prev, x_cur, 1.0 / F_PX, 0.999, "usac", "homography")
+        rotation_only.append(np.degrees(geodesic_angle(R.T, rotation_from_correspondences(
+            x_prev, x_cur, 1.0 / F_PX, 0.999, "usac", "rotation").R_prev_cur)))
+        if found.model == "homography":
+            measured.append(np.degrees(geodesic_angle(R.T, found.R_prev_cur)))
         else:
-            assert np.median(errors["rotation"]) < 0.05, errors
+            assert np.degrees(geodesic_angle(R.T, found.R_prev_cur)) == pytest.approx(rotation_only[-1])
+    assert all(error < 0.2 for error in measured), measured
+    if direction == (1, 0, 0):  # sideways before a wall facing the camera: no dual in front
+        assert len(measured) == 5 and np.median(rotation_only) > 2.0, (measured, rotation_only)
+
+
+def test_a_homography_of_a_pure_rotation_is_its_rotation():
+    """No baseline: H = R, the normal undetermined; within 0.2 degrees (the rotation-only
+    estimate when no decomposition puts the points in front of both views)."""
+    rng = np.random.default_rng(6)
+    for _ in range(10):
+        x_prev, x_cur, R = plane_view_pair(rng, np.zeros(3), 20)
+        found = rotation_from_correspondences(x_prev, x_cur, 1.0 / F_PX, 0.999, "usac", "homography")
+        assert np.degrees(geodesic_angle(R.T, found.R_prev_cur)) < 0.2
+
+
+@pytest.mark.parametrize("n", [0, 1, 2, 3])
+def test_a_homography_needs_four_points(n):
+    rng = np.random.default_rng(7)
+    x_prev, x_cur, _ = plane_view_pair(rng, np.array([0.05, 0, 0]), 0, n=n, outliers=0.0)
+    assert two_view.homography_rotations(x_prev, x_cur, 1.0 / F_PX, 0.999) is None
