@@ -51,14 +51,15 @@ def rotation_ransac(
     """Pure-rotation model: 2-point minimal sets scored in batches until, given the best inlier
     ratio w so far, another sample is unlikely to do better (log(1 - confidence) / log(1 - w^2)
     samples, at most `max_hypotheses`), then least squares on the inliers (twice). Returns
-    (R_cur_prev, inlier mask) or None with fewer than 2 points."""
+    (R_cur_prev, inlier mask), or None with fewer than 2 points or when no sample is supported
+    by two points (as with non-finite bearings, whose rotation would be NaN)."""
     n = len(f_prev)
     if n < 2:
         return None
     pairs = np.random.default_rng(seed).integers(0, n, (-(-max_hypotheses // batch) * batch, 2))
     cos_threshold = np.cos(threshold_rad)  # an angle below the threshold is a cosine above its cosine
     R_best, best_count, _ = _best_two_point_rotation(f_prev, f_cur, pairs, cos_threshold, confidence, batch)
-    if best_count < 0:
+    if best_count < 2:
         return None
     mask = np.einsum("ij,nj,ni->n", R_best, f_prev, f_cur) > cos_threshold
     for _ in range(2):

@@ -160,3 +160,13 @@ def test_a_homography_needs_four_points(n):
     rng = np.random.default_rng(7)
     x_prev, x_cur, _ = plane_view_pair(rng, np.array([0.05, 0, 0]), 0, n=n, outliers=0.0)
     assert two_view.homography_rotations(x_prev, x_cur, 1.0 / F_PX, 0.999) is None
+
+
+@pytest.mark.parametrize("geometry", ["rotation", "essential", "auto", "homography"])
+@pytest.mark.parametrize("bad", [np.nan, np.inf])
+def test_non_finite_points_measure_nothing(geometry, bad):
+    """No NaN rotation reaches a tracker: points that are all non-finite give no model."""
+    x_prev, x_cur, _ = view_pair(np.random.default_rng(8), n=50)
+    x_prev[:] = bad
+    with np.errstate(invalid="ignore"):
+        assert rotation_from_correspondences(x_prev, x_cur, 1.0 / F_PX, 0.999, "usac", geometry) is None
