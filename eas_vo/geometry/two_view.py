@@ -202,31 +202,41 @@ def essential_rotation(
     return E, R, mask
 
 
+#: A homography's decomposition is taken to put the points in front of both views when this
+#: share of its inliers is: noise puts a few points of a steeply tilted plane, near its
+#: horizon, behind it, and an all-or-nothing test would then keep only the dual.
+IN_FRONT_SHARE = 0.9
+
+
 def homography_rotations(
     x_prev: np.ndarray, x_cur: np.ndarray, threshold: float, confidence: float
 ) -> tuple[list[np.ndarray], np.ndarray, np.ndarray] | None:
     """The rotations of a plane's homography H ~ R + t n^T / d: (each decomposition's R_cur_prev
-    that keeps the inliers in front of both views, inlier mask, transfer residuals [normalised
-    units]), or None with fewer than 4 points or no homography.
+    that puts the inliers in front of both views, inlier mask, transfer residuals [normalised
+    units]), or None with fewer than 4 points, no homography or no inliers.
 
     H holds exactly for the points of a plane seen from two places, and for a pure rotation
     (H = R), so the camera's translation is kept out of R where a rotation-only model would
-    turn its parallax into rotation. Up to two decompositions keep the points in front: the
-    true one and its dual, whose normal lies along the translation; none when t ~ 0 leaves
-    the normal undetermined.
+    turn its parallax into rotation. A point x of the first view and its match x' lie in front
+    of a decomposition's plane (normal n in the first view's frame) when n . x > 0 and
+    (R n) . x' > 0 (homogeneous normalised coordinates). Up to two decompositions pass with a
+    translation: the true one and its dual, whose normal lies along the translation; without
+    one (t ~ 0, the normal undetermined) any number, with nearly the same rotation.
     """
     if len(x_prev) < 4:
         return None
     H, mask = cv2.findHomography(x_prev, x_cur, cv2.RANSAC, threshold, confidence=confidence)
-    if H is None or mask is None:
+    if H is None or mask is None or not mask.any():
         return None
     mask = mask.ravel().astype(bool)
     _, rotations, _, normals = cv2.decomposeHomographyMat(H, np.eye(3))
-    inliers_prev = x_prev[mask].reshape(-1, 1, 2).astype(np.float32)
-    inliers_cur = x_cur[mask].reshape(-1, 1, 2).astype(np.float32)
-    visible = cv2.filterHomographyDecompByVisibleRefpoints(rotations, normals, inliers_prev, inliers_cur)
+    x = np.column_stack([x_prev[mask], np.ones(mask.sum())])
+    x_next = np.column_stack([x_cur[mask], np.ones(mask.sum())])
+    in_front = [  # (exact data can decompose into NaN: no point is in front of those)
+        R for R, n in zip(rotations, normals)
+        if np.mean((x @ n.ravel() > 0) & (x_next @ (R @ n).ravel() > 0)) >= IN_FRONT_SHARE
+    ]
     transferred = cv2.perspectiveTransform(np.asarray(x_prev, np.float64).reshape(-1, 1, 2), H).reshape(-1, 2)
-    in_front = [] if visible is None else [rotations[int(k)] for k in np.ravel(visible)]
     return in_front, mask, np.linalg.norm(transferred - x_cur, axis=1)
 
 
@@ -278,7 +288,8 @@ def rotation_from_correspondences(
 
     Returns:
         The rotation, its inlier count, the model used and the median inlier residual, or
-        None when no model is found.
+        None when no model is found (for `rotation`, `auto` and `homography`: when the
+        rotation-only RANSAC, which runs first, finds none).
     """
     if geometry == "essential":
         found = essential_rotation(pts_prev_n, pts_cur_n, threshold, confidence, ESSENTIAL_METHODS[method])
