@@ -301,8 +301,8 @@ IMU_DISAGREEMENT_DEG = 10.0
 #: The gyro's clock is off when reading it this much later or earlier [s] explains the tracked
 #: rotations clearly better (CLOCK_GAIN: the median residual at most 90 % of the configured
 #: clock's): on twelve simulated IMUs read on time (best.toml and paper.toml, eas) the search
-#: found -7.8 to +3.7 ms at 93 % or more (the images' own lag); on the real excerpt with a gyro made from its ground
-#: truth (9 ms behind its frames) 8.9-9.2 ms at about 60 %.
+#: found -7.8 to +3.7 ms at 93 % or more (the images' own lag); on the real excerpt with a gyro
+#: made from its ground truth (9 ms behind its frames) 8.9-9.2 ms at about 60 %.
 CLOCK_OFF_S = 0.002
 CLOCK_GAIN = 0.9
 #: Below this spread (ImuAgreement.spread) the camera turned about one axis only and the fit

@@ -96,9 +96,10 @@ class PoseSeries:
 
 @dataclass(frozen=True)
 class ImuSeries:
-    """IMU readings: t [s] (increasing), accelerometer [m/s^2], gyro [rad/s]. A dataset gives them in the
-    IMU's frame and clock; trackers and backends get them in the camera frame, on the frames'
-    clock (in_camera_frame, applied by the pipeline with the run's camera-IMU rotation)."""
+    """IMU readings: t [s] (increasing), accelerometer [m/s^2], gyro [rad/s]. A dataset gives
+    them in the IMU's frame and clock; trackers and backends get them in the camera frame, on
+    the frames' clock (in_camera_frame, applied by the pipeline with the run's camera-IMU
+    rotation)."""
 
     t: np.ndarray
     acc: np.ndarray

@@ -208,20 +208,22 @@ def essential_rotation(
 IN_FRONT_SHARE = 0.9
 
 
-def homography_rotations(
+def homography_rotation(
     x_prev: np.ndarray, x_cur: np.ndarray, threshold: float, confidence: float
-) -> tuple[list[np.ndarray], np.ndarray, np.ndarray] | None:
-    """The rotations of a plane's homography H ~ R + t n^T / d: (each decomposition's R_cur_prev
-    that puts the inliers in front of both views, inlier mask, transfer residuals [normalised
-    units]), or None with fewer than 4 points, no homography or no inliers.
+) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+    """The rotation of a plane's homography H ~ R + t n^T / d: (R_cur_prev, inlier mask,
+    transfer residuals [normalised units]), or None where H determines none: fewer than 4
+    points, no homography, no decomposition putting the inliers in front of both views, or
+    two that do and differ by more than `threshold` [normalised units ~ rad].
 
     H holds exactly for the points of a plane seen from two places, and for a pure rotation
     (H = R), so the camera's translation is kept out of R where a rotation-only model would
     turn its parallax into rotation. A point x of the first view and its match x' lie in front
     of a decomposition's plane (normal n in the first view's frame) when n . x > 0 and
     (R n) . x' > 0 (homogeneous normalised coordinates). Up to two decompositions pass with a
-    translation: the true one and its dual, whose normal lies along the translation; without
-    one (t ~ 0, the normal undetermined) any number, with nearly the same rotation.
+    translation: the true one and its dual, whose normal lies along the translation, which
+    nothing in two views tells apart; without one (t ~ 0, the normal undetermined) any
+    number, with nearly the same rotation.
     """
     if len(x_prev) < 4:
         return None
@@ -236,8 +238,10 @@ def homography_rotations(
         R for R, n in zip(rotations, normals)
         if np.mean((x @ n.ravel() > 0) & (x_next @ (R @ n).ravel() > 0)) >= IN_FRONT_SHARE
     ]
+    if not in_front or any(geodesic_angle(in_front[0], R) > threshold for R in in_front[1:]):
+        return None
     transferred = cv2.perspectiveTransform(np.asarray(x_prev, np.float64).reshape(-1, 1, 2), H).reshape(-1, 2)
-    return in_front, mask, np.linalg.norm(transferred - x_cur, axis=1)
+    return in_front[0], mask, np.linalg.norm(transferred - x_cur, axis=1)
 
 
 #: Robust estimators around the five-point solver, by config name.
@@ -280,11 +284,8 @@ def rotation_from_correspondences(
             `rotation` (rotation-only: 2-point RANSAC and least squares on bearings), `auto`
             (both, the better by GRIC; the essential matrix's rotation is then the candidate
             closest to the rotation-only one, so a cheirality flip cannot get through), or
-            `homography` (a plane's homography and its rotation where it determines one, see
-            homography_rotations; else rotation-only: when no homography is found, when no
-            decomposition puts the inliers in front of both views, as with a pure rotation's
-            noise, or when the true one and its dual both do and differ by more than
-            `threshold`, as nothing in two views tells them apart).
+            `homography` (a plane's homography and its rotation where it determines one,
+            see homography_rotation; else rotation-only).
 
     Returns:
         The rotation, its inlier count, the model used and the median inlier residual, or
@@ -306,11 +307,11 @@ def rotation_from_correspondences(
     if geometry == "rotation":
         return _result(R_rot, rot_mask, "rotation", rot_residuals, dims=2)
     if geometry == "homography":
-        found = homography_rotations(pts_prev_n, pts_cur_n, threshold, confidence)
-        in_front = found[0] if found is not None else []
-        if not in_front or any(geodesic_angle(in_front[0], R) > threshold for R in in_front[1:]):
+        found = homography_rotation(pts_prev_n, pts_cur_n, threshold, confidence)
+        if found is None:
             return _result(R_rot, rot_mask, "rotation", rot_residuals, dims=2)
-        return _result(in_front[0], found[1], "homography", found[2], dims=2)
+        R_hom, hom_mask, hom_residuals = found
+        return _result(R_hom, hom_mask, "homography", hom_residuals, dims=2)
     found = essential_rotation(pts_prev_n, pts_cur_n, threshold, confidence, ESSENTIAL_METHODS[method], R_hint=R_rot)
     if found is None:
         return _result(R_rot, rot_mask, "rotation", rot_residuals, dims=2)

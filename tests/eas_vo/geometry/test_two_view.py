@@ -177,7 +177,7 @@ def test_a_homography_of_a_pure_rotation_is_its_rotation():
 def test_a_homography_needs_four_points(n):
     rng = np.random.default_rng(7)
     x_prev, x_cur, _ = plane_view_pair(rng, np.array([0.05, 0, 0]), 0, n=n, outliers=0.0)
-    assert two_view.homography_rotations(x_prev, x_cur, 1.0 / F_PX, 0.999) is None
+    assert two_view.homography_rotation(x_prev, x_cur, 1.0 / F_PX, 0.999) is None
 
 
 @pytest.mark.parametrize("geometry", ["rotation", "essential", "auto", "homography"])
