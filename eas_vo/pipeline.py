@@ -255,6 +255,8 @@ def summarise(config: ResolvedConfig, dataset: Dataset, tracked: Tracked, errors
         "inliers_mean": float(np.mean([r.inliers for r in pairs])),
         "status_counts": dict(Counter(r.status for r in records)),
         "redetections": int(sum(r.redetected for r in pairs)),
+        "edges": len(tracked.edges),
+        "loop_edges": int(sum(e.loop for e in tracked.edges)),
         "sequence_s": float(span),
         "elapsed_s": float(elapsed),
         "load_s": float(load_s),

@@ -187,6 +187,8 @@ class RelativeRotation:
         residual_rad: robust per-axis noise of the inliers [rad, ~ px / focal length], from the
             median of their residuals (the angle between rotated and observed bearings for
             the rotation model, the Sampson distance for the essential matrix); 0 when unknown.
+        loop: a loop closure (frame i is a keyframe seen again) rather than a measurement of
+            the motion since a recent frame.
     """
 
     i: int
@@ -195,6 +197,7 @@ class RelativeRotation:
     inliers: int = 0
     inlier_ratio: float = 1.0
     residual_rad: float = 0.0
+    loop: bool = False
 
     @property
     def sigma_rad(self) -> float:

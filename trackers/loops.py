@@ -6,7 +6,7 @@ rotation-only RANSAC on the matched keypoints, refined by LK from the keyframe's
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import cv2
 import numpy as np
@@ -106,7 +106,7 @@ class LoopCloser:
             edge, _ = self.matching.rotation(closest.image, self._corners(closest), self._detected(closest),
                                              image, self._detected(current), closest.index, k)
             if edge is not None:
-                loops = [edge]
+                loops = [replace(edge, loop=True)]
                 self.R_w_c = closest.R_w_c @ edge.R_i_j  # relocalise the running estimate on the loop
         if new_keyframe:
             current.R_w_c = self.R_w_c.copy()

@@ -35,6 +35,7 @@ def test_run_writes_every_output(eas_run):
     rows = list(csv.DictReader(open(eas_run / "frames.csv")))
     assert len(rows) == metrics["frames"] == len((eas_run / "trajectory.tum").read_text().splitlines())
     assert metrics["nc_mean"] == pytest.approx(np.mean([int(r["nc"]) for r in rows[1:]]))
+    assert metrics["edges"] == sum(r["status"] in ("ok", "weak") for r in rows) and metrics["loop_edges"] == 0
     assert (eas_run / "rotation.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
 
@@ -55,6 +56,14 @@ def test_cache_lists_clears_and_a_run_rebuilds_what_was_cleared(short_sequence, 
     assert main(["run", "--dataset", str(short_sequence), "--out", str(again), "--quiet"]) == 0
     assert len(list((tmp_path / "cache" / "events").glob("*.ev"))) == 1
     assert json.loads((again / "metrics.json").read_text())["ape_mean_rad"] == json.loads((first / "metrics.json").read_text())["ape_mean_rad"]
+
+
+def test_a_run_with_loop_closure_says_how_many_loops_closed(short_sequence, tmp_path, capsys):
+    out = tmp_path / "loops"
+    assert main(["run", "--dataset", str(short_sequence), "--frontend", "eas", "--set", "tracker.loop_closure=true",
+                 "--out", str(out), "--quiet"]) == 0
+    loops = json.loads((out / "metrics.json").read_text())["loop_edges"]
+    assert f", {loops} loop(s) closed, " in capsys.readouterr().out
 
 
 def test_evo_reports_the_same_average_ape(eas_run):

@@ -51,8 +51,9 @@ def errors_deg(R_w_c, estimate):
 def test_loop_closure_cuts_the_final_drift_fivefold(sweep):
     R_w_c, views = sweep
     plain, closed = track(views), track(views, loop_closure=True)
-    loops = [e for e in closed if e.j - e.i > 1]
-    assert not any(e.j - e.i > 1 for e in plain) and len(loops) >= 5
+    loops = [e for e in closed if e.loop]
+    assert loops == [e for e in closed if e.j - e.i > 1] and len(loops) >= 5
+    assert not any(e.j - e.i > 1 or e.loop for e in plain)
     for e in loops:  # every loop edge is right
         assert np.degrees(geodesic_angle(e.R_i_j, R_w_c[e.i].T @ R_w_c[e.j])) < 0.2
     graph = GtsamBackend(GtsamConfig(robust="cauchy"))
