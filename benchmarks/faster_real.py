@@ -1,0 +1,70 @@
+"""Faster real motion than the excerpt's: its frames thinned to every 2nd or 3rd (the same
+images and motion blur, two or three times the rotation between frames: about 40 and 60
+degrees at its p95 speed), run with best.toml and each tracker, without an IMU and with a
+1 kHz gyro made from the ground truth (benchmarks/gyro_clock.py, read at the 9 ms its clock
+asks for). Prints average APE [rad] per window (`histeq`, time offset 0.01 s).
+
+    python benchmarks/faster_real.py [--real DIR] [--every 1 2 3] [--trackers klt hybrid match]
+                                     [--set SECTION.KEY=VALUE ...]
+"""
+
+from __future__ import annotations
+
+import argparse
+import tempfile
+from pathlib import Path
+
+from gyro_clock import with_gyro_from_ground_truth
+
+from eas_vo import config, pipeline
+
+WINDOWS = {"0-20 s": (0.0, 20.0), "20-30 s": (20.0, 10.0), "0-30 s": (0.0, 30.0)}
+TRACKERS = {
+    "klt": ("klt", []),
+    "hybrid": ("klt", ["tracker.fallback=match"]),
+    "match": ("match", ["tracker.loop_closure=true", "tracker.loop_geometry=homography"]),
+}
+GYRO_CLOCK_S = 0.009  # where the made gyro's clock sits against the frames (gyro_clock.py)
+
+
+def thinned(folder: Path, out: Path, every: int) -> Path:
+    """`out`: `folder`'s files linked, with only every `every`-th frame listed in images.txt."""
+    out.mkdir(parents=True)
+    for entry in folder.iterdir():
+        if entry.name != "images.txt":
+            (out / entry.name).symlink_to(entry.resolve())
+    lines = (folder / "images.txt").read_text().splitlines(keepends=True)
+    (out / "images.txt").write_text("".join(lines[::every]))
+    return out
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--real", type=Path, default=Path("../shared/data/ecd/shapes_rotation_0-30s"))
+    parser.add_argument("--every", type=int, nargs="+", default=[1, 2, 3], help="keep every N-th frame")
+    parser.add_argument("--trackers", nargs="+", default=list(TRACKERS), choices=list(TRACKERS))
+    parser.add_argument("--set", action="append", default=[], metavar="SECTION.KEY=VALUE", help="change best.toml (repeatable)")
+    args = parser.parse_args()
+    if not (args.real / "images.txt").is_file():
+        raise SystemExit(f"{args.real}: no images.txt (give the real excerpt's folder with --real)")
+    with tempfile.TemporaryDirectory() as tmp:
+        rig = with_gyro_from_ground_truth(args.real, Path(tmp) / "rig", seed=0)
+        print("| frames | IMU | tracker | " + " | ".join(WINDOWS) + " |")
+        print("|---" * (len(WINDOWS) + 3) + "|")
+        for every in args.every:
+            for imu, source in (("-", args.real), ("gyro", rig)):
+                folder = thinned(source, Path(tmp) / f"every-{every}-{imu}", every)
+                for name in args.trackers:
+                    tracker, changes = TRACKERS[name]
+                    clock = [f"run.imu_time_offset_s={GYRO_CLOCK_S}"] if source is rig else []
+                    cells = []
+                    for start, duration in WINDOWS.values():
+                        cfg = config.resolve("best", {"dataset": str(folder), "frontend": "histeq", "tracker": tracker,
+                                                      "start_s": start, "duration_s": duration, "time_offset_s": 0.01},
+                                             changes + clock + args.set)
+                        cells.append(f"{pipeline.run(cfg).metrics['ape_mean_rad']:.3f}")
+                    print(f"| every {every} | {imu} | {name} | " + " | ".join(cells) + " |", flush=True)
+
+
+if __name__ == "__main__":
+    main()
