@@ -133,7 +133,7 @@ class GtsamBackend(Backend):
         for k in range(1, len(times)):
             a, b = times[k - 1], times[k]
             if a < imu.t[0] or b > imu.t[-1] + 0.1:
-                continue  # no gyro over this interval
+                continue  # no gyro over this interval (one ending up to 0.1 s after the last reading holds its rate)
             pim = gtsam.PreintegratedAhrsMeasurements(params, np.zeros(3))
             for rate, dt in zip(*imu.rates_between(a, b)):
                 pim.integrateMeasurement(rate, dt)

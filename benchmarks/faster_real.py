@@ -1,6 +1,7 @@
 """Faster real motion than the excerpt's: its frames thinned to every 2nd or 3rd (the same
-images and motion blur, two or three times the rotation between frames: about 40 and 60
-degrees at its p95 speed), run with best.toml and each tracker, without an IMU and with a
+images and motion blur, two or three times the rotation between frames: about 43 and 65
+degrees at its last 5 s's p95 speed), run with best.toml and each tracker (`match` with its own
+defaults and best.toml's loop closure), without an IMU and with a
 1 kHz gyro made from the ground truth (benchmarks/gyro_clock.py, read at the 9 ms its clock
 asks for). Prints average APE [rad] per window (`histeq`, time offset 0.01 s).
 
@@ -43,7 +44,8 @@ def main() -> None:
     parser.add_argument("--real", type=Path, default=Path("../shared/data/ecd/shapes_rotation_0-30s"))
     parser.add_argument("--every", type=int, nargs="+", default=[1, 2, 3], help="keep every N-th frame")
     parser.add_argument("--trackers", nargs="+", default=list(TRACKERS), choices=list(TRACKERS))
-    parser.add_argument("--set", action="append", default=[], metavar="SECTION.KEY=VALUE", help="change best.toml (repeatable)")
+    parser.add_argument("--set", action="append", default=[], metavar="SECTION.KEY=VALUE",
+                        help="change best.toml for every tracker's runs (repeatable; a key a tracker lacks is an error)")
     args = parser.parse_args()
     if not (args.real / "images.txt").is_file():
         raise SystemExit(f"{args.real}: no images.txt (give the real excerpt's folder with --real)")

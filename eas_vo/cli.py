@@ -345,7 +345,7 @@ def cmd_run(args) -> int:
         ape_text += f" (time offset {m['time_offset_s'] * 1e3:+.1f} ms, estimated)"
     counts = m["status_counts"]
     statuses = ", ".join(f"{counts[s]} {s}" for s in ("first", "ok", "weak", "lost", "same_time") if counts.get(s))
-    loops = f"{m['loop_edges']} loop(s) closed, " if getattr(config.tracker, "loop_closure", False) else ""
+    loops = f"{m['loop_edges']} loop(s) closed, " if m["loop_edges"] is not None else ""
     print(
         f"{rc.frontend}+{rc.tracker}+{rc.backend} on {rc.dataset}: {m['frames']} frames ({statuses}), "
         f"average NC {m['nc_mean']:.1f}, {loops}"

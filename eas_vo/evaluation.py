@@ -1,4 +1,6 @@
-"""Accuracy against ground truth: the paper's average APE (Eq. 3) and correspondence counts."""
+"""Accuracy against ground truth: the paper's average APE of rotation (Eq. 3) for a run or a
+TUM trajectory, the ground truth's time offset, the trajectory APE (ORB-SLAM runs), and how the
+IMU's gyro agrees with the tracked rotations."""
 
 from __future__ import annotations
 
@@ -45,7 +47,8 @@ class RotationErrors:
 def rotation_errors(
     t: np.ndarray, R_w_c: np.ndarray, ground_truth: PoseSeries, time_offset_s: float = 0.0
 ) -> RotationErrors:
-    """Eq. 3 per frame: ground truth slerped at `t + time_offset_s`, estimate aligned at the first frame.
+    """Eq. 3 per frame: ground truth slerped at `t + time_offset_s`, estimate aligned at the
+    first frame that has ground truth.
 
     The alignment is evo's `--align_origin`: R_aligned_k = R_gt_0 R_est_0^T R_est_k.
     """
@@ -93,20 +96,26 @@ def tum_aligned_rotations(estimate_tum: Path, groundtruth_tum: Path) -> tuple[np
     return common, R_gt, R_aligned
 
 
-def estimate_time_offset(t: np.ndarray, edges, ground_truth: PoseSeries, search_s: float = 0.1) -> float:
+#: How far [s] run.time_offset_auto searches for the ground truth's time offset, either way.
+OFFSET_SEARCH_S = 0.1
+
+
+def estimate_time_offset(t: np.ndarray, edges, ground_truth: PoseSeries, search_s: float = OFFSET_SEARCH_S) -> float | None:
     """The offset [s] to add to frame times so that ground truth best explains the measured rotations.
 
     For a candidate offset d, each measured relative rotation R_i_j is compared with the
     ground truth's between t_i + d and t_j + d; the cost is the mean geodesic error of the
     best 80 % (robust to tracking failures). A 2 ms grid over [-search_s, search_s] is
-    refined to 0.1 ms around its best point. Needs a moving camera; 0 with too few edges.
+    refined to 0.1 ms around its best point. Needs a moving camera. None when it cannot be
+    estimated: fewer than 5 edges, or ground truth spanning fewer than half of them (and 5)
+    at every offset of the grid.
     """
     from scipy.spatial.transform import Rotation, Slerp
 
     t = np.asarray(t, dtype=float)
     edges = [e for e in edges if 0 <= e.i < len(t) and 0 <= e.j < len(t)]
     if len(edges) < 5:
-        return 0.0
+        return None
     i = np.array([e.i for e in edges])
     j = np.array([e.j for e in edges])
     R_meas = np.stack([e.R_i_j for e in edges])
@@ -124,7 +133,10 @@ def estimate_time_offset(t: np.ndarray, edges, ground_truth: PoseSeries, search_
         return float(errors[: max(1, int(0.8 * len(errors)))].mean())
 
     coarse = np.arange(-search_s, search_s + 1e-9, 0.002)
-    best = coarse[np.argmin([cost(d) for d in coarse])]
+    costs = [cost(d) for d in coarse]
+    if not np.isfinite(min(costs)):
+        return None
+    best = coarse[np.argmin(costs)]
     fine = best + np.arange(-0.002, 0.002 + 1e-9, 0.0001)
     return float(fine[np.argmin([cost(d) for d in fine])])
 

@@ -18,7 +18,8 @@ import numpy as np
 from eas_vo import registry
 from eas_vo.config import ResolvedConfig
 from eas_vo.errors import EasVoError, Interrupted
-from eas_vo.evaluation import ImuAgreement, RotationErrors, estimate_time_offset, imu_agreement, rotation_errors
+from eas_vo.evaluation import (OFFSET_SEARCH_S, ImuAgreement, RotationErrors, estimate_time_offset, imu_agreement,
+                               rotation_errors)
 from eas_vo.geometry.rotations import geodesic_angle, matrix_to_rotvec, quats_from_matrices, rotvec_to_matrix
 from eas_vo.io import atomic_path, json_text, output_folder, write_text_atomic
 from eas_vo.orb import OrbStats
@@ -46,6 +47,7 @@ class Tracked:
     records: list[FrameRecord] = field(default_factory=list)
     edges: list[RelativeRotation] = field(default_factory=list)
     orb: OrbStats | None = None  # ORB statistics of the images (run.orb_stats)
+    closes_loops: bool = False  # the tracker looked for loops (Tracker.closes_loops)
     interrupted: KeyboardInterrupt | None = None
 
     @property
@@ -99,9 +101,9 @@ def _run_into(parts: Pipeline, config: ResolvedConfig, out: Path | None, progres
         agreement = None if parts.imu is None else imu_agreement(t, tracked.edges, parts.imu)
         imu, imu_offset = _backend_imu(config, parts.backend, parts.imu, agreement)
         R_w_c = parts.backend.solve(len(t), tracked.edges, times=t, imu=imu)
-        errors, offset = evaluate(config, parts.dataset, t, R_w_c, tracked.edges)
-        metrics = summarise(config, parts.dataset, tracked, errors, offset, time.perf_counter() - started, load_s,
-                            agreement, imu_offset)
+        errors, offset, offset_estimated = evaluate(config, parts.dataset, t, R_w_c, tracked.edges)
+        metrics = summarise(config, parts.dataset, tracked, errors, offset, offset_estimated,
+                            time.perf_counter() - started, load_s, agreement, imu_offset)
         result = RunResult(t, R_w_c, tracked.records, tracked.edges, errors, metrics, parts.backend.causal_R_w_c)
         if out is not None:
             write_outputs(out, result, parts.dataset.label)
@@ -200,7 +202,7 @@ def track(parts: Pipeline, config: ResolvedConfig, frames_csv: Path | None = Non
     An interrupt stops the loop and is kept in the result; with fewer than 2 frames it is re-raised.
     """
     rc = config.run
-    tracked = Tracked(orb=OrbStats() if rc.orb_stats else None)
+    tracked = Tracked(orb=OrbStats() if rc.orb_stats else None, closes_loops=parts.tracker.closes_loops)
     n_window = len(parts.dataset.window(rc.start_s, rc.duration_s))
     with _FrameLog(frames_csv) as log, _progress(n_window, progress, rc) as bar:
         try:
@@ -225,21 +227,25 @@ def track(parts: Pipeline, config: ResolvedConfig, frames_csv: Path | None = Non
     return tracked
 
 
-def evaluate(config: ResolvedConfig, dataset: Dataset, t: np.ndarray, R_w_c: np.ndarray, edges) -> tuple[RotationErrors | None, float]:
-    """Per-frame rotation errors against the dataset's ground truth (None without it), and the
-    time offset [s] used: the configured one, or the one estimated from the edges."""
+def evaluate(config: ResolvedConfig, dataset: Dataset, t: np.ndarray, R_w_c: np.ndarray,
+             edges) -> tuple[RotationErrors | None, float, bool]:
+    """Per-frame rotation errors against the dataset's ground truth (None without it), the
+    time offset [s] used, and whether it was estimated from the edges (run.time_offset_auto;
+    else, or when the estimate is impossible, the configured one)."""
     rc = config.run
     if dataset.ground_truth is None:
-        return None, rc.time_offset_s
-    offset = estimate_time_offset(t, edges, dataset.ground_truth) if rc.time_offset_auto else rc.time_offset_s
-    return rotation_errors(t, R_w_c, dataset.ground_truth, offset), offset
+        return None, rc.time_offset_s, False
+    estimated = estimate_time_offset(t, edges, dataset.ground_truth) if rc.time_offset_auto else None
+    offset = rc.time_offset_s if estimated is None else estimated
+    return rotation_errors(t, R_w_c, dataset.ground_truth, offset), offset, estimated is not None
 
 
-def summarise(config: ResolvedConfig, dataset: Dataset, tracked: Tracked, errors, offset: float, elapsed: float, load_s: float,
-              agreement: ImuAgreement | None = None, imu_offset: float | None = None) -> dict:
+def summarise(config: ResolvedConfig, dataset: Dataset, tracked: Tracked, errors, offset: float, offset_estimated: bool,
+              elapsed: float, load_s: float, agreement: ImuAgreement | None = None, imu_offset: float | None = None) -> dict:
     """metrics.json: accuracy, tracking and speed figures; speed is measured over the
-    processing, after the dataset was opened. With an IMU: its check against the tracked
-    rotations (`agreement`) and the time offset [s] the backend read it with."""
+    processing, after the dataset was opened. `offset` [s]: the ground truth's time offset the
+    errors were measured with (`offset_estimated`: from the edges). With an IMU: its check
+    against the tracked rotations (`agreement`) and the time offset [s] the backend read it with."""
     records = tracked.records
     pairs = records[1:]
     span = records[-1].t - records[0].t
@@ -256,7 +262,7 @@ def summarise(config: ResolvedConfig, dataset: Dataset, tracked: Tracked, errors
         "status_counts": dict(Counter(r.status for r in records)),
         "redetections": int(sum(r.redetected for r in pairs)),
         "edges": len(tracked.edges),
-        "loop_edges": int(sum(e.loop for e in tracked.edges)),
+        "loop_edges": int(sum(e.loop for e in tracked.edges)) if tracked.closes_loops else None,
         "sequence_s": float(span),
         "elapsed_s": float(elapsed),
         "load_s": float(load_s),
@@ -266,17 +272,28 @@ def summarise(config: ResolvedConfig, dataset: Dataset, tracked: Tracked, errors
     if errors is not None:
         metrics.update(errors.summary())
     metrics["time_offset_s"] = offset
-    metrics["time_offset_estimated"] = config.run.time_offset_auto and dataset.ground_truth is not None
+    metrics["time_offset_estimated"] = offset_estimated
     reclocked = imu_offset is not None and imu_offset != config.run.imu_time_offset_s
     if imu_offset is not None:
         metrics["imu_time_offset_s"] = imu_offset
         metrics["imu_time_offset_estimated"] = reclocked
     metrics["data_warnings"] = (dataset.data_warnings() + _events_end_early(config, dataset, tracked.times)
+                                + _offset_not_estimated(config, dataset, tracked, offset, offset_estimated)
                                 + _imu_disagrees(config, agreement, reclocked))
     metrics["partial"] = tracked.interrupted is not None
     if tracked.orb is not None:
         metrics.update(tracked.orb.summary())
     return metrics
+
+
+def _offset_not_estimated(config: ResolvedConfig, dataset: Dataset, tracked: Tracked, offset: float,
+                          estimated: bool) -> list[str]:
+    """A warning when run.time_offset_auto could not estimate the offset (evaluation.estimate_time_offset)."""
+    if not config.run.time_offset_auto or dataset.ground_truth is None or estimated:
+        return []
+    return [f"the time offset could not be estimated from the {len(tracked.edges)} measured rotations (fewer than 5, "
+            f"or the ground truth spans fewer than half of them at every offset within {OFFSET_SEARCH_S * 1e3:g} ms): "
+            f"the errors are measured with {offset:+g} s"]
 
 
 def _events_end_early(config: ResolvedConfig, dataset: Dataset, times: np.ndarray) -> list[str]:

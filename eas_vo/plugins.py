@@ -168,8 +168,8 @@ class Tracker:
     """Measures relative rotations between the images of one sequence, fed in time order.
 
     Required: `process(image, t)`. Optional: `reset()`, which `__init__` calls last, so a
-    tracker sets up its per-sequence state there, and `needs_imu`. It never knows which frontend made the
-    images. Frame indices count the images given since construction (or reset), from 0.
+    tracker sets up its per-sequence state there, `needs_imu` and `closes_loops`. It never knows which
+    frontend made the images. Frame indices count the images given since construction (or reset), from 0.
     """
 
     name: ClassVar[str] = "tracker"
@@ -193,11 +193,18 @@ class Tracker:
         refuses a dataset that has none, before any work (default: False)."""
         return False
 
+    @property
+    def closes_loops(self) -> bool:
+        """Whether this configuration looks for loops: the run then counts the edges it marked
+        `loop` and says how many closed, none included (default: False)."""
+        return False
+
     def process(self, image: np.ndarray, t: float) -> tuple[FrameRecord, list[RelativeRotation]]:
         """Take the next image (uint8, sensor size) taken at `t` [s].
 
         Returns the frame's record (its `index` is this image's frame index) and the
-        relative rotations measured now, each `R_i_j` with j this frame and i < j.
+        relative rotations measured now, each `R_i_j` with j this frame and i < j, with
+        `loop=True` on those that close a loop.
         """
         raise NotImplementedError
 

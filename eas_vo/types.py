@@ -215,14 +215,17 @@ class FrameRecord:
     Attributes:
         index, t: frame index and time [s].
         nc: correspondences tracked from the previous frame (the paper's NC).
-        inliers: essential-matrix inliers (0 when no model was estimated).
+        inliers: inliers of the frame-to-frame model (0 when no model was estimated).
         status: `first`; `ok`; `weak` (a rotation was measured but its model is weak: too few
             inliers, a low inlier ratio or a large residual, see `reason`); `lost` (nothing was
             measured, the previous rotation is kept: too few correspondences or no model);
             `same_time` (the frame has the previous frame's timestamp: frame skipped).
         redetected: features were detected again in this frame (klt: < threshold2).
-        inlier_ratio: inliers / nc of the frame-to-frame model (0 without one).
-        residual_px: median inlier residual of that model [px] (0 without one).
+        inlier_ratio: inliers / the correspondences the frame-to-frame model was fitted to (0
+            without one): nc, except where klt's descriptor fallback measured the frame (nc: its
+            matches; the model: the LK tracks refined from them, unless that refinement was weak).
+        residual_px: per-axis noise of that model's inliers [px] (sigma from their median
+            residual; 0 without one).
         reason: why the frame is `weak` or `lost` ("" otherwise).
     """
 

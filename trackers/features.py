@@ -83,7 +83,8 @@ class RefinedMatching:
 
     Args:
         features: the keypoint detector and matcher.
-        fine: the geometry of the LK refinement (the coarse one: rotation-only, twice its thresholds).
+        fine: the geometry of the LK refinement (the coarse one: rotation-only with the fixed
+            RANSAC_THRESHOLD_PX and MAX_RESIDUAL_PX, twice the TwoViewConfig defaults).
         min_inliers: fewer matches, or inliers, and nothing is measured.
     """
 

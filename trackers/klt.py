@@ -1,7 +1,8 @@
 """`klt`, the paper's tracker: Shi-Tomasi corners, pyramidal Lucas-Kanade flow from frame
 to frame, five-point essential matrix, thresholds 1 and 2 -- and, off by default, what keeps
 it on track through fast motion: LK started from a predicted rotation (gyro or constant
-angular velocity), a forward-backward check, and descriptor matching when LK loses the track.
+angular velocity), a forward-backward check, and descriptor matching when LK's measurement is
+weak or lost.
 
 It only ever sees uint8 images; the geometry is the shared `eas_vo.geometry.two_view`.
 """
@@ -131,6 +132,10 @@ class KltTracker(Tracker):
     @property
     def needs_imu(self) -> bool:
         return self.config.predict == "gyro"
+
+    @property
+    def closes_loops(self) -> bool:
+        return self.config.loop_closure
 
     def detect(self, image: np.ndarray) -> np.ndarray:
         """Shi-Tomasi corners of `image`, (N, 2) float32 [px]."""

@@ -60,6 +60,10 @@ class MatchTracker(Tracker):
     description = "ORB or SIFT descriptors matched frame to frame (ratio or cross check), shared two-view geometry"
     Config = MatchConfig
 
+    @property
+    def closes_loops(self) -> bool:
+        return self.config.loop_closure
+
     def reset(self) -> None:
         c = self.config
         self.features = Features(c.detector, c.max_features, c.matching, c.ratio)

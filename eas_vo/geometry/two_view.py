@@ -288,7 +288,8 @@ def rotation_from_correspondences(
             see homography_rotation; else rotation-only).
 
     Returns:
-        The rotation, its inlier count, the model used and the median inlier residual, or
+        The rotation, its inlier count, the model used and the inliers' per-axis noise (sigma
+        from their median residual, see _result), or
         None when no model is found (for `rotation`, `auto` and `homography`: when the
         rotation-only RANSAC, which runs first, finds none).
     """

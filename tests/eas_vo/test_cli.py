@@ -35,7 +35,7 @@ def test_run_writes_every_output(eas_run):
     rows = list(csv.DictReader(open(eas_run / "frames.csv")))
     assert len(rows) == metrics["frames"] == len((eas_run / "trajectory.tum").read_text().splitlines())
     assert metrics["nc_mean"] == pytest.approx(np.mean([int(r["nc"]) for r in rows[1:]]))
-    assert metrics["edges"] == sum(r["status"] in ("ok", "weak") for r in rows) and metrics["loop_edges"] == 0
+    assert metrics["edges"] == sum(r["status"] in ("ok", "weak") for r in rows) and metrics["loop_edges"] is None
     assert (eas_run / "rotation.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
 
@@ -222,6 +222,22 @@ def test_a_time_offset_that_misses_the_ground_truth_is_one_line_before_any_work(
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "covers none of the" in err and "time offset -9 s" in err
     assert not out.exists()
+
+
+def test_an_offset_that_cannot_be_estimated_is_said_and_not_claimed(sequence_copy, tmp_path, capsys):
+    """Ground truth over the first 0.5 s of 2: --time-offset auto cannot estimate the offset,
+    says so, measures the errors with 0 s and does not call that estimated."""
+    gt = sequence_copy / "groundtruth.txt"
+    rows = [line for line in gt.read_text().splitlines(keepends=True) if not line.startswith("#")]
+    t0 = float(rows[0].split()[0])
+    gt.write_text("".join(line for line in rows if float(line.split()[0]) < t0 + 0.5))
+    out = tmp_path / "auto"
+    assert main(["run", "--dataset", str(sequence_copy), "--time-offset", "auto", "--out", str(out), "--quiet"]) == 0
+    metrics = json.loads((out / "metrics.json").read_text())
+    assert metrics["time_offset_s"] == 0.0 and metrics["time_offset_estimated"] is False
+    assert any("could not be estimated" in w for w in metrics["data_warnings"])
+    said = capsys.readouterr()
+    assert "could not be estimated" in said.err and "estimated)" not in said.out
 
 
 def test_results_are_strict_json_with_or_without_ground_truth(sequence_copy, tmp_path):

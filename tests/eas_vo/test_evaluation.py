@@ -86,6 +86,10 @@ def test_time_offset_known_answer():
     noise = Rotation.from_rotvec(rng.normal(0, 0.0005, (len(t_frames), 3))).as_matrix()
     edges = [RelativeRotation(k - 1, k, R_true[k - 1].T @ R_true[k] @ noise[k]) for k in range(1, len(t_frames))]
     assert estimate_time_offset(t_frames, edges, gt) == pytest.approx(true_offset, abs=0.0005)
+    # ground truth over the first 3 of the frames' 9 s: no offset within the search explains half the edges
+    short = PoseSeries(t_gt[:600], gt.p_w_c[:600], gt.q_w_c[:600])
+    assert estimate_time_offset(t_frames, edges, short) is None
+    assert estimate_time_offset(t_frames, edges[:4], gt) is None
 
 
 @pytest.mark.parametrize("R_imu_cam", [np.eye(3), Rotation.from_rotvec([0, 0, np.pi / 2]).as_matrix(),
