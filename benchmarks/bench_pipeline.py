@@ -1,10 +1,11 @@
-"""Throughput of the paper's pipeline (eas + klt + chain) on the embedded default sequence.
+"""Throughput of a whole run: by default eas-vo run's (eas + klt + chain on the embedded
+default sequence), with --config that file's plugins, each replaced where a flag names another.
 
 Prints frames/s and the real-time factor (sequence duration / processing time) of a
 whole run, and where the time goes (loading, frontend, tracker, backend).
 
-    python benchmarks/bench_pipeline.py [--dataset SPEC] [--frontend eas] [--tracker klt]
-                                        [--backend chain] [--config FILE] [--set KEY=VALUE] [--repeat 3]
+    python benchmarks/bench_pipeline.py [--config FILE] [--dataset SPEC] [--frontend F] [--tracker T]
+                                        [--backend B] [--set KEY=VALUE] [--repeat 3]
 """
 
 from __future__ import annotations
@@ -51,21 +52,20 @@ def _timed(fn) -> float:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--dataset", default="synthetic:default")
-    parser.add_argument("--frontend", default="eas")
-    parser.add_argument("--tracker", default="klt")
-    parser.add_argument("--backend", default="chain")
-    parser.add_argument("--config", help="a config file or bundled name (its [run] plugins are overridden by the flags)")
+    for kind in ("dataset", "frontend", "tracker", "backend"):
+        parser.add_argument(f"--{kind}", help=f"the {kind} (default: the config's, else eas-vo run's)")
+    parser.add_argument("--config", help="a config file or bundled name (its [run] plugins unless the flags name others)")
     parser.add_argument("--set", action="append", default=[], metavar="SECTION.KEY=VALUE", help="a config override, as eas-vo run --set")
     parser.add_argument("--repeat", type=int, default=3)
     args = parser.parse_args()
     chosen = {"dataset": args.dataset, "frontend": args.frontend, "tracker": args.tracker, "backend": args.backend}
     cfg = config.resolve(args.config, chosen, args.set)
-    registry.open_dataset(args.dataset).events()  # simulate and cache outside the timing
+    rc = cfg.run
+    registry.open_dataset(rc.dataset).events()  # simulate and cache outside the timing
 
     runs = [pipeline.run(cfg).metrics for _ in range(args.repeat)]
     best = min(runs, key=lambda m: m["elapsed_s"])
-    print(f"{args.frontend}+{args.tracker}+{args.backend} on {args.dataset}: {best['frames']} frames, {best['sequence_s']:.2f} s of data")
+    print(f"{rc.frontend}+{rc.tracker}+{rc.backend} on {rc.dataset}: {best['frames']} frames, {best['sequence_s']:.2f} s of data")
     print(f"  whole run (best of {args.repeat}): {best['elapsed_s']:.2f} s, "
           f"{best['frames_per_s']:.1f} frames/s, real-time factor {best['realtime_factor']:.2f}x")
     stages = min((stage_times(cfg) for _ in range(args.repeat)), key=lambda s: s["frontend"] + s["tracker"])
