@@ -24,24 +24,66 @@ def _figure(**kwargs):
     return fig
 
 
+#: How a frame's status is shaded in the tracking panel (ok and first: not at all).
+STATUS_COLOURS = {"weak": "tab:orange", "lost": "tab:red"}
+
+
 def plot_rotation(path: str | Path, result, title: str = "") -> None:
+    """rotation_figure, saved as PNG."""
+    rotation_figure(result, title).savefig(path, dpi=110, format="png")
+
+
+def rotation_figure(result, title: str = ""):
     """Estimated (aligned to ground truth at the first frame) and true roll/pitch/yaw over time,
-    like the paper's Fig. 3. Without ground truth only the estimate is drawn."""
+    like the paper's Fig. 3, over a tracking panel: the rotation error [deg] per frame (with
+    ground truth), weak and lost frames shaded (through every panel), loop closures marked at
+    the frame that closed them. Without ground truth only the estimate is drawn."""
     t0 = result.t[0]
     errors = result.errors
-    fig = _figure(figsize=(8, 6.5), layout="constrained")
-    axes = fig.subplots(3, 1, sharex=True)
+    fig = _figure(figsize=(8, 8), layout="constrained")
+    axes = fig.subplots(4, 1, sharex=True, height_ratios=(1, 1, 1, 0.8))
     if errors is not None and errors.valid.any():
-        _draw_euler(axes, result.t[errors.valid] - t0, errors.R_w_c_aligned, errors.R_w_c_gt)
+        _draw_euler(axes[:3], result.t[errors.valid] - t0, errors.R_w_c_aligned, errors.R_w_c_gt)
+        axes[3].plot(result.t[errors.valid] - t0, np.degrees(errors.ape_rad), color="k", lw=0.9, label="error")
+        axes[3].set_ylabel("error [deg]")
     else:
-        _draw_euler(axes, result.t - t0, result.R_w_c)
+        _draw_euler(axes[:3], result.t - t0, result.R_w_c)
+        axes[3].set_yticks([])
+        axes[3].set_ylabel("tracking")
+    _shade_statuses(axes, result.records, t0)
+    for k, j in enumerate(sorted({e.j for e in result.edges if e.loop})):
+        axes[3].axvline(result.t[j] - t0, color="tab:blue", lw=0.8, label="loop closed" if k == 0 else None)
     axes[0].legend(loc="best", fontsize="small")
+    if axes[3].get_legend_handles_labels()[0]:
+        axes[3].legend(loc="upper left", fontsize="small", ncol=4)
+    axes[3].grid(alpha=0.3)
     axes[-1].set_xlabel("time [s]")
     m = result.metrics
     if "ape_mean_rad" in m:
         title += f"\naverage APE {m['ape_mean_rad']:.4f} rad, average NC {m['nc_mean']:.1f}"
     fig.suptitle(title, fontsize="medium")
-    fig.savefig(path, dpi=110, format="png")
+    return fig
+
+
+def _shade_statuses(axes, records, t0: float) -> None:
+    """Shade each run of consecutive weak (or lost) frames in every axis, from the previous
+    frame's time to its own (the interval its measurement covers): one collection per status
+    and axis, labelled in the last."""
+    runs = {status: [] for status in STATUS_COLOURS}  # (start [s], width [s]) per status
+    k = 1
+    while k < len(records):
+        status = records[k].status
+        end = k
+        while end + 1 < len(records) and records[end + 1].status == status:
+            end += 1
+        if status in runs:
+            runs[status].append((records[k - 1].t - t0, records[end].t - records[k - 1].t))
+        k = end + 1
+    for status, spans in runs.items():
+        for ax in axes:
+            if spans:
+                ax.broken_barh(spans, (0, 1), transform=ax.get_xaxis_transform(), color=STATUS_COLOURS[status],
+                               alpha=0.2, lw=0, label=status if ax is axes[-1] else None)
 
 
 def _draw_euler(column, t: np.ndarray, R_est: np.ndarray, R_gt: np.ndarray | None = None, labels: bool = True) -> None:

@@ -26,3 +26,31 @@ def draw(tmp_path):
             for f, v in (("original", 0.4), ("eas", 0.04))]
     plots.plot_ape_bars(tmp_path / "bars.png", rows)
     plots.plot_ape_time(tmp_path / "time.png", {("d", "eas"): (np.arange(5.0), np.linspace(0, 0.1, 5))})
+
+
+def test_the_rotation_plot_shows_where_tracking_was_weak_or_lost_and_where_loops_closed():
+    from types import SimpleNamespace
+
+    from eas_vo.evaluation import rotation_errors
+    from eas_vo.types import FrameRecord, PoseSeries, RelativeRotation
+
+    statuses = ["first", "ok", "weak", "weak", "ok", "lost", "ok", "weak", "ok", "ok"]
+    t = 0.1 * np.arange(len(statuses))
+    records = [FrameRecord(k, t[k], 0, 0, s, False) for k, s in enumerate(statuses)]
+    edges = [RelativeRotation(0, 6, np.eye(3), loop=True), RelativeRotation(2, 8, np.eye(3), loop=True),
+             RelativeRotation(7, 8, np.eye(3))]
+    R_w_c = np.repeat(np.eye(3)[None], len(t), axis=0)
+    gt = PoseSeries(t, np.zeros((len(t), 3)), np.tile([0.0, 0.0, 0.0, 1.0], (len(t), 1)))
+    for errors in (None, rotation_errors(t, R_w_c, gt)):
+        result = SimpleNamespace(t=t, R_w_c=R_w_c, errors=errors, records=records, edges=edges, metrics={})
+        axes = plots.rotation_figure(result).axes
+        for ax in axes:  # the runs of weak frames (2-3, 7) and the lost frame (5), in every panel
+            shaded = {status: [] for status in plots.STATUS_COLOURS}
+            for collection in ax.collections:
+                colour = collection.get_facecolor()[0][:3]
+                status = next(s for s, c in plots.STATUS_COLOURS.items() if np.allclose(matplotlib.colors.to_rgb(c), colour))
+                shaded[status] += [tuple(np.round(p.get_extents().intervalx, 6)) for p in collection.get_paths()]
+            assert shaded == {"weak": [(0.1, 0.3), (0.6, 0.7)], "lost": [(0.4, 0.5)]}, shaded
+        loops = [line.get_xdata()[0] for line in axes[3].lines[-2:]]
+        np.testing.assert_allclose(loops, [0.6, 0.8])  # loops closed at frames 6 and 8
+        assert len(axes[3].lines) == 2 + (errors is not None)  # and the error curve with ground truth
