@@ -287,6 +287,7 @@ def table_rows(cells: list[Cell], results: dict) -> list[dict]:
             "error": results.get(cell, {}).get("error", ""),
             "nc_mean": results.get(cell, {}).get("nc_mean"),
             "ape_mean_rad": results.get(cell, {}).get("ape_mean_rad"),
+            "time_offset_estimated": results.get(cell, {}).get("time_offset_estimated"),
             "orb_keypoints_mean": results.get(cell, {}).get("orb_keypoints_mean"),
             "orb_matches_mean": results.get(cell, {}).get("orb_matches_mean"),
             "data_warnings": results.get(cell, {}).get("data_warnings", []),

@@ -138,6 +138,7 @@ def estimate_time_offset(t: np.ndarray, edges, ground_truth: PoseSeries, search_
         return None
     best = coarse[np.argmin(costs)]
     fine = best + np.arange(-0.002, 0.002 + 1e-9, 0.0001)
+    fine = fine[np.abs(fine) <= search_s + 1e-12]
     return float(fine[np.argmin([cost(d) for d in fine])])
 
 

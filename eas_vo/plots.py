@@ -51,7 +51,7 @@ def rotation_figure(result, title: str = ""):
         axes[3].set_yticks([])
         axes[3].set_ylabel("tracking")
     _shade_statuses(axes, result.records, t0)
-    for k, j in enumerate(sorted({e.j for e in result.edges if e.loop})):
+    for k, j in enumerate(sorted({e.j for e in result.edges if e.loop and 0 <= e.j < len(result.t)})):
         axes[3].axvline(result.t[j] - t0, color="tab:blue", lw=0.8, label="loop closed" if k == 0 else None)
     axes[0].legend(loc="best", fontsize="small")
     if axes[3].get_legend_handles_labels()[0]:

@@ -196,7 +196,8 @@ class Tracker:
     @property
     def closes_loops(self) -> bool:
         """Whether this configuration looks for loops: the run then counts the edges it marked
-        `loop` and says how many closed, none included (default: False)."""
+        `loop` and says how many closed, none included (default: False; the count is then null,
+        though rotation.png still marks any edge marked `loop`)."""
         return False
 
     def process(self, image: np.ndarray, t: float) -> tuple[FrameRecord, list[RelativeRotation]]:

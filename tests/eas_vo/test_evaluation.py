@@ -90,6 +90,10 @@ def test_time_offset_known_answer():
     short = PoseSeries(t_gt[:600], gt.p_w_c[:600], gt.q_w_c[:600])
     assert estimate_time_offset(t_frames, edges, short) is None
     assert estimate_time_offset(t_frames, edges[:4], gt) is None
+    # a true offset beyond the search: the estimate stays inside it, on its edge
+    _, R_far, _ = interpolate_poses(gt, t_frames + 0.13)
+    far = [RelativeRotation(k - 1, k, R_far[k - 1].T @ R_far[k]) for k in range(1, len(t_frames))]
+    assert abs(estimate_time_offset(t_frames, far, gt)) <= 0.1 + 1e-9
 
 
 @pytest.mark.parametrize("R_imu_cam", [np.eye(3), Rotation.from_rotvec([0, 0, np.pi / 2]).as_matrix(),

@@ -32,15 +32,18 @@ def test_the_rotation_plot_shows_where_tracking_was_weak_or_lost_and_where_loops
     from types import SimpleNamespace
 
     from eas_vo.evaluation import rotation_errors
+    from eas_vo.geometry.rotations import rotvec_to_matrix
     from eas_vo.types import FrameRecord, PoseSeries, RelativeRotation
 
     statuses = ["first", "ok", "weak", "weak", "ok", "lost", "ok", "weak", "ok", "ok"]
     t = 0.1 * np.arange(len(statuses))
     records = [FrameRecord(k, t[k], 0, 0, s, False) for k, s in enumerate(statuses)]
-    edges = [RelativeRotation(0, 6, np.eye(3), loop=True), RelativeRotation(2, 8, np.eye(3), loop=True),
-             RelativeRotation(7, 8, np.eye(3))]
-    R_w_c = np.repeat(np.eye(3)[None], len(t), axis=0)
-    gt = PoseSeries(t, np.zeros((len(t), 3)), np.tile([0.0, 0.0, 0.0, 1.0], (len(t), 1)))
+    edges = [RelativeRotation(0, 6, np.eye(3), loop=True), RelativeRotation(1, 6, np.eye(3), loop=True),
+             RelativeRotation(2, 8, np.eye(3), loop=True), RelativeRotation(8, 9, np.eye(3)),
+             RelativeRotation(3, 12, np.eye(3), loop=True)]  # a frame the run does not have: not drawn
+    R_w_c = np.stack([rotvec_to_matrix(np.array([0.0, 0.0, 0.01 * k])) for k in range(len(t))])  # 0.01 rad per frame
+    t_gt = np.linspace(0.15, 0.95, 9)  # ground truth from frame 2 on
+    gt = PoseSeries(t_gt, np.zeros((9, 3)), np.tile([0.0, 0.0, 0.0, 1.0], (9, 1)))
     for errors in (None, rotation_errors(t, R_w_c, gt)):
         result = SimpleNamespace(t=t, R_w_c=R_w_c, errors=errors, records=records, edges=edges, metrics={})
         axes = plots.rotation_figure(result).axes
@@ -51,6 +54,11 @@ def test_the_rotation_plot_shows_where_tracking_was_weak_or_lost_and_where_loops
                 status = next(s for s, c in plots.STATUS_COLOURS.items() if np.allclose(matplotlib.colors.to_rgb(c), colour))
                 shaded[status] += [tuple(np.round(p.get_extents().intervalx, 6)) for p in collection.get_paths()]
             assert shaded == {"weak": [(0.1, 0.3), (0.6, 0.7)], "lost": [(0.4, 0.5)]}, shaded
-        loops = [line.get_xdata()[0] for line in axes[3].lines[-2:]]
-        np.testing.assert_allclose(loops, [0.6, 0.8])  # loops closed at frames 6 and 8
-        assert len(axes[3].lines) == 2 + (errors is not None)  # and the error curve with ground truth
+        marks = [line for line in axes[3].lines if line.get_label() != "error"]
+        np.testing.assert_allclose([line.get_xdata()[0] for line in marks], [0.6, 0.8])  # loops closed at frames 6 and 8
+        labels = set(axes[3].get_legend_handles_labels()[1])
+        assert labels == {"weak", "lost", "loop closed"} | ({"error"} if errors is not None else set())
+        if errors is not None:  # the error [deg] of frames 2-9, aligned at frame 2
+            (curve,) = [line for line in axes[3].lines if line.get_label() == "error"]
+            np.testing.assert_allclose(curve.get_xdata(), t[2:])
+            np.testing.assert_allclose(curve.get_ydata(), np.degrees(0.01 * np.arange(8)), atol=1e-9)

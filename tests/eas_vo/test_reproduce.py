@@ -64,6 +64,19 @@ def test_table1_in_one_command_beside_the_papers(paper_site, tmp_path, capsys):
     assert paper_site["hdr_boxes.zip"] == 1
 
 
+def test_table1_marks_a_cell_whose_time_offset_could_not_be_estimated():
+    from eas_vo.reproduce import PAPER_ORDER, SEQUENCES, table1_markdown
+
+    cells = [(seq, source) for seq in SEQUENCES for source in PAPER_ORDER]
+    rows = [{"dataset_name": seq, "method": "klt+chain", "frontend": source, "status": "ok", "nc_mean": 100.0,
+             "ape_mean_rad": 0.05 + 0.01 * k, "time_offset_estimated": True} for k, (seq, source) in enumerate(cells)]
+    table = table1_markdown(rows, "paper", 25.0)
+    assert "* |" not in table and "could not be estimated" not in table
+    rows[3]["time_offset_estimated"] = False
+    table = table1_markdown(rows, "paper", 25.0)
+    assert table.count("* |") == 1 and "| 0.080* |" in table and "could not be estimated for this cell" in table
+
+
 def test_table2_orb_statistics_and_a_slam_trajectorys_ape(paper_site, short_sequence, tmp_path):
     from eas_vo.geometry.rotations import matrices_from_quats
     from eas_vo.pipeline import format_tum
