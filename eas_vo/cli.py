@@ -343,8 +343,7 @@ def cmd_run(args) -> int:
     ape_text = f"average APE {ape:.4f} rad ({ape * 57.29577951:.2f} deg)" if ape is not None else "no ground truth"
     if m["time_offset_estimated"]:
         ape_text += f" (time offset {m['time_offset_s'] * 1e3:+.1f} ms, estimated)"
-    counts = m["status_counts"]
-    statuses = ", ".join(f"{counts[s]} {s}" for s in ("first", "ok", "weak", "lost", "same_time") if counts.get(s))
+    statuses = _status_text(m["status_counts"], m["status_reasons"])
     loops = f"{m['loop_edges']} loop(s) closed, " if m["loop_edges"] is not None else ""
     print(
         f"{rc.frontend}+{rc.tracker}+{rc.backend} on {rc.dataset}: {m['frames']} frames ({statuses}), "
@@ -352,6 +351,16 @@ def cmd_run(args) -> int:
         f"{ape_text}, {m['frames_per_s']:.1f} frames/s -> {out}"
     )
     return 0
+
+
+def _status_text(counts: dict, reasons: dict) -> str:
+    """'1 first, 54 ok, 172 weak: 160 low inlier ratio, 12 few inliers' (most frequent reason first)."""
+    parts = []
+    for status in ("first", "ok", "weak", "lost", "same_time"):
+        if counts.get(status):
+            why = sorted(reasons.get(status, {}).items(), key=lambda kv: (-kv[1], kv[0]))
+            parts.append(f"{counts[status]} {status}" + (": " + ", ".join(f"{n} {r}" for r, n in why) if why else ""))
+    return "; ".join(parts) if any(": " in p for p in parts) else ", ".join(parts)
 
 
 def cmd_compare(args) -> int:

@@ -260,6 +260,8 @@ def summarise(config: ResolvedConfig, dataset: Dataset, tracked: Tracked, errors
         "nc_mean": float(np.mean([r.nc for r in pairs])),
         "inliers_mean": float(np.mean([r.inliers for r in pairs])),
         "status_counts": dict(Counter(r.status for r in records)),
+        "status_reasons": {status: dict(Counter(r.reason.split(" (")[0] for r in records if r.status == status and r.reason))
+                           for status in ("weak", "lost")},
         "redetections": int(sum(r.redetected for r in pairs)),
         "edges": len(tracked.edges),
         "loop_edges": int(sum(e.loop for e in tracked.edges)) if tracked.closes_loops else None,

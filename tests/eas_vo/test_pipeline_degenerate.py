@@ -3,6 +3,7 @@ logic decides, every frame is marked in frames.csv, and no NaN reaches an output
 
 import csv
 import json
+from collections import Counter
 
 import cv2
 import numpy as np
@@ -109,9 +110,14 @@ def test_a_run_made_to_fail_says_so_frame_by_frame(sequence_copy, tmp_path, caps
     assert all(r["status"] in ("weak", "lost") and r["reason"] for r in rows), [r for r in rows if r["status"] == "ok"][:3]
     weak = [r for r in rows if r["status"] == "weak"]
     assert all(float(r["inlier_ratio"]) < 0.5 or float(r["residual_px"]) > 0.5 or int(r["inliers"]) < 15 for r in weak)
-    lost = len(rows) - len(weak)
-    counted = ", ".join(f"{n} {s}" for n, s in ((1, "first"), (len(weak), "weak"), (lost, "lost")) if n)
-    assert f"{len(rows) + 1} frames ({counted})," in capsys.readouterr().out
+    reasons = {s: Counter(r["reason"].split(" (")[0] for r in rows if r["status"] == s) for s in ("weak", "lost")}
+    assert json.loads((out / "metrics.json").read_text())["status_reasons"] == reasons
+    said = capsys.readouterr().out.split(" frames (", 1)[1].split("), ")[0].split("; ")
+    assert said[0] == "1 first" and len(said) == 1 + sum(1 for c in reasons.values() if c)
+    for part in said[1:]:  # e.g. "40 weak: 31 low inlier ratio, 9 few inliers"
+        head, why = part.split(": ")
+        n, status = head.split(" ")
+        assert int(n) == sum(reasons[status].values()) and sorted(why.split(", ")) == sorted(f"{k} {r}" for r, k in reasons[status].items())
 
 
 def test_event_frontends_say_when_the_events_end_or_there_are_none(sequence_copy, tmp_path, capsys):
