@@ -7,6 +7,7 @@ matplotlib is only loaded when a figure is drawn.
 
 from __future__ import annotations
 
+import itertools
 from pathlib import Path
 
 import numpy as np
@@ -70,15 +71,11 @@ def _shade_statuses(axes, records, t0: float) -> None:
     frame's time to its own (the interval its measurement covers): one collection per status
     and axis, labelled in the last."""
     runs = {status: [] for status in STATUS_COLOURS}  # (start [s], width [s]) per status
-    k = 1
-    while k < len(records):
-        status = records[k].status
-        end = k
-        while end + 1 < len(records) and records[end + 1].status == status:
-            end += 1
+    for status, run in itertools.groupby(zip(records, records[1:]), key=lambda pair: pair[1].status):
+        run = list(run)
         if status in runs:
-            runs[status].append((records[k - 1].t - t0, records[end].t - records[k - 1].t))
-        k = end + 1
+            start, end = run[0][0].t, run[-1][1].t  # from the frame before the run to its last
+            runs[status].append((start - t0, end - start))
     for status, spans in runs.items():
         for ax in axes:
             if spans:

@@ -305,24 +305,25 @@ def rotation_from_correspondences(
         return None
     R_rot, rot_mask = rotation
     rot_residuals = angular_residuals(R_rot, f_prev, f_cur)
+    rotation_only = _result(R_rot, rot_mask, "rotation", rot_residuals, dims=2)
     if geometry == "rotation":
-        return _result(R_rot, rot_mask, "rotation", rot_residuals, dims=2)
+        return rotation_only
     if geometry == "homography":
         found = homography_rotation(pts_prev_n, pts_cur_n, threshold, confidence)
         if found is None:
-            return _result(R_rot, rot_mask, "rotation", rot_residuals, dims=2)
+            return rotation_only
         R_hom, hom_mask, hom_residuals = found
         return _result(R_hom, hom_mask, "homography", hom_residuals, dims=2)
     found = essential_rotation(pts_prev_n, pts_cur_n, threshold, confidence, ESSENTIAL_METHODS[method], R_hint=R_rot)
     if found is None:
-        return _result(R_rot, rot_mask, "rotation", rot_residuals, dims=2)
+        return rotation_only
     E, R_ess, ess_mask = found
     sigma = threshold / 2.0
     ess_residuals = sampson_residuals(E, pts_prev_n, pts_cur_n)
     gric_rot = gric(rot_residuals, sigma, model_dim=2, params=3)
     gric_ess = gric(ess_residuals, sigma, model_dim=3, params=5)
     if gric_rot <= gric_ess:
-        return _result(R_rot, rot_mask, "rotation", rot_residuals, dims=2)
+        return rotation_only
     return _result(R_ess, ess_mask, "essential", ess_residuals, dims=1)
 
 

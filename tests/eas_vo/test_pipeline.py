@@ -58,19 +58,22 @@ def test_best_config_beats_the_paper_config():
     assert real.metrics["ape_mean_rad"] <= 0.08
 
 
-def test_a_gyro_on_another_clock_is_found_on_real_images(tmp_path):
+@pytest.fixture
+def benchmarks_importable(monkeypatch):
+    """The repository's benchmarks/ importable by name: their helpers make the test rigs."""
+    monkeypatch.syspath_prepend(str(REPOSITORY / "benchmarks"))
+
+
+def test_a_gyro_on_another_clock_is_found_on_real_images(tmp_path, benchmarks_importable):
     """The real excerpt given a 1 kHz gyro made from its ground truth (white noise and a bias;
     on the ground truth's clock, about 9 ms behind the frames: --time-offset auto finds +9.1
     ms; made as benchmarks/gyro_clock.py makes it): read as if on the frames' clock, the run
     over the last, fastest 10 s says so and names the offset; read with it, no warning; with
     run.imu_time_offset_auto the backend reads it there. (What the offset is worth in APE
     moves with its exact value: README, not asserted.)"""
-    import importlib.util
+    from gyro_clock import with_gyro_from_ground_truth
 
-    spec = importlib.util.spec_from_file_location("gyro_clock", REPOSITORY / "benchmarks" / "gyro_clock.py")
-    gyro_clock = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(gyro_clock)
-    rig = gyro_clock.with_gyro_from_ground_truth(require(SHAPES_ROTATION), tmp_path / "with_gyro", seed=0)
+    rig = with_gyro_from_ground_truth(require(SHAPES_ROTATION), tmp_path / "with_gyro", seed=0)
 
     def best(imu_offset_s, *changes):
         cfg = config.resolve("best", {"dataset": str(rig), "frontend": "histeq", "start_s": 20.0, "duration_s": 10.0,
@@ -89,14 +92,13 @@ def test_a_gyro_on_another_clock_is_found_on_real_images(tmp_path):
     assert auto["imu_time_offset_s"] == pytest.approx(suggested, abs=1e-4)
 
 
-def test_twice_the_excerpts_speed_holds_with_a_gyro_and_is_marked_without_one(tmp_path, monkeypatch):
+def test_twice_the_excerpts_speed_holds_with_a_gyro_and_is_marked_without_one(tmp_path, benchmarks_importable):
     """The excerpt's first 20 s with every second frame (benchmarks/faster_real.py): with a gyro
     made from the ground truth best.toml holds (0.008 rad measured); from frames alone it does
     not (0.71), and then every frame whose measured step is more than 5 deg off the truth says
     so in its status (`weak` or `lost`, not `ok`)."""
     from eas_vo.geometry.rotations import geodesic_angle, interpolate_poses
 
-    monkeypatch.syspath_prepend(str(REPOSITORY / "benchmarks"))
     from faster_real import GYRO_CLOCK_S, thinned
     from gyro_clock import with_gyro_from_ground_truth
 

@@ -134,13 +134,12 @@ def test_a_homography_keeps_a_planes_parallax_out_of_the_rotation_or_measures_no
     for _ in range(5):
         x_prev, x_cur, R = plane_view_pair(rng, t_m, tilt_deg)
         found = rotation_from_correspondences(x_prev, x_cur, 1.0 / F_PX, 0.999, "usac", "homography")
-        rotation_only.append(np.degrees(geodesic_angle(R.T, rotation_from_correspondences(
-            x_prev, x_cur, 1.0 / F_PX, 0.999, "usac", "rotation").R_prev_cur)))
+        rotation = rotation_from_correspondences(x_prev, x_cur, 1.0 / F_PX, 0.999, "usac", "rotation")
+        rotation_only.append(np.degrees(geodesic_angle(R.T, rotation.R_prev_cur)))
         if found.model == "homography":
             measured.append(np.degrees(geodesic_angle(R.T, found.R_prev_cur)))
         else:
-            np.testing.assert_allclose(found.R_prev_cur, rotation_from_correspondences(
-                x_prev, x_cur, 1.0 / F_PX, 0.999, "usac", "rotation").R_prev_cur)
+            np.testing.assert_allclose(found.R_prev_cur, rotation.R_prev_cur)
     assert all(error < 0.2 for error in measured), measured
     if direction == (1, 0, 0) and tilt_deg < 60:  # sideways: the dual puts half the points behind
         assert len(measured) == 5 and np.median(rotation_only) > 2.0, (measured, rotation_only)
