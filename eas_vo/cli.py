@@ -344,7 +344,7 @@ def cmd_run(args) -> int:
     if m["time_offset_estimated"]:
         ape_text += f" (time offset {m['time_offset_s'] * 1e3:+.1f} ms, estimated)"
     statuses = _status_text(m["status_counts"], m["status_reasons"])
-    loops = f"{m['loop_edges']} loop(s) closed, " if m["loop_edges"] is not None else ""
+    loops = f"{m['loop_count']} loop(s) closed, " if m["loop_count"] is not None else ""
     print(
         f"{rc.frontend}+{rc.tracker}+{rc.backend} on {rc.dataset}: {m['frames']} frames ({statuses}), "
         f"average NC {m['nc_mean']:.1f}, {loops}"

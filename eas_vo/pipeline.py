@@ -263,8 +263,8 @@ def summarise(config: ResolvedConfig, dataset: Dataset, tracked: Tracked, errors
         "status_reasons": {status: dict(Counter(r.reason.split(" (")[0] for r in records if r.status == status and r.reason))
                            for status in ("weak", "lost")},
         "redetections": int(sum(r.redetected for r in pairs)),
-        "edges": len(tracked.edges),
-        "loop_edges": int(sum(e.loop for e in tracked.edges)) if tracked.closes_loops else None,
+        "edge_count": len(tracked.edges),
+        "loop_count": int(sum(e.loop for e in tracked.edges)) if tracked.closes_loops else None,
         "sequence_s": float(span),
         "elapsed_s": float(elapsed),
         "load_s": float(load_s),

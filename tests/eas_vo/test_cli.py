@@ -35,7 +35,7 @@ def test_run_writes_every_output(eas_run):
     rows = list(csv.DictReader(open(eas_run / "frames.csv")))
     assert len(rows) == metrics["frames"] == len((eas_run / "trajectory.tum").read_text().splitlines())
     assert metrics["nc_mean"] == pytest.approx(np.mean([int(r["nc"]) for r in rows[1:]]))
-    assert metrics["edges"] == sum(r["status"] in ("ok", "weak") for r in rows) and metrics["loop_edges"] is None
+    assert metrics["edge_count"] == sum(r["status"] in ("ok", "weak") for r in rows) and metrics["loop_count"] is None
     assert (eas_run / "rotation.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
 
@@ -62,7 +62,7 @@ def test_a_run_with_loop_closure_says_how_many_loops_closed(short_sequence, tmp_
     out = tmp_path / "loops"
     assert main(["run", "--dataset", str(short_sequence), "--frontend", "eas", "--set", "tracker.loop_closure=true",
                  "--out", str(out), "--quiet"]) == 0
-    loops = json.loads((out / "metrics.json").read_text())["loop_edges"]
+    loops = json.loads((out / "metrics.json").read_text())["loop_count"]
     assert f", {loops} loop(s) closed, " in capsys.readouterr().out
 
 
