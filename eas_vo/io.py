@@ -222,23 +222,50 @@ def output_folder(out: str | Path, replace: bool = False, keep_partial: bool = T
 
 
 def _acquire(lock: Path, out: Path) -> None:
-    for _ in range(2):
-        try:
-            fd = os.open(lock, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o666)
-        except FileExistsError:
-            if _lock_is_held(lock):
-                raise EasVoError(f"{out} is being written by another eas-vo process (pid {_lock_owner(lock)[0] or '?'}); "
-                                 "wait for it or choose another --out") from None
-            lock.unlink(missing_ok=True)  # its writer is gone: a crash left it, and maybe a staging folder
-            for stale in out.parent.glob(f".{out.name}.*.tmp"):
-                pid = stale.name[len(out.name) + 2: -len(".tmp")]
-                if not (pid.isdigit() and _alive(int(pid))):
-                    shutil.rmtree(stale, ignore_errors=True)
-            continue
+    """Take `lock`: it appears whole, with this process's pid and start time already in it (a
+    file of its own hard-linked to the lock's name), so a writer killed at any moment never
+    leaves an empty lock that others must wait out."""
+    mine = lock.with_name(f"{lock.name}.{os.getpid()}")
+    mine.write_text(f"{os.getpid()} {_started(os.getpid()) or ''}\n")
+    try:
+        for _ in range(2):
+            try:
+                _link_or_create(mine, lock)
+                return
+            except FileExistsError:
+                if _lock_is_held(lock):
+                    raise EasVoError(f"{out} is being written by another eas-vo process (pid {_lock_owner(lock)[0] or '?'}); "
+                                     "wait for it or choose another --out") from None
+                lock.unlink(missing_ok=True)  # its writer is gone: a crash left it, and maybe a staging folder
+                _remove_leftovers(out)
+        raise EasVoError(f"{out}: could not take its lock {lock}")
+    finally:
+        mine.unlink(missing_ok=True)
+
+
+def _link_or_create(mine: Path, lock: Path) -> None:
+    """`lock` made a second name of `mine`; FileExistsError if it exists. On a file system
+    without hard links, created and then written (a kill in between leaves it empty)."""
+    try:
+        os.link(mine, lock)
+    except FileExistsError:
+        raise
+    except OSError:
+        fd = os.open(lock, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o666)
         with os.fdopen(fd, "w") as fh:
-            fh.write(f"{os.getpid()} {_started(os.getpid()) or ''}\n")
-        return
-    raise EasVoError(f"{out}: could not take its lock {lock}")
+            fh.write(mine.read_text())
+
+
+def _remove_leftovers(out: Path) -> None:
+    """Staging folders and lock files of writers that are gone."""
+    for stale in [*out.parent.glob(f".{out.name}.*.tmp"), *out.parent.glob(f".{out.name}.lock.*")]:
+        pid = stale.name.removesuffix(".tmp").rsplit(".", 1)[-1]
+        if pid.isdigit() and _alive(int(pid)):
+            continue
+        if stale.is_dir():
+            shutil.rmtree(stale, ignore_errors=True)
+        else:
+            stale.unlink(missing_ok=True)
 
 
 def _lock_owner(lock: Path) -> tuple[int, str | None]:

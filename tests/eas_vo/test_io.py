@@ -87,9 +87,29 @@ def test_a_crashed_writers_lock_and_leftovers_are_taken_over(tmp_path):
     dead = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True, text=True)
     (tmp_path / ".out.lock").write_text(dead.stdout)
     (tmp_path / f".out.{dead.stdout.strip()}.tmp").mkdir()
+    (tmp_path / f".out.lock.{dead.stdout.strip()}").write_text(dead.stdout)  # killed before its lock was linked
     with output_folder(out) as staging:
         (staging / "metrics.json").write_text("{}\n")
     assert sorted(p.name for p in tmp_path.iterdir()) == ["out"]
+
+
+def test_a_lock_appears_with_its_owner_already_in_it(tmp_path, monkeypatch):
+    """A writer killed between making its lock and writing it would leave an empty lock that
+    blocks every other writer for 10 s: the lock is a second name of a file written first."""
+    import eas_vo.io as io_module
+
+    seen = []
+    real_link = os.link
+
+    def link(source, target):
+        seen.append(Path(source).read_text())  # what the lock holds the moment it exists
+        real_link(source, target)
+
+    monkeypatch.setattr(io_module.os, "link", link)
+    with output_folder(tmp_path / "out"):
+        assert (tmp_path / ".out.lock").read_text() == seen[0]
+        assert seen[0].split()[0] == str(os.getpid())
+        assert sorted(p.name for p in tmp_path.iterdir() if p.name.startswith(".out.lock")) == [".out.lock"]
 
 
 def test_a_folder_is_replaced_only_if_asked_and_only_if_eas_vo_wrote_it(tmp_path):
