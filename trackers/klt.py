@@ -9,7 +9,7 @@ It only ever sees uint8 images; the geometry is the shared `eas_vo.geometry.two_
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import cv2
 import numpy as np
@@ -17,15 +17,16 @@ import numpy as np
 from eas_vo.errors import ConfigError
 from eas_vo.geometry.rotations import gyro_rotation
 from eas_vo.plugins import Tracker
+from eas_vo.trackers.alignment import PhotometricAlignment
 from eas_vo.trackers.features import DETECTORS, Features, RefinedMatching
 from eas_vo.trackers.loops import LoopClosureConfig, LoopCloser
-from eas_vo.trackers.measurement import TwoViewConfig, frame_record, measure
+from eas_vo.trackers.measurement import TwoViewConfig, frame_record, measure, weakness
 from eas_vo.trackers.motion import lk_params, lk_track, scaled_rotation
 from eas_vo.types import CameraModel, FrameRecord, ImuSeries, RelativeRotation
 from eas_vo.validation import check_choice, check_range
 
 PREDICTIONS = ("none", "gyro", "velocity", "auto")
-FALLBACKS = ("none", "match")
+FALLBACKS = ("none", "match", "align")
 
 
 @dataclass(frozen=True)
@@ -50,7 +51,7 @@ class KltConfig(LoopClosureConfig, TwoViewConfig):
             `imu_rotvec_cam` puts it.
         fb_max_px: 0 (the paper) or the forward-backward check: a corner tracked back into the
             previous frame must land within this many pixels of where it started.
-        fallback: `none` (the paper) or `match`: when LK's measurement is weak or missing
+        fallback: `none` (the paper), `match` or `align`. `match`: when LK's measurement is weak or missing
             (the frame is `weak` or `lost`), the previous and current images are matched by
             descriptors (`fallback_detector`), refined by LK from the matched rotation
             (features.RefinedMatching), and that measurement replaces LK's if it is not weak
@@ -59,6 +60,18 @@ class KltConfig(LoopClosureConfig, TwoViewConfig):
             chance inliers and is weak by its inlier ratio (tests/trackers), and falling back
             only below `min_inliers` inliers gave 0.0254 rad on the real excerpt's first 20 s
             against 0.0249 (best.toml otherwise).
+            `align`: when LK's measurement is missing or has under `min_inliers` inliers and
+            no gyro predicted it (a gyro's prediction does not miss: LK then failed on the
+            images, which aligning the same images rarely repairs, and the gyro carries the
+            gtsam graph; at four times the synthetic speed it made the run 2.5x slower for no
+            gain), the two views are aligned by their
+            intensities (a coarse search over pan, tilt and roll, then Gauss-Newton coarse to
+            fine), and LK tracks corners detected afresh from that rotation. That measurement
+            replaces LK's if it is not weak; otherwise whichever of LK's step, the retried one
+            and the alignment alone explains the two images best (the alignment alone: an edge
+            without correspondences, inliers 0, `weak`). It keeps frames-only tracking through
+            motion LK cannot follow: blur that differs between two frames defeats LK's
+            patches, not an alignment of whole images.
     """
 
     max_corners: int = 500
@@ -117,12 +130,14 @@ class KltTracker(Tracker):
         self._lk_params = lk_params(c.lk_win_size, c.lk_max_level, c.lk_max_iterations, c.lk_epsilon_px)
         self._predict = c.predict if c.predict != "auto" else ("gyro" if imu is not None else "velocity")
         self._matching = RefinedMatching(Features(c.fallback_detector), camera, c, c.min_inliers) if c.fallback == "match" else None
+        self._alignment = PhotometricAlignment(camera) if c.fallback == "align" else None
 
     def reset(self) -> None:
         """Forget every frame seen; the next frame is a first frame."""
         self._prev_image: np.ndarray | None = None
         self._prev_pts = np.empty((0, 2), np.float32)
         self._prev_detected: tuple | None = None  # the previous image's keypoints, when the fallback detected them
+        self._prev_pyramid: dict | None = None  # the previous image undistorted, when the alignment made it
         self._kf_pts = np.empty((0, 2), np.float32)  # where each tracked corner was in the keyframe
         self._kf_index = 0
         self._k = -1
@@ -174,7 +189,8 @@ class KltTracker(Tracker):
             return FrameRecord(k, t, 0, 0, "same_time", False), []
         t_prev, self._prev_t = self._prev_t, t
 
-        cur, ok = self.track(image, self.predicted_rotation(t_prev, t))
+        predicted = self.predicted_rotation(t_prev, t)
+        cur, ok = self.track(image, predicted)
         nc = int(ok.sum())
         edges, step = [], None
         if nc >= c.threshold1:
@@ -197,6 +213,16 @@ class KltTracker(Tracker):
                 step, edges = matched, [matched]
                 record = frame_record(self._matching.coarse, self.camera, k, t, n_matched, matched, True, True)
         self._prev_detected = detected
+        pyramid = None
+        if self._alignment is not None and self._predict != "gyro" and (step is None or step.inliers < c.min_inliers):
+            pyramid = self._alignment.pyramid(image)
+            aligned = self._aligned_step(image, pyramid, predicted, step, k)
+            if aligned is not None:
+                (step, n_aligned), edges = aligned, [aligned[0]]
+                record = frame_record(c, self.camera, k, t, n_aligned, step, True, True)
+                if n_aligned == 0:
+                    record = replace(record, reason="aligned by intensities alone (no correspondences)")
+        self._prev_pyramid = pyramid
         self._last_step = (step.R_i_j, t - t_prev) if step is not None else None
         if record.redetected:
             self._start_keyframe(image, self.detect(image))
@@ -207,6 +233,28 @@ class KltTracker(Tracker):
         if self._loops is not None:
             edges = edges + self._loops.step(k, image, edges, lost=record.status == "lost")
         return record, edges
+
+    def _aligned_step(self, image: np.ndarray, pyramid: dict, predicted: np.ndarray | None, step: RelativeRotation | None, k: int):
+        """A weak or missing LK step replaced by direct alignment (see KltConfig.fallback):
+        (the new step, its correspondence count), or None to keep LK's."""
+        align = self._alignment
+        source = self._prev_pyramid or align.pyramid(self._prev_image)
+
+
+        def score(R_prev_cur: np.ndarray) -> float:
+            return align.score(source, pyramid, R_prev_cur)
+
+        R_aligned = align.align(source, pyramid, [np.eye(3)] if predicted is None else [predicted, np.eye(3)])
+        corners = self.detect(self._prev_image)
+        cur, ok = lk_track(self.camera, self._prev_image, corners, image, self._lk_params, R_aligned)
+        retried = measure(self.config, self.camera, corners[ok], cur[ok], k - 1, k) if ok.sum() >= self.config.threshold1 else None
+        if retried is not None and not weakness(self.config, retried, self.camera.focal_px):
+            return retried, int(ok.sum())
+        candidates = [(RelativeRotation(k - 1, k, R_aligned), 0)]
+        candidates += [(retried, int(ok.sum()))] if retried is not None else []
+        candidates += [(step, None)] if step is not None else []
+        best = max(candidates, key=lambda candidate: score(candidate[0].R_i_j))
+        return None if best[0] is step else best
 
     def _start_keyframe(self, image: np.ndarray, pts: np.ndarray) -> None:
         self._prev_image, self._prev_pts, self._kf_pts, self._kf_index = image, pts, pts, self._k

@@ -1,0 +1,158 @@
+"""Direct photometric alignment on views rendered by known rotations, and klt's `align` fallback."""
+
+import cv2
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from eas_vo.trackers.alignment import PhotometricAlignment
+from eas_vo.trackers.klt import KltConfig, KltTracker
+from eas_vo.types import CameraModel
+from helpers import CAMERA, assert_rotations_close, large_rotation, textured_image, warp_by_rotation
+
+#: The real excerpt's calibration: strong radial distortion.
+DAVIS = CameraModel.from_calib([199.09, 198.83, 132.19, 110.71, -0.368, 0.151, -0.0003, -0.0008, 0.0])
+
+
+def rendered_through_lens(camera: CameraModel, R_w_c: np.ndarray, seed: int) -> np.ndarray:
+    """A distant textured wall (a plane at infinity: only rotation matters) seen by `camera`
+    turned by R_w_c, through its distortion."""
+    wall = textured_image(seed, size=(600, 800), shapes=900)
+    K_wall = np.array([[200.0, 0, 400], [0, 200.0, 300], [0, 0, 1]])
+    pixels = np.stack(np.meshgrid(np.arange(camera.width), np.arange(camera.height)), -1).reshape(-1, 2).astype(float)
+    bearings = np.hstack([camera.undistort(pixels), np.ones((len(pixels), 1))]) @ R_w_c.T
+    on_wall = bearings @ K_wall.T
+    uv = (on_wall[:, :2] / on_wall[:, 2:]).astype(np.float32).reshape(camera.height, camera.width, 2)
+    return cv2.remap(wall, uv[..., 0], uv[..., 1], cv2.INTER_LINEAR, borderValue=60)
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_finds_a_large_rotation_with_roll_from_no_motion(seed):
+    """15-25 degrees, 10-12 of them roll, on fine texture: within 0.1 degree, and the score
+    ranks the truth above no motion."""
+    base = textured_image(seed, shapes=300)
+    R_c0_c1 = large_rotation(np.random.default_rng(100 + seed))
+    align = PhotometricAlignment(CAMERA)
+    source, image = align.pyramid(base), align.pyramid(warp_by_rotation(base, R_c0_c1.T))
+    found = align.align(source, image, [np.eye(3)])
+    assert_rotations_close(found, R_c0_c1, np.radians(0.1))
+    assert align.score(source, image, R_c0_c1) > 0.95 > 0.5 > align.score(source, image, np.eye(3))
+
+
+@pytest.mark.parametrize("rotvec_deg", [(-20, 10, 15), (5, 30, -5), (35, -10, 0)])
+def test_finds_the_rotation_through_a_distorting_lens(rotvec_deg):
+    """Views rendered through the DAVIS's distortion (k1 -0.37): the rotation, not a
+    homography of distorted pixels, is what the alignment finds."""
+    R_c0_c1 = Rotation.from_rotvec(np.radians(rotvec_deg)).as_matrix()
+    align = PhotometricAlignment(DAVIS)
+    source = align.pyramid(rendered_through_lens(DAVIS, np.eye(3), seed=1))
+    image = align.pyramid(rendered_through_lens(DAVIS, R_c0_c1, seed=1))
+    assert_rotations_close(align.align(source, image, [np.eye(3)]), R_c0_c1, np.radians(0.2))
+
+
+def test_starts_from_the_given_rotation_beyond_the_searched_grid():
+    """35 degrees of roll lie outside the +-15 degree search; a start near it is refined."""
+    R_c0_c1 = Rotation.from_rotvec(np.radians([3, 5, 35])).as_matrix()
+    align = PhotometricAlignment(DAVIS)
+    source = align.pyramid(rendered_through_lens(DAVIS, np.eye(3), seed=2))
+    image = align.pyramid(rendered_through_lens(DAVIS, R_c0_c1, seed=2))
+    start = Rotation.from_rotvec(np.radians([1, 3, 32])).as_matrix()
+    assert_rotations_close(align.align(source, image, [start]), R_c0_c1, np.radians(0.2))
+
+
+def blobs(seed):
+    """Large blurred shapes: few corners, and LK loses them over 25-35 degrees."""
+    return cv2.normalize(cv2.GaussianBlur(textured_image(seed, shapes=60), (0, 0), 6), None, 0, 255, cv2.NORM_MINMAX)
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_align_fallback_recovers_what_lk_lost(seed):
+    base = blobs(seed)
+    R_c0_c1 = large_rotation(np.random.default_rng(200 + seed), angle_deg=(25, 35))
+    moved = warp_by_rotation(base, R_c0_c1.T)
+    results = {}
+    for fallback in ("none", "align"):
+        tracker = KltTracker(KltConfig(fallback=fallback), CAMERA)
+        tracker.process(base, 0.0)
+        results[fallback] = tracker.process(moved, 0.05)
+    lk_record, (lk_edge,) = results["none"]
+    assert lk_record.status == "weak" and lk_record.inliers < 15
+    assert np.degrees(Rotation.from_matrix(R_c0_c1.T @ lk_edge.R_i_j).magnitude()) > 5
+    record, (edge,) = results["align"]
+    assert record.status == "ok" and record.redetected
+    assert_rotations_close(edge.R_i_j, R_c0_c1, np.radians(0.5))
+
+
+def test_the_alignment_alone_is_a_weak_edge_without_correspondences():
+    """No LK measurement can count (threshold1 above any corner count): the edge is the
+    alignment's, with no inliers, marked weak and why."""
+    base = textured_image(4, shapes=300)
+    R_c0_c1 = large_rotation(np.random.default_rng(7))
+    tracker = KltTracker(KltConfig(fallback="align", threshold1=100_000, threshold2=100_000), CAMERA)
+    tracker.process(base, 0.0)
+    record, (edge,) = tracker.process(warp_by_rotation(base, R_c0_c1.T), 0.05)
+    assert (record.status, record.reason, record.inliers, edge.inliers) == (
+        "weak", "aligned by intensities alone (no correspondences)", 0, 0)
+    assert edge.sigma_rad == np.inf
+    assert_rotations_close(edge.R_i_j, R_c0_c1, np.radians(0.1))
+
+
+def test_a_good_lk_step_is_left_alone():
+    """The fallback only acts on steps with too few inliers: a small turn is LK's own."""
+    base = textured_image(5)
+    small = Rotation.from_rotvec([0.0, 0.02, 0.01]).as_matrix()
+    tracker = KltTracker(KltConfig(fallback="align"), CAMERA)
+    tracker.process(base, 0.0)
+    record, (edge,) = tracker.process(warp_by_rotation(base, small.T), 0.05)
+    assert record.status == "ok" and not record.redetected
+    assert_rotations_close(edge.R_i_j, small, np.radians(0.2))
+
+
+def test_unrelated_views_score_low():
+    align = PhotometricAlignment(CAMERA)
+    a, b = align.pyramid(textured_image(1)), align.pyramid(textured_image(2))
+    assert abs(align.score(a, b, np.eye(3))) < 0.3
+    assert align.score(a, a, np.eye(3)) > 0.999
+    assert align.score(a, a, Rotation.from_rotvec([0, np.pi / 2 + 0.2, 0]).as_matrix()) == -1.0  # nothing shared
+
+
+def test_fallback_choices_are_checked():
+    from eas_vo.errors import ConfigError
+
+    with pytest.raises(ConfigError, match="fallback = 'pray'; allowed: none, match, align"):
+        KltConfig(fallback="pray").validate()
+
+
+def test_the_score_is_opencvs_warp_and_numpys_correlation():
+    """Cross-check of the compiled score: the same ZNCC from cv2.warpPerspective and numpy."""
+    align = PhotometricAlignment(CAMERA)
+    a, b = align.pyramid(textured_image(3)), align.pyramid(textured_image(3, shapes=200))
+    S = np.diag([0.5, 0.5, 1.0])
+    seen = align._levels[0.5]
+    for rotvec in ([0, 0, 0], [0.05, -0.1, 0.2], [-0.2, 0.1, -0.05]):
+        R = Rotation.from_rotvec(rotvec).as_matrix()
+        H = S @ CAMERA.K @ R @ np.linalg.inv(CAMERA.K) @ np.linalg.inv(S)
+        flags = cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP
+        warped = cv2.warpPerspective(a[0.5], H, a[0.5].shape[::-1], flags=flags, borderValue=np.nan)
+        x, y = warped[seen.ys, seen.xs], b[0.5][seen.ys, seen.xs]
+        both = ~np.isnan(x)
+        expected = np.corrcoef(x[both], y[both])[0, 1]
+        assert align.score(a, b, R) == pytest.approx(expected, abs=0.01)
+
+
+def test_a_gyro_prediction_is_left_to_lk():
+    """Where the gyro predicts, LK's failure is the images' (here a gyro that says "still"
+    while the view turned by 25-35 degrees): no alignment, LK's own weak step stays."""
+    from eas_vo.types import ImuSeries
+
+    base = blobs(0)
+    R_c0_c1 = large_rotation(np.random.default_rng(200), angle_deg=(25, 35))
+    t_imu = np.linspace(-0.1, 0.2, 61)
+    still = ImuSeries(t_imu, np.zeros((61, 3)), np.zeros((61, 3)))
+    records = {}
+    for imu, fallback in ((None, "align"), (still, "align"), (still, "none")):
+        tracker = KltTracker(KltConfig(fallback=fallback, predict="auto"), CAMERA, imu=imu)
+        tracker.process(base, 0.0)
+        records[imu is None, fallback], _ = tracker.process(warp_by_rotation(base, R_c0_c1.T), 0.05)
+    assert records[True, "align"].status == "ok"  # frames only: aligned, then LK again
+    assert records[False, "align"] == records[False, "none"] and records[False, "none"].inliers < 15

@@ -1,0 +1,209 @@
+"""Direct photometric alignment of two views of a rotating camera: how well a rotation explains
+the two images (the zero-mean normalised cross-correlation of one image warped onto the other),
+and a rotation found from the intensities alone, where tracked points fail (motion blur that
+differs between the two frames defeats LK's small patches, not an alignment of whole images).
+Not a plugin.
+
+Both work on undistorted images (the pinhole camera of the same K), where a rotation R_i_j is
+exactly the homography K R_i_j K^-1 from view j to view i, whatever the scene's depth.
+"""
+
+from __future__ import annotations
+
+import cv2
+import numba
+import numpy as np
+
+from eas_vo.types import CameraModel
+
+#: Resolution of the score (a fraction of the sensor's): half a pixel of the sensor is well
+#: below a failed track's error (degrees), and the scale averages the noise.
+SCORE_SCALE = 0.5
+#: Resolutions of the coarse-to-fine alignment: an eighth of the 240 px sensor still holds a
+#: shape; its basin there spans several of its pixels, tens of the sensor's (a lost track's).
+ALIGN_SCALES = (0.125, 0.25, 0.5)
+#: Blur [px] of the coarsest scale where the search ranks its first candidates: it widens the
+#: score's peak beyond the grid's half step for scenes of fine texture.
+SEARCH_BLUR_PX = 1.0
+#: Pans and tilts [deg] scored at the coarsest scale besides the given starts: the 43 deg
+#: between frames of the real excerpt's p95 speed at half its frame rate, in steps of an
+#: eighth of the 60 deg field of view; each with these rolls [deg] (half their step, 7.5 deg,
+#: moves the view's edges by about as much as half a step of pan).
+SEARCH_GRID_DEG = np.arange(-45.0, 45.1, 7.5)
+SEARCH_ROLL_DEG = (-15.0, 0.0, 15.0)
+#: How many candidates go on to each scale of ALIGN_SCALES (the best-scoring after the last).
+SEARCH_KEEP = (8, 2, 1)
+#: Gauss-Newton steps at each scale, each run stopping sooner once a step moves the view by
+#: under ALIGN_STOP_PX pixels of that scale.
+ALIGN_ITERATIONS = 10
+ALIGN_STOP_PX = 0.01
+#: The overlap below which two views share too little to be scored [fraction of the view].
+MIN_OVERLAP = 0.2
+
+
+class PhotometricAlignment:
+    """Scores and finds rotations between two uint8 images of `camera` by their intensities."""
+
+    def __init__(self, camera: CameraModel):
+        self.camera = camera
+        size = (camera.width, camera.height)
+        self._maps = cv2.initUndistortRectifyMap(camera.K, camera.dist, None, camera.K, size, cv2.CV_32FC1)
+        seen = self._undistort(np.full((camera.height, camera.width), 255, np.uint8)) == 255
+        self._levels = {s: _Level(camera.K, _resized(seen.astype(np.uint8) * 255, s) == 255, s)
+                        for s in sorted({SCORE_SCALE, *ALIGN_SCALES})}
+        self._grid = np.array([cv2.Rodrigues(np.radians([tilt, pan, roll]))[0]
+                               for roll in SEARCH_ROLL_DEG for pan in SEARCH_GRID_DEG for tilt in SEARCH_GRID_DEG])
+
+    def _undistort(self, image: np.ndarray) -> np.ndarray:
+        return cv2.remap(image, *self._maps, cv2.INTER_LINEAR)
+
+    def pyramid(self, image: np.ndarray) -> dict:
+        """`image` undistorted at each scale the alignment and the score use, and the coarsest
+        blurred by SEARCH_BLUR_PX (key "search"); float32."""
+        flat = self._undistort(image).astype(np.float32)
+        levels: dict = {s: _resized(flat, s) for s in self._levels}
+        levels["search"] = cv2.GaussianBlur(levels[ALIGN_SCALES[0]], (0, 0), SEARCH_BLUR_PX)
+        return levels
+
+    def score(self, source: dict, image: dict, R_source_image: np.ndarray) -> float:
+        """How well R_source_image explains the two views (their `pyramid`s): the zero-mean
+        normalised cross-correlation of `source` warped into `image`'s view with `image`, over
+        the pixels both see (at SCORE_SCALE); -1 when they share under MIN_OVERLAP of the view."""
+        return float(self._levels[SCORE_SCALE].scores([source[SCORE_SCALE]], [image[SCORE_SCALE]], R_source_image[None])[0, 0])
+
+    def align(self, source: dict, image: dict, starts: list[np.ndarray]) -> np.ndarray:
+        """R_source_image found from the intensities (`pyramid`s): `starts` and the grid of
+        SEARCH_GRID_DEG and SEARCH_ROLL_DEG scored at the coarsest scale, the best SEARCH_KEEP[0]
+        (half by the sharp image's score, half by the blurred one's) refined there by
+        Gauss-Newton on the rotation's three angles, the best SEARCH_KEEP[1] of those at the
+        next scale, and so on; the best of the last."""
+        candidates = np.concatenate([np.asarray(starts, float).reshape(-1, 3, 3), self._grid])
+        for scale, keep in zip(ALIGN_SCALES, SEARCH_KEEP):
+            level = self._levels[scale]
+            if scale == ALIGN_SCALES[0]:  # half ranked sharp, half blurred
+                sharp, blurred = np.argsort(-level.scores([source[scale], source["search"]], [image[scale], image["search"]], candidates))
+                order = list(dict.fromkeys([*sharp[: keep // 2], *blurred[:keep], *sharp]))[:keep]
+            else:
+                order = np.argsort(-level.scores([source[scale]], [image[scale]], candidates)[0])[:keep]
+            candidates = level.refine(source[scale], image[scale], candidates[np.asarray(order)])
+        last = ALIGN_SCALES[-1]
+        return candidates[int(np.argmax(self._levels[last].scores([source[last]], [image[last]], candidates)[0]))]
+
+
+class _Level:
+    """One scale of the undistorted views: the image view's pixels (those the lens sees) as
+    bearings, for scoring and refining rotations there."""
+
+    def __init__(self, K: np.ndarray, seen: np.ndarray, scale: float):
+        self.K = np.diag([scale, scale, 1.0]) @ K
+        self.shape = seen.shape
+        self.ys, self.xs = np.nonzero(seen)
+        self.bearings = np.linalg.inv(self.K) @ np.stack([self.xs, self.ys, np.ones_like(self.xs)]).astype(float)  # (3, N)
+
+    def _sample(self, source: np.ndarray, Rs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """`source` at where each rotation of Rs (C, 3, 3) puts the image view's pixels: values
+        (C, N) and whether they fall inside `source` (C, N)."""
+        u, v, inside = self._where(Rs)
+        return cv2.remap(source, u, v, cv2.INTER_LINEAR), inside
+
+    def _where(self, Rs: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Where each rotation of Rs (C, 3, 3) puts the image view's pixels in the source view:
+        u, v (C, N) [px, float32; -1 outside] and whether they fall inside it (C, N)."""
+        C, N = len(Rs), self.bearings.shape[1]
+        pixels = ((self.K @ Rs).reshape(3 * C, 3) @ self.bearings).reshape(C, 3, N).astype(np.float32)  # one GEMM
+        z = pixels[:, 2]
+        ahead = z > 1e-6
+        z = np.where(ahead, z, np.float32(1.0))
+        u, v = pixels[:, 0] / z, pixels[:, 1] / z
+        h, w = self.shape
+        inside = ahead & (u >= 0) & (u <= w - 1) & (v >= 0) & (v <= h - 1)
+        u[~inside], v[~inside] = -1.0, -1.0
+        return u, v, inside
+
+    def scores(self, sources: list[np.ndarray], images: list[np.ndarray], Rs: np.ndarray) -> np.ndarray:
+        """The ZNCC of each image of `images` with the same-index image of `sources` warped by
+        each rotation of Rs (C, 3, 3), over the pixels both see: (len(images), C); -1 where
+        they share under MIN_OVERLAP."""
+        return _zncc(np.stack(sources).astype(np.float32), np.stack([im[self.ys, self.xs] for im in images]).astype(np.float32),
+                     np.asarray(self.K @ Rs, np.float64), self.bearings, MIN_OVERLAP * len(self.xs))
+
+    def refine(self, source: np.ndarray, image: np.ndarray, Rs: np.ndarray) -> np.ndarray:
+        """Each R_source_image of Rs (C, 3, 3) refined by inverse-compositional Gauss-Newton on
+        the squared difference of the two views (each normalised to zero mean and unit variance
+        over the pixels both see), all at once, up to ALIGN_ITERATIONS steps, stopping once no
+        step moves the view by ALIGN_STOP_PX at this scale."""
+        target = image[self.ys, self.xs].astype(float)
+        gx = cv2.Sobel(image, cv2.CV_32F, 1, 0, ksize=3)[self.ys, self.xs] / 8
+        gy = cv2.Sobel(image, cv2.CV_32F, 0, 1, ksize=3)[self.ys, self.xs] / 8
+        X, Y = self.bearings[0], self.bearings[1]  # z = 1
+        fx, fy = self.K[0, 0], self.K[1, 1]
+        # d image(pi(K exp([d]x) b)) / d d at d = 0 is r (-[b]x), r = grad . d pi / d b
+        r0, r1, r2 = gx * fx, gy * fy, -(gx * fx * X + gy * fy * Y)
+        J = np.stack([r2 * Y - r1, r0 - r2 * X, r1 * X - r0 * Y], axis=1)  # (N, 3)
+        JJ = J[:, :, None] * J[:, None, :]  # (N, 3, 3)
+        Rs = np.array(Rs, float)
+        for _ in range(ALIGN_ITERATIONS):
+            values, inside = self._sample(source, Rs)
+            weights = inside.astype(float)
+            n = np.maximum(weights.sum(1, keepdims=True), 1.0)
+            v_mean, t_mean = (values * weights).sum(1, keepdims=True) / n, (target * weights).sum(1, keepdims=True) / n
+            v_std = np.sqrt((((values - v_mean) ** 2) * weights).sum(1, keepdims=True) / n)
+            t_std = np.sqrt((((target - t_mean) ** 2) * weights).sum(1, keepdims=True) / n)
+            usable = (n[:, 0] >= MIN_OVERLAP * len(self.xs)) & (v_std[:, 0] > 0) & (t_std[:, 0] > 0)
+            v_std, t_std = np.where(v_std > 0, v_std, 1.0), np.where(t_std > 0, t_std, 1.0)
+            residual = ((values - v_mean) / v_std - (target - t_mean) / t_std) * weights
+            H = np.einsum("cn,nij->cij", weights, JJ) / t_std[:, :, None] ** 2 + 1e-9 * np.eye(3)
+            deltas = np.linalg.solve(H, (residual @ J / t_std)[..., None])[..., 0]
+            deltas[~usable] = 0.0
+            Rs = np.array([R @ cv2.Rodrigues(-d)[0] for R, d in zip(Rs, deltas)])
+            if np.linalg.norm(deltas, axis=1).max() * fx < ALIGN_STOP_PX:
+                break
+        return Rs
+
+
+def _resized(image: np.ndarray, scale: float) -> np.ndarray:
+    return cv2.resize(image, None, fx=scale, fy=scale, interpolation=cv2.INTER_AREA)
+
+
+@numba.njit(cache=True, nogil=True)
+def _zncc(sources, targets, KRs, bearings, min_count):
+    """scores (P, C): for each image pair p and rotation c, the ZNCC of targets[p] (P, N, at
+    the image view's pixels) with sources[p] (P, h, w) sampled (bilinear) where K R_c puts the
+    pixels' bearings (3, N); -1 with under `min_count` pixels inside."""
+    P, h, w = sources.shape
+    C, N = KRs.shape[0], bearings.shape[1]
+    out = np.full((P, C), -1.0)
+    sums = np.zeros((P, 5))
+    for c in range(C):
+        M = KRs[c]
+        sums[:] = 0.0
+        count = 0
+        for n in range(N):
+            bx, by, bz = bearings[0, n], bearings[1, n], bearings[2, n]
+            z = M[2, 0] * bx + M[2, 1] * by + M[2, 2] * bz
+            if z <= 1e-6:
+                continue
+            u = (M[0, 0] * bx + M[0, 1] * by + M[0, 2] * bz) / z
+            v = (M[1, 0] * bx + M[1, 1] * by + M[1, 2] * bz) / z
+            if u < 0 or v < 0 or u > w - 1 or v > h - 1:
+                continue
+            i, j = min(int(u), w - 2), min(int(v), h - 2)
+            a, b = u - i, v - j
+            count += 1
+            for p in range(P):
+                x = ((1 - a) * (1 - b) * sources[p, j, i] + a * (1 - b) * sources[p, j, i + 1]
+                     + (1 - a) * b * sources[p, j + 1, i] + a * b * sources[p, j + 1, i + 1])
+                y = targets[p, n]
+                sums[p, 0] += x
+                sums[p, 1] += y
+                sums[p, 2] += x * x
+                sums[p, 3] += y * y
+                sums[p, 4] += x * y
+        if count < min_count:
+            continue
+        for p in range(P):
+            sx, sy, sxx, syy, sxy = sums[p, 0], sums[p, 1], sums[p, 2], sums[p, 3], sums[p, 4]
+            vx, vy = sxx - sx * sx / count, syy - sy * sy / count
+            if vx > 0 and vy > 0:
+                out[p, c] = (sxy - sx * sy / count) / np.sqrt(vx * vy)
+    return out
