@@ -39,13 +39,14 @@ ALIGN_ITERATIONS = 10
 ALIGN_STOP_PX = 0.01
 #: The overlap below which two views share too little to be scored [fraction of the view].
 MIN_OVERLAP = 0.2
+#: Columns per cv2.remap call (it takes maps under 32767 columns: a 1280 x 720 view has more).
+REMAP_COLUMNS = 32000
 
 
 class PhotometricAlignment:
     """Scores and finds rotations between two uint8 images of `camera` by their intensities."""
 
     def __init__(self, camera: CameraModel):
-        self.camera = camera
         size = (camera.width, camera.height)
         self._maps = cv2.initUndistortRectifyMap(camera.K, camera.dist, None, camera.K, size, cv2.CV_32FC1)
         seen = self._undistort(np.full((camera.height, camera.width), 255, np.uint8)) == 255
@@ -68,7 +69,8 @@ class PhotometricAlignment:
     def score(self, source: dict, image: dict, R_source_image: np.ndarray) -> float:
         """How well R_source_image explains the two views (their `pyramid`s): the zero-mean
         normalised cross-correlation of `source` warped into `image`'s view with `image`, over
-        the pixels both see (at SCORE_SCALE); -1 when they share under MIN_OVERLAP of the view."""
+        the pixels both see (at SCORE_SCALE); -1 when they share under MIN_OVERLAP of the view
+        or either is flat there."""
         return float(self._levels[SCORE_SCALE].scores([source[SCORE_SCALE]], [image[SCORE_SCALE]], R_source_image[None])[0, 0])
 
     def align(self, source: dict, image: dict, starts: list[np.ndarray]) -> np.ndarray:
@@ -96,19 +98,22 @@ class _Level:
 
     def __init__(self, K: np.ndarray, seen: np.ndarray, scale: float):
         self.K = np.diag([scale, scale, 1.0]) @ K
-        self.shape = seen.shape
+        self.shape, self.seen = seen.shape, seen
         self.ys, self.xs = np.nonzero(seen)
         self.bearings = np.linalg.inv(self.K) @ np.stack([self.xs, self.ys, np.ones_like(self.xs)]).astype(float)  # (3, N)
 
     def _sample(self, source: np.ndarray, Rs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """`source` at where each rotation of Rs (C, 3, 3) puts the image view's pixels: values
-        (C, N) and whether they fall inside `source` (C, N)."""
+        (C, N) and whether the source saw them (C, N)."""
         u, v, inside = self._where(Rs)
-        return cv2.remap(source, u, v, cv2.INTER_LINEAR), inside
+        step = REMAP_COLUMNS  # OpenCV's remap takes maps under 32767 columns
+        return np.concatenate([cv2.remap(source, u[:, a:a + step], v[:, a:a + step], cv2.INTER_LINEAR)
+                               for a in range(0, u.shape[1], step)], axis=1), inside
 
     def _where(self, Rs: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Where each rotation of Rs (C, 3, 3) puts the image view's pixels in the source view:
-        u, v (C, N) [px, float32; -1 outside] and whether they fall inside it (C, N)."""
+        u, v (C, N) [px, float32; -1 outside] and whether the source saw them there (inside its
+        image and its lens's view, C, N)."""
         C, N = len(Rs), self.bearings.shape[1]
         pixels = ((self.K @ Rs).reshape(3 * C, 3) @ self.bearings).reshape(C, 3, N).astype(np.float32)  # one GEMM
         z = pixels[:, 2]
@@ -118,14 +123,15 @@ class _Level:
         h, w = self.shape
         inside = ahead & (u >= 0) & (u <= w - 1) & (v >= 0) & (v <= h - 1)
         u[~inside], v[~inside] = -1.0, -1.0
+        inside[inside] = self.seen[(v[inside] + 0.5).astype(int), (u[inside] + 0.5).astype(int)]
         return u, v, inside
 
     def scores(self, sources: list[np.ndarray], images: list[np.ndarray], Rs: np.ndarray) -> np.ndarray:
         """The ZNCC of each image of `images` with the same-index image of `sources` warped by
         each rotation of Rs (C, 3, 3), over the pixels both see: (len(images), C); -1 where
-        they share under MIN_OVERLAP."""
+        they share under MIN_OVERLAP or either is flat there."""
         return _zncc(np.stack(sources).astype(np.float32), np.stack([im[self.ys, self.xs] for im in images]).astype(np.float32),
-                     np.asarray(self.K @ Rs, np.float64), self.bearings, MIN_OVERLAP * len(self.xs))
+                     np.asarray(self.K @ Rs, np.float64), self.bearings, self.seen, max(MIN_OVERLAP * len(self.xs), 1.0))
 
     def refine(self, source: np.ndarray, image: np.ndarray, Rs: np.ndarray) -> np.ndarray:
         """Each R_source_image of Rs (C, 3, 3) refined by inverse-compositional Gauss-Newton on
@@ -166,10 +172,11 @@ def _resized(image: np.ndarray, scale: float) -> np.ndarray:
 
 
 @numba.njit(cache=True, nogil=True)
-def _zncc(sources, targets, KRs, bearings, min_count):
+def _zncc(sources, targets, KRs, bearings, seen, min_count):
     """scores (P, C): for each image pair p and rotation c, the ZNCC of targets[p] (P, N, at
     the image view's pixels) with sources[p] (P, h, w) sampled (bilinear) where K R_c puts the
-    pixels' bearings (3, N); -1 with under `min_count` pixels inside."""
+    pixels' bearings (3, N), where the source's lens saw (`seen`, h x w); -1 with under
+    `min_count` (at least 1) such pixels, or a flat image."""
     P, h, w = sources.shape
     C, N = KRs.shape[0], bearings.shape[1]
     out = np.full((P, C), -1.0)
@@ -185,7 +192,7 @@ def _zncc(sources, targets, KRs, bearings, min_count):
                 continue
             u = (M[0, 0] * bx + M[0, 1] * by + M[0, 2] * bz) / z
             v = (M[1, 0] * bx + M[1, 1] * by + M[1, 2] * bz) / z
-            if u < 0 or v < 0 or u > w - 1 or v > h - 1:
+            if u < 0 or v < 0 or u > w - 1 or v > h - 1 or not seen[int(v + 0.5), int(u + 0.5)]:
                 continue
             i, j = min(int(u), w - 2), min(int(v), h - 2)
             a, b = u - i, v - j

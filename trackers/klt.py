@@ -214,7 +214,8 @@ class KltTracker(Tracker):
                 record = frame_record(self._matching.coarse, self.camera, k, t, n_matched, matched, True, True)
         self._prev_detected = detected
         pyramid = None
-        if self._alignment is not None and self._predict != "gyro" and (step is None or step.inliers < c.min_inliers):
+        by_gyro = self._predict == "gyro" and predicted is not None
+        if self._alignment is not None and not by_gyro and (step is None or step.inliers < c.min_inliers):
             pyramid = self._alignment.pyramid(image)
             aligned = self._aligned_step(image, pyramid, predicted, step, k)
             if aligned is not None:
@@ -235,26 +236,27 @@ class KltTracker(Tracker):
         return record, edges
 
     def _aligned_step(self, image: np.ndarray, pyramid: dict, predicted: np.ndarray | None, step: RelativeRotation | None, k: int):
-        """A weak or missing LK step replaced by direct alignment (see KltConfig.fallback):
-        (the new step, its correspondence count), or None to keep LK's."""
+        """A missing LK step, or one with too few inliers, replaced by direct alignment (see
+        KltConfig.fallback): (the new step, its correspondence count), or None to keep LK's
+        (also when no rotation explains the two images: they share nothing, or one is flat)."""
         align = self._alignment
         source = self._prev_pyramid or align.pyramid(self._prev_image)
-
 
         def score(R_prev_cur: np.ndarray) -> float:
             return align.score(source, pyramid, R_prev_cur)
 
         R_aligned = align.align(source, pyramid, [np.eye(3)] if predicted is None else [predicted, np.eye(3)])
         corners = self.detect(self._prev_image)
-        cur, ok = lk_track(self.camera, self._prev_image, corners, image, self._lk_params, R_aligned)
+        cur, ok = lk_track(self.camera, self._prev_image, corners, image, self._lk_params, R_aligned, self.config.fb_max_px)
         retried = measure(self.config, self.camera, corners[ok], cur[ok], k - 1, k) if ok.sum() >= self.config.threshold1 else None
         if retried is not None and not weakness(self.config, retried, self.camera.focal_px):
             return retried, int(ok.sum())
-        candidates = [(RelativeRotation(k - 1, k, R_aligned), 0)]
-        candidates += [(retried, int(ok.sum()))] if retried is not None else []
-        candidates += [(step, None)] if step is not None else []
-        best = max(candidates, key=lambda candidate: score(candidate[0].R_i_j))
-        return None if best[0] is step else best
+        candidates = [(RelativeRotation(k - 1, k, R_aligned), 0)] + ([(retried, int(ok.sum()))] if retried is not None else [])
+        scores = [score(candidate[0].R_i_j) for candidate in candidates]
+        best = int(np.argmax(scores))
+        if scores[best] <= -1.0 or (step is not None and score(step.R_i_j) >= scores[best]):
+            return None
+        return candidates[best]
 
     def _start_keyframe(self, image: np.ndarray, pts: np.ndarray) -> None:
         self._prev_image, self._prev_pts, self._kf_pts, self._kf_index = image, pts, pts, self._k

@@ -156,3 +156,25 @@ def test_a_gyro_prediction_is_left_to_lk():
         records[imu is None, fallback], _ = tracker.process(warp_by_rotation(base, R_c0_c1.T), 0.05)
     assert records[True, "align"].status == "ok"  # frames only: aligned, then LK again
     assert records[False, "align"] == records[False, "none"] and records[False, "none"].inliers < 15
+
+
+def test_black_frames_stay_lost():
+    """No rotation explains two flat images: the fallback adds nothing."""
+    tracker = KltTracker(KltConfig(fallback="align"), CAMERA)
+    black = np.zeros((180, 240), np.uint8)
+    tracker.process(black, 0.0)
+    record, edges = tracker.process(black, 0.05)
+    assert record.status == "lost" and edges == []
+
+
+@pytest.mark.parametrize("camera", [
+    CameraModel(640, 480, np.array([[530.0, 0, 320], [0, 530.0, 240], [0, 0, 1]])),  # more columns than one remap takes
+    CameraModel(240, 180, np.array([[200.0, 0, 120], [0, 200.0, 90], [0, 0, 1]]), np.array([0.3, 0.0, 0.0, 0.0, 0.0])),  # pincushion: unseen corners
+], ids=["640x480", "pincushion"])
+def test_other_sensors_and_lenses(camera):
+    R_c0_c1 = Rotation.from_rotvec(np.radians([8, -12, 6])).as_matrix()
+    align = PhotometricAlignment(camera)
+    source = align.pyramid(rendered_through_lens(camera, np.eye(3), seed=3))
+    image = align.pyramid(rendered_through_lens(camera, R_c0_c1, seed=3))
+    assert_rotations_close(align.align(source, image, [np.eye(3)]), R_c0_c1, np.radians(0.2))
+    assert align.score(source, image, R_c0_c1) > 0.95
