@@ -345,9 +345,10 @@ def cmd_run(args) -> int:
         ape_text += f" (time offset {m['time_offset_s'] * 1e3:+.1f} ms, estimated)"
     statuses = _status_text(m["status_counts"], m["status_reasons"])
     loops = f"{m['loop_count']} loop(s) closed, " if m["loop_count"] is not None else ""
+    gyro = f"gyro {m['gyro']}, " if m["gyro"] else ""
     print(
         f"{rc.frontend}+{rc.tracker}+{rc.backend} on {rc.dataset}: {m['frames']} frames ({statuses}), "
-        f"average NC {m['nc_mean']:.1f}, {loops}"
+        f"average NC {m['nc_mean']:.1f}, {loops}{gyro}"
         f"{ape_text}, {m['frames_per_s']:.1f} frames/s -> {out}"
     )
     return 0
