@@ -161,6 +161,9 @@ class ImuAgreement:
             around the previous estimate): the offset may be larger still.
         residual_rad, residual_unshifted_rad: the median |g - R v| [rad] over the agreeing
             pairs with the gyro read clock_shift_s later, and as configured.
+        turned_sigma_deg: the standard deviation [deg] of R's angle about its least certain
+            axis, from the agreeing pairs' scatter about the fit (_fit_sigma_deg): fewer pairs,
+            smaller rotations or noisier images make it larger.
     """
 
     R: np.ndarray
@@ -171,6 +174,7 @@ class ImuAgreement:
     shift_at_limit: bool
     residual_rad: float
     residual_unshifted_rad: float
+    turned_sigma_deg: float
 
     @property
     def turned_deg(self) -> float:
@@ -211,7 +215,8 @@ def imu_agreement(t: np.ndarray, edges, imu: ImuSeries) -> ImuAgreement | None:
         singular = np.linalg.svd(v[agree], compute_uv=False)
         spread = float(singular[1] / max(singular[0], 1e-12))
         moved, shift = abs(best - shift), best
-        found = ImuAgreement(R, len(v), int(agree.sum()), spread, best, limit, residual, unshifted)
+        found = ImuAgreement(R, len(v), int(agree.sum()), spread, best, limit, residual, unshifted,
+                             _fit_sigma_deg(v[agree] @ R.T, g[agree]))
         if moved < 1e-3:
             break
     return found
@@ -230,6 +235,17 @@ def _fit_axes(v: np.ndarray, g: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         if agree.sum() < 3:
             break
     return R, agree
+
+
+def _fit_sigma_deg(u: np.ndarray, g: np.ndarray) -> float:
+    """The standard deviation [deg] of a small rotation d in g = Exp(d) u + noise, about its least
+    certain axis, for rotation vectors u (the fitted tracker's, (N, 3)) and g (the gyro's): the
+    noise per axis from the median residual (|noise| of a 3-D Gaussian has median 1.538 sigma),
+    the information sum(|u|^2 I - u u^T) / sigma^2 of the linearised fit."""
+    sigma = np.median(np.linalg.norm(g - u, axis=1)) / 1.538
+    information = np.sum(u * u) * np.eye(3) - u.T @ u
+    smallest = np.linalg.eigvalsh(information)[0]
+    return float(np.degrees(sigma / np.sqrt(smallest))) if smallest > 0 else float("inf")
 
 
 def _best_clock_shift(t0: np.ndarray, t1: np.ndarray, expected: np.ndarray, turned, imu: ImuSeries,

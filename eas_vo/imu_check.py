@@ -132,6 +132,10 @@ class GyroVerdict:
         """The run's warnings on the gyro: one line when it is not used (`retracked`: the frames
         were tracked again without it) or used without the images' check, joined with the first
         of the `findings` of the axes and clock checks (evaluation.imu_agreement), then the rest."""
+        if retracked and not self.contradicts:
+            findings = [f"the frames were tracked again without the gyro's predictions (with them the images measured "
+                        f"too little to check it); {self.disagreeing} of {self.judged} confident frame pairs disagree with "
+                        "it"] + findings
         if self.contradicts:
             again = "; the frames were tracked again without it" if retracked else ""
             said = (f"the gyro is not used: {self.disagreeing} of {self.judged} confidently measured frame pairs "

@@ -99,12 +99,7 @@ def _run_into(parts: Pipeline, config: ResolvedConfig, out: Path | None, progres
         write_text_atomic(out / "config.toml", config.to_toml())
         write_text_atomic(out / "identity.json", json_text(run_identity(config)))
     try:
-        frames_csv = out / "frames.csv" if out else None
-        tracked = track(parts, config, frames_csv, progress)
-        verdict = None if parts.imu is None else judge_gyro(tracked.times, tracked.edges, parts.imu)
-        retrack = verdict is not None and verdict.contradicts and parts.tracker.uses_imu and tracked.interrupted is None
-        if retrack:  # its predictions may have misled the tracker
-            tracked = track(_without_imu(parts, config), config, frames_csv, progress)
+        tracked, verdict, retracked = _track_judging_the_gyro(parts, config, out, progress)
         t = tracked.times
         agreement = None if parts.imu is None else imu_agreement(t, tracked.edges, parts.imu)
         fused = None if verdict is None or verdict.contradicts else parts.imu
@@ -112,7 +107,7 @@ def _run_into(parts: Pipeline, config: ResolvedConfig, out: Path | None, progres
         R_w_c = parts.backend.solve(len(t), tracked.edges, times=t, imu=imu)
         errors, offset, offset_estimated = evaluate(config, parts.dataset, t, R_w_c, tracked.edges)
         metrics = summarise(config, parts.dataset, tracked, errors, offset, offset_estimated,
-                            time.perf_counter() - started, load_s, agreement, imu_offset, verdict, retrack)
+                            time.perf_counter() - started, load_s, agreement, imu_offset, verdict, retracked)
         metrics["data_warnings"] = parts.imu_warnings + metrics["data_warnings"] + list(parts.backend.solver_warnings)
         result = RunResult(t, R_w_c, tracked.records, tracked.edges, errors, metrics, parts.backend.causal_R_w_c)
         if out is not None:
@@ -194,6 +189,30 @@ def open_pipeline(config: ResolvedConfig) -> Pipeline:
         parts.imu_warnings = check_readings(parts.imu, window, dataset.label, rc.imu_time_offset_s)
     dataset.events()
     return parts
+
+
+def _track_judging_the_gyro(parts: Pipeline, config: ResolvedConfig, out: Path | None,
+                            progress: bool) -> tuple[Tracked, GyroVerdict | None, bool]:
+    """Track (frames.csv in `out`), and judge the gyro by the images (imu_check.judge_gyro).
+    When the tracker predicted from a gyro the images contradict or cannot check (a wrong one
+    misleads LK until nothing is measured confidently), track again without it: that tracking
+    is kept if the first was contradicted or if it can judge the gyro, whose verdict it then
+    gives. Returns the tracking kept, the verdict (None without a gyro) and whether the kept
+    tracking is the one without the gyro."""
+    tracked = track(parts, config, out / "frames.csv" if out else None, progress)
+    verdict = None if parts.imu is None else judge_gyro(tracked.times, tracked.edges, parts.imu)
+    if verdict is None or verdict.use == "used" or not parts.tracker.uses_imu or tracked.interrupted is not None:
+        return tracked, verdict, False
+    second_csv = out / "frames_without_gyro.csv" if out else None
+    second = track(_without_imu(parts, config), config, second_csv, progress)
+    second_verdict = judge_gyro(second.times, second.edges, parts.imu)
+    if not (verdict.contradicts or second_verdict.can_tell):
+        if second_csv:
+            second_csv.unlink()
+        return tracked, verdict, False
+    if second_csv:
+        second_csv.replace(out / "frames.csv")
+    return second, verdict if verdict.contradicts else second_verdict, True
 
 
 def _without_imu(parts: Pipeline, config: ResolvedConfig) -> Pipeline:
@@ -356,6 +375,12 @@ CLOCK_GAIN = 0.9
 #: cannot tell how the gyro is turned about it: under 0.05 for a pure pan (a test), 0.5-0.65 on
 #: hand-held sequences (synthetic:default, seed 41, a 30 s one, the real excerpt).
 MIN_SPREAD = 0.2
+#: ... and by more than this many standard deviations of the fit (ImuAgreement.turned_sigma_deg),
+#: so that a short or noisy sequence says nothing it cannot tell. The images' errors are
+#: correlated from pair to pair (lag, blur), which the scatter understates: on right IMUs
+#: (2 s simulated sequences at 240x180, 346x260 and 640x480, eas and histeq) the fit was 0.8-11
+#: deg off, up to 4.3 of its sigmas; an axis swap 65.
+AXES_SIGMAS = 5.0
 #: A fit this close [deg] to an axis swap or flip is taken for it (those are 90 deg apart; a
 #: quarter turn misread on a 2 s sequence was fitted 10 deg off).
 AXES_SNAP_DEG = 20.0
@@ -380,8 +405,9 @@ def _conclusive(agreement: ImuAgreement | None) -> bool:
 
 def _axes_off(agreement: ImuAgreement | None) -> bool:
     """Whether the gyro agrees with the images only turned by more than IMU_DISAGREEMENT_DEG
-    (about more than one axis: MIN_SPREAD)."""
-    return _conclusive(agreement) and agreement.spread >= MIN_SPREAD and agreement.turned_deg > IMU_DISAGREEMENT_DEG
+    and AXES_SIGMAS times the fit's own uncertainty (about more than one axis: MIN_SPREAD)."""
+    return (_conclusive(agreement) and agreement.spread >= MIN_SPREAD
+            and agreement.turned_deg > max(IMU_DISAGREEMENT_DEG, AXES_SIGMAS * agreement.turned_sigma_deg))
 
 
 def _clock_is_off(agreement: ImuAgreement | None) -> bool:

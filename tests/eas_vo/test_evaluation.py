@@ -123,6 +123,33 @@ def test_imu_agreement_finds_how_the_gyro_is_turned(R_imu_cam):
     assert imu_agreement(t[:15], edges[:14], imu) is None  # too few frame pairs to tell
 
 
+def test_the_axes_fit_knows_its_own_uncertainty():
+    """Rotation vectors of about 2 deg with 0.4 deg of white noise per pair (a 2 s sequence
+    of weak images): the fit's angle scatters about the truth as its own sigma says (within
+    20 % over 400 draws), that sigma shrinks as 1 / sqrt(pairs), and no draw of a right IMU
+    comes out AXES_SIGMAS of it off (the pipeline's test for naming a mount)."""
+    from eas_vo.evaluation import _fit_sigma_deg
+    from eas_vo.geometry.two_view import kabsch
+    from eas_vo.pipeline import AXES_SIGMAS
+
+    rng = np.random.default_rng(5)
+    sigmas = {}
+    for pairs in (20, 80):
+        angles, said = [], []
+        for _ in range(400):
+            v = rng.normal(0, np.radians(2.0) / np.sqrt(3), (pairs, 3))
+            g = v + rng.normal(0, np.radians(0.4) / np.sqrt(3), v.shape)
+            R = kabsch(v, g)
+            angles.append(Rotation.from_matrix(R).as_rotvec())
+            said.append(_fit_sigma_deg(v @ R.T, g))
+        angles = np.degrees(np.array(angles))
+        assert np.max(np.linalg.norm(angles, axis=1) / np.array(said)) < AXES_SIGMAS
+        sigmas[pairs] = float(np.median(said))
+        worst_axis = np.sqrt(np.linalg.eigvalsh(np.cov(angles.T))[-1])
+        assert sigmas[pairs] == pytest.approx(worst_axis, rel=0.2), (pairs, sigmas[pairs], worst_axis)
+    assert sigmas[20] / sigmas[80] == pytest.approx(2.0, rel=0.2)
+
+
 def test_a_pan_about_one_axis_never_claims_the_imu_is_turned():
     """A camera that only pans (yaw, 0.2 deg noise, IMU placed right): the fit is free about
     the pan axis and lands anywhere; spread says so and the run stays silent. The same with

@@ -77,6 +77,7 @@ CASES = {
     "two readings": (lambda r: r[:2], ()),
     "a 1000 rad/s spike": (lambda r: np.vstack([r[:200], r[200] + [0, 0, 0, 0, 1000, 0, 0], r[201:]]), ()),
     "scaled by 1e6": (lambda r: scaled(r, 1e6), ()),
+    "scaled by 20": (lambda r: scaled(r, 20.0), ()),  # within range: misleads LK until nothing is confident
     "timestamps in microseconds": (lambda r: scaled(r, 1e6, 0), ()),
     "its clock 1 s off": (lambda r: r, ("run.imu_time_offset_s=1.0",)),
     "axes swapped": (swapped, ()),
@@ -145,3 +146,19 @@ def test_any_wrong_gyro_is_refused_warned_or_harmless(rig, how):
     said, metrics = outcome(with_imu(sequence, folder, made), *assignments)
     event(said if metrics is None else f"{said}, gyro {metrics['gyro']}")
     assert said != "silent" or metrics["ape_mean_rad"] <= without + TOLERANCE_RAD, (how, metrics)
+
+
+def test_a_run_tracked_again_keeps_one_frames_csv_of_the_tracking_it_used(rig, tmp_path):
+    """A gyro 20 times too fast misleads LK until the images can tell nothing; the frames are
+    tracked again without it, and the folder holds that tracking's frames.csv only."""
+    import csv
+
+    sequence, rows, without, root = rig
+    folder = with_imu(sequence, tmp_path / "seq", scaled(rows, 20.0))
+    result = pipeline.run(resolve("best", {"dataset": str(folder)}), tmp_path / "out")
+    assert result.metrics["gyro"] == "not used" and result.metrics["ape_mean_rad"] <= without + TOLERANCE_RAD
+    written = sorted(p.name for p in (tmp_path / "out").iterdir() if not p.name.startswith("."))
+    assert written == sorted(pipeline.RUN_FILES + ("groundtruth.tum",))
+    with open(tmp_path / "out" / "frames.csv") as f:
+        logged = [int(row["inliers"]) for row in csv.DictReader(f)]
+    assert logged == [r.inliers for r in result.records]
