@@ -236,10 +236,16 @@ class EcdFolderDataset(Dataset):
     def _decode_frame(self, k: int) -> np.ndarray:
         name = self._frame_names[k]
         data = np.frombuffer(self.source.read_bytes(name), np.uint8)
-        with silenced_stderr():  # a damaged PNG: libpng's own line would come before ours
-            image = cv2.imdecode(data, cv2.IMREAD_GRAYSCALE)
+        image = None
+        if data.size:  # OpenCV asserts on an empty buffer instead of returning None
+            with silenced_stderr():  # a damaged PNG: libpng's own line would come before ours
+                try:
+                    image = cv2.imdecode(data, cv2.IMREAD_GRAYSCALE)
+                except cv2.error:  # a header OpenCV refuses (e.g. a size beyond its limits)
+                    pass
         if image is None:
-            raise DataError(self.source.label(name), f"cannot decode frame {k} (images.txt line {self._frame_lines[k]})")
+            empty = ": the file is empty" if not data.size else ""
+            raise DataError(self.source.label(name), f"cannot decode frame {k}{empty} (images.txt line {self._frame_lines[k]})")
         return image
 
     def _read_calib(self, width: int, height: int) -> CameraModel:
