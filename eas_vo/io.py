@@ -83,13 +83,17 @@ def cache_usage() -> dict[str, CachePart]:
 
 def clear_cache(names: list[str]) -> dict[str, int]:
     """Empty the cache folders `names` (all checked first), leaving hidden files (writes under
-    way, CACHE_ABOUT) and what links point to; the bytes freed by each."""
-    import shutil
-
+    way, CACHE_ABOUT) and what links point to; the bytes freed by each. A folder that is a link
+    is refused: its target is not the cache's to empty."""
     usage = cache_usage()
     unknown = [name for name in names if name not in usage]
     if unknown:
         raise EasVoError(f"cache {unknown[0]!r}: not in {cache_dir()} (there: {', '.join(usage) or 'nothing'})")
+    linked = [name for name in names if usage[name].link]
+    if linked:
+        link = cache_dir() / linked[0]
+        raise EasVoError(f"cache {linked[0]!r}: {link} is a link to {link.resolve()}, which eas-vo does not empty; "
+                         "remove the link, or empty that folder yourself")
     for name in dict.fromkeys(names):
         for entry in _visible(cache_dir() / name):
             if entry.is_dir() and not entry.is_symlink():
