@@ -159,10 +159,27 @@ def check_writable_folder(out: str | Path) -> Path:
         raise EasVoError(f"--out {out} is the root of the file system; choose a folder")
     if out.exists() and not out.is_dir():
         raise EasVoError(f"--out {out} is a file, not a folder")
-    existing = next(p for p in [out, *out.parents] if p.exists())
+    _check_writable(out)
+    return out
+
+
+def check_output_file(out: str | Path, replace: bool) -> Path:
+    """The absolute output file (symlinks followed), or a one-line error, before any work: a
+    folder is refused, so is a place that cannot be written, and an existing file unless `replace`."""
+    out = Path(out).expanduser().resolve()
+    if out.is_dir():
+        raise EasVoError(f"--out {out} is a folder; give the name of the file to write, e.g. {out / 'gallery.png'}")
+    if out.exists() and not replace:
+        raise EasVoError(f"--out {out} exists; choose another name or add --overwrite")
+    _check_writable(out)
+    return out
+
+
+def _check_writable(out: Path) -> None:
+    """A one-line error unless the nearest existing folder of `out` (itself, or its parent) can be written."""
+    existing = next(p for p in [out, *out.parents] if p.exists() and p.is_dir())
     if not os.access(existing, os.W_OK | os.X_OK):
         raise EasVoError(f"--out {out}: {existing} is not writable")
-    return out
 
 
 def check_output_folder(out: str | Path, replace: bool) -> Path:
