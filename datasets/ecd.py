@@ -229,7 +229,7 @@ class EcdFolderDataset(Dataset):
         """(width, height) from frame k's PNG header (its first 24 bytes), None if not a PNG."""
         with self.source.open(self._frame_names[k]) as f:
             head = f.read(24)
-        if head[:8] == b"\x89PNG\r\n\x1a\n" and head[12:16] == b"IHDR":
+        if len(head) == 24 and head[:8] == b"\x89PNG\r\n\x1a\n" and head[12:16] == b"IHDR":
             return int.from_bytes(head[16:20], "big"), int.from_bytes(head[20:24], "big")
         return None
 

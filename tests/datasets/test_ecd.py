@@ -112,6 +112,7 @@ def test_unreadable_frame_is_reported_with_its_index(sequence_copy):
 @pytest.mark.parametrize("content,says", [
     (b"", "cannot decode frame 5: the file is empty"),
     (b"P5\n99999 99999\n255\n", "cannot decode frame 5"),  # a header OpenCV raises on, not returns None
+    (b"\x89PNG\r\n\x1a\n\x00\x00\x00\rIHDR\x00\x00\x00\xf0", "cannot decode frame 5"),  # cut inside its size
 ])
 def test_an_empty_or_refused_frame_names_its_file_and_index(sequence_copy, tmp_path, door, content, says):
     (sequence_copy / "images" / "frame_00000005.png").write_bytes(content)
