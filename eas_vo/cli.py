@@ -118,6 +118,7 @@ def build_parser() -> argparse.ArgumentParser:
     render.add_argument("--config", metavar="FILE", help="config file for the frontends' settings")
     render.add_argument("--set", dest="assignments", action="append", default=[], metavar="SECTION.KEY=VALUE")
     render.add_argument("--out", required=True, metavar="PNG", help="output image, e.g. gallery.png")
+    render.add_argument("--overwrite", action="store_true", help="replace an existing --out (never one of the inputs)")
     render.set_defaults(func=cmd_render)
 
     export = sub.add_parser(
@@ -253,15 +254,19 @@ def _names(option: str, text: str) -> list[str]:
     return listed
 
 
-def _refuse_inputs_inside(out: Path, dataset_spec: str, *others: tuple[str, str]) -> None:
-    """An output folder that is, or holds, the dataset (or another input: (what, path)) it is
-    made from would replace it."""
+def _refuse_inputs_inside(out: Path, dataset_spec: str, *others: tuple[str, str | None], out_is_file: bool = False) -> None:
+    """An output folder that is, or holds, the dataset (or another input: (what, path or None))
+    it is made from would replace it; so would an output file that is one, or lies inside one."""
     from eas_vo.registry import resolve_dataset
 
     for what, path in [("the dataset", resolve_dataset(dataset_spec)[1]), *others]:
-        path = Path(path).expanduser()
-        if path.exists() and path.resolve().is_relative_to(out):
+        path = Path(path).expanduser() if path is not None else None
+        if path is None or not path.exists():
+            continue
+        if not out_is_file and path.resolve().is_relative_to(out):
             raise EasVoError(f"--out {out} holds {what} {path}; writing there would replace it")
+        if out_is_file and out.is_relative_to(path.resolve()):
+            raise EasVoError(f"--out {out} is {what} {path}, or inside it; writing there would replace it")
 
 
 def _positive_int(text: str) -> int:
@@ -330,7 +335,7 @@ def cmd_run(args) -> int:
     rc = config.run
     if args.out:
         out = check_output_folder(args.out, replace=args.overwrite)
-        _refuse_inputs_inside(out, rc.dataset)
+        _refuse_inputs_inside(out, rc.dataset, ("the --config", args.config))
     else:
         import time
 
@@ -431,24 +436,25 @@ def cmd_list(args) -> int:
 
 
 def cmd_render(args) -> int:
-    from eas_vo.config import RunConfig
+    from eas_vo import config as config_mod
     from eas_vo.gallery import frontend_images
-    from eas_vo.io import atomic_path
+    from eas_vo.io import atomic_path, check_output_file
     from eas_vo.plots import plot_gallery
 
-    if Path(args.out).is_dir():
-        raise EasVoError(f"--out {args.out} is a folder; render writes one image, e.g. gallery.png")
+    out = check_output_file(args.out, replace=args.overwrite)
     try:
         frames = [int(v) for v in args.frames.split(",") if v.strip()]
     except ValueError:
         raise EasVoError(f"--frames takes comma-separated frame indices, got {args.frames!r}") from None
     if not frames:
         raise EasVoError("--frames names no frame")
+    dataset = config_mod.resolve(args.config, {"dataset": args.dataset}, args.assignments).run.dataset
+    _refuse_inputs_inside(out, dataset, ("the --config", args.config), out_is_file=True)
     frontends = [v.strip() for v in args.frontends.split(",")] if args.frontends else None
     names, images = frontend_images(args.dataset, frames, frontends, args.config, args.assignments)
-    with atomic_path(args.out) as tmp:
-        plot_gallery(tmp, names, images, frames, title=args.dataset or RunConfig().dataset)
-    print(f"wrote {len(frames)} frame(s) x {len(names)} frontend(s) to {args.out}")
+    with atomic_path(out) as tmp:
+        plot_gallery(tmp, names, images, frames, title=dataset)
+    print(f"wrote {len(frames)} frame(s) x {len(names)} frontend(s) to {out}")
     return 0
 
 
@@ -475,7 +481,7 @@ def cmd_export(args) -> int:
         args.assignments,
     )
     out = check_output_folder(args.out, replace=args.overwrite)
-    _refuse_inputs_inside(out, config.run.dataset)
+    _refuse_inputs_inside(out, config.run.dataset, ("the --config", args.config))
     done = export(config, out, args.format, progress=not args.quiet and sys.stderr.isatty(), replace=args.overwrite)
     print(f"wrote {done['frames']} {done['frontend']} images of {done['dataset']} ({done['format']} layout, "
           f"{done['fps']:.2f} frames/s) and settings.yaml to {out}")

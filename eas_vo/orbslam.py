@@ -64,16 +64,16 @@ def export(config, out: str | Path, fmt: str, progress: bool = False, replace: b
         raise EasVoError(f"--format {fmt!r}: choose one of {', '.join(FORMATS)}")
     rc = config.run
     parts = open_pipeline(config)
-    n_window = len(parts.dataset.window(rc.start_s, rc.duration_s))
+    window = parts.dataset.window(rc.start_s, rc.duration_s)
+    names = _image_names(parts.dataset.label, window, parts.dataset.frame_times()[window], fmt)
     times = []
     with output_folder(out, replace, keep_partial=False) as staging:
         image_dir = staging / ("rgb" if fmt == "tum" else "mav0/cam0/data")
         image_dir.mkdir(parents=True)
-        for sample in tqdm(parts.dataset.samples(rc.start_s, rc.duration_s), total=n_window, disable=not progress,
-                           unit="frame", desc=f"export {rc.frontend}"):
+        for sample, name in tqdm(zip(parts.dataset.samples(rc.start_s, rc.duration_s), names), total=len(window),
+                                 disable=not progress, unit="frame", desc=f"export {rc.frontend}"):
             image = parts.frontend(sample)
             check_image(image, parts.dataset.camera, rc.frontend, sample)
-            name = f"{sample.t:.6f}.png" if fmt == "tum" else f"{_ns(sample.t)}.png"
             if not cv2.imwrite(str(image_dir / name), np.ascontiguousarray(image)):
                 raise EasVoError(f"{image_dir / name}: could not write the image")
             times.append(sample.t)
@@ -92,6 +92,22 @@ def export(config, out: str | Path, fmt: str, progress: bool = False, replace: b
 
 def _ns(t_s: float) -> int:
     return int(round(t_s * 1e9))
+
+
+def _image_names(label: str, frames: np.ndarray, times: np.ndarray, fmt: str) -> list[str]:
+    """The image file of each frame (its timestamp: TUM's in us, EuRoC's in ns), or a one-line
+    error naming two frames that would share one: ORB-SLAM2 takes each image's time from its
+    name (EuRoC) or its rgb.txt line (TUM) and keys its trajectory by it, so two frames at one
+    time are one pose twice (and a trajectory `evaluate` refuses)."""
+    names = [f"{t:.6f}.png" if fmt == "tum" else f"{_ns(t)}.png" for t in times]
+    first_of = {}
+    for k, name in zip(frames, names):
+        if name in first_of:
+            raise EasVoError(f"{label}: frames {first_of[name]} and {k} have one timestamp in the {fmt} layout "
+                             f"({name[:-4]}); ORB-SLAM2 needs one time per image: export a window without them "
+                             "(--start, --duration) or fix the dataset's times")
+        first_of[name] = int(k)
+    return names
 
 
 # ----------------------------------------------------------------------------- scoring external trajectories
