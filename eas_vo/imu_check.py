@@ -47,7 +47,8 @@ def check_readings(imu: ImuSeries, frame_times: np.ndarray, label: str, offset_s
     if np.all(np.ptp(imu.gyro, axis=0) == 0):
         raise EasVoError(f"{where} reads {_vector(imu.gyro[0])} rad/s in every one of its {n} readings: a gyro's own "
                          "noise moves its readings, so this one is stuck or not connected")
-    frames_dt = float(np.median(np.diff(frame_times)))
+    steps = np.diff(frame_times)
+    frames_dt = float(np.median(steps[steps > 0])) if np.any(steps > 0) else np.inf  # repeated times are no interval
     imu_dt = float(np.median(np.diff(imu.t)))
     if imu_dt > frames_dt:
         raise EasVoError(
@@ -141,7 +142,7 @@ class GyroVerdict:
             said = (f"the gyro is not used: {self.disagreeing} of {self.judged} confidently measured frame pairs "
                     f"disagree with it (median {self.median_off_deg:.2f} deg apart){again}")
             if not findings:
-                return [f"{said}. Check its units (rad/s), axes (run.imu_rotvec_cam) and clock (run.imu_time_offset_s)"]
+                return [f"{said}. Check its units (rad/s), signs, axes (run.imu_rotvec_cam) and clock (run.imu_time_offset_s)"]
             return [f"{said}; {findings[0]}"] + findings[1:]
         if not self.can_tell:
             return [f"the gyro is used unchecked: the images measured {self.judged} turning frame pairs confidently, "
