@@ -491,7 +491,7 @@ def cmd_evaluate(args) -> int:
     m = evaluate_estimate(args.dataset, args.estimate, args.align, args.max_diff, args.out, args.label,
                           replace=args.overwrite)
     print(f"{args.estimate} vs {m['dataset']} ({m['align']}, {m['matched_poses']} of {m['estimate_poses']} poses matched, "
-          f"scale {m['scale']:.4f}): translation APE mean {m['ape_trans_mean_m']:.4f} m, RMSE {m['ape_trans_rmse_m']:.4f} m; "
+          f"scale {m['scale']:.4g}): translation APE mean {m['ape_trans_mean_m']:.4f} m, RMSE {m['ape_trans_rmse_m']:.4f} m; "
           f"rotation APE mean {m['ape_rot_mean_rad']:.4f} rad" + (f" -> {args.out}" if args.out else ""))
     return 0
 

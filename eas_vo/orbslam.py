@@ -157,4 +157,4 @@ def table2_row(label: str, metrics: dict) -> str:
     m = metrics
     return ("| source | average APE [m] | RMSE [m] | rotation APE [rad] | scale | poses |\n|---|---|---|---|---|---|\n"
             f"| {label} | {m['ape_trans_mean_m']:.3f} | {m['ape_trans_rmse_m']:.3f} | {m['ape_rot_mean_rad']:.3f} | "
-            f"{m['scale']:.3f} | {m['matched_poses']} |\n")
+            f"{m['scale']:.3g} | {m['matched_poses']} |\n")

@@ -211,3 +211,42 @@ def test_tum_files_are_scored_like_the_run(tmp_path):
     np.testing.assert_allclose(t, gt.t - gt.t[0], atol=1e-9)
     np.testing.assert_allclose(ape, errors.ape_rad, atol=1e-9)
     assert tum_rotation_errors(tmp_path / "est.tum", tmp_path / "missing.tum") is None
+
+
+def _path_of_three(seed=0):
+    """Ground truth of a camera moved by hand over 0.5 s: three poses about 2 cm apart."""
+    rng = np.random.default_rng(seed)
+    t = np.array([0.0, 0.25, 0.5])
+    p = np.array([[0.0, 0.0, 0.0], [0.02, 0.005, 0.0], [0.03, 0.02, 0.004]])
+    return PoseSeries(t, p, Rotation.from_rotvec(rng.normal(0, 0.1, (3, 3))).as_quat())
+
+
+@pytest.mark.parametrize("align, positions, says", [
+    ("sim3", lambda p: p + np.random.default_rng(1).normal(0, 0.01, p.shape), "fix the sim3 alignment's rotation only"),
+    ("se3", lambda p: p + np.random.default_rng(1).normal(0, 0.01, p.shape), "fix the se3 alignment's rotation only"),
+    ("sim3", lambda p: np.array([[10.0, 20, 30], [11, 22, 33], [12, 24, 36 + 1e-9]]), "lie on a line or a point"),
+    ("se3", lambda p: 1e200 * (p + 1), "overflow floating point"),
+])
+def test_an_alignment_the_positions_cannot_fix_is_refused(align, positions, says):
+    """Three poses with the ground truth's rotations: positions off by 1 cm where the path
+    spans 2 cm leave the alignment's rotation free (it turned them by 2.9 rad); positions on
+    a line to within rounding span no plane; positions of 1e200 m overflow under se3."""
+    from eas_vo.evaluation import trajectory_ape
+
+    gt = _path_of_three()
+    with pytest.raises(ValueError, match=says):
+        trajectory_ape(gt, PoseSeries(gt.t, positions(gt.p_w_c), gt.q_w_c), align)
+
+
+def test_an_alignment_needs_its_least_poses_and_reaches_any_finite_scale():
+    from eas_vo.evaluation import trajectory_ape
+
+    gt = _path_of_three()
+    with pytest.raises(ValueError, match="origin alignment needs at least 2"):
+        trajectory_ape(gt, PoseSeries(gt.t[:1], gt.p_w_c[:1], gt.q_w_c[:1]), "origin")
+    with pytest.raises(ValueError, match="sim3 alignment needs at least 3"):
+        trajectory_ape(gt, PoseSeries(gt.t[:2], gt.p_w_c[:2], gt.q_w_c[:2]), "sim3")
+    huge = trajectory_ape(gt, PoseSeries(gt.t, 1e200 * (gt.p_w_c + 1), gt.q_w_c), "sim3")
+    assert huge.scale == pytest.approx(1e-200, rel=1e-9) and huge.summary()["ape_trans_mean_m"] < 1e-12
+    near = trajectory_ape(gt, PoseSeries(gt.t, gt.p_w_c + np.random.default_rng(1).normal(0, 1e-4, (3, 3)), gt.q_w_c), "sim3")
+    assert near.summary()["ape_rot_mean_rad"] < 0.05
