@@ -360,6 +360,12 @@ def write_text_atomic(path: str | Path, text: str) -> None:
 
 
 
+def markdown_cell(text: str) -> str:
+    """`text` as one cell of a Markdown table: each run of white space or control characters
+    (a newline too) made one space, and `|` escaped, so the cell can end neither its row nor itself."""
+    return re.sub(r"[\s\x00-\x1f\x7f]+", " ", text).strip().replace("|", "\\|")
+
+
 def slug(text: str) -> str:
     """A file-name-safe name for a dataset spec, path or label: its last path component with
     every run of characters other than letters, digits and `._=-` replaced by `-`."""

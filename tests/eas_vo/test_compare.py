@@ -290,3 +290,40 @@ def test_compare_takes_its_default_tracker_and_backend_from_the_config(short_seq
     (row,) = json.loads((out / "table.json").read_text())
     run = resolve("best", {"dataset": str(short_sequence)}).run
     assert (row["tracker"], row["backend"]) == (run.tracker, run.backend) == ("klt", "gtsam")
+
+
+@pytest.mark.parametrize("executor", ["local", "dask"])
+def test_any_exception_in_a_cell_is_that_cells_failure_and_the_grid_finishes(short_sequence, tmp_path, capsys, monkeypatch,
+                                                                             executor):
+    """A frontend that raises a ValueError (a bug, not bad input; with `|` and a newline in its
+    message): its cells fail in the table with the type and a request to report it, the
+    traceback in the cell's error.txt; every other cell finishes, the table is written, and the
+    exit status says a cell failed. Two processes (forked: the patch reaches them), and an
+    in-process Dask cluster."""
+    from eas_vo.frontends.intensity import HistEqFrontend
+
+    def broken(self, sample):
+        raise ValueError("no | image\nat all")
+
+    monkeypatch.setattr(HistEqFrontend, "__call__", broken)
+    out = tmp_path / "cmp"
+    argv = ["compare", "--dataset", str(short_sequence), "--frontends", "original,histeq", "--backends", "chain,gtsam",
+            "--duration", "0.5", "--out", str(out), "--quiet", "--jobs", "2"]
+    if executor == "dask":
+        distributed = pytest.importorskip("distributed", reason="the 'distributed' extra is not installed")
+        cluster = distributed.LocalCluster(n_workers=1, threads_per_worker=2, processes=False, dashboard_address=None)
+        argv += ["--executor", "dask", "--scheduler", cluster.scheduler_address]
+    with cluster if executor == "dask" else contextlib.nullcontext():
+        assert main(argv) == 1
+    captured = capsys.readouterr()
+    assert "4 cells (4 run, 0 already complete, 2 failed)" in captured.out
+    rows = {(r["frontend"], r["backend"]): r for r in json.loads((out / "table.json").read_text())}
+    for backend in ("chain", "gtsam"):
+        assert rows[("original", backend)]["status"] == "ok"
+        failed = rows[("histeq", backend)]
+        assert failed["status"] == "failed" and failed["error"].startswith("ValueError: no | image (a bug")
+        assert f"cell {failed['folder']} failed: ValueError: no | image (a bug" in captured.err
+        error_txt = (out / failed["folder"] / "error.txt").read_text()
+        assert error_txt.startswith(failed["error"] + "\n") and "Traceback" in error_txt and "in broken" in error_txt
+    histeq_row = next(line for line in (out / "table.md").read_text().splitlines() if line.startswith("| histeq |"))
+    assert histeq_row.count(" | ") == 4 and "ValueError: no \\| image" in histeq_row
