@@ -197,3 +197,13 @@ def test_evaluate_never_writes_over_its_dataset_or_its_estimate(short_sequence, 
         done = run_eas_vo("evaluate", "--dataset", str(dataset), "--estimate", str(estimate), "--out", str(out), "--overwrite")
         assert done.returncode == 2 and says in done.stderr and done.stderr.count("\n") == 1, done.stderr
     assert (dataset / "events.txt").exists() and estimate.exists()
+
+
+def test_a_label_never_breaks_the_table_row():
+    """A `|`, a newline or a control character in --label: one row of six cells, the `|` escaped."""
+    from eas_vo.orbslam import table2_row
+
+    metrics = {"ape_trans_mean_m": 0.02, "ape_trans_rmse_m": 0.03, "ape_rot_mean_rad": 0.1, "scale": 1.5, "matched_poses": 9}
+    header, rule, row = table2_row("eas | v2\nsecond\tline\x1b", metrics).splitlines()
+    assert row == "| eas \\| v2 second line | 0.020 | 0.030 | 0.100 | 1.5 | 9 |"
+    assert row.replace("\\|", "").count("|") == header.count("|") == 7
