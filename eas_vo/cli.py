@@ -506,7 +506,10 @@ def cmd_reproduce(args) -> int:
         seq, colon, source = key.partition(":")
         if not (sep and colon and path):
             raise EasVoError(f"--estimate {text!r}: expected SEQUENCE:SOURCE=FILE, e.g. hdr_boxes:eas=KeyFrameTrajectory.txt")
-        estimates[(seq.strip(), source.strip())] = path
+        key = (seq.strip(), source.strip())
+        if key in estimates:
+            raise EasVoError(f"--estimate {key[0]}:{key[1]} given twice ({estimates[key]} and {path}): give one")
+        estimates[key] = path
     if estimates and args.table != "table2":
         raise EasVoError("--estimate belongs to table2 (ORB-SLAM2 trajectories)")
     out = check_writable_folder(args.out or f"reproduce/{args.table}")
