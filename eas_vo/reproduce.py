@@ -15,7 +15,7 @@ import numpy as np
 from eas_vo import compare
 from eas_vo.errors import EasVoError
 from eas_vo.gallery import PAPER_ORDER
-from eas_vo.io import atomic_path, json_text, write_text_atomic
+from eas_vo.io import atomic_path, json_text, remove_stale_temporaries, write_text_atomic
 
 SEQUENCES = ("hdr_boxes", "hdr_poster")
 
@@ -65,10 +65,16 @@ def _overrides(duration_s: float, orb: bool) -> dict:
             "orb_stats": orb or None}
 
 
-def _check(cells, config: str, overrides: dict) -> None:
-    """Every cell's configuration resolved (a bad --config, key or backend is an error) before any download."""
+#: The files reproduce writes in its output folder beside compare's.
+OUTPUT_FILES = ("table1.md", "table1.json", "table2.md", "table2.json", "fig3_*.png")
+
+
+def _check(cells, config: str, overrides: dict, out: Path) -> None:
+    """Every cell's configuration resolved (a bad --config, key or backend is an error) before
+    any download; then the temporary files of a reproduce killed while writing into `out` removed."""
     for cell in cells:
         compare.cell_config(cell, config, [], overrides)
+    remove_stale_temporaries(out, OUTPUT_FILES)
 
 
 # ----------------------------------------------------------------------------- Table 1
@@ -80,7 +86,7 @@ def table1(out: Path, duration_s: float = PAPER_DURATION_S, backends=("chain", "
     table1.md (ours beside the paper's, ratios, orderings), table1.json and one Fig. 3-style
     Euler plot per sequence and backend. Returns (rows, cells run, table1 markdown)."""
     cells, overrides = _cells(PAPER_ORDER, backends), _overrides(duration_s, orb=False)
-    _check(cells, config, overrides)
+    _check(cells, config, overrides, out)
     fetch_sequences(progress)
     rows, n_run = compare.run_experiment(cells, out, config, [], overrides, jobs, progress)
     markdown = table1_markdown(rows, config, duration_s)
@@ -173,7 +179,7 @@ def table2(out: Path, estimates: dict[tuple[str, str], str], duration_s: float =
             raise EasVoError(f"--estimate {seq}:{source}: the paper's Table 2 has {', '.join(SEQUENCES)} x original, eas")
         read_estimate(path)  # a missing or malformed file is an error before any download
     cells, overrides = _cells(("original", "eas"), ("chain",)), _overrides(duration_s, orb=True)
-    _check(cells, config, overrides)
+    _check(cells, config, overrides, out)
     fetch_sequences(progress)
     # scored before the cells run: an estimate the ground truth cannot score is an error before that work
     slam = {key: evaluate_estimate(SPECS[key[0]], path, "sim3", 0.01, out / "slam" / f"{key[0]}_{key[1]}",

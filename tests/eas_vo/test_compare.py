@@ -327,3 +327,23 @@ def test_any_exception_in_a_cell_is_that_cells_failure_and_the_grid_finishes(sho
         assert error_txt.startswith(failed["error"] + "\n") and "Traceback" in error_txt and "in broken" in error_txt
     histeq_row = next(line for line in (out / "table.md").read_text().splitlines() if line.startswith("| histeq |"))
     assert histeq_row.count(" | ") == 4 and "ValueError: no \\| image" in histeq_row
+
+
+def test_a_resume_removes_the_temporaries_of_a_compare_killed_while_writing(one_cell, tmp_path):
+    """What `kill -9` leaves while compare writes its figures and tables (temporaries of a
+    writer that is gone, this version's and the older pid-less kind) is removed by the resume;
+    a live writer's temporary and files that are not compare's own stay."""
+    import subprocess
+
+    out, argv, _ = one_cell
+    copy = tmp_path / "one"
+    shutil.copytree(out, copy)
+    gone = subprocess.Popen(["true"])
+    gone.wait()
+    stale = [f".ape_bars.png.{gone.pid}.k2j3h4ab.tmp", ".ape_time.png.k2j3h4ab.tmp", f".table.json.{gone.pid}.x1y2.tmp"]
+    kept = [f".table.md.{os.getpid()}.abcd1234.tmp", f".notes.txt.{gone.pid}.abcd1234.tmp", "ape_bars.png.tmp"]
+    for name in stale + kept:
+        (copy / name).write_bytes(b"half a file")
+    with contextlib.redirect_stdout(io.StringIO()):
+        assert main(argv[:-4] + [str(copy), "--jobs", "1", "--quiet"]) == 0
+    assert [name for name in stale + kept if (copy / name).exists()] == kept
