@@ -498,7 +498,7 @@ def cmd_evaluate(args) -> int:
     m = evaluate_estimate(args.dataset, args.estimate, args.align, args.max_diff, args.out, args.label,
                           replace=args.overwrite)
     print(f"{args.estimate} vs {m['dataset']} ({m['align']}, {m['matched_poses']} of {m['estimate_poses']} poses matched, "
-          f"scale {m['scale']:.4f}): translation APE mean {m['ape_trans_mean_m']:.4f} m, RMSE {m['ape_trans_rmse_m']:.4f} m; "
+          f"scale {m['scale']:.4g}): translation APE mean {m['ape_trans_mean_m']:.4f} m, RMSE {m['ape_trans_rmse_m']:.4f} m; "
           f"rotation APE mean {m['ape_rot_mean_rad']:.4f} rad" + (f" -> {args.out}" if args.out else ""))
     return 0
 
@@ -513,7 +513,10 @@ def cmd_reproduce(args) -> int:
         seq, colon, source = key.partition(":")
         if not (sep and colon and path):
             raise EasVoError(f"--estimate {text!r}: expected SEQUENCE:SOURCE=FILE, e.g. hdr_boxes:eas=KeyFrameTrajectory.txt")
-        estimates[(seq.strip(), source.strip())] = path
+        key = (seq.strip(), source.strip())
+        if key in estimates:
+            raise EasVoError(f"--estimate {key[0]}:{key[1]} given twice ({estimates[key]} and {path}): give one")
+        estimates[key] = path
     if estimates and args.table != "table2":
         raise EasVoError("--estimate belongs to table2 (ORB-SLAM2 trajectories)")
     out = check_writable_folder(args.out or f"reproduce/{args.table}")

@@ -130,11 +130,12 @@ def silenced_stderr():
 
 @contextmanager
 def atomic_path(path: str | Path):
-    """Yield a temporary path beside `path`; on success rename it over `path` with the mode a
-    plain `open` would have given it (0666 less the umask), else delete it."""
+    """Yield a temporary path beside `path`, `.NAME.PID.RANDOM.tmp`; on success rename it over
+    `path` with the mode a plain `open` would have given it (0666 less the umask), else delete
+    it (a killed writer's is left: remove_stale_temporaries)."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.{os.getpid()}.", suffix=".tmp", dir=path.parent)
     os.close(fd)
     try:
         yield Path(tmp)
@@ -143,6 +144,17 @@ def atomic_path(path: str | Path):
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
         raise
+
+
+def remove_stale_temporaries(folder: Path, names: tuple[str, ...]) -> None:
+    """Delete the temporary files atomic_path left in `folder` for the files `names` (glob
+    patterns, e.g. `fig3_*.png`) when the process that wrote them is gone (killed mid-write):
+    those of a live writer, and every other file, stay."""
+    for name in names:
+        for tmp in folder.glob(f".{name}.*.tmp"):
+            pid = tmp.name.removesuffix(".tmp").rsplit(".", 2)[-2]
+            if tmp.is_file() and not tmp.is_symlink() and not (pid.isdigit() and _alive(int(pid))):
+                tmp.unlink(missing_ok=True)
 
 
 #: The file that marks a folder as an eas-vo output (a run, an export, an evaluation) and lists
@@ -379,6 +391,12 @@ def write_text_atomic(path: str | Path, text: str) -> None:
     with atomic_path(path) as tmp:
         tmp.write_text(text)
 
+
+
+def markdown_cell(text: str) -> str:
+    """`text` as one cell of a Markdown table: each run of white space or control characters
+    (a newline too) made one space, and `|` escaped, so the cell can end neither its row nor itself."""
+    return re.sub(r"[\s\x00-\x1f\x7f]+", " ", text).strip().replace("|", "\\|")
 
 
 def slug(text: str) -> str:

@@ -227,3 +227,13 @@ def test_frames_that_would_share_an_image_name_are_refused_before_any_work(short
     with pytest.raises(EasVoError, match=rf"frames 9 and 10 have one timestamp in the {fmt} layout"):
         export(resolve(None, {"dataset": str(sequence), "frontend": "original"}), tmp_path / "again", fmt)
     assert not (tmp_path / "tum").exists() and not (tmp_path / "again").exists()
+
+
+def test_a_label_never_breaks_the_table_row():
+    """A `|`, a newline or a control character in --label: one row of six cells, the `|` escaped."""
+    from eas_vo.orbslam import table2_row
+
+    metrics = {"ape_trans_mean_m": 0.02, "ape_trans_rmse_m": 0.03, "ape_rot_mean_rad": 0.1, "scale": 1.5, "matched_poses": 9}
+    header, rule, row = table2_row("eas | v2\nsecond\tline\x1b", metrics).splitlines()
+    assert row == "| eas \\| v2 second line | 0.020 | 0.030 | 0.100 | 1.5 | 9 |"
+    assert row.replace("\\|", "").count("|") == header.count("|") == 7
