@@ -338,8 +338,9 @@ def _offset_not_estimated(config: ResolvedConfig, dataset: Dataset, tracked: Tra
     """A warning when run.time_offset_auto could not estimate the offset (evaluation.estimate_time_offset)."""
     if not config.run.time_offset_auto or dataset.ground_truth is None or estimated:
         return []
-    return [f"the time offset could not be estimated from the {len(tracked.edges)} measured rotations (fewer than 5, "
-            f"or the ground truth spans fewer than half of them at every offset within {OFFSET_SEARCH_S * 1e3:g} ms): "
+    return [f"the time offset could not be estimated from the {len(tracked.edges)} measured rotations (fewer than 5; "
+            f"the ground truth spanning fewer than half of them at every offset within {OFFSET_SEARCH_S * 1e3:g} ms; or no "
+            "clear best offset within it: a still camera, identical frames, or a true offset beyond the search): "
             f"the errors are measured with {offset:+g} s"]
 
 
