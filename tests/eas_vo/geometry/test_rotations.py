@@ -23,7 +23,11 @@ def test_gyro_rotation_takes_each_reading_as_the_rate_at_its_time():
     step = np.where(t[:, None] < 0.2, 0.0, rate)  # still until 0.195 s, turning from 0.2 s
     stepped = ImuSeries(t, np.zeros((len(t), 3)), step)
     assert geodesic_angle(gyro_rotation(stepped, 0.18, 0.23), Rotation.from_rotvec(rate * 0.0325).as_matrix()) < 1e-12
-    assert gyro_rotation(constant, -0.01, 0.04) is None and gyro_rotation(constant, 0.97, 1.02) is None
+    # beyond the readings by up to four reading intervals (20 ms) the first or last is held; further, nothing
+    held = Rotation.from_rotvec(rate * 0.05).as_matrix()
+    assert geodesic_angle(gyro_rotation(constant, -0.01, 0.04), held) < 1e-12
+    assert geodesic_angle(gyro_rotation(constant, 0.96, 1.01), held) < 1e-12
+    assert gyro_rotation(constant, -0.03, 0.02) is None and gyro_rotation(constant, 0.97, 1.02) is None
 
 
 @pytest.mark.parametrize("rotvec", [(0.0, 0.0, np.pi / 2), (0.02, -0.03, 0.01), (np.pi, 0.0, 0.0)])
