@@ -111,13 +111,14 @@ class PhotometricAlignment:
 
 
 class _Level:
-    """One resolution of the undistorted views, `focal_px` [px] of focal length (the sensor's
-    at most): the image view's pixels (those the lens sees, `seen` at the sensor's size) as
-    bearings, for scoring and refining rotations there."""
+    """One resolution of the undistorted views, `focal_px` [px] of focal length along each axis
+    (the sensor's at most; pixels that are not square become square): the image view's pixels
+    (those the lens sees, `seen` at the sensor's size) as bearings, for scoring and refining
+    rotations there."""
 
     def __init__(self, camera: CameraModel, seen: np.ndarray, focal_px: float):
-        scale = min(focal_px / camera.focal_px, 1.0)
-        self.size = (max(round(camera.width * scale), 2), max(round(camera.height * scale), 2))
+        fx, fy = camera.K[0, 0], camera.K[1, 1]
+        self.size = (max(round(camera.width * min(focal_px / fx, 1.0)), 2), max(round(camera.height * min(focal_px / fy, 1.0)), 2))
         sx, sy = self.size[0] / camera.width, self.size[1] / camera.height
         # cv2.resize keeps pixel centres in place: x' + 0.5 = sx (x + 0.5)
         self.K = np.array([[sx, 0.0, 0.5 * (sx - 1.0)], [0.0, sy, 0.5 * (sy - 1.0)], [0.0, 0.0, 1.0]]) @ camera.K
