@@ -229,17 +229,23 @@ class EcdFolderDataset(Dataset):
         """(width, height) from frame k's PNG header (its first 24 bytes), None if not a PNG."""
         with self.source.open(self._frame_names[k]) as f:
             head = f.read(24)
-        if head[:8] == b"\x89PNG\r\n\x1a\n" and head[12:16] == b"IHDR":
+        if len(head) == 24 and head[:8] == b"\x89PNG\r\n\x1a\n" and head[12:16] == b"IHDR":
             return int.from_bytes(head[16:20], "big"), int.from_bytes(head[20:24], "big")
         return None
 
     def _decode_frame(self, k: int) -> np.ndarray:
         name = self._frame_names[k]
         data = np.frombuffer(self.source.read_bytes(name), np.uint8)
-        with silenced_stderr():  # a damaged PNG: libpng's own line would come before ours
-            image = cv2.imdecode(data, cv2.IMREAD_GRAYSCALE)
+        image = None
+        if data.size:  # OpenCV asserts on an empty buffer instead of returning None
+            with silenced_stderr():  # a damaged PNG: libpng's own line would come before ours
+                try:
+                    image = cv2.imdecode(data, cv2.IMREAD_GRAYSCALE)
+                except cv2.error:  # a header OpenCV refuses (e.g. a size beyond its limits)
+                    pass
         if image is None:
-            raise DataError(self.source.label(name), f"cannot decode frame {k} (images.txt line {self._frame_lines[k]})")
+            empty = ": the file is empty" if not data.size else ""
+            raise DataError(self.source.label(name), f"cannot decode frame {k}{empty} (images.txt line {self._frame_lines[k]})")
         return image
 
     def _read_calib(self, width: int, height: int) -> CameraModel:

@@ -8,6 +8,7 @@ Event arrays are decoded straight from their serialised bytes with numpy.
 
 from __future__ import annotations
 
+import struct
 from dataclasses import dataclass
 from functools import cache
 from pathlib import Path
@@ -33,8 +34,17 @@ uint32 height
 uint32 width
 dvs_msgs/Event[] events
 """
+#: What rosbags' reader raises on damaged bytes besides its ReaderError: failed asserts, unknown
+#: connection ids, undecodable header text, short reads of its own parsing, and what the chunk
+#: decompressors raise (bz2: OSError, EOFError, ValueError; lz4: RuntimeError).
+DAMAGED_BAG_ERRORS = (AssertionError, KeyError, IndexError, ValueError, struct.error, OSError, EOFError, RuntimeError)
 #: Serialised dvs_msgs/Event: x, y, ts.sec, ts.nsec, polarity (13 bytes, packed).
 _EVENT_WIRE = np.dtype([("x", "<u2"), ("y", "<u2"), ("sec", "<u4"), ("nsec", "<u4"), ("p", "u1")])
+
+
+def _said(exc: Exception) -> str:
+    """What the reader said of damaged bytes; nothing for its failed asserts and lookups."""
+    return "" if isinstance(exc, (AssertionError, KeyError)) else str(exc)
 
 
 @cache
@@ -93,8 +103,8 @@ class RosbagDataset(Dataset):
         try:
             self.reader = Reader(self.path)
             self.reader.open()
-        except (ReaderError, OSError, ValueError) as exc:
-            raise DataError(self.path, f"not a readable ROS1 bag ({exc})") from None
+        except (ReaderError, *DAMAGED_BAG_ERRORS) as exc:
+            raise DataError(self.path, f"not a readable ROS1 bag ({_said(exc) or 'a damaged index'})") from None
         self.topics = {conn.topic for conn in self.reader.connections}
         self._times, self._frames = self._read_images()
         if not self._frames:
@@ -112,7 +122,7 @@ class RosbagDataset(Dataset):
         for conn in connections:
             if conn.msgtype != msgtype:
                 raise DataError(self.path, f"topic {topic} carries {conn.msgtype}, expected {msgtype}")
-        for index, (conn, _, raw) in enumerate(self.reader.messages(connections=connections)):
+        for index, (conn, raw) in enumerate(self._records(topic, connections)):
             if not deserialize:
                 yield index, raw
                 continue
@@ -120,6 +130,26 @@ class RosbagDataset(Dataset):
                 yield index, typestore().deserialize_ros1(raw, conn.msgtype)
             except Exception as exc:  # rosbags raises assorted errors on damaged data
                 raise DataError(f"{self.path}:{topic}", f"cannot decode message ({exc})", index) from None
+
+    def _records(self, topic: str, connections: list):
+        """(connection, raw bytes) of each message of `connections`, in time order; damaged bag
+        bytes name the topic, the message's index in it and its bag time."""
+        from rosbags.rosbag1 import ReaderError
+
+        records = self.reader.messages(connections=connections)
+        index = 0
+        while True:
+            try:
+                conn, _, raw = next(records)
+            except StopIteration:
+                return
+            except (ReaderError, *DAMAGED_BAG_ERRORS) as exc:
+                t_ns = sorted(entry.time for c in connections for entry in self.reader.indexes[c.id])[index]
+                raise DataError(f"{self.path}:{topic}", f"damaged bag data, message unreadable at bag time "
+                                                        f"{t_ns / 1e9:.6f} s" + (f" ({_said(exc)})" if _said(exc) else ""),
+                                index) from None
+            yield conn, raw
+            index += 1
 
     def _read_images(self):
         times, frames = [], []

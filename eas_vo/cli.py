@@ -118,6 +118,7 @@ def build_parser() -> argparse.ArgumentParser:
     render.add_argument("--config", metavar="FILE", help="config file for the frontends' settings")
     render.add_argument("--set", dest="assignments", action="append", default=[], metavar="SECTION.KEY=VALUE")
     render.add_argument("--out", required=True, metavar="PNG", help="output image, e.g. gallery.png")
+    render.add_argument("--overwrite", action="store_true", help="replace an existing --out (never one of the inputs)")
     render.set_defaults(func=cmd_render)
 
     export = sub.add_parser(
@@ -253,15 +254,19 @@ def _names(option: str, text: str) -> list[str]:
     return listed
 
 
-def _refuse_inputs_inside(out: Path, dataset_spec: str, *others: tuple[str, str]) -> None:
-    """An output folder that is, or holds, the dataset (or another input: (what, path)) it is
-    made from would replace it."""
+def _refuse_inputs_inside(out: Path, dataset_spec: str, *others: tuple[str, str | None], out_is_file: bool = False) -> None:
+    """An output folder that is, or holds, the dataset (or another input: (what, path or None))
+    it is made from would replace it; so would an output file that is one, or lies inside one."""
     from eas_vo.registry import resolve_dataset
 
     for what, path in [("the dataset", resolve_dataset(dataset_spec)[1]), *others]:
-        path = Path(path).expanduser()
-        if path.exists() and path.resolve().is_relative_to(out):
+        path = Path(path).expanduser() if path is not None else None
+        if path is None or not path.exists():
+            continue
+        if not out_is_file and path.resolve().is_relative_to(out):
             raise EasVoError(f"--out {out} holds {what} {path}; writing there would replace it")
+        if out_is_file and out.is_relative_to(path.resolve()):
+            raise EasVoError(f"--out {out} is {what} {path}, or inside it; writing there would replace it")
 
 
 def _positive_int(text: str) -> int:
@@ -330,7 +335,7 @@ def cmd_run(args) -> int:
     rc = config.run
     if args.out:
         out = check_output_folder(args.out, replace=args.overwrite)
-        _refuse_inputs_inside(out, rc.dataset)
+        _refuse_inputs_inside(out, rc.dataset, ("the --config", args.config))
     else:
         import time
 
@@ -345,9 +350,10 @@ def cmd_run(args) -> int:
         ape_text += f" (time offset {m['time_offset_s'] * 1e3:+.1f} ms, estimated)"
     statuses = _status_text(m["status_counts"], m["status_reasons"])
     loops = f"{m['loop_count']} loop(s) closed, " if m["loop_count"] is not None else ""
+    gyro = f"gyro {m['gyro']}, " if m["gyro"] else ""
     print(
         f"{rc.frontend}+{rc.tracker}+{rc.backend} on {rc.dataset}: {m['frames']} frames ({statuses}), "
-        f"average NC {m['nc_mean']:.1f}, {loops}"
+        f"average NC {m['nc_mean']:.1f}, {loops}{gyro}"
         f"{ape_text}, {m['frames_per_s']:.1f} frames/s -> {out}"
     )
     return 0
@@ -430,24 +436,25 @@ def cmd_list(args) -> int:
 
 
 def cmd_render(args) -> int:
-    from eas_vo.config import RunConfig
+    from eas_vo import config as config_mod
     from eas_vo.gallery import frontend_images
-    from eas_vo.io import atomic_path
+    from eas_vo.io import atomic_path, check_output_file
     from eas_vo.plots import plot_gallery
 
-    if Path(args.out).is_dir():
-        raise EasVoError(f"--out {args.out} is a folder; render writes one image, e.g. gallery.png")
+    out = check_output_file(args.out, replace=args.overwrite)
     try:
         frames = [int(v) for v in args.frames.split(",") if v.strip()]
     except ValueError:
         raise EasVoError(f"--frames takes comma-separated frame indices, got {args.frames!r}") from None
     if not frames:
         raise EasVoError("--frames names no frame")
+    dataset = config_mod.resolve(args.config, {"dataset": args.dataset}, args.assignments).run.dataset
+    _refuse_inputs_inside(out, dataset, ("the --config", args.config), out_is_file=True)
     frontends = [v.strip() for v in args.frontends.split(",")] if args.frontends else None
     names, images = frontend_images(args.dataset, frames, frontends, args.config, args.assignments)
-    with atomic_path(args.out) as tmp:
-        plot_gallery(tmp, names, images, frames, title=args.dataset or RunConfig().dataset)
-    print(f"wrote {len(frames)} frame(s) x {len(names)} frontend(s) to {args.out}")
+    with atomic_path(out) as tmp:
+        plot_gallery(tmp, names, images, frames, title=dataset)
+    print(f"wrote {len(frames)} frame(s) x {len(names)} frontend(s) to {out}")
     return 0
 
 
@@ -474,7 +481,7 @@ def cmd_export(args) -> int:
         args.assignments,
     )
     out = check_output_folder(args.out, replace=args.overwrite)
-    _refuse_inputs_inside(out, config.run.dataset)
+    _refuse_inputs_inside(out, config.run.dataset, ("the --config", args.config))
     done = export(config, out, args.format, progress=not args.quiet and sys.stderr.isatty(), replace=args.overwrite)
     print(f"wrote {done['frames']} {done['frontend']} images of {done['dataset']} ({done['format']} layout, "
           f"{done['fps']:.2f} frames/s) and settings.yaml to {out}")
@@ -491,7 +498,7 @@ def cmd_evaluate(args) -> int:
     m = evaluate_estimate(args.dataset, args.estimate, args.align, args.max_diff, args.out, args.label,
                           replace=args.overwrite)
     print(f"{args.estimate} vs {m['dataset']} ({m['align']}, {m['matched_poses']} of {m['estimate_poses']} poses matched, "
-          f"scale {m['scale']:.4f}): translation APE mean {m['ape_trans_mean_m']:.4f} m, RMSE {m['ape_trans_rmse_m']:.4f} m; "
+          f"scale {m['scale']:.4g}): translation APE mean {m['ape_trans_mean_m']:.4f} m, RMSE {m['ape_trans_rmse_m']:.4f} m; "
           f"rotation APE mean {m['ape_rot_mean_rad']:.4f} rad" + (f" -> {args.out}" if args.out else ""))
     return 0
 
@@ -506,7 +513,10 @@ def cmd_reproduce(args) -> int:
         seq, colon, source = key.partition(":")
         if not (sep and colon and path):
             raise EasVoError(f"--estimate {text!r}: expected SEQUENCE:SOURCE=FILE, e.g. hdr_boxes:eas=KeyFrameTrajectory.txt")
-        estimates[(seq.strip(), source.strip())] = path
+        key = (seq.strip(), source.strip())
+        if key in estimates:
+            raise EasVoError(f"--estimate {key[0]}:{key[1]} given twice ({estimates[key]} and {path}): give one")
+        estimates[key] = path
     if estimates and args.table != "table2":
         raise EasVoError("--estimate belongs to table2 (ORB-SLAM2 trajectories)")
     out = check_writable_folder(args.out or f"reproduce/{args.table}")

@@ -11,6 +11,7 @@ import itertools
 import json
 import signal
 import sys
+import traceback
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -19,7 +20,7 @@ import numpy as np
 
 from eas_vo.config import parse_set
 from eas_vo.errors import EasVoError, Interrupted, sigterm_as_interrupt
-from eas_vo.io import json_text, output_folder, slug, write_text_atomic
+from eas_vo.io import json_text, markdown_cell, output_folder, remove_stale_temporaries, slug, write_text_atomic
 
 
 @dataclass(frozen=True)
@@ -100,7 +101,8 @@ def cell_config(cell: Cell, config_file, assignments: list[str], run_overrides: 
 
 
 def run_cell(cell: Cell, out_root: str, config_file, assignments: list[str], run_overrides: dict) -> dict:
-    """Run one cell into its folder (in a worker process). A user error is reported, not raised."""
+    """Run one cell into its folder (in a worker process). Any error is the cell's failure,
+    reported, not raised: a user error's message, or for a bug also its traceback in error.txt."""
     from eas_vo import pipeline
 
     folder = Path(out_root) / cell.folder
@@ -109,14 +111,25 @@ def run_cell(cell: Cell, out_root: str, config_file, assignments: list[str], run
         with sigterm_as_interrupt():  # a worker keeps its partial outputs on SIGTERM, however it was started
             metrics = pipeline.run(cfg, folder, replace=True).metrics  # a cell's folder is compare's own
         return {"status": "ok", **metrics}
-    except EasVoError as exc:
-        message = str(exc).splitlines()[0]
+    except Exception as exc:
+        failure = cell_failure(exc)
+        details = "" if isinstance(exc, EasVoError) else traceback.format_exc()
         try:
             with output_folder(folder, replace=True) as staging:  # the cell's folder says why, and stays compare's own
-                write_text_atomic(staging / "error.txt", message + "\n")
+                write_text_atomic(staging / "error.txt", failure["error"] + "\n" + details)
         except EasVoError:
             pass  # a folder compare may not replace: the table carries the message
-        return {"status": "failed", "error": message}
+        return failure
+
+
+def cell_failure(exc: Exception) -> dict:
+    """A failed cell's result: a user error's first line; anything else (a bug in eas-vo or a
+    plugin) by its type and first line, with a request to report it."""
+    first = (str(exc).splitlines() or [""])[0]
+    if isinstance(exc, EasVoError):
+        return {"status": "failed", "error": first}
+    return {"status": "failed", "error": f"{type(exc).__name__}: {first} (a bug, not a problem with the input: "
+                                         "please report it with the cell's error.txt)"}
 
 
 def completed(out_root: Path, cell: Cell, identity: dict) -> dict | None:
@@ -163,7 +176,7 @@ def run_grid(
             with Client(scheduler) as client:
                 futures = {client.submit(run_cell, cell, *args, pure=False): cell for cell in todo}
                 for future in dask_completed(futures):
-                    results[futures[future]] = future.result()
+                    results[futures[future]] = _result(future)
                     bar.update(1)
         elif jobs <= 1 or len(todo) <= 1:
             for cell in todo:
@@ -174,7 +187,7 @@ def run_grid(
             futures = {pool.submit(run_cell, cell, *args): cell for cell in todo}
             try:
                 for future in as_completed(futures):
-                    results[futures[future]] = future.result()
+                    results[futures[future]] = _result(future)
                     bar.update(1)
             except KeyboardInterrupt:  # Ctrl-C or SIGTERM: stop now, keep every finished cell
                 _stop(pool, futures, results)
@@ -184,6 +197,15 @@ def run_grid(
                 raise
             pool.shutdown()
     return results, len(todo)
+
+
+def _result(future) -> dict:
+    """A finished cell's result; its failure if its worker could not return one (it died, or
+    the result did not reach compare)."""
+    try:
+        return future.result()
+    except Exception as exc:
+        return cell_failure(exc)
 
 
 def _end_with_parent() -> None:
@@ -224,6 +246,7 @@ def run_experiment(cells: list[Cell], out: Path, config_file, assignments, overr
 
     for cell in cells:
         cell_config(cell, config_file, assignments, overrides)
+    remove_stale_temporaries(out, OUTPUT_FILES)  # of a compare killed while writing them
     for dataset, dataset_sweep in dict.fromkeys(
         (c.dataset, tuple(f"{k}={v}" for k, v in c.sweep if k.startswith("dataset."))) for c in cells
     ):
@@ -245,6 +268,10 @@ def run_experiment(cells: list[Cell], out: Path, config_file, assignments, overr
         kept = f"the table of the {n_run} finished cells was written to {out}; the same command resumes the rest"
         raise Interrupted.keeping(interrupted, kept) from None
     return rows, n_run
+
+
+#: The files compare writes in its output folder (write_tables, write_figures).
+OUTPUT_FILES = ("table.md", "table.csv", "table.json", "ape_bars.png", "ape_time.png", "ape_sweep.png")
 
 
 def write_figures(out: Path, cells: list[Cell], rows: list[dict]) -> None:
@@ -340,12 +367,12 @@ def table_markdown(rows: list[dict]) -> str:
     head2 = ["Source type"] + ["average NC", "average APE"] * (len(datasets) * len(methods))
     lines = ["| " + " | ".join(head1) + " |", "|" + "---|" * len(head1), "| " + " | ".join(head2) + " |"]
     for frontend, sweep in sources:
-        cells = [frontend + (f" ({sweep})" if sweep else "")]
+        cells = [markdown_cell(frontend + (f" ({sweep})" if sweep else ""))]
         for d in datasets:
             for m in methods:
                 r = by_key.get((d, m, frontend, sweep))
                 if r is None or r["status"] != "ok":
-                    cells += ["failed" if r else "", (r or {}).get("error", "")[:60]]
+                    cells += ["failed" if r else "", markdown_cell((r or {}).get("error", "")[:60])]
                     continue
                 nc, ape = r["nc_mean"], r["ape_mean_rad"]
                 nc_text = f"{nc:.0f}"

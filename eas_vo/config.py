@@ -126,6 +126,9 @@ def build(cls, values: dict, section: str):
             validate()
         except ConfigError as exc:
             raise ConfigError(f"{section}.{exc}") from None
+    for key, value in kwargs.items():
+        if hints[key] is tuple and not isinstance(value, tuple):  # not an array, and validate() did not say so
+            raise ConfigError(f"{section}.{key} must be an array, e.g. {_toml_value(getattr(cls, key, ()))}, got {value!r}")
     return cfg
 
 
@@ -143,8 +146,9 @@ def _coerce(value, hint, key: str):
         if isinstance(value, str):
             return value
     elif hint is tuple:
-        if isinstance(value, (list, tuple)):
-            return tuple(value)  # TOML arrays arrive as lists; a frozen config holds tuples
+        # TOML arrays arrive as lists; a frozen config holds tuples. Anything else is left for
+        # the config's validate() to refuse, which says what it expects (e.g. 3 numbers [rad]).
+        return tuple(value) if isinstance(value, (list, tuple)) else value
     else:
         return value
     raise ConfigError(f"{key} must be {hint.__name__}, got {value!r}")
@@ -184,13 +188,34 @@ def read_config_file(path: str | Path) -> dict:
     if not p.is_file():
         raise ConfigError(f"{p}: not a config file (a directory?)")
     try:
-        raw = tomllib.loads(p.read_text())
+        raw = tomllib.loads(p.read_text(encoding="utf-8-sig"))  # a byte-order mark, as some editors write, is read past
     except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
         raise ConfigError(f"{p}: invalid TOML: {exc}") from None
     unknown = sorted(set(raw) - set(SECTIONS))
     if unknown:
         raise ConfigError(f"{p}: unknown section [{unknown[0]}]; allowed: {', '.join(SECTIONS)}")
+    _check_tables(raw, str(p))
     return raw
+
+
+def _check_tables(raw: dict, where: str) -> None:
+    """Each section in `raw` a table, and so is each plugin table in one ([tracker.klt]: a key
+    named after an installed plugin of the section's kind); else a one-line error from `where`."""
+    for section, table in raw.items():
+        if not isinstance(table, dict):
+            raise ConfigError(f"{where}: {section} must be a table ([{section}] and its keys), found {_found(table)}")
+        installed = registry.available(f"{section}s") if section != "run" else {}
+        for key, value in table.items():
+            if key in installed and not isinstance(value, dict):
+                raise ConfigError(f"{where}: {section}.{key} must be a table (the {key} {section}'s keys, "
+                                  f"[{section}.{key}]), found {_found(value)}")
+
+
+def _found(value) -> str:
+    """A TOML value that is not a table, for a message: arrays of tables in words, others as written."""
+    if isinstance(value, list) and value and all(isinstance(v, dict) for v in value):
+        return "an array of tables"
+    return _toml_value(value)
 
 
 def run_section(config_file: str | Path | None = None, assignments: list[str] = ()) -> RunConfig:
@@ -215,6 +240,7 @@ def resolve(
     raw["run"].update({k: v for k, v in (run_overrides or {}).items() if v is not None})
     for assignment in assignments:
         keys, value = parse_set(assignment)
+        _check_tables({keys[0]: {keys[1]: value if len(keys) == 2 else {}}}, f"--set {assignment}")
         table = raw[keys[0]]
         for k in keys[1:-1]:
             table = table.setdefault(k, {})
@@ -231,7 +257,7 @@ def resolve(
         "tracker": registry.get("trackers", run.tracker),
         "backend": registry.get("backends", run.backend),
     }
-    sections = {name: build(cls.Config, _plugin_table(raw[name], name, cls.name), name) for name, cls in chosen.items()}
+    sections = {name: build(cls.Config, _plugin_table(raw[name], name, cls), name) for name, cls in chosen.items()}
     return ResolvedConfig(run=run, **sections)
 
 
@@ -264,18 +290,20 @@ def _as_numbers(value):
         return value
 
 
-def _plugin_table(table: dict, section: str, name: str) -> dict:
+def _plugin_table(table: dict, section: str, plugin: type) -> dict:
     """Flat keys of a section, over its `[section.<name>]` table; other plugins' tables dropped.
 
     A table must be named after an installed plugin of the section's kind, so that a typo
-    (`[frontend.eass]`) is an error rather than silently ignored.
+    (`[frontend.eass]`) is an error rather than silently ignored; a table under one of the
+    plugin's own keys is kept, for `build` to say what that key takes.
     """
     installed = registry.available(f"{section}s")
+    own_keys = {f.name for f in fields(plugin.Config)}
     for key, value in table.items():
-        if isinstance(value, dict) and key not in installed:
+        if isinstance(value, dict) and key not in installed and key not in own_keys:
             raise ConfigError(
                 f"unknown table {section}.{key}: not an installed {section} plugin ({', '.join(installed) or 'none'})"
             )
-    merged = dict(table.get(name, {})) if isinstance(table.get(name), dict) else {}
-    merged.update({k: v for k, v in table.items() if not isinstance(v, dict)})
+    merged = dict(table.get(plugin.name, {}))  # a table: _check_tables saw to it
+    merged.update({k: v for k, v in table.items() if k in own_keys or not isinstance(v, dict)})
     return merged

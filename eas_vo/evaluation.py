@@ -104,11 +104,14 @@ def estimate_time_offset(t: np.ndarray, edges, ground_truth: PoseSeries, search_
     """The offset [s] to add to frame times so that ground truth best explains the measured rotations.
 
     For a candidate offset d, each measured relative rotation R_i_j is compared with the
-    ground truth's between t_i + d and t_j + d; the cost is the mean geodesic error of the
-    best 80 % (robust to tracking failures). A 2 ms grid over [-search_s, search_s] is
-    refined to 0.1 ms around its best point. Needs a moving camera. None when it cannot be
-    estimated: fewer than 5 edges, or ground truth spanning fewer than half of them (and 5)
-    at every offset of the grid.
+    ground truth's between t_i + d and t_j + d; the cost is the mean geodesic error [rad] of
+    the best 80 % (robust to tracking failures). A 2 ms grid over [-search_s, search_s] is
+    refined to 0.1 ms around its best point. None when it cannot be estimated: fewer than 5
+    edges; ground truth spanning fewer than half of them (and 5) at every offset of the grid;
+    or no clear best: an offset at either end of the search costs no more than the best
+    plus two standard errors of that best cost (a still camera, identical frames, rotation
+    at a constant rate: a flat cost; or a best fit on the search's edge, the true offset
+    lying beyond it).
     """
     from scipy.spatial.transform import Rotation, Slerp
 
@@ -122,23 +125,31 @@ def estimate_time_offset(t: np.ndarray, edges, ground_truth: PoseSeries, search_
     slerp = Slerp(ground_truth.t, Rotation.from_quat(ground_truth.q_w_c))
     span = (ground_truth.t[0], ground_truth.t[-1])
 
-    def cost(offset: float) -> float:
+    def kept_errors(offset: float) -> np.ndarray | None:
+        """The best 80 % of the edges' errors [rad] at `offset`; None if too few edges have ground truth."""
         tt = t + offset
         use = (tt[i] >= span[0]) & (tt[j] <= span[1])
         if use.sum() < max(5, len(edges) // 2):
-            return np.inf
+            return None
         R_i = slerp(tt[i[use]]).as_matrix()
         R_j = slerp(tt[j[use]]).as_matrix()
         errors = np.sort(geodesic_angle(np.swapaxes(R_i, 1, 2) @ R_j, R_meas[use]))
-        return float(errors[: max(1, int(0.8 * len(errors)))].mean())
+        return errors[: int(0.8 * len(errors))]
+
+    def cost(offset: float) -> float:
+        kept = kept_errors(offset)
+        return np.inf if kept is None else float(kept.mean())
 
     coarse = np.arange(-search_s, search_s + 1e-9, 0.002)
-    costs = [cost(d) for d in coarse]
-    if not np.isfinite(min(costs)):
+    costs = np.array([cost(d) for d in coarse])
+    if not np.isfinite(costs.min()):
         return None
-    best = coarse[np.argmin(costs)]
-    fine = best + np.arange(-0.002, 0.002 + 1e-9, 0.0001)
-    fine = fine[np.abs(fine) <= search_s + 1e-12]
+    best = int(np.argmin(costs))
+    kept = kept_errors(coarse[best])
+    noise = 2 * kept.std(ddof=1) / np.sqrt(len(kept))
+    if min(costs[0], costs[-1]) <= costs[best] + noise:
+        return None
+    fine = coarse[best] + np.arange(-0.002, 0.002 + 1e-9, 0.0001)
     return float(fine[np.argmin([cost(d) for d in fine])])
 
 
@@ -161,6 +172,9 @@ class ImuAgreement:
             around the previous estimate): the offset may be larger still.
         residual_rad, residual_unshifted_rad: the median |g - R v| [rad] over the agreeing
             pairs with the gyro read clock_shift_s later, and as configured.
+        turned_sigma_deg: the standard deviation [deg] of R's angle about its least certain
+            axis, from the agreeing pairs' scatter about the fit (_fit_sigma_deg): fewer pairs,
+            smaller rotations or noisier images make it larger.
     """
 
     R: np.ndarray
@@ -171,6 +185,7 @@ class ImuAgreement:
     shift_at_limit: bool
     residual_rad: float
     residual_unshifted_rad: float
+    turned_sigma_deg: float
 
     @property
     def turned_deg(self) -> float:
@@ -211,7 +226,8 @@ def imu_agreement(t: np.ndarray, edges, imu: ImuSeries) -> ImuAgreement | None:
         singular = np.linalg.svd(v[agree], compute_uv=False)
         spread = float(singular[1] / max(singular[0], 1e-12))
         moved, shift = abs(best - shift), best
-        found = ImuAgreement(R, len(v), int(agree.sum()), spread, best, limit, residual, unshifted)
+        found = ImuAgreement(R, len(v), int(agree.sum()), spread, best, limit, residual, unshifted,
+                             _fit_sigma_deg(v[agree] @ R.T, g[agree]))
         if moved < 1e-3:
             break
     return found
@@ -230,6 +246,17 @@ def _fit_axes(v: np.ndarray, g: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         if agree.sum() < 3:
             break
     return R, agree
+
+
+def _fit_sigma_deg(u: np.ndarray, g: np.ndarray) -> float:
+    """The standard deviation [deg] of a small rotation d in g = Exp(d) u + noise, about its least
+    certain axis, for rotation vectors u (the fitted tracker's, (N, 3)) and g (the gyro's): the
+    noise per axis from the median residual (|noise| of a 3-D Gaussian has median 1.538 sigma),
+    the information sum(|u|^2 I - u u^T) / sigma^2 of the linearised fit."""
+    sigma = np.median(np.linalg.norm(g - u, axis=1)) / 1.538
+    information = np.sum(u * u) * np.eye(3) - u.T @ u
+    smallest = np.linalg.eigvalsh(information)[0]
+    return float(np.degrees(sigma / np.sqrt(smallest))) if smallest > 0 else float("inf")
 
 
 def _best_clock_shift(t0: np.ndarray, t1: np.ndarray, expected: np.ndarray, turned, imu: ImuSeries,
@@ -262,6 +289,12 @@ def _best_clock_shift(t0: np.ndarray, t1: np.ndarray, expected: np.ndarray, turn
 # ----------------------------------------------------------------------------- external trajectories
 
 ALIGNMENTS = ("sim3", "se3", "origin")
+#: The cross-covariance's singular values of two point sets whose second is below this
+#: fraction of the first: the sets are collinear to within rounding (umeyama).
+COLLINEAR = 1e-9
+#: The largest standard uncertainty [rad] of a sim3 / se3 alignment's rotation (about 3
+#: degrees) that still measures a rotation APE (alignment_uncertainty).
+ALIGN_UNCERTAINTY_RAD = 0.05
 
 
 @dataclass(frozen=True)
@@ -318,16 +351,22 @@ def associate(t_ref: np.ndarray, t_est: np.ndarray, max_diff_s: float = 0.01) ->
 
 def umeyama(x: np.ndarray, y: np.ndarray, with_scale: bool) -> tuple[np.ndarray, np.ndarray, float] | None:
     """(R, t, s) minimising sum |y_k - (s R x_k + t)|^2 over points x, y (N, 3)
-    (Umeyama, IEEE PAMI 1991, eqs. 34-43); s = 1 without scale. None if degenerate."""
+    (Umeyama, IEEE PAMI 1991, eqs. 34-43); s = 1 without scale. Solved on the centred points
+    divided by their largest coordinate (no overflow for any finite input). None if degenerate:
+    the points' cross-covariance has a second singular value below COLLINEAR of its first
+    (either set collinear, or a point, to within rounding)."""
     mean_x, mean_y = x.mean(axis=0), y.mean(axis=0)
-    dx, dy = x - mean_x, y - mean_y
-    var_x = float(np.mean(np.sum(dx**2, axis=1)))
+    size_x, size_y = np.abs(x - mean_x).max(), np.abs(y - mean_y).max()
+    if not (size_x > 0 and size_y > 0):
+        return None
+    dx, dy = (x - mean_x) / size_x, (y - mean_y) / size_y
     U, d, Vt = np.linalg.svd(dy.T @ dx / len(x))
-    if np.count_nonzero(d > np.finfo(float).eps) < 2:
+    if d[1] <= COLLINEAR * d[0]:
         return None
     S = np.diag([1.0, 1.0, -1.0 if np.linalg.det(U) * np.linalg.det(Vt) < 0 else 1.0])
     R = U @ S @ Vt
-    s = float(np.trace(np.diag(d) @ S) / var_x) if with_scale else 1.0
+    var_x = float(np.mean(np.sum(dx**2, axis=1)))
+    s = float(np.trace(np.diag(d) @ S) / var_x) * (size_y / size_x) if with_scale else 1.0
     return R, mean_y - s * R @ mean_x, s
 
 
@@ -339,20 +378,58 @@ def similarity_transform(R_a: np.ndarray, t_a: np.ndarray, s: float, p_w_c: np.n
 def trajectory_ape(ground_truth: PoseSeries, estimate: PoseSeries, align: str = "sim3", max_diff_s: float = 0.01):
     """Translation and rotation APE of `estimate` (camera-to-world poses) after `align`:
     sim3 (Umeyama with scale: evo_ape -as, for monocular SLAM), se3 (-a) or origin (first
-    poses made equal: --align_origin). Raises ValueError when the two cannot be compared."""
+    poses made equal: --align_origin).
+
+    What each alignment needs, else ValueError: origin, 2 matched poses (the first one's error
+    is 0 by construction); sim3 and se3, 3 matched poses whose positions span a plane in both
+    trajectories (umeyama) and fix the alignment's rotation to within ALIGN_UNCERTAINTY_RAD
+    (alignment_uncertainty, with the position noise the best similarity leaves: a wrong scale
+    under se3 is an error to measure, not noise); and every figure finite.
+    """
     i_gt, i_est = associate(ground_truth.t, estimate.t, max_diff_s)
-    if len(i_gt) == 0:
-        raise ValueError(f"no estimate pose is within {max_diff_s} s of a ground-truth pose")
+    least = 2 if align == "origin" else 3
+    if len(i_gt) < least:
+        raise ValueError(f"{len(i_gt)} estimate pose(s) within {max_diff_s} s of a ground-truth pose; "
+                         f"{align} alignment needs at least {least}")
     p_gt, R_gt = ground_truth.p_w_c[i_gt], matrices_from_quats(ground_truth.q_w_c[i_gt])
     p_est, R_est = estimate.p_w_c[i_est], matrices_from_quats(estimate.q_w_c[i_est])
     if align == "origin":
         R_a = R_gt[0] @ R_est[0].T
         t_a, s = p_gt[0] - R_a @ p_est[0], 1.0
     else:
-        solved = umeyama(p_est, p_gt, with_scale=align == "sim3") if len(i_gt) >= 3 else None
-        if solved is None:
-            raise ValueError(f"{len(i_gt)} matched poses do not span a plane; {align} alignment is not defined")
-        R_a, t_a, s = solved
-    p_aligned, R_aligned = similarity_transform(R_a, t_a, s, p_est, R_est)
-    return TrajectoryApe(estimate.t[i_est], R_a, t_a, s, np.linalg.norm(p_gt - p_aligned, axis=1),
-                         geodesic_angle(R_gt, R_aligned))
+        similar = umeyama(p_est, p_gt, with_scale=True)
+        if similar is None:
+            raise ValueError(f"the positions of the {len(i_gt)} matched poses lie on a line or a point; "
+                             f"{align} alignment needs them to span a plane")
+        with np.errstate(over="ignore", invalid="ignore"):  # an overflow is refused below
+            shape_error_m = np.linalg.norm(p_gt - similarity_transform(*similar, p_est, R_est)[0], axis=1)
+        uncertainty = alignment_uncertainty(p_gt, shape_error_m, dof=7)
+        if uncertainty > ALIGN_UNCERTAINTY_RAD:
+            raise ValueError(f"the {len(i_gt)} matched positions fix the {align} alignment's rotation only to about "
+                             f"{uncertainty:.2g} rad ({ALIGN_UNCERTAINTY_RAD:g} at most): they spread too little across "
+                             "their main direction for how far they miss the ground truth")
+        R_a, t_a, s = similar if align == "sim3" else umeyama(p_est, p_gt, with_scale=False)
+    with np.errstate(over="ignore", invalid="ignore"):  # an overflow is refused below
+        p_aligned, R_aligned = similarity_transform(R_a, t_a, s, p_est, R_est)
+        ape = TrajectoryApe(estimate.t[i_est], R_a, t_a, s, np.linalg.norm(p_gt - p_aligned, axis=1),
+                            geodesic_angle(R_gt, R_aligned))
+        finite = np.isfinite(list(ape.summary().values())).all()
+    if not (finite and s > 0):
+        raise ValueError(f"positions up to {np.abs(p_est).max():.3g} m: the errors after {align} alignment "
+                         "overflow floating point")
+    return ape
+
+
+def alignment_uncertainty(p_gt: np.ndarray, error_m: np.ndarray, dof: int) -> float:
+    """The standard uncertainty [rad] of an alignment's rotation about the ground-truth
+    positions' main direction, the least constrained axis: sigma / sqrt(sum rho_k^2), with
+    sigma^2 [m^2] the position noise per coordinate the residuals `error_m` (N,) [m] show
+    (their squares summed over 3N - dof) and rho_k [m] each position's distance from the main
+    axis through their mean (p_gt (N, 3) [m]). inf without residual degrees of freedom."""
+    centred = p_gt - p_gt.mean(axis=0)
+    main = np.linalg.svd(centred, full_matrices=False)[2][0]
+    across = float(np.sum(centred**2) - np.sum((centred @ main) ** 2))
+    free = 3 * len(p_gt) - dof
+    if free <= 0 or across <= 0:
+        return np.inf
+    return float(np.sqrt(np.sum(error_m**2) / free / across))

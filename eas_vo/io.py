@@ -83,13 +83,17 @@ def cache_usage() -> dict[str, CachePart]:
 
 def clear_cache(names: list[str]) -> dict[str, int]:
     """Empty the cache folders `names` (all checked first), leaving hidden files (writes under
-    way, CACHE_ABOUT) and what links point to; the bytes freed by each."""
-    import shutil
-
+    way, CACHE_ABOUT) and what links point to; the bytes freed by each. A folder that is a link
+    is refused: its target is not the cache's to empty."""
     usage = cache_usage()
     unknown = [name for name in names if name not in usage]
     if unknown:
         raise EasVoError(f"cache {unknown[0]!r}: not in {cache_dir()} (there: {', '.join(usage) or 'nothing'})")
+    linked = [name for name in names if usage[name].link]
+    if linked:
+        link = cache_dir() / linked[0]
+        raise EasVoError(f"cache {linked[0]!r}: {link} is a link to {link.resolve()}, which eas-vo does not empty; "
+                         "remove the link, or empty that folder yourself")
     for name in dict.fromkeys(names):
         for entry in _visible(cache_dir() / name):
             if entry.is_dir() and not entry.is_symlink():
@@ -126,11 +130,12 @@ def silenced_stderr():
 
 @contextmanager
 def atomic_path(path: str | Path):
-    """Yield a temporary path beside `path`; on success rename it over `path` with the mode a
-    plain `open` would have given it (0666 less the umask), else delete it."""
+    """Yield a temporary path beside `path`, `.NAME.PID.RANDOM.tmp`; on success rename it over
+    `path` with the mode a plain `open` would have given it (0666 less the umask), else delete
+    it (a killed writer's is left: remove_stale_temporaries)."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.{os.getpid()}.", suffix=".tmp", dir=path.parent)
     os.close(fd)
     try:
         yield Path(tmp)
@@ -139,6 +144,17 @@ def atomic_path(path: str | Path):
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
         raise
+
+
+def remove_stale_temporaries(folder: Path, names: tuple[str, ...]) -> None:
+    """Delete the temporary files atomic_path left in `folder` for the files `names` (glob
+    patterns, e.g. `fig3_*.png`) when the process that wrote them is gone (killed mid-write):
+    those of a live writer, and every other file, stay."""
+    for name in names:
+        for tmp in folder.glob(f".{name}.*.tmp"):
+            pid = tmp.name.removesuffix(".tmp").rsplit(".", 2)[-2]
+            if tmp.is_file() and not tmp.is_symlink() and not (pid.isdigit() and _alive(int(pid))):
+                tmp.unlink(missing_ok=True)
 
 
 #: The file that marks a folder as an eas-vo output (a run, an export, an evaluation) and lists
@@ -155,10 +171,27 @@ def check_writable_folder(out: str | Path) -> Path:
         raise EasVoError(f"--out {out} is the root of the file system; choose a folder")
     if out.exists() and not out.is_dir():
         raise EasVoError(f"--out {out} is a file, not a folder")
-    existing = next(p for p in [out, *out.parents] if p.exists())
+    _check_writable(out)
+    return out
+
+
+def check_output_file(out: str | Path, replace: bool) -> Path:
+    """The absolute output file (symlinks followed), or a one-line error, before any work: a
+    folder is refused, so is a place that cannot be written, and an existing file unless `replace`."""
+    out = Path(out).expanduser().resolve()
+    if out.is_dir():
+        raise EasVoError(f"--out {out} is a folder; give the name of the file to write, e.g. {out / 'gallery.png'}")
+    if out.exists() and not replace:
+        raise EasVoError(f"--out {out} exists; choose another name or add --overwrite")
+    _check_writable(out)
+    return out
+
+
+def _check_writable(out: Path) -> None:
+    """A one-line error unless the nearest existing folder of `out` (itself, or its parent) can be written."""
+    existing = next(p for p in [out, *out.parents] if p.exists() and p.is_dir())
     if not os.access(existing, os.W_OK | os.X_OK):
         raise EasVoError(f"--out {out}: {existing} is not writable")
-    return out
 
 
 def check_output_folder(out: str | Path, replace: bool) -> Path:
@@ -358,6 +391,12 @@ def write_text_atomic(path: str | Path, text: str) -> None:
     with atomic_path(path) as tmp:
         tmp.write_text(text)
 
+
+
+def markdown_cell(text: str) -> str:
+    """`text` as one cell of a Markdown table: each run of white space or control characters
+    (a newline too) made one space, and `|` escaped, so the cell can end neither its row nor itself."""
+    return re.sub(r"[\s\x00-\x1f\x7f]+", " ", text).strip().replace("|", "\\|")
 
 
 def slug(text: str) -> str:

@@ -17,7 +17,7 @@ import cv2
 import numpy as np
 
 from eas_vo.errors import DataError, EasVoError
-from eas_vo.io import data_line, json_text, output_folder, parse_table, write_text_atomic
+from eas_vo.io import data_line, json_text, markdown_cell, output_folder, parse_table, write_text_atomic
 from eas_vo.types import CameraModel, PoseSeries
 
 FORMATS = ("tum", "euroc")
@@ -64,16 +64,16 @@ def export(config, out: str | Path, fmt: str, progress: bool = False, replace: b
         raise EasVoError(f"--format {fmt!r}: choose one of {', '.join(FORMATS)}")
     rc = config.run
     parts = open_pipeline(config)
-    n_window = len(parts.dataset.window(rc.start_s, rc.duration_s))
+    window = parts.dataset.window(rc.start_s, rc.duration_s)
+    names = _image_names(parts.dataset.label, window, parts.dataset.frame_times()[window], fmt)
     times = []
     with output_folder(out, replace, keep_partial=False) as staging:
         image_dir = staging / ("rgb" if fmt == "tum" else "mav0/cam0/data")
         image_dir.mkdir(parents=True)
-        for sample in tqdm(parts.dataset.samples(rc.start_s, rc.duration_s), total=n_window, disable=not progress,
-                           unit="frame", desc=f"export {rc.frontend}"):
+        for sample, name in tqdm(zip(parts.dataset.samples(rc.start_s, rc.duration_s), names), total=len(window),
+                                 disable=not progress, unit="frame", desc=f"export {rc.frontend}"):
             image = parts.frontend(sample)
             check_image(image, parts.dataset.camera, rc.frontend, sample)
-            name = f"{sample.t:.6f}.png" if fmt == "tum" else f"{_ns(sample.t)}.png"
             if not cv2.imwrite(str(image_dir / name), np.ascontiguousarray(image)):
                 raise EasVoError(f"{image_dir / name}: could not write the image")
             times.append(sample.t)
@@ -92,6 +92,22 @@ def export(config, out: str | Path, fmt: str, progress: bool = False, replace: b
 
 def _ns(t_s: float) -> int:
     return int(round(t_s * 1e9))
+
+
+def _image_names(label: str, frames: np.ndarray, times: np.ndarray, fmt: str) -> list[str]:
+    """The image file of each frame (its timestamp: TUM's in us, EuRoC's in ns), or a one-line
+    error naming two frames that would share one: ORB-SLAM2 takes each image's time from its
+    name (EuRoC) or its rgb.txt line (TUM) and keys its trajectory by it, so two frames at one
+    time are one pose twice (and a trajectory `evaluate` refuses)."""
+    names = [f"{t:.6f}.png" if fmt == "tum" else f"{_ns(t)}.png" for t in times]
+    first_of = {}
+    for k, name in zip(frames, names):
+        if name in first_of:
+            raise EasVoError(f"{label}: frames {first_of[name]} and {k} have one timestamp in the {fmt} layout "
+                             f"({name[:-4]}); ORB-SLAM2 needs one time per image: export a window without them "
+                             "(--start, --duration) or fix the dataset's times")
+        first_of[name] = int(k)
+    return names
 
 
 # ----------------------------------------------------------------------------- scoring external trajectories
@@ -156,5 +172,5 @@ def table2_row(label: str, metrics: dict) -> str:
     RMSE, rotation APE, scale and matched poses beside it."""
     m = metrics
     return ("| source | average APE [m] | RMSE [m] | rotation APE [rad] | scale | poses |\n|---|---|---|---|---|---|\n"
-            f"| {label} | {m['ape_trans_mean_m']:.3f} | {m['ape_trans_rmse_m']:.3f} | {m['ape_rot_mean_rad']:.3f} | "
-            f"{m['scale']:.3f} | {m['matched_poses']} |\n")
+            f"| {markdown_cell(label)} | {m['ape_trans_mean_m']:.3f} | {m['ape_trans_rmse_m']:.3f} | {m['ape_rot_mean_rad']:.3f} | "
+            f"{m['scale']:.3g} | {m['matched_poses']} |\n")

@@ -20,6 +20,7 @@ from eas_vo.config import ResolvedConfig
 from eas_vo.errors import EasVoError, Interrupted
 from eas_vo.evaluation import (OFFSET_SEARCH_S, ImuAgreement, RotationErrors, estimate_time_offset, imu_agreement,
                                rotation_errors)
+from eas_vo.imu_check import GyroVerdict, check_readings, judge_gyro
 from eas_vo.geometry.rotations import geodesic_angle, matrix_to_rotvec, quats_from_matrices, rotvec_to_matrix
 from eas_vo.io import atomic_path, json_text, output_folder, write_text_atomic
 from eas_vo.orb import OrbStats
@@ -31,13 +32,15 @@ FRAMES_CSV_FIELDS = ("index", "t", "nc", "inliers", "status", "redetected", "inl
 
 @dataclass
 class Pipeline:
-    """The opened dataset, its IMU in the camera frame (None without one) and the plugins built for it."""
+    """The opened dataset, its IMU in the camera frame (None without one, or when no plugin
+    reads it), the plugins built for it and what the IMU's check before any work found."""
 
     dataset: Dataset
     imu: ImuSeries | None
     frontend: Frontend
     tracker: Tracker
     backend: Backend
+    imu_warnings: list[str] = field(default_factory=list)
 
 
 @dataclass
@@ -96,14 +99,16 @@ def _run_into(parts: Pipeline, config: ResolvedConfig, out: Path | None, progres
         write_text_atomic(out / "config.toml", config.to_toml())
         write_text_atomic(out / "identity.json", json_text(run_identity(config)))
     try:
-        tracked = track(parts, config, out / "frames.csv" if out else None, progress)
+        tracked, verdict, retracked = _track_judging_the_gyro(parts, config, out, progress)
         t = tracked.times
         agreement = None if parts.imu is None else imu_agreement(t, tracked.edges, parts.imu)
-        imu, imu_offset = _backend_imu(config, parts.backend, parts.imu, agreement)
+        fused = None if verdict is None or verdict.contradicts else parts.imu
+        imu, imu_offset = _backend_imu(config, parts.backend, fused, agreement)
         R_w_c = parts.backend.solve(len(t), tracked.edges, times=t, imu=imu)
         errors, offset, offset_estimated = evaluate(config, parts.dataset, t, R_w_c, tracked.edges)
         metrics = summarise(config, parts.dataset, tracked, errors, offset, offset_estimated,
-                            time.perf_counter() - started, load_s, agreement, imu_offset)
+                            time.perf_counter() - started, load_s, agreement, imu_offset, verdict, retracked)
+        metrics["data_warnings"] = parts.imu_warnings + metrics["data_warnings"] + list(parts.backend.solver_warnings)
         result = RunResult(t, R_w_c, tracked.records, tracked.edges, errors, metrics, parts.backend.causal_R_w_c)
         if out is not None:
             write_outputs(out, result, parts.dataset.label)
@@ -177,8 +182,44 @@ def open_pipeline(config: ResolvedConfig) -> Pipeline:
         if plugin.needs_imu and dataset.imu is None:
             raise EasVoError(f"{kind} {plugin.name!r} as configured needs an IMU and {dataset.label} has none "
                              f"(imu.txt, or the bag's IMU topic); change the {kind} settings or the dataset")
+    if imu is not None and not (parts.tracker.uses_imu or parts.backend.uses_imu):
+        parts.imu = None  # nothing reads it: neither checked nor judged
+    if parts.imu is not None:
+        window = dataset.frame_times()[dataset.window(rc.start_s, rc.duration_s)]
+        parts.imu_warnings = check_readings(parts.imu, window, dataset.label, rc.imu_time_offset_s)
     dataset.events()
     return parts
+
+
+def _track_judging_the_gyro(parts: Pipeline, config: ResolvedConfig, out: Path | None,
+                            progress: bool) -> tuple[Tracked, GyroVerdict | None, bool]:
+    """Track (frames.csv in `out`), and judge the gyro by the images (imu_check.judge_gyro).
+    When the tracker predicted from a gyro the images contradict or cannot check (a wrong one
+    misleads LK until nothing is measured confidently), track again without it: that tracking
+    is kept if the first was contradicted or if it can judge the gyro, whose verdict it then
+    gives. Returns the tracking kept, the verdict (None without a gyro) and whether the kept
+    tracking is the one without the gyro."""
+    tracked = track(parts, config, out / "frames.csv" if out else None, progress)
+    verdict = None if parts.imu is None else judge_gyro(tracked.times, tracked.edges, parts.imu)
+    if verdict is None or verdict.use == "used" or not parts.tracker.uses_imu or tracked.interrupted is not None:
+        return tracked, verdict, False
+    second_csv = out / "frames_without_gyro.csv" if out else None
+    second = track(_without_imu(parts, config), config, second_csv, progress)
+    second_verdict = judge_gyro(second.times, second.edges, parts.imu)
+    if not (verdict.contradicts or second_verdict.can_tell):
+        if second_csv:
+            second_csv.unlink()
+        return tracked, verdict, False
+    if second_csv:
+        second_csv.replace(out / "frames.csv")
+    return second, verdict if verdict.contradicts else second_verdict, True
+
+
+def _without_imu(parts: Pipeline, config: ResolvedConfig) -> Pipeline:
+    """The same pipeline with a tracker that does not see the IMU."""
+    tracker = registry.get("trackers", config.run.tracker)(config.tracker, parts.dataset.camera, imu=None)
+    parts.frontend.reset()
+    return Pipeline(parts.dataset, parts.imu, parts.frontend, tracker, parts.backend, parts.imu_warnings)
 
 
 def _check_ground_truth_overlap(dataset: Dataset, rc, n_window: int) -> None:
@@ -241,11 +282,13 @@ def evaluate(config: ResolvedConfig, dataset: Dataset, t: np.ndarray, R_w_c: np.
 
 
 def summarise(config: ResolvedConfig, dataset: Dataset, tracked: Tracked, errors, offset: float, offset_estimated: bool,
-              elapsed: float, load_s: float, agreement: ImuAgreement | None = None, imu_offset: float | None = None) -> dict:
+              elapsed: float, load_s: float, agreement: ImuAgreement | None = None, imu_offset: float | None = None,
+              verdict: GyroVerdict | None = None, retracked: bool = False) -> dict:
     """metrics.json: accuracy, tracking and speed figures; speed is measured over the
     processing, after the dataset was opened. `offset` [s]: the ground truth's time offset the
     errors were measured with (`offset_estimated`: from the edges). With an IMU: its check
-    against the tracked rotations (`agreement`) and the time offset [s] the backend read it with."""
+    against the tracked rotations (`agreement`), the time offset [s] the backend read it with, and
+    the images' verdict on it (`retracked`: the frames were tracked again without it)."""
     records = tracked.records
     pairs = records[1:]
     span = records[-1].t - records[0].t
@@ -279,9 +322,11 @@ def summarise(config: ResolvedConfig, dataset: Dataset, tracked: Tracked, errors
     if imu_offset is not None:
         metrics["imu_time_offset_s"] = imu_offset
         metrics["imu_time_offset_estimated"] = reclocked
+    imu_findings = _imu_disagrees(config, agreement, reclocked)
+    metrics["gyro"] = None if verdict is None else verdict.use
     metrics["data_warnings"] = (dataset.data_warnings() + _events_end_early(config, dataset, tracked.times)
                                 + _offset_not_estimated(config, dataset, tracked, offset, offset_estimated)
-                                + _imu_disagrees(config, agreement, reclocked))
+                                + (imu_findings if verdict is None else verdict.warnings(retracked, imu_findings)))
     metrics["partial"] = tracked.interrupted is not None
     if tracked.orb is not None:
         metrics.update(tracked.orb.summary())
@@ -293,8 +338,9 @@ def _offset_not_estimated(config: ResolvedConfig, dataset: Dataset, tracked: Tra
     """A warning when run.time_offset_auto could not estimate the offset (evaluation.estimate_time_offset)."""
     if not config.run.time_offset_auto or dataset.ground_truth is None or estimated:
         return []
-    return [f"the time offset could not be estimated from the {len(tracked.edges)} measured rotations (fewer than 5, "
-            f"or the ground truth spans fewer than half of them at every offset within {OFFSET_SEARCH_S * 1e3:g} ms): "
+    return [f"the time offset could not be estimated from the {len(tracked.edges)} measured rotations (fewer than 5; "
+            f"the ground truth spanning fewer than half of them at every offset within {OFFSET_SEARCH_S * 1e3:g} ms; or no "
+            "clear best offset within it: a still camera, identical frames, or a true offset beyond the search): "
             f"the errors are measured with {offset:+g} s"]
 
 
@@ -330,6 +376,12 @@ CLOCK_GAIN = 0.9
 #: cannot tell how the gyro is turned about it: under 0.05 for a pure pan (a test), 0.5-0.65 on
 #: hand-held sequences (synthetic:default, seed 41, a 30 s one, the real excerpt).
 MIN_SPREAD = 0.2
+#: ... and by more than this many standard deviations of the fit (ImuAgreement.turned_sigma_deg),
+#: so that a short or noisy sequence says nothing it cannot tell. The images' errors are
+#: correlated from pair to pair (lag, blur), which the scatter understates: on right IMUs
+#: (2 s simulated sequences at 240x180, 346x260 and 640x480, eas and histeq) the fit was 0.8-11
+#: deg off, up to 4.3 of its sigmas; an axis swap 65.
+AXES_SIGMAS = 5.0
 #: A fit this close [deg] to an axis swap or flip is taken for it (those are 90 deg apart; a
 #: quarter turn misread on a 2 s sequence was fitted 10 deg off).
 AXES_SNAP_DEG = 20.0
@@ -354,8 +406,9 @@ def _conclusive(agreement: ImuAgreement | None) -> bool:
 
 def _axes_off(agreement: ImuAgreement | None) -> bool:
     """Whether the gyro agrees with the images only turned by more than IMU_DISAGREEMENT_DEG
-    (about more than one axis: MIN_SPREAD)."""
-    return _conclusive(agreement) and agreement.spread >= MIN_SPREAD and agreement.turned_deg > IMU_DISAGREEMENT_DEG
+    and AXES_SIGMAS times the fit's own uncertainty (about more than one axis: MIN_SPREAD)."""
+    return (_conclusive(agreement) and agreement.spread >= MIN_SPREAD
+            and agreement.turned_deg > max(IMU_DISAGREEMENT_DEG, AXES_SIGMAS * agreement.turned_sigma_deg))
 
 
 def _clock_is_off(agreement: ImuAgreement | None) -> bool:

@@ -168,7 +168,7 @@ class Tracker:
     """Measures relative rotations between the images of one sequence, fed in time order.
 
     Required: `process(image, t)`. Optional: `reset()`, which `__init__` calls last, so a
-    tracker sets up its per-sequence state there, `needs_imu` and `closes_loops`. It never knows which
+    tracker sets up its per-sequence state there, `needs_imu`, `uses_imu` and `closes_loops`. It never knows which
     frontend made the images. Frame indices count the images given since construction (or reset), from 0.
     """
 
@@ -194,6 +194,13 @@ class Tracker:
         return False
 
     @property
+    def uses_imu(self) -> bool:
+        """Whether this configuration reads the IMU when the dataset has one (the pipeline then
+        checks it before any work, and tracks again without it when the images contradict it;
+        default: False)."""
+        return False
+
+    @property
     def closes_loops(self) -> bool:
         """Whether this configuration looks for loops: the run then counts the edges it marked
         `loop` and says how many closed, none included (default: False; the count is then null,
@@ -213,7 +220,8 @@ class Tracker:
 class Backend:
     """Turns relative rotations into absolute camera-to-world rotations, one per frame.
 
-    Required: `solve(n_frames, edges, *, times, imu)`. Optional: `causal_R_w_c`, `needs_imu`, `uses_imu`.
+    Required: `solve(n_frames, edges, *, times, imu)`. Optional: `causal_R_w_c`, `solver_warnings`, `needs_imu`,
+    `uses_imu`.
     """
 
     name: ClassVar[str] = "backend"
@@ -223,6 +231,9 @@ class Backend:
     #: Set by `solve` in an online backend: each frame's rotation as estimated when that
     #: frame arrived, (n_frames, 3, 3). None (the default) for a batch backend.
     causal_R_w_c: np.ndarray | None = None
+    #: Set by `solve`: one line per way the solution falls short (a solver that did not
+    #: converge, measurements it left out), which the run prints as warnings. Empty by default.
+    solver_warnings: tuple[str, ...] = ()
 
     def __init__(self, config=None):
         self.config = config if config is not None else self.Config()

@@ -15,7 +15,7 @@ import numpy as np
 from eas_vo import compare
 from eas_vo.errors import EasVoError
 from eas_vo.gallery import PAPER_ORDER
-from eas_vo.io import atomic_path, json_text, write_text_atomic
+from eas_vo.io import atomic_path, json_text, remove_stale_temporaries, write_text_atomic
 
 SEQUENCES = ("hdr_boxes", "hdr_poster")
 
@@ -39,29 +39,42 @@ PAPER_TABLE2 = {
 PAPER_DURATION_S = 25.0
 
 
-def fetch_sequences(progress: bool) -> dict[str, str]:
-    """Fetch both sequences unless present and verified; {name: --dataset spec}."""
+#: The --dataset spec of each sequence (fetched on first use).
+SPECS = {name: f"ecd:{name}" for name in SEQUENCES}
+
+
+def fetch_sequences(progress: bool) -> None:
+    """Fetch both sequences unless present and verified."""
     from eas_vo.registry import fetchable
 
-    specs = {}
-    for name in SEQUENCES:
-        plugin, _ = fetchable(f"ecd:{name}")
+    for spec in SPECS.values():
+        plugin, name = fetchable(spec)
         plugin.fetch(name, progress=progress)
-        specs[name] = f"ecd:{name}"
-    return specs
 
 
-def _cells(specs: dict[str, str], frontends, backends) -> list[compare.Cell]:
+def _cells(frontends, backends) -> list[compare.Cell]:
     """The grid, each sequence's cells in a folder named after it."""
-    cells = compare.plan(list(specs.values()), list(frontends), ["klt"], list(backends), [])
-    names = {spec: name for name, spec in specs.items()}
+    cells = compare.plan(list(SPECS.values()), list(frontends), ["klt"], list(backends), [])
+    names = {spec: name for name, spec in SPECS.items()}
     return [dataclasses.replace(c, dataset_name=names[c.dataset]) for c in cells]
 
 
-def _run(cells, out: Path, config: str, duration_s: float, jobs: int, progress: bool, orb: bool = False):
-    overrides = {"start_s": 0.0, "duration_s": duration_s, "time_offset_s": None, "time_offset_auto": True,
-                 "orb_stats": orb or None}
-    return compare.run_experiment(cells, out, config, [], overrides, jobs, progress)
+def _overrides(duration_s: float, orb: bool) -> dict:
+    """The [run] values of the paper's runs: its window, the time offset estimated, ORB statistics for Table 2."""
+    return {"start_s": 0.0, "duration_s": duration_s, "time_offset_s": None, "time_offset_auto": True,
+            "orb_stats": orb or None}
+
+
+#: The files reproduce writes in its output folder beside compare's.
+OUTPUT_FILES = ("table1.md", "table1.json", "table2.md", "table2.json", "fig3_*.png")
+
+
+def _check(cells, config: str, overrides: dict, out: Path) -> None:
+    """Every cell's configuration resolved (a bad --config, key or backend is an error) before
+    any download; then the temporary files of a reproduce killed while writing into `out` removed."""
+    for cell in cells:
+        compare.cell_config(cell, config, [], overrides)
+    remove_stale_temporaries(out, OUTPUT_FILES)
 
 
 # ----------------------------------------------------------------------------- Table 1
@@ -72,9 +85,10 @@ def table1(out: Path, duration_s: float = PAPER_DURATION_S, backends=("chain", "
     """The six sources on both sequences with `config`; writes compare's tables and figures,
     table1.md (ours beside the paper's, ratios, orderings), table1.json and one Fig. 3-style
     Euler plot per sequence and backend. Returns (rows, cells run, table1 markdown)."""
-    specs = fetch_sequences(progress)
-    cells = _cells(specs, PAPER_ORDER, backends)
-    rows, n_run = _run(cells, out, config, duration_s, jobs, progress)
+    cells, overrides = _cells(PAPER_ORDER, backends), _overrides(duration_s, orb=False)
+    _check(cells, config, overrides, out)
+    fetch_sequences(progress)
+    rows, n_run = compare.run_experiment(cells, out, config, [], overrides, jobs, progress)
     markdown = table1_markdown(rows, config, duration_s)
     write_text_atomic(out / "table1.md", markdown)
     write_text_atomic(out / "table1.json", json_text({"paper": PAPER_TABLE1, "ours": rows, "config": config,
@@ -163,13 +177,15 @@ def table2(out: Path, estimates: dict[tuple[str, str], str], duration_s: float =
     for (seq, source), path in estimates.items():
         if seq not in SEQUENCES or source not in ("original", "eas"):
             raise EasVoError(f"--estimate {seq}:{source}: the paper's Table 2 has {', '.join(SEQUENCES)} x original, eas")
-        read_estimate(path)  # a missing or malformed file is an error before any work
-    specs = fetch_sequences(progress)
-    cells = _cells(specs, ("original", "eas"), ("chain",))
-    rows, n_run = _run(cells, out, config, duration_s, jobs, progress, orb=True)
-    slam = {key: evaluate_estimate(specs[key[0]], path, "sim3", 0.01, out / "slam" / f"{key[0]}_{key[1]}",
+        read_estimate(path)  # a missing or malformed file is an error before any download
+    cells, overrides = _cells(("original", "eas"), ("chain",)), _overrides(duration_s, orb=True)
+    _check(cells, config, overrides, out)
+    fetch_sequences(progress)
+    # scored before the cells run: an estimate the ground truth cannot score is an error before that work
+    slam = {key: evaluate_estimate(SPECS[key[0]], path, "sim3", 0.01, out / "slam" / f"{key[0]}_{key[1]}",
                                    label=f"{key[0]} {key[1]}", replace=True)
             for key, path in estimates.items()}
+    rows, n_run = compare.run_experiment(cells, out, config, [], overrides, jobs, progress)
     markdown = table2_markdown(rows, slam, duration_s)
     write_text_atomic(out / "table2.md", markdown)
     write_text_atomic(out / "table2.json", json_text({"paper": PAPER_TABLE2, "orb": rows,

@@ -6,6 +6,8 @@ frame a; trajectories are camera-to-world (`R_w_c`).
 
 from __future__ import annotations
 
+import functools
+
 from dataclasses import dataclass, field
 
 import cv2
@@ -94,6 +96,11 @@ class PoseSeries:
     q_w_c: np.ndarray
 
 
+#: A gyro is taken to measure an interval when no stretch of it without a reading is longer
+#: than this many median reading intervals (a sample or three lost).
+MAX_GAP_READINGS = 4
+
+
 @dataclass(frozen=True)
 class ImuSeries:
     """IMU readings: t [s] (increasing), accelerometer [m/s^2], gyro [rad/s]. A dataset gives
@@ -110,6 +117,26 @@ class ImuSeries:
         the frames' clock (IMU time = frame time + time_offset_s [s])."""
         R = np.asarray(R_imu_cam, float)
         return ImuSeries(self.t - time_offset_s, self.acc @ R, self.gyro @ R)
+
+    def covered(self, t0, t1) -> np.ndarray:
+        """Which intervals [t0, t1] [s] (scalars or arrays) the gyro measures: t0 <= t1, and no
+        stretch of them without a reading, the ends included, longer than MAX_GAP_READINGS median
+        reading intervals (the rates are interpolated across a gap; across a longer one, guessed)."""
+        t0, t1 = np.asarray(t0, float), np.asarray(t1, float)
+        t = self.t
+        if len(t) < 2:
+            return np.zeros(np.broadcast(t0, t1).shape, bool)
+        limit, wide = self._gaps
+        before = np.clip(np.searchsorted(t, t0, side="right") - 1, 0, len(t) - 1)  # the reading at or before t0
+        after = np.clip(np.searchsorted(t, t1, side="left"), 0, len(t) - 1)  # the reading at or after t1
+        inside = (t0 >= t[0] - limit) & (t1 <= t[-1] + limit)  # beyond the readings by at most one gap
+        return (t1 >= t0) & inside & (wide[after] == wide[before])
+
+    @functools.cached_property
+    def _gaps(self) -> tuple[float, np.ndarray]:
+        """The longest gap `covered` accepts [s] and, per reading, the count of longer ones before it."""
+        limit = MAX_GAP_READINGS * float(np.median(np.diff(self.t)))
+        return limit, np.concatenate([[0], np.cumsum(np.diff(self.t) > limit)])
 
     def rates_between(self, t0: float, t1: float) -> tuple[np.ndarray, np.ndarray]:
         """[t0, t1] (t0 <= t1) cut at the readings' times: the mean gyro rate over each piece

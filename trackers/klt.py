@@ -152,6 +152,10 @@ class KltTracker(Tracker):
         return self.config.predict == "gyro"
 
     @property
+    def uses_imu(self) -> bool:
+        return self.config.predict in ("gyro", "auto")
+
+    @property
     def closes_loops(self) -> bool:
         return self.config.loop_closure
 

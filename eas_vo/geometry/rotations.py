@@ -33,8 +33,8 @@ def matrix_to_rotvec(R: np.ndarray) -> np.ndarray:
 def gyro_rotation(imu: ImuSeries, t0: float, t1: float) -> np.ndarray | None:
     """R_0_1, the rotation of the IMU's frame from t0 to t1 >= t0 [s, its clock] by its gyro
     (rates linear between readings: ImuSeries.rates_between); None when the IMU does not
-    cover [t0, t1] (or t1 < t0)."""
-    if len(imu.t) < 2 or t0 < imu.t[0] or t1 > imu.t[-1] or t1 < t0:
+    measure [t0, t1] (ImuSeries.covered)."""
+    if not imu.covered(t0, t1):
         return None
     rates, dt = imu.rates_between(t0, t1)
     return reduce(np.matmul, rotvec_to_matrix(rates * dt[:, None]), np.eye(3))

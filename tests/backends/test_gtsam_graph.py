@@ -173,3 +173,78 @@ def test_the_gyro_model_defaults_to_the_simulated_davis_imu():
     from eas_vo.datasets.simulator.sensor import ImuModel
 
     assert (GtsamConfig().gyro_noise, GtsamConfig().gyro_bias_sigma) == (ImuModel().gyro_noise, ImuModel().gyro_bias)
+
+
+def gyro_rig(seed=9, noise_deg=0.3):
+    """A 200 Hz gyro with white noise and 20 Hz frames on its readings, their true rotations
+    and consecutive edges with `noise_deg` of noise and 100 inliers."""
+    from eas_vo.types import ImuSeries
+
+    rng = np.random.default_rng(seed)
+    t_imu = np.arange(0.0, 4.0, 0.005)
+    omega = 1.0 + np.cumsum(rng.normal(0, 0.05, (len(t_imu), 3)), axis=0)
+    exact = ImuSeries(t_imu, np.zeros_like(omega), omega)
+    frames = np.arange(0, len(t_imu) - 1, 10)
+    R = np.empty((len(frames), 3, 3))
+    R[0] = np.eye(3)
+    for k in range(1, len(frames)):
+        R[k] = R[k - 1] @ gyro_rotation(exact, t_imu[frames[k - 1]], t_imu[frames[k]])
+    noisy = ImuSeries(t_imu, np.zeros_like(omega), omega + rng.normal(0, 0.003 * np.sqrt(200), omega.shape))
+    return t_imu[frames], R, noisy, edges_for(R, seed=seed + 1, noise_rad=np.radians(noise_deg))
+
+
+@pytest.mark.parametrize("mode", ["batch", "online"])
+def test_a_repeated_frame_time_gets_no_gyro_factor_and_the_graph_still_fuses(mode):
+    """Frame 10 repeats frame 9 (its timestamp and view; the tracker measures nothing there): no
+    factor over no time, and the rest is fused as without it, in batch (which returned the
+    chain) and online (which raised gtsam's IndeterminateSystemException)."""
+    times, R, imu, _ = gyro_rig()
+    times, R = np.insert(times, 10, times[9]), np.insert(R, 10, R[9], axis=0)
+    edges = [e for e in edges_for(R, seed=10, noise_rad=np.radians(0.3)) if e.j != 10]
+    backend = GtsamBackend(GtsamConfig(gyro=True, mode=mode))
+    fused = ape(backend.solve(len(R), edges, times=times, imu=imu), R)
+    chain = ape(ChainBackend().solve(len(R), edges), R)
+    assert fused < 0.5 * chain and backend.solver_warnings == [], (fused, chain)
+
+
+def test_a_gyro_glitch_within_range_never_overrides_confident_images():
+    """One reading 30 rad/s off (within a MEMS gyro's range): the interval it falls in is left
+    out (a gate, warned); every frame pair then follows the images and the gyro elsewhere."""
+    from eas_vo.types import ImuSeries
+
+    times, R, imu, edges = gyro_rig()
+    rates = imu.gyro.copy()
+    glitch = int(np.searchsorted(imu.t, times[20])) + 3  # inside frame interval 20 -> 21
+    rates[glitch, 2] += 30.0
+    backend = GtsamBackend(GtsamConfig(gyro=True))
+    fused = backend.solve(len(R), edges, times=times, imu=ImuSeries(imu.t, imu.acc, rates))
+    step = lambda R_w, k: R_w[k - 1].T @ R_w[k]
+    assert np.degrees(geodesic_angle(step(fused, 21), step(R, 21))) < 1.0
+    assert len(backend.solver_warnings) == 1 and "left out of 1 frame interval" in backend.solver_warnings[0]
+    assert "frame 21" in backend.solver_warnings[0]
+    right = GtsamBackend(GtsamConfig(gyro=True))
+    right.solve(len(R), edges, times=times, imu=imu)
+    assert right.solver_warnings == []  # a right gyro is never gated by the images' noise
+
+
+@pytest.mark.parametrize("mode", ["batch", "online"])
+def test_a_solver_that_fails_is_a_warning_and_the_chain(mode, monkeypatch):
+    times, R, imu, edges = gyro_rig()
+    backend = GtsamBackend(GtsamConfig(gyro=True, mode=mode))
+
+    def fails(*args):
+        raise RuntimeError("Indeterminant linear system detected while working near variable 7")
+
+    monkeypatch.setattr(backend, f"_{mode}", fails)
+    out = backend.solve(len(R), edges, times=times, imu=imu)
+    assert_rotations_close(out, ChainBackend().solve(len(R), edges), 1e-12)
+    assert backend.solver_warnings == [f"the pose graph could not be solved ({mode}: Indeterminant linear system detected "
+                                       "while working near variable 7): the rotations are the chained measurements, unsmoothed"]
+    assert backend.causal_R_w_c is None
+
+
+def test_levenberg_marquardt_stopped_early_is_said():
+    times, R, imu, edges = gyro_rig()
+    backend = GtsamBackend(GtsamConfig(gyro=True, iterations=1))
+    backend.solve(len(R), edges, times=times, imu=imu)
+    assert len(backend.solver_warnings) == 1 and "stopped at backend.iterations = 1" in backend.solver_warnings[0]

@@ -1,5 +1,7 @@
 """The Event Camera Dataset folder reader, on simulator output and on the real excerpt."""
 
+import shutil
+
 import numpy as np
 import pytest
 from hypothesis import given
@@ -104,6 +106,20 @@ def test_unreadable_frame_is_reported_with_its_index(sequence_copy):
     (sequence_copy / "images" / "frame_00000002.png").write_bytes(b"not a png")  # among the first three: at once
     with pytest.raises(DataError, match=r"cannot decode frame 2 \(images.txt line 3\)"):
         EcdFolderDataset(sequence_copy)
+
+
+@pytest.mark.parametrize("door", ["folder", "zip"])
+@pytest.mark.parametrize("content,says", [
+    (b"", "cannot decode frame 5: the file is empty"),
+    (b"P5\n99999 99999\n255\n", "cannot decode frame 5"),  # a header OpenCV raises on, not returns None
+    (b"\x89PNG\r\n\x1a\n\x00\x00\x00\rIHDR\x00\x00\x00\xf0", "cannot decode frame 5"),  # cut inside its size
+])
+def test_an_empty_or_refused_frame_names_its_file_and_index(sequence_copy, tmp_path, door, content, says):
+    (sequence_copy / "images" / "frame_00000005.png").write_bytes(content)
+    location = sequence_copy if door == "folder" else shutil.make_archive(str(tmp_path / "seq"), "zip", sequence_copy)
+    ds = EcdFolderDataset(location)
+    with pytest.raises(DataError, match=rf"frame_00000005.png: {says} \(images.txt line 6\)"):
+        ds.load_frame(5)
 
 
 def test_bad_ground_truth_line(sequence_copy):

@@ -62,6 +62,53 @@ def test_bag_event_message_damage_names_topic_and_index(bag_path, sequence, tmp_
 
 
 
+def _compressed_copy(src, dst, compression):
+    from rosbags.rosbag1 import Reader, Writer
+
+    from eas_vo.datasets.rosbag import typestore
+
+    writer = Writer(dst)
+    writer.set_compression(getattr(Writer.CompressionFormat, compression))
+    with Reader(src) as reader, writer:
+        conns = {c.id: writer.add_connection(c.topic, c.msgtype, typestore=typestore()) for c in reader.connections}
+        for conn, t, raw in reader.messages():
+            writer.write(conns[conn.id], t, raw)
+
+
+# Bytes damaged inside a chunk, one per kind of error rosbags' reader raises on them: a record
+# header's length (its ReaderError), the record's connection id (a KeyError), its time (a failed
+# assert), and a compressed chunk (bz2's OSError, lz4's RuntimeError).
+@pytest.mark.parametrize("damage", ["header_length", "connection", "time", "bz2", "lz4"])
+def test_damaged_bytes_inside_a_chunk_name_the_topic_message_and_time(bag_path, tmp_path, damage):
+    from rosbags.rosbag1 import Reader
+
+    topic = "/dvs/imu" if damage in ("header_length", "connection", "time") else "/dvs/image_raw"
+    src = bag_path
+    if damage in ("bz2", "lz4"):
+        src = tmp_path / f"{damage}.bag"
+        _compressed_copy(bag_path, src, damage.upper())
+    data = bytearray(src.read_bytes())
+    with Reader(src) as reader:
+        entries = reader.indexes[next(c.id for c in reader.connections if c.topic == topic)]
+        if damage in ("bz2", "lz4"):  # the fourth chunk's stream header: its first image is the one named
+            chunk_pos = sorted(reader.chunks)[3]
+            index = next(k for k, e in enumerate(entries) if e.chunk_pos == chunk_pos)
+            data[reader.chunks[chunk_pos].datapos] ^= 0xFF
+        else:  # the sixth IMU message's record header
+            index = 5
+            record = reader.chunks[entries[index].chunk_pos].datapos + entries[index].offset
+            field = {"header_length": (record, 4), "connection": (data.index(b"conn=", record) + 5, 4),
+                     "time": (data.index(b"time=", record) + 5, 4)}[damage]
+            data[field[0]: field[0] + field[1]] = b"\xf0\xff\xff\x7f"
+        t_s = entries[index].time / 1e9
+    path = tmp_path / "damaged.bag"
+    path.write_bytes(bytes(data))
+    with pytest.raises(DataError, match=rf"damaged.bag:{topic}:{index}: damaged bag data, message unreadable at "
+                                        rf"bag time {t_s:.6f} s") as info:
+        RosbagDataset(path)
+    assert "\n" not in str(info.value)
+
+
 @settings(max_examples=40, deadline=None, derandomize=True, suppress_health_check=list(HealthCheck))
 @given(cut=st.floats(0.0, 1.0), flip=st.integers(0, 10**9))
 def test_truncated_or_damaged_bag_is_named_or_read_whole(bag_path, sequence, tmp_path_factory, cut, flip):

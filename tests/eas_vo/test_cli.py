@@ -343,7 +343,7 @@ def test_damaged_datasets_are_one_line_before_any_work(sequence_copy, tmp_path, 
 @pytest.mark.parametrize("argv, says", [
     (["run", "--out", "{tmp}/a_file"], "is a file, not a folder"),
     (["run", "--config", "{tmp}"], "not a config file"),
-    (["render", "--frames", "1", "--out", "{tmp}"], "is a folder; render writes one image"),
+    (["render", "--frames", "1", "--out", "{tmp}"], "is a folder; give the name of the file to write"),
     (["compare", "--frontends", ",", "--out", "{tmp}/cmp"], "names nothing"),
     (["simulate", "--out", "{tmp}", "--duration", "0.3"], "is not empty"),
 ])
@@ -366,3 +366,41 @@ def test_an_absurd_window_is_one_line_without_numpy_warnings(short_sequence, tmp
     err = one_line_failure(["run", "--dataset", str(short_sequence), "--start", "1e308", "--duration", "1e308",
                             "--out", str(tmp_path / "out")], capsys)
     assert "holds 0 sample(s); at least 2 are needed" in err
+
+
+def test_render_writes_over_a_file_only_with_overwrite_and_never_over_an_input(short_sequence, tmp_path, capsys):
+    """An existing --out is kept without --overwrite; with it, a file of the dataset (a frame,
+    also through a link to it) or the --config is still refused; any other file is replaced."""
+    dataset = tmp_path / "seq"  # the short sequence, its frames copied (its events linked: their cache is reused)
+    shutil.copytree(short_sequence / "images", dataset / "images")
+    for name in ("events.txt", "images.txt", "calib.txt"):
+        (dataset / name).symlink_to(short_sequence / name)
+    frame = dataset / "images" / "frame_00000005.png"
+    kept = frame.read_bytes()
+    estimate = tmp_path / "trajectory.tum"
+    estimate.write_text("0 0 0 0 0 0 0 1\n")
+    config = tmp_path / "render.toml"
+    config.write_text(f'[run]\ndataset = "{dataset}"\n')
+    (tmp_path / "frame.png").symlink_to(frame)
+    render = ["render", "--frames", "1", "--frontends", "original", "--config", str(config)]
+    for out, overwrite, says in ((estimate, [], "exists; choose another name or add --overwrite"),
+                                 (frame, ["--overwrite"], "is the dataset"),
+                                 (tmp_path / "frame.png", ["--overwrite"], "is the dataset"),
+                                 (config, ["--overwrite"], "is the --config")):
+        assert says in one_line_failure([*render, "--out", str(out), *overwrite], capsys)
+    assert frame.read_bytes() == kept and estimate.read_text() == "0 0 0 0 0 0 0 1\n" and config.read_text().startswith("[run]")
+    assert main([*render, "--out", str(estimate), "--overwrite"]) == 0
+    assert estimate.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and not list(tmp_path.glob(".*.tmp"))
+
+
+@pytest.mark.parametrize("command", ["run", "export"])
+def test_an_output_folder_holding_the_config_file_is_refused_even_with_overwrite(short_sequence, tmp_path, capsys, command):
+    from helpers import mark_as_eas_vo_output
+
+    out = tmp_path / "earlier"
+    out.mkdir()
+    config = out / "config.toml"  # an earlier run's resolved config, read again
+    config.write_text(f'[run]\ndataset = "{short_sequence}"\nfrontend = "original"\nduration_s = 0.2\n')
+    mark_as_eas_vo_output(out)
+    err = one_line_failure([command, "--config", str(config), "--out", str(out), "--overwrite", "--quiet"], capsys)
+    assert "holds the --config" in err and config.read_text().startswith("[run]\ndataset")

@@ -290,3 +290,60 @@ def test_compare_takes_its_default_tracker_and_backend_from_the_config(short_seq
     (row,) = json.loads((out / "table.json").read_text())
     run = resolve("best", {"dataset": str(short_sequence)}).run
     assert (row["tracker"], row["backend"]) == (run.tracker, run.backend) == ("klt", "gtsam")
+
+
+@pytest.mark.parametrize("executor", ["local", "dask"])
+def test_any_exception_in_a_cell_is_that_cells_failure_and_the_grid_finishes(short_sequence, tmp_path, capsys, monkeypatch,
+                                                                             executor):
+    """A frontend that raises a ValueError (a bug, not bad input; with `|` and a newline in its
+    message): its cells fail in the table with the type and a request to report it, the
+    traceback in the cell's error.txt; every other cell finishes, the table is written, and the
+    exit status says a cell failed. Two processes (forked: the patch reaches them), and an
+    in-process Dask cluster."""
+    from eas_vo.frontends.intensity import HistEqFrontend
+
+    def broken(self, sample):
+        raise ValueError("no | image\nat all")
+
+    monkeypatch.setattr(HistEqFrontend, "__call__", broken)
+    out = tmp_path / "cmp"
+    argv = ["compare", "--dataset", str(short_sequence), "--frontends", "original,histeq", "--backends", "chain,gtsam",
+            "--duration", "0.5", "--out", str(out), "--quiet", "--jobs", "2"]
+    if executor == "dask":
+        distributed = pytest.importorskip("distributed", reason="the 'distributed' extra is not installed")
+        cluster = distributed.LocalCluster(n_workers=1, threads_per_worker=2, processes=False, dashboard_address=None)
+        argv += ["--executor", "dask", "--scheduler", cluster.scheduler_address]
+    with cluster if executor == "dask" else contextlib.nullcontext():
+        assert main(argv) == 1
+    captured = capsys.readouterr()
+    assert "4 cells (4 run, 0 already complete, 2 failed)" in captured.out
+    rows = {(r["frontend"], r["backend"]): r for r in json.loads((out / "table.json").read_text())}
+    for backend in ("chain", "gtsam"):
+        assert rows[("original", backend)]["status"] == "ok"
+        failed = rows[("histeq", backend)]
+        assert failed["status"] == "failed" and failed["error"].startswith("ValueError: no | image (a bug")
+        assert f"cell {failed['folder']} failed: ValueError: no | image (a bug" in captured.err
+        error_txt = (out / failed["folder"] / "error.txt").read_text()
+        assert error_txt.startswith(failed["error"] + "\n") and "Traceback" in error_txt and "in broken" in error_txt
+    histeq_row = next(line for line in (out / "table.md").read_text().splitlines() if line.startswith("| histeq |"))
+    assert histeq_row.count(" | ") == 4 and "ValueError: no \\| image" in histeq_row
+
+
+def test_a_resume_removes_the_temporaries_of_a_compare_killed_while_writing(one_cell, tmp_path):
+    """What `kill -9` leaves while compare writes its figures and tables (temporaries of a
+    writer that is gone, this version's and the older pid-less kind) is removed by the resume;
+    a live writer's temporary and files that are not compare's own stay."""
+    import subprocess
+
+    out, argv, _ = one_cell
+    copy = tmp_path / "one"
+    shutil.copytree(out, copy)
+    gone = subprocess.Popen(["true"])
+    gone.wait()
+    stale = [f".ape_bars.png.{gone.pid}.k2j3h4ab.tmp", ".ape_time.png.k2j3h4ab.tmp", f".table.json.{gone.pid}.x1y2.tmp"]
+    kept = [f".table.md.{os.getpid()}.abcd1234.tmp", f".notes.txt.{gone.pid}.abcd1234.tmp", "ape_bars.png.tmp"]
+    for name in stale + kept:
+        (copy / name).write_bytes(b"half a file")
+    with contextlib.redirect_stdout(io.StringIO()):
+        assert main(argv[:-4] + [str(copy), "--jobs", "1", "--quiet"]) == 0
+    assert [name for name in stale + kept if (copy / name).exists()] == kept

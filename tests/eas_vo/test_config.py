@@ -41,6 +41,7 @@ def test_per_plugin_tables_apply_only_to_their_plugin(tmp_path):
     [
         ("frontend.bogus=1", "unknown key frontend.bogus"),
         ("frontend.n=abc", "frontend.n must be int"),
+        ("frontend.n={a=1}", "frontend.n must be int"),  # a table where a number goes: the key's own message
         ("frontend.n=0", "n = 0 is out of range"),
         ("tracker.threshold1=500", "threshold1 .* must not exceed threshold2"),
         ("nosection.x=1", "SECTION.KEY=VALUE"),
@@ -147,3 +148,54 @@ def test_a_config_written_before_the_imu_moved_to_run_still_resolves(tmp_path):
     # what the run's IMU warning asks for wins over the old places; other plugins' tables are not read
     assert resolve(old, assignments=["run.imu_time_offset_s=0.009"]).run.imu_time_offset_s == 0.009
     assert resolve(old, assignments=["backend.chain.imu_time_offset_s=0.5"]).run.imu_time_offset_s == 0.004
+
+
+@pytest.mark.parametrize("text,says", [
+    ('frontend = "eas"\n', 'frontend must be a table \\(\\[frontend\\] and its keys\\), found "eas"'),
+    ("run = 5\n", "run must be a table .*, found 5"),
+    ('run = "x"\n', 'run must be a table .*, found "x"'),
+    ('[[run]]\nfrontend = "eas"\n', r"run must be a table .*, found an array of tables"),
+    ('dataset = "x"\n', 'dataset must be a table .*, found "x"'),
+    ("[tracker]\nklt = 5\n", r"tracker.klt must be a table \(the klt tracker's keys, \[tracker.klt\]\), found 5"),
+    ("[[tracker.klt]]\nmax_corners = 5\n", r"tracker.klt must be a table .*, found an array of tables"),
+    ("[frontend]\neas = [1, 2]\n", r"frontend.eas must be a table .*, found \[1, 2\]"),
+])
+def test_a_section_or_plugin_table_that_is_not_one_names_the_file_and_key(tmp_path, text, says):
+    from eas_vo.config import run_section
+
+    path = tmp_path / "c.toml"
+    path.write_text(text)
+    for read in (resolve, run_section):  # run, export, render; compare's [run]
+        with pytest.raises(ConfigError, match=rf"^{path}: {says}$"):
+            read(path)
+
+
+def test_a_set_plugin_table_that_is_not_one_names_the_assignment():
+    with pytest.raises(ConfigError, match=r"^--set tracker.klt=5: tracker.klt must be a table .*, found 5$"):
+        resolve(None, {}, ["tracker.klt=5"])
+
+
+def test_a_byte_order_mark_is_read_past(tmp_path):
+    path = tmp_path / "c.toml"
+    path.write_bytes(b'\xef\xbb\xbf[run]\nfrontend = "slice"\n')
+    assert resolve(path).run.frontend == "slice"
+
+
+@pytest.mark.parametrize("value", ['"abc"', "5", "true", "{a = 1}", "[1, 2]", '[1, "a", 3]'])
+def test_a_vector_key_says_what_it_expects(value):
+    with pytest.raises(ConfigError, match=r"^run.imu_rotvec_cam = .*; expected an array of 3 finite numbers \[rad\]$"):
+        resolve(None, {}, [f"run.imu_rotvec_cam={value}"])
+
+
+def test_a_vector_key_its_config_does_not_check_is_still_refused_unless_an_array():
+    from dataclasses import dataclass
+
+    from eas_vo.config import build
+
+    @dataclass(frozen=True)
+    class Unchecked:
+        offsets: tuple = (0.0, 0.0)
+
+    assert build(Unchecked, {"offsets": [1, 2]}, "plugin").offsets == (1, 2)
+    with pytest.raises(ConfigError, match=r"^plugin.offsets must be an array, e.g. \[0.0, 0.0\], got 'abc'$"):
+        build(Unchecked, {"offsets": "abc"}, "plugin")

@@ -90,10 +90,34 @@ def test_time_offset_known_answer():
     short = PoseSeries(t_gt[:600], gt.p_w_c[:600], gt.q_w_c[:600])
     assert estimate_time_offset(t_frames, edges, short) is None
     assert estimate_time_offset(t_frames, edges[:4], gt) is None
-    # a true offset beyond the search: the estimate stays inside it, on its edge
-    _, R_far, _ = interpolate_poses(gt, t_frames + 0.13)
-    far = [RelativeRotation(k - 1, k, R_far[k - 1].T @ R_far[k]) for k in range(1, len(t_frames))]
-    assert abs(estimate_time_offset(t_frames, far, gt)) <= 0.1 + 1e-9
+
+
+def _steps(R_w_c: np.ndarray, noise_rad: float, seed: int) -> list[RelativeRotation]:
+    """Consecutive relative rotations of `R_w_c` (N, 3, 3), each with random noise of about `noise_rad`."""
+    noise = Rotation.from_rotvec(np.random.default_rng(seed).normal(0, noise_rad / np.sqrt(3), (len(R_w_c), 3))).as_matrix()
+    return [RelativeRotation(k - 1, k, R_w_c[k - 1].T @ R_w_c[k] @ noise[k]) for k in range(1, len(R_w_c))]
+
+
+def test_a_time_offset_without_a_clear_best_fit_is_not_an_estimate():
+    """A flat cost (a still camera; identical frames while the camera turns; a turn at a
+    constant rate, which looks the same at every offset) or a best fit on the search's edge
+    (a true offset of 130 ms, beyond the 100 ms searched) is None, never the edge or a
+    point of the flat; 2 s at 20 Hz with 0.03 deg of noise, as a short run."""
+    t_gt = np.arange(0, 2.5, 0.005)
+    t_frames = np.arange(0.25, 2.25, 0.05)
+    moving = ground_truth(len(t_gt), seed=3, rate=200.0)[0]
+    still = PoseSeries(t_gt, np.zeros((len(t_gt), 3)), np.tile([0.0, 0.0, 0.0, 1.0], (len(t_gt), 1)))
+    steady = Rotation.from_rotvec(np.outer(t_gt, [0.3, -0.5, 0.2])).as_matrix()
+    steady = PoseSeries(t_gt, np.zeros((len(t_gt), 3)), quats_from_matrices(steady))
+    identical = np.tile(np.eye(3), (len(t_frames), 1, 1))
+    noise = np.radians(0.03)
+    for gt, R_measured in ((still, identical), (moving, identical), (steady, interpolate_poses(steady, t_frames)[1]),
+                           (moving, interpolate_poses(moving, t_frames + 0.13)[1])):
+        assert estimate_time_offset(t_frames, _steps(R_measured, noise, seed=2), gt) is None
+    # the same 2 s of turning, measured on time and 20 ms late: estimated
+    for late_s in (0.0, 0.02):
+        edges = _steps(interpolate_poses(moving, t_frames + late_s)[1], noise, seed=2)
+        assert estimate_time_offset(t_frames, edges, moving) == pytest.approx(late_s, abs=0.001)
 
 
 @pytest.mark.parametrize("R_imu_cam", [np.eye(3), Rotation.from_rotvec([0, 0, np.pi / 2]).as_matrix(),
@@ -121,6 +145,33 @@ def test_imu_agreement_finds_how_the_gyro_is_turned(R_imu_cam):
     assert np.degrees(geodesic_angle(agreement.R, R_imu_cam)) < 1.0
     assert 0.55 * agreement.pairs < agreement.agreeing < 0.75 * agreement.pairs
     assert imu_agreement(t[:15], edges[:14], imu) is None  # too few frame pairs to tell
+
+
+def test_the_axes_fit_knows_its_own_uncertainty():
+    """Rotation vectors of about 2 deg with 0.4 deg of white noise per pair (a 2 s sequence
+    of weak images): the fit's angle scatters about the truth as its own sigma says (within
+    20 % over 400 draws), that sigma shrinks as 1 / sqrt(pairs), and no draw of a right IMU
+    comes out AXES_SIGMAS of it off (the pipeline's test for naming a mount)."""
+    from eas_vo.evaluation import _fit_sigma_deg
+    from eas_vo.geometry.two_view import kabsch
+    from eas_vo.pipeline import AXES_SIGMAS
+
+    rng = np.random.default_rng(5)
+    sigmas = {}
+    for pairs in (20, 80):
+        angles, said = [], []
+        for _ in range(400):
+            v = rng.normal(0, np.radians(2.0) / np.sqrt(3), (pairs, 3))
+            g = v + rng.normal(0, np.radians(0.4) / np.sqrt(3), v.shape)
+            R = kabsch(v, g)
+            angles.append(Rotation.from_matrix(R).as_rotvec())
+            said.append(_fit_sigma_deg(v @ R.T, g))
+        angles = np.degrees(np.array(angles))
+        assert np.max(np.linalg.norm(angles, axis=1) / np.array(said)) < AXES_SIGMAS
+        sigmas[pairs] = float(np.median(said))
+        worst_axis = np.sqrt(np.linalg.eigvalsh(np.cov(angles.T))[-1])
+        assert sigmas[pairs] == pytest.approx(worst_axis, rel=0.2), (pairs, sigmas[pairs], worst_axis)
+    assert sigmas[20] / sigmas[80] == pytest.approx(2.0, rel=0.2)
 
 
 def test_a_pan_about_one_axis_never_claims_the_imu_is_turned():
@@ -187,3 +238,42 @@ def test_tum_files_are_scored_like_the_run(tmp_path):
     np.testing.assert_allclose(t, gt.t - gt.t[0], atol=1e-9)
     np.testing.assert_allclose(ape, errors.ape_rad, atol=1e-9)
     assert tum_rotation_errors(tmp_path / "est.tum", tmp_path / "missing.tum") is None
+
+
+def _path_of_three(seed=0):
+    """Ground truth of a camera moved by hand over 0.5 s: three poses about 2 cm apart."""
+    rng = np.random.default_rng(seed)
+    t = np.array([0.0, 0.25, 0.5])
+    p = np.array([[0.0, 0.0, 0.0], [0.02, 0.005, 0.0], [0.03, 0.02, 0.004]])
+    return PoseSeries(t, p, Rotation.from_rotvec(rng.normal(0, 0.1, (3, 3))).as_quat())
+
+
+@pytest.mark.parametrize("align, positions, says", [
+    ("sim3", lambda p: p + np.random.default_rng(1).normal(0, 0.01, p.shape), "fix the sim3 alignment's rotation only"),
+    ("se3", lambda p: p + np.random.default_rng(1).normal(0, 0.01, p.shape), "fix the se3 alignment's rotation only"),
+    ("sim3", lambda p: np.array([[10.0, 20, 30], [11, 22, 33], [12, 24, 36 + 1e-9]]), "lie on a line or a point"),
+    ("se3", lambda p: 1e200 * (p + 1), "overflow floating point"),
+])
+def test_an_alignment_the_positions_cannot_fix_is_refused(align, positions, says):
+    """Three poses with the ground truth's rotations: positions off by 1 cm where the path
+    spans 2 cm leave the alignment's rotation free (it turned them by 2.9 rad); positions on
+    a line to within rounding span no plane; positions of 1e200 m overflow under se3."""
+    from eas_vo.evaluation import trajectory_ape
+
+    gt = _path_of_three()
+    with pytest.raises(ValueError, match=says):
+        trajectory_ape(gt, PoseSeries(gt.t, positions(gt.p_w_c), gt.q_w_c), align)
+
+
+def test_an_alignment_needs_its_least_poses_and_reaches_any_finite_scale():
+    from eas_vo.evaluation import trajectory_ape
+
+    gt = _path_of_three()
+    with pytest.raises(ValueError, match="origin alignment needs at least 2"):
+        trajectory_ape(gt, PoseSeries(gt.t[:1], gt.p_w_c[:1], gt.q_w_c[:1]), "origin")
+    with pytest.raises(ValueError, match="sim3 alignment needs at least 3"):
+        trajectory_ape(gt, PoseSeries(gt.t[:2], gt.p_w_c[:2], gt.q_w_c[:2]), "sim3")
+    huge = trajectory_ape(gt, PoseSeries(gt.t, 1e200 * (gt.p_w_c + 1), gt.q_w_c), "sim3")
+    assert huge.scale == pytest.approx(1e-200, rel=1e-9) and huge.summary()["ape_trans_mean_m"] < 1e-12
+    near = trajectory_ape(gt, PoseSeries(gt.t, gt.p_w_c + np.random.default_rng(1).normal(0, 1e-4, (3, 3)), gt.q_w_c), "sim3")
+    assert near.summary()["ape_rot_mean_rad"] < 0.05

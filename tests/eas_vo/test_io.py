@@ -250,8 +250,9 @@ def test_a_lock_held_by_a_zombie_is_taken_over(tmp_path):
 def test_the_cache_is_listed_and_cleared_folder_by_folder(tmp_path, monkeypatch):
     """Sizes count every visible file below a cache folder, never what a link inside points
     to; each folder says what it holds (the latest words); a part that is itself a link to a
-    folder elsewhere is listed and cleared there; clearing keeps hidden files (a write under
-    way), the folders, the others and any link's target; every name is checked first."""
+    folder elsewhere is listed, and never emptied (nor anything else, asked with it); clearing
+    keeps hidden files (a write under way), the folders, the others and any link's target;
+    every name is checked first."""
     from eas_vo.io import CachePart, cache_folder, cache_usage, clear_cache
 
     cache = tmp_path / "cache"
@@ -276,10 +277,13 @@ def test_the_cache_is_listed_and_cleared_folder_by_folder(tmp_path, monkeypatch)
     with pytest.raises(EasVoError, match="cache 'bench': not in .*cache .there: data, events, synthetic"):
         clear_cache(["events", "bench"])
     assert cache_usage()["events"].entries == 2  # nothing removed
-    assert clear_cache(["events", "data", "events"]) == {"events": 100, "data": 9}
-    assert cache_usage() == {"data": CachePart(0, 0, "", True), "events": CachePart(0, 0, "event caches"),
-                             "synthetic": CachePart(1, 57, "")}
-    assert outside.read_bytes() == b"y" * 1000 and (events / ".a.ev.123.tmp").exists() and elsewhere.is_dir()
+    with pytest.raises(EasVoError, match=rf"cache 'data': .*data is a link to {elsewhere}, which eas-vo does not empty"):
+        clear_cache(["events", "data"])
+    assert cache_usage()["events"].entries == 2 and (elsewhere / "seq.zip").read_bytes() == b"d" * 9
+    assert clear_cache(["events", "synthetic", "events"]) == {"events": 100, "synthetic": 57}
+    assert cache_usage() == {"data": CachePart(1, 9, "", True), "events": CachePart(0, 0, "event caches"),
+                             "synthetic": CachePart(0, 0, "")}
+    assert outside.read_bytes() == b"y" * 1000 and (events / ".a.ev.123.tmp").exists() and (elsewhere / "seq.zip").exists()
     monkeypatch.setenv("EAS_VO_CACHE_DIR", str(outside))
     with pytest.raises(EasVoError, match="precious.ev: the cache folder .EAS_VO_CACHE_DIR. is not a folder"):
         cache_usage()

@@ -197,3 +197,43 @@ def test_evaluate_never_writes_over_its_dataset_or_its_estimate(short_sequence, 
         done = run_eas_vo("evaluate", "--dataset", str(dataset), "--estimate", str(estimate), "--out", str(out), "--overwrite")
         assert done.returncode == 2 and says in done.stderr and done.stderr.count("\n") == 1, done.stderr
     assert (dataset / "events.txt").exists() and estimate.exists()
+
+
+@pytest.mark.parametrize("fmt", ["tum", "euroc"])
+def test_frames_that_would_share_an_image_name_are_refused_before_any_work(short_sequence, tmp_path, fmt):
+    """TUM names an image by its time in us, EuRoC in ns: two frames at one such time are named
+    (one image written over the other before); frames 0.3 us apart share a TUM name only."""
+    from eas_vo.config import resolve
+    from eas_vo.errors import EasVoError
+    from eas_vo.orbslam import export
+
+    sequence = tmp_path / "seq"  # the short sequence's files (its event cache too), with other frame times
+    sequence.mkdir()
+    for name in ("events.txt", "calib.txt", "groundtruth.txt", "images"):
+        (sequence / name).symlink_to(short_sequence / name)
+    lines = (short_sequence / "images.txt").read_text().splitlines()
+    t20 = float(lines[20].split()[0])
+    lines[21] = f"{t20 + 3e-7:.9f} {lines[21].split()[1]}"
+    (sequence / "images.txt").write_text("\n".join(lines) + "\n")
+    config = resolve(None, {"dataset": str(sequence), "frontend": "original"})
+    if fmt == "tum":
+        with pytest.raises(EasVoError, match=rf"frames 20 and 21 have one timestamp in the tum layout \({t20:.6f}\)"):
+            export(config, tmp_path / "tum", fmt)
+    else:  # distinct to the ns: every frame its own image, as many as said
+        done = export(config, tmp_path / "euroc", fmt)
+        assert done["frames"] == len(lines) == len(list((tmp_path / "euroc/mav0/cam0/data").iterdir()))
+    lines[10] = f"{lines[9].split()[0]} {lines[10].split()[1]}"
+    (sequence / "images.txt").write_text("\n".join(lines) + "\n")
+    with pytest.raises(EasVoError, match=rf"frames 9 and 10 have one timestamp in the {fmt} layout"):
+        export(resolve(None, {"dataset": str(sequence), "frontend": "original"}), tmp_path / "again", fmt)
+    assert not (tmp_path / "tum").exists() and not (tmp_path / "again").exists()
+
+
+def test_a_label_never_breaks_the_table_row():
+    """A `|`, a newline or a control character in --label: one row of six cells, the `|` escaped."""
+    from eas_vo.orbslam import table2_row
+
+    metrics = {"ape_trans_mean_m": 0.02, "ape_trans_rmse_m": 0.03, "ape_rot_mean_rad": 0.1, "scale": 1.5, "matched_poses": 9}
+    header, rule, row = table2_row("eas | v2\nsecond\tline\x1b", metrics).splitlines()
+    assert row == "| eas \\| v2 second line | 0.020 | 0.030 | 0.100 | 1.5 | 9 |"
+    assert row.replace("\\|", "").count("|") == header.count("|") == 7

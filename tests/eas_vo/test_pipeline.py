@@ -145,7 +145,7 @@ def test_the_gyro_is_reclocked_only_for_a_backend_that_reads_it_and_a_shift_foun
     cfg = config.resolve("best", {"backend": backend, "frontend": frontend},
                          ["run.imu_time_offset_s=0.005", "run.imu_time_offset_auto=true"])
     plugin = registry.get("backends", backend)(cfg.backend)
-    found = ImuAgreement(np.eye(3), 100, 90, 0.6, 0.012, at_limit, 0.004, 0.008)
+    found = ImuAgreement(np.eye(3), 100, 90, 0.6, 0.012, at_limit, 0.004, 0.008, 0.5)
     imu = ImuSeries(np.arange(0.0, 1.0, 0.005), np.zeros((200, 3)), np.ones((200, 3)))
     given, offset = _backend_imu(cfg, plugin, imu, found)
     if reclocked:

@@ -1,0 +1,176 @@
+"""Whether a dataset's gyro can be right, before any work (check_readings), and whether the
+images agree with it, after tracking (judge_gyro).
+
+The readings are taken in the camera frame on the frames' clock (ImuSeries.in_camera_frame).
+What the readings alone can show is refused with one line: rates no gyro measures, a sensor
+that reads one value throughout, fewer readings than frames, no frame interval measured.
+What only the images can show (axes, sign, scale or clock wrong) is judged from the
+confidently measured frame-to-frame rotations: a gyro they contradict is not used.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from eas_vo.errors import EasVoError
+from eas_vo.geometry.rotations import geodesic_angle, gyro_rotation
+from eas_vo.types import MAX_GAP_READINGS, ImuSeries
+
+#: No MEMS gyro measures faster [rad/s]: the widest full scale sold is +-4000 deg/s (e.g.
+#: TDK InvenSense ICM-20649; the DAVIS240's MPU-6150 and the DAVIS346's MPU-6500 reach 2000).
+MAX_GYRO_RAD_S = float(np.radians(4000.0))
+#: Clock units a timestamp column is often written in by mistake, as factors of the second.
+_TIME_UNITS = {"milliseconds": 1e3, "microseconds": 1e6, "nanoseconds": 1e9}
+
+
+def check_readings(imu: ImuSeries, frame_times: np.ndarray, label: str, offset_s: float) -> list[str]:
+    """Refuse (EasVoError) a gyro whose readings cannot be right for the frames at
+    `frame_times` [s] (the run's window); return warnings for what is only incomplete.
+
+    `offset_s`: the run's imu_time_offset_s, named in the messages about coverage."""
+    where = f"{label}: the IMU"
+    n = len(imu.t)
+    if n < 2:
+        raise EasVoError(f"{where} holds {n} reading(s): a gyro needs at least 2 to measure a rotation")
+    rates = np.abs(imu.gyro)
+    if not np.all(np.isfinite(rates)):
+        k = int(np.flatnonzero(~np.isfinite(rates).all(axis=1))[0])
+        raise EasVoError(f"{where}'s reading {k} (t={imu.t[k]:.6f} s) is not finite")
+    k = int(np.argmax(rates.max(axis=1)))
+    if rates[k].max() > MAX_GYRO_RAD_S:
+        raise EasVoError(
+            f"{where}'s reading {k} (t={imu.t[k]:.6f} s) turns at {rates[k].max():.4g} rad/s, faster than any MEMS "
+            f"gyro measures ({MAX_GYRO_RAD_S:.1f} rad/s = 4000 deg/s): the rates must be in rad/s (not deg/s), "
+            "and a glitch must be removed from the file")
+    if np.all(np.ptp(imu.gyro, axis=0) == 0):
+        raise EasVoError(f"{where} reads {_vector(imu.gyro[0])} rad/s in every one of its {n} readings: a gyro's own "
+                         "noise moves its readings, so this one is stuck or not connected")
+    steps = np.diff(frame_times)
+    frames_dt = float(np.median(steps[steps > 0])) if np.any(steps > 0) else np.inf  # repeated times are no interval
+    imu_dt = float(np.median(np.diff(imu.t)))
+    if imu_dt > frames_dt:
+        raise EasVoError(
+            f"{where} reads every {imu_dt:.4g} s ({1 / imu_dt:.4g} Hz), less often than the frames "
+            f"({1 / frames_dt:.4g} Hz): it cannot measure the rotation between two frames{_unit_hint(imu, frame_times)}")
+    t0, t1 = frame_times[:-1], frame_times[1:]
+    covered = imu.covered(t0, t1)
+    span = (f"readings {imu.t[0]:.3f}-{imu.t[-1]:.3f} s on the frames' clock with run.imu_time_offset_s = "
+            f"{offset_s:.10g}; frames {frame_times[0]:.3f}-{frame_times[-1]:.3f} s")
+    if not covered.any():
+        raise EasVoError(f"{where} measures none of the window's {len(t0)} frame intervals ({span}): check the IMU "
+                         f"file's clock and run.imu_time_offset_s{_unit_hint(imu, frame_times)}")
+    if covered.all():
+        return []
+    return [f"the gyro measures {int(covered.sum())} of the window's {len(t0)} frame intervals ({span}; a gap over "
+            f"{MAX_GAP_READINGS} reading intervals counts as none): the others are measured by the images alone"]
+
+
+def _unit_hint(imu: ImuSeries, frame_times: np.ndarray) -> str:
+    """'; are its timestamps in microseconds?' when the IMU's time span is about 1e3, 1e6 or
+    1e9 times the frames' (the readings' rate then looks that much lower)."""
+    ratio = np.ptp(imu.t) / max(np.ptp(frame_times), 1e-12)
+    for unit, factor in _TIME_UNITS.items():
+        if abs(np.log10(ratio / factor)) < 0.5:
+            return f"; are its timestamps in {unit}? they must be in seconds"
+    return ""
+
+
+def _vector(v) -> str:
+    return "[" + ", ".join(f"{x:.6g}" for x in v) + "]"
+
+
+#: A frame-to-frame rotation with this many inliers is a confident measurement of the images
+#: (the 2-point rotation model's RANSAC: 30 inliers leave well under one chance in a million
+#: that an outlier model explains them).
+CONFIDENT_INLIERS = 30
+#: Pairs over which neither the gyro nor the images turned this much [rad] carry no direction
+#: or size to compare (0.5 deg).
+MIN_TURN_RAD = float(np.radians(0.5))
+#: The gyro disagrees with a pair when the angle between the two rotations exceeds this part of
+#: the larger of them: a gyro read in the wrong unit or not at all gives 1 or more, a sign flip 2,
+#: an axis swap 1.4, a clock a frame interval off about 1 at constant motion; a right one on
+#: simulated and real sequences 0.1-0.3 (the images' own noise).
+DISAGREEMENT = 0.5
+#: The images can judge the gyro from this many confident pairs that turned.
+MIN_JUDGED_PAIRS = 10
+
+
+@dataclass(frozen=True)
+class GyroVerdict:
+    """What the images say of the gyro.
+
+    Attributes:
+        judged: confident frame-to-frame rotations (CONFIDENT_INLIERS) over intervals the gyro
+            measures, where either turned at least MIN_TURN_RAD.
+        disagreeing: those whose angle to the gyro's exceeds DISAGREEMENT of the larger rotation.
+        median_off_deg: the median angle [deg] between the two rotations over the judged pairs.
+    """
+
+    judged: int
+    disagreeing: int
+    median_off_deg: float
+
+    @property
+    def can_tell(self) -> bool:
+        return self.judged >= MIN_JUDGED_PAIRS
+
+    @property
+    def contradicts(self) -> bool:
+        """The images contradict the gyro: most judged pairs disagree."""
+        return self.can_tell and self.disagreeing > self.judged / 2
+
+    @property
+    def use(self) -> str:
+        """metrics.json's `gyro`: "used", "used unchecked" (the images cannot tell) or "not used"
+        (they contradict it)."""
+        if self.contradicts:
+            return "not used"
+        return "used" if self.can_tell else "used unchecked"
+
+    def warnings(self, retracked: bool, findings: list[str]) -> list[str]:
+        """The run's warnings on the gyro: one line when it is not used (`retracked`: the frames
+        were tracked again without it) or used without the images' check, joined with the first
+        of the `findings` of the axes and clock checks (evaluation.imu_agreement), then the rest."""
+        if retracked and not self.contradicts:
+            findings = [f"the frames were tracked again without the gyro's predictions (with them the images measured "
+                        f"too little to check it); {self.disagreeing} of {self.judged} confident frame pairs disagree with "
+                        "it"] + findings
+        if self.contradicts:
+            again = "; the frames were tracked again without it" if retracked else ""
+            said = (f"the gyro is not used: {self.disagreeing} of {self.judged} confidently measured frame pairs "
+                    f"disagree with it (median {self.median_off_deg:.2f} deg apart){again}")
+            if not findings:
+                return [f"{said}. Check its units (rad/s), signs, axes (run.imu_rotvec_cam) and clock (run.imu_time_offset_s)"]
+            return [f"{said}; {findings[0]}"] + findings[1:]
+        if not self.can_tell:
+            return [f"the gyro is used unchecked: the images measured {self.judged} turning frame pairs confidently, "
+                    f"at least {MIN_JUDGED_PAIRS} are needed to check it"] + findings
+        return findings
+
+
+def judge_gyro(t: np.ndarray, edges, imu: ImuSeries) -> GyroVerdict:
+    """Compare the consecutive edges' rotations (frame times `t` [s]) with the gyro's over the
+    same intervals, as configured (no axes or clock fitted): GyroVerdict."""
+    steps = [e for e in edges if e.j == e.i + 1 and not e.loop and e.inliers >= CONFIDENT_INLIERS]
+    measured = imu.covered(np.array([t[e.i] for e in steps]), np.array([t[e.j] for e in steps]))
+    steps = [e for e, m in zip(steps, measured) if m]
+    if not steps:
+        return GyroVerdict(0, 0, float("nan"))
+    R_vision = np.stack([e.R_i_j for e in steps])
+    R_gyro = np.stack([gyro_rotation(imu, t[e.i], t[e.j]) for e in steps])
+    judged, disagree, off = disagreement(R_gyro, R_vision)
+    if not judged.any():
+        return GyroVerdict(0, 0, float("nan"))
+    return GyroVerdict(int(judged.sum()), int(disagree.sum()), float(np.degrees(np.median(off[judged]))))
+
+
+def disagreement(R_gyro: np.ndarray, R_vision: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """For rotations over the same intervals (N, 3, 3): which pairs turned enough to compare
+    (MIN_TURN_RAD), which of those disagree (DISAGREEMENT) and the angle between the two [rad]."""
+    identity = np.eye(3)
+    turned = np.maximum(geodesic_angle(identity, R_vision), geodesic_angle(identity, R_gyro))
+    off = geodesic_angle(R_gyro, R_vision)
+    judged = turned >= MIN_TURN_RAD
+    return judged, judged & (off > DISAGREEMENT * turned), off

@@ -1,0 +1,117 @@
+"""The IMU's checks: what its readings alone refuse (known answers on made gyros), and the
+images' verdict on a gyro from exact frame-to-frame rotations."""
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from eas_vo.errors import EasVoError
+from eas_vo.geometry.rotations import gyro_rotation
+from eas_vo.imu_check import CONFIDENT_INLIERS, MAX_GYRO_RAD_S, MIN_JUDGED_PAIRS, check_readings, judge_gyro
+from eas_vo.types import ImuSeries, RelativeRotation
+
+FRAMES = np.arange(0.0, 2.0, 0.05)  # 20 Hz
+
+
+def gyro(t=None, seed=0) -> ImuSeries:
+    """A 200 Hz gyro turning about 1 rad/s about slowly changing axes, with white noise."""
+    t = np.arange(-0.1, 2.1, 0.005) if t is None else t
+    rng = np.random.default_rng(seed)
+    rates = np.column_stack([np.sin(2.0 * t), 0.8 * np.cos(1.3 * t), 0.5 + 0.3 * np.sin(0.7 * t)])
+    return ImuSeries(t, np.zeros_like(rates), rates + rng.normal(0, 0.01, rates.shape))
+
+
+def changed(imu: ImuSeries, t=None, rates=None) -> ImuSeries:
+    return ImuSeries(imu.t if t is None else t, imu.acc, imu.gyro if rates is None else rates)
+
+
+def test_a_right_gyro_passes_without_warning():
+    assert check_readings(gyro(), FRAMES, "seq", 0.0) == []
+
+
+def spiked(imu):
+    rates = imu.gyro.copy()
+    rates[200, 1] = 1000.0
+    return changed(imu, rates=rates)
+
+
+@pytest.mark.parametrize("make, said", [
+    (lambda imu: changed(imu, rates=np.degrees(imu.gyro) * 40), "faster than any MEMS gyro"),  # deg/s, fast
+    (spiked, "reading 200 (t=0.900000 s)"),
+    (lambda imu: changed(imu, rates=imu.gyro * 1e6), "rates must be in rad/s"),
+    (lambda imu: changed(imu, rates=np.zeros_like(imu.gyro)), "stuck or not connected"),
+    (lambda imu: changed(imu, rates=np.ones_like(imu.gyro)), "stuck or not connected"),
+    (lambda imu: ImuSeries(imu.t[::200], imu.acc[::200], imu.gyro[::200]), "less often than the frames"),
+    (lambda imu: changed(imu, t=imu.t * 1e6), "timestamps in microseconds"),
+    (lambda imu: changed(imu, t=imu.t * 1e9), "timestamps in nanoseconds"),
+    (lambda imu: ImuSeries(imu.t[30:32], imu.acc[30:32], imu.gyro[30:32]), "measures none of the window's 39"),
+    (lambda imu: changed(imu, t=imu.t - 100.0), "measures none of the window's 39"),
+    (lambda imu: ImuSeries(imu.t[:1], imu.acc[:1], imu.gyro[:1]), "holds 1 reading"),
+])
+def test_readings_that_cannot_be_right_are_refused(make, said):
+    with pytest.raises(EasVoError, match="^seq: the IMU") as refused:
+        check_readings(make(gyro()), FRAMES, "seq", 0.0)
+    assert said in str(refused.value) and "\n" not in str(refused.value)
+
+
+def test_the_widest_mems_range_is_accepted_and_one_more_refused():
+    imu = gyro()
+    rates = imu.gyro.copy()
+    rates[100, 0] = MAX_GYRO_RAD_S
+    assert check_readings(changed(imu, rates=rates), FRAMES, "seq", 0.0) == []
+    rates[100, 0] = -1.01 * MAX_GYRO_RAD_S
+    with pytest.raises(EasVoError, match="reading 100"):
+        check_readings(changed(imu, rates=rates), FRAMES, "seq", 0.0)
+
+
+def test_a_gyro_that_misses_part_of_the_window_is_a_warning_counting_what_it_measures():
+    imu = gyro()
+    keep = (imu.t < 0.5) | (imu.t > 1.0)  # 0.5 s without readings
+    warnings = check_readings(ImuSeries(imu.t[keep], imu.acc[keep], imu.gyro[keep]), FRAMES, "seq", 0.25)
+    # the 12 frame intervals from [0.45, 0.5] to [1.0, 1.05] cross the gap
+    assert len(warnings) == 1 and "measures 27 of the window's 39 frame intervals" in warnings[0]
+    assert "run.imu_time_offset_s = 0.25" in warnings[0]
+
+
+def test_covered_follows_the_gaps_and_the_ends():
+    t = np.r_[np.arange(0.0, 1.0, 0.005), np.arange(1.1, 2.0, 0.005)]
+    imu = ImuSeries(t, np.zeros((len(t), 3)), np.zeros((len(t), 3)))
+    t0 = np.array([0.0, 0.5, 0.95, 1.05, 1.5, 1.99, -0.1, -0.01, 0.6])
+    t1 = np.array([0.05, 0.55, 1.0, 1.12, 1.55, 2.01, 0.0, 0.0, 0.5])
+    # the last reading's hold (up to four intervals past it) counts; a 0.105 s gap and t1 < t0 do not
+    np.testing.assert_array_equal(imu.covered(t0, t1), [1, 1, 0, 0, 1, 1, 0, 1, 0])
+    assert gyro_rotation(imu, 0.95, 1.0) is None and gyro_rotation(imu, 0.5, 0.55) is not None
+
+
+def edges_from(imu: ImuSeries, inliers=100, skip=()):
+    """Exact consecutive rotations between FRAMES as the gyro measures them."""
+    return [RelativeRotation(k - 1, k, gyro_rotation(imu, FRAMES[k - 1], FRAMES[k]), inliers)
+            for k in range(1, len(FRAMES)) if k not in skip]
+
+
+def test_the_images_agree_with_a_right_gyro_and_contradict_wrong_ones():
+    imu = gyro()
+    right = judge_gyro(FRAMES, edges_from(imu), imu)
+    assert right.can_tell and not right.contradicts and right.use == "used"
+    assert right.judged == len(FRAMES) - 1 and right.disagreeing == 0
+    swap = Rotation.from_euler("z", 90, degrees=True).as_matrix()
+    wrong = {
+        "deg/s": changed(imu, rates=np.degrees(imu.gyro)),
+        "zeros": changed(imu, rates=imu.gyro * 0),
+        "flipped": changed(imu, rates=-imu.gyro),
+        "swapped": changed(imu, rates=imu.gyro @ swap),
+        "late by 0.4 s": changed(imu, t=imu.t - 0.4),
+    }
+    for name, bad in wrong.items():
+        verdict = judge_gyro(FRAMES, edges_from(imu), bad)
+        assert verdict.contradicts and verdict.use == "not used", name
+        assert "the gyro is not used" in verdict.warnings(True, [])[0]
+
+
+def test_the_images_say_when_they_cannot_tell():
+    imu = gyro()
+    few = judge_gyro(FRAMES, edges_from(imu, inliers=CONFIDENT_INLIERS - 1), imu)
+    assert not few.can_tell and few.use == "used unchecked" and few.judged == 0
+    some = judge_gyro(FRAMES, edges_from(imu, skip=range(MIN_JUDGED_PAIRS, 40)), changed(imu, rates=-imu.gyro))
+    assert some.judged == MIN_JUDGED_PAIRS - 1 and not some.contradicts
+    assert "used unchecked" in some.warnings(False, [])[0]
