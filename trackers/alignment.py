@@ -16,29 +16,37 @@ import numpy as np
 
 from eas_vo.types import CameraModel
 
-#: Resolution of the score (a fraction of the sensor's): half a pixel of the sensor is well
-#: below a failed track's error (degrees), and the scale averages the noise.
-SCORE_SCALE = 0.5
-#: Resolutions of the coarse-to-fine alignment: an eighth of the 240 px sensor still holds a
-#: shape; its basin there spans several of its pixels, tens of the sensor's (a lost track's).
-ALIGN_SCALES = (0.125, 0.25, 0.5)
-#: Blur [px] of the coarsest scale where the search ranks its first candidates: it widens the
+#: Focal lengths [px] of the resolutions the alignment and the score work at, whatever the
+#: sensor: each view is resized to them, so every figure below in pixels of a resolution is an
+#: angle (a pixel at 25 px of focal length spans 2.3 deg). Coarse to fine: the coarsest still
+#: holds a shape, its basin spans several of its pixels, tens of degrees (a lost track's);
+#: the finest's half pixel (0.3 deg) is well below a failed track's error, and it averages
+#: the noise. Equal to an eighth, a quarter and half of the DAVIS240's 200 px.
+ALIGN_FOCAL_PX = (25.0, 50.0, 100.0)
+SCORE_FOCAL_PX = 100.0
+#: Blur [px of the coarsest resolution] where the search ranks its first candidates: it widens the
 #: score's peak beyond the grid's half step for scenes of fine texture.
 SEARCH_BLUR_PX = 1.0
-#: Pans and tilts [deg] scored at the coarsest scale besides the given starts: the 43 deg
-#: between frames of the real excerpt's p95 speed at half its frame rate, in steps of an
-#: eighth of the 60 deg field of view; each with these rolls [deg] (half their step, 7.5 deg,
-#: moves the view's edges by about as much as half a step of pan).
+#: Pans and tilts [deg] scored at the coarsest resolution besides the given starts: the 43 deg
+#: between frames of the real excerpt's p95 speed at half its frame rate, in steps of 7.5 deg
+#: (3.3 px there, inside the basin); each with these rolls [deg] (half their step, 7.5 deg,
+#: moves the DAVIS240's view's edges by about as much as half a step of pan).
 SEARCH_GRID_DEG = np.arange(-45.0, 45.1, 7.5)
 SEARCH_ROLL_DEG = (-15.0, 0.0, 15.0)
-#: How many candidates go on to each scale of ALIGN_SCALES (the best-scoring after the last).
+#: How many candidates go on to each resolution of ALIGN_FOCAL_PX (the best-scoring after the last).
 SEARCH_KEEP = (8, 2, 1)
-#: Gauss-Newton steps at each scale, each run stopping sooner once a step moves the view by
-#: under ALIGN_STOP_PX pixels of that scale.
+#: Gauss-Newton steps at each resolution, each run stopping sooner once a step moves the view by
+#: under ALIGN_STOP_PX pixels of that resolution.
 ALIGN_ITERATIONS = 10
 ALIGN_STOP_PX = 0.01
 #: The overlap below which two views share too little to be scored [fraction of the view].
 MIN_OVERLAP = 0.2
+#: A rotation explains two views only where it leaves at most this fraction of the mismatch
+#: (1 - score) that no motion leaves: what beats no motion by less is what noise, a sensor's
+#: fixed pattern or a featureless view give (on dim simulated frames 93 of the 109 alignments
+#: more than 2 deg off leave more; on the real excerpt thinned to every 3rd frame the right
+#: ones leave 0.02-0.64).
+IDENTITY_MARGIN = 0.7
 #: Columns per cv2.remap call (it takes maps under 32767 columns: a 1280 x 720 view has more).
 REMAP_COLUMNS = 32000
 
@@ -50,8 +58,7 @@ class PhotometricAlignment:
         size = (camera.width, camera.height)
         self._maps = cv2.initUndistortRectifyMap(camera.K, camera.dist, None, camera.K, size, cv2.CV_32FC1)
         seen = self._undistort(np.full((camera.height, camera.width), 255, np.uint8)) == 255
-        self._levels = {s: _Level(camera.K, _resized(seen.astype(np.uint8) * 255, s) == 255, s)
-                        for s in sorted({SCORE_SCALE, *ALIGN_SCALES})}
+        self._levels = {f: _Level(camera, seen, f) for f in sorted({SCORE_FOCAL_PX, *ALIGN_FOCAL_PX})}
         self._grid = np.array([cv2.Rodrigues(np.radians([tilt, pan, roll]))[0]
                                for roll in SEARCH_ROLL_DEG for pan in SEARCH_GRID_DEG for tilt in SEARCH_GRID_DEG])
 
@@ -59,48 +66,70 @@ class PhotometricAlignment:
         return cv2.remap(image, *self._maps, cv2.INTER_LINEAR)
 
     def pyramid(self, image: np.ndarray) -> dict:
-        """`image` undistorted at each scale the alignment and the score use, and the coarsest
-        blurred by SEARCH_BLUR_PX (key "search"); float32."""
+        """`image` undistorted at each resolution the alignment and the score use (keyed by
+        their focal lengths [px]), and the coarsest blurred by SEARCH_BLUR_PX (key "search");
+        float32."""
         flat = self._undistort(image).astype(np.float32)
-        levels: dict = {s: _resized(flat, s) for s in self._levels}
-        levels["search"] = cv2.GaussianBlur(levels[ALIGN_SCALES[0]], (0, 0), SEARCH_BLUR_PX)
+        levels: dict = {f: level.resized(flat) for f, level in self._levels.items()}
+        levels["search"] = cv2.GaussianBlur(levels[ALIGN_FOCAL_PX[0]], (0, 0), SEARCH_BLUR_PX)
         return levels
 
     def score(self, source: dict, image: dict, R_source_image: np.ndarray) -> float:
         """How well R_source_image explains the two views (their `pyramid`s): the zero-mean
         normalised cross-correlation of `source` warped into `image`'s view with `image`, over
-        the pixels both see (at SCORE_SCALE); -1 when they share under MIN_OVERLAP of the view
+        the pixels both see (at SCORE_FOCAL_PX); -1 when they share under MIN_OVERLAP of the view
         or either is flat there."""
-        return float(self._levels[SCORE_SCALE].scores([source[SCORE_SCALE]], [image[SCORE_SCALE]], R_source_image[None])[0, 0])
+        f = SCORE_FOCAL_PX
+        return float(self._levels[f].scores([source[f]], [image[f]], R_source_image[None])[0, 0])
 
-    def align(self, source: dict, image: dict, starts: list[np.ndarray]) -> np.ndarray:
+    def explains(self, source: dict, image: dict, R_source_image: np.ndarray) -> bool:
+        """Whether R_source_image explains the two views (`pyramid`s) clearly better than no
+        motion: its score leaves at most IDENTITY_MARGIN of the mismatch (1 - score) that the
+        identity's leaves, and the views share enough to be scored."""
+        score = self.score(source, image, R_source_image)
+        return score > -1.0 and 1.0 - score <= IDENTITY_MARGIN * (1.0 - self.score(source, image, np.eye(3)))
+
+    def align(self, source: dict, image: dict, starts: list[np.ndarray]) -> np.ndarray | None:
         """R_source_image found from the intensities (`pyramid`s): `starts` and the grid of
-        SEARCH_GRID_DEG and SEARCH_ROLL_DEG scored at the coarsest scale, the best SEARCH_KEEP[0]
-        (half by the sharp image's score, half by the blurred one's) refined there by
-        Gauss-Newton on the rotation's three angles, the best SEARCH_KEEP[1] of those at the
-        next scale, and so on; the best of the last."""
+        SEARCH_GRID_DEG and SEARCH_ROLL_DEG scored at the coarsest resolution, the best
+        SEARCH_KEEP[0] (half by the sharp image's score, half by the blurred one's) refined
+        there by Gauss-Newton on the rotation's three angles, the best SEARCH_KEEP[1] of those
+        at the next resolution, and so on; the best of the last. None where it does not
+        explain the views clearly better than no motion (`explains`)."""
         candidates = np.concatenate([np.asarray(starts, float).reshape(-1, 3, 3), self._grid])
-        for scale, keep in zip(ALIGN_SCALES, SEARCH_KEEP):
-            level = self._levels[scale]
-            if scale == ALIGN_SCALES[0]:  # half ranked sharp, half blurred
-                sharp, blurred = np.argsort(-level.scores([source[scale], source["search"]], [image[scale], image["search"]], candidates))
+        for f, keep in zip(ALIGN_FOCAL_PX, SEARCH_KEEP):
+            level = self._levels[f]
+            if f == ALIGN_FOCAL_PX[0]:  # half ranked sharp, half blurred
+                sharp, blurred = np.argsort(-level.scores([source[f], source["search"]], [image[f], image["search"]], candidates))
                 order = list(dict.fromkeys([*sharp[: keep // 2], *blurred[:keep], *sharp]))[:keep]
             else:
-                order = np.argsort(-level.scores([source[scale]], [image[scale]], candidates)[0])[:keep]
-            candidates = level.refine(source[scale], image[scale], candidates[np.asarray(order)])
-        last = ALIGN_SCALES[-1]
-        return candidates[int(np.argmax(self._levels[last].scores([source[last]], [image[last]], candidates)[0]))]
+                order = np.argsort(-level.scores([source[f]], [image[f]], candidates)[0])[:keep]
+            candidates = level.refine(source[f], image[f], candidates[np.asarray(order)])
+        last = ALIGN_FOCAL_PX[-1]
+        best = candidates[int(np.argmax(self._levels[last].scores([source[last]], [image[last]], candidates)[0]))]
+        return best if self.explains(source, image, best) else None
 
 
 class _Level:
-    """One scale of the undistorted views: the image view's pixels (those the lens sees) as
-    bearings, for scoring and refining rotations there."""
+    """One resolution of the undistorted views, `focal_px` [px] of focal length along each axis
+    (the sensor's at most; pixels that are not square become square): the image view's pixels
+    (those the lens sees, `seen` at the sensor's size) as bearings, for scoring and refining
+    rotations there."""
 
-    def __init__(self, K: np.ndarray, seen: np.ndarray, scale: float):
-        self.K = np.diag([scale, scale, 1.0]) @ K
-        self.shape, self.seen = seen.shape, seen
-        self.ys, self.xs = np.nonzero(seen)
+    def __init__(self, camera: CameraModel, seen: np.ndarray, focal_px: float):
+        fx, fy = camera.K[0, 0], camera.K[1, 1]
+        self.size = (max(round(camera.width * min(focal_px / fx, 1.0)), 2), max(round(camera.height * min(focal_px / fy, 1.0)), 2))
+        sx, sy = self.size[0] / camera.width, self.size[1] / camera.height
+        # cv2.resize keeps pixel centres in place: x' + 0.5 = sx (x + 0.5)
+        self.K = np.array([[sx, 0.0, 0.5 * (sx - 1.0)], [0.0, sy, 0.5 * (sy - 1.0)], [0.0, 0.0, 1.0]]) @ camera.K
+        self.seen = self.resized(seen.astype(np.uint8) * 255) == 255
+        self.shape = self.seen.shape
+        self.ys, self.xs = np.nonzero(self.seen)
         self.bearings = np.linalg.inv(self.K) @ np.stack([self.xs, self.ys, np.ones_like(self.xs)]).astype(float)  # (3, N)
+
+    def resized(self, image: np.ndarray) -> np.ndarray:
+        """`image` (the sensor's size) at this resolution."""
+        return cv2.resize(image, self.size, interpolation=cv2.INTER_AREA)
 
     def _sample(self, source: np.ndarray, Rs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """`source` at where each rotation of Rs (C, 3, 3) puts the image view's pixels: values
@@ -137,7 +166,7 @@ class _Level:
         """Each R_source_image of Rs (C, 3, 3) refined by inverse-compositional Gauss-Newton on
         the squared difference of the two views (each normalised to zero mean and unit variance
         over the pixels both see), all at once, up to ALIGN_ITERATIONS steps, stopping once no
-        step moves the view by ALIGN_STOP_PX at this scale."""
+        step moves the view by ALIGN_STOP_PX at this resolution."""
         target = image[self.ys, self.xs].astype(float)
         gx = cv2.Sobel(image, cv2.CV_32F, 1, 0, ksize=3)[self.ys, self.xs] / 8
         gy = cv2.Sobel(image, cv2.CV_32F, 0, 1, ksize=3)[self.ys, self.xs] / 8
@@ -165,10 +194,6 @@ class _Level:
             if np.linalg.norm(deltas, axis=1).max() * fx < ALIGN_STOP_PX:
                 break
         return Rs
-
-
-def _resized(image: np.ndarray, scale: float) -> np.ndarray:
-    return cv2.resize(image, None, fx=scale, fy=scale, interpolation=cv2.INTER_AREA)
 
 
 @numba.njit(cache=True, nogil=True)

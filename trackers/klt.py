@@ -66,7 +66,10 @@ class KltConfig(LoopClosureConfig, TwoViewConfig):
             gtsam graph; at four times the synthetic speed it made the run 2.5x slower for no
             gain), the two views are aligned by their
             intensities (a coarse search over pan, tilt and roll, then Gauss-Newton coarse to
-            fine), and LK tracks corners detected afresh from that rotation. That measurement
+            fine, at resolutions of fixed focal length whatever the sensor) and, where that
+            rotation explains them clearly better than no motion, LK tracks corners detected
+            afresh from that rotation (where it does not, LK's step stays if it does, else the
+            frame is `lost`: no measurement). That measurement
             replaces LK's if it is not weak; otherwise whichever of LK's step, the retried one
             and the alignment alone explains the two images best (the alignment alone: an edge
             without correspondences, inliers 0, `weak`). It keeps frames-only tracking through
@@ -223,9 +226,12 @@ class KltTracker(Tracker):
             pyramid = self._alignment.pyramid(image)
             aligned = self._aligned_step(image, pyramid, predicted, step, k)
             if aligned is not None:
-                (step, n_aligned), edges = aligned, [aligned[0]]
-                record = frame_record(c, self.camera, k, t, n_aligned, step, True, True)
-                if n_aligned == 0:
+                step, n_aligned = aligned
+                edges = [step] if step is not None else []
+                record = frame_record(c, self.camera, k, t, n_aligned if step is not None else nc, step, True, True)
+                if step is None:
+                    record = replace(record, reason="no rotation explains the two images clearly better than no motion")
+                elif n_aligned == 0:
                     record = replace(record, reason="aligned by intensities alone (no correspondences)")
         self._prev_pyramid = pyramid
         self._last_step = (step.R_i_j, t - t_prev) if step is not None else None
@@ -241,8 +247,9 @@ class KltTracker(Tracker):
 
     def _aligned_step(self, image: np.ndarray, pyramid: dict, predicted: np.ndarray | None, step: RelativeRotation | None, k: int):
         """A missing LK step, or one with too few inliers, replaced by direct alignment (see
-        KltConfig.fallback): (the new step, its correspondence count), or None to keep LK's
-        (also when no rotation explains the two images: they share nothing, or one is flat)."""
+        KltConfig.fallback): (the new step, its correspondence count), or None to keep LK's;
+        (None, 0) where neither the alignment nor LK's step explains the two images clearly
+        better than no motion (PhotometricAlignment.explains): no measurement."""
         align = self._alignment
         source = self._prev_pyramid or align.pyramid(self._prev_image)
 
@@ -250,6 +257,8 @@ class KltTracker(Tracker):
             return align.score(source, pyramid, R_prev_cur)
 
         R_aligned = align.align(source, pyramid, [np.eye(3)] if predicted is None else [predicted, np.eye(3)])
+        if R_aligned is None:
+            return None if step is None or align.explains(source, pyramid, step.R_i_j) else (None, 0)
         corners = self.detect(self._prev_image)
         cur, ok = lk_track(self.camera, self._prev_image, corners, image, self._lk_params, R_aligned, self.config.fb_max_px)
         retried = measure(self.config, self.camera, corners[ok], cur[ok], k - 1, k) if ok.sum() >= self.config.threshold1 else None
