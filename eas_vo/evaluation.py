@@ -4,7 +4,7 @@ IMU's gyro agrees with the tracked rotations."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -175,6 +175,7 @@ class ImuAgreement:
         turned_sigma_deg: the standard deviation [deg] of R's angle about its least certain
             axis, from the agreeing pairs' scatter about the fit (_fit_sigma_deg): fewer pairs,
             smaller rotations or noisier images make it larger.
+        mirrored: the fit is of the gyro's rates negated, -g = R v (its axes mirrored).
     """
 
     R: np.ndarray
@@ -186,6 +187,7 @@ class ImuAgreement:
     residual_rad: float
     residual_unshifted_rad: float
     turned_sigma_deg: float
+    mirrored: bool = False
 
     @property
     def turned_deg(self) -> float:
@@ -206,7 +208,19 @@ def imu_agreement(t: np.ndarray, edges, imu: ImuSeries) -> ImuAgreement | None:
     """Compare the rotation vectors of the consecutive edges (camera frame) with the gyro's
     over the same frame times [s] (`imu` in the camera frame, on the frames' clock): the
     rotation between them (_fit_axes) and the gyro's clock (_best_clock_shift), redone at the
-    new clock until it moves less than 1 ms. None without 20 pairs to compare."""
+    new clock until it moves less than 1 ms. None without 20 pairs to compare. The gyro's rates
+    negated are fitted too (a mirrored axis convention, which no rotation undoes: a rotation by
+    180 deg explains the half of them about two axes), and kept, `mirrored`, where more pairs
+    agree with them."""
+    found = _agreement(t, edges, imu)
+    mirrored = _agreement(t, edges, ImuSeries(imu.t, imu.acc, -imu.gyro))
+    if mirrored is not None and (found is None or mirrored.agreeing > found.agreeing):
+        return replace(mirrored, mirrored=True)
+    return found
+
+
+def _agreement(t: np.ndarray, edges, imu: ImuSeries) -> ImuAgreement | None:
+    """imu_agreement for the gyro's rates as they are."""
     steps = [e for e in edges if e.j == e.i + 1 and 0 <= e.i < len(t) - 1]
     t0 = np.array([t[e.i] for e in steps], float)
     t1 = np.array([t[e.j] for e in steps], float)

@@ -407,8 +407,8 @@ def _conclusive(agreement: ImuAgreement | None) -> bool:
 def _axes_off(agreement: ImuAgreement | None) -> bool:
     """Whether the gyro agrees with the images only turned by more than IMU_DISAGREEMENT_DEG
     and AXES_SIGMAS times the fit's own uncertainty (about more than one axis: MIN_SPREAD)."""
-    return (_conclusive(agreement) and agreement.spread >= MIN_SPREAD
-            and agreement.turned_deg > max(IMU_DISAGREEMENT_DEG, AXES_SIGMAS * agreement.turned_sigma_deg))
+    return _conclusive(agreement) and agreement.spread >= MIN_SPREAD and (
+        agreement.mirrored or agreement.turned_deg > max(IMU_DISAGREEMENT_DEG, AXES_SIGMAS * agreement.turned_sigma_deg))
 
 
 def _clock_is_off(agreement: ImuAgreement | None) -> bool:
@@ -484,7 +484,8 @@ def _imu_axes_warning(config: ResolvedConfig, agreement) -> str:
     R_imu_cam = R_configured @ agreement.R
     axes = min(_axis_rotations(), key=lambda R: geodesic_angle(R, R_imu_cam))
     off = np.degrees(geodesic_angle(axes, R_imu_cam))
-    if off < AXES_SNAP_DEG and np.degrees(geodesic_angle(axes, R_configured)) > IMU_DISAGREEMENT_DEG:
+    moved = agreement.mirrored or np.degrees(geodesic_angle(axes, R_configured)) > IMU_DISAGREEMENT_DEG
+    if off < AXES_SNAP_DEG and moved:
         kind = "the identity" if np.allclose(axes, np.eye(3)) else "axes swapped or flipped"
         looks, how = axes, f"{kind}, {off:.1f} deg from the fit"
     else:
@@ -493,6 +494,11 @@ def _imu_axes_warning(config: ResolvedConfig, agreement) -> str:
     def vector(v) -> str:
         return "[" + ", ".join(f"{float(x) + 0.0:.10g}" if abs(x) > 1e-12 else "0" for x in v) + "]"
 
+    if agreement.mirrored:
+        return (f"the gyro agrees with the tracked rotations only with its rates negated ({agreement.agreeing} of "
+                f"{agreement.pairs} frame pairs): its axes are mirrored (a left-handed convention), which no "
+                f"run.imu_rotvec_cam undoes; negate its rates in the file, then run.imu_rotvec_cam = "
+                f"{vector(matrix_to_rotvec(looks))} ({how})")
     return (f"the gyro agrees with the tracked rotations only turned by {agreement.turned_deg:.1f} deg ({agreement.agreeing} of "
             f"{agreement.pairs} frame pairs): the IMU looks mounted as run.imu_rotvec_cam = {vector(matrix_to_rotvec(looks))} "
             f"({how}), not {vector(config.run.imu_rotvec_cam)}; check it and the camera calibration")

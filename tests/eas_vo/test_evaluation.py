@@ -120,17 +120,19 @@ def test_a_time_offset_without_a_clear_best_fit_is_not_an_estimate():
         assert estimate_time_offset(t_frames, edges, moving) == pytest.approx(late_s, abs=0.001)
 
 
+@pytest.mark.parametrize("mirrored", [False, True])
 @pytest.mark.parametrize("R_imu_cam", [np.eye(3), Rotation.from_rotvec([0, 0, np.pi / 2]).as_matrix(),
                                        Rotation.from_rotvec([0.1, -0.25, 0.05]).as_matrix()])
-def test_imu_agreement_finds_how_the_gyro_is_turned(R_imu_cam):
-    """A 200 Hz gyro mounted as R_imu_cam (white noise, constant bias), read as if mounted at
-    the identity; 20 Hz tracked rotations with 0.2 deg noise, 3 % too small (lagging events),
-    and a third of them replaced by random rotations: the fit finds R_imu_cam within 1 deg and
-    tells the failed third apart."""
+def test_imu_agreement_finds_how_the_gyro_is_turned(R_imu_cam, mirrored):
+    """A 200 Hz gyro mounted as R_imu_cam (white noise, constant bias), its axes mirrored (rates
+    negated) or not, read as if mounted at the identity; 20 Hz tracked rotations with 0.2 deg
+    noise, 3 % too small (lagging events), and a third of them replaced by random rotations: the
+    fit finds R_imu_cam within 1 deg, whether it is mirrored, and tells the failed third apart."""
     rng = np.random.default_rng(4)
     t_imu = np.arange(0.0, 10.0, 0.005)
     omega_cam = np.stack([np.convolve(rng.normal(0, 2.0, len(t_imu)), np.ones(40) / 40 * 6, mode="same") for _ in range(3)], 1)
-    gyro = omega_cam @ R_imu_cam.T + np.array([0.01, -0.005, 0.008]) + rng.normal(0, 0.003 * np.sqrt(200), omega_cam.shape)
+    sign = -1.0 if mirrored else 1.0
+    gyro = sign * omega_cam @ R_imu_cam.T + np.array([0.01, -0.005, 0.008]) + rng.normal(0, 0.003 * np.sqrt(200), omega_cam.shape)
     imu = ImuSeries(t_imu, np.zeros_like(gyro), gyro).in_camera_frame(np.eye(3), 0.0)
     truth = ImuSeries(t_imu, np.zeros_like(omega_cam), omega_cam)
     t = np.arange(0.2, 9.8, 0.05)
@@ -142,7 +144,7 @@ def test_imu_agreement_finds_how_the_gyro_is_turned(R_imu_cam):
         R = Rotation.from_rotvec(step) * Rotation.from_rotvec(rng.normal(0, np.radians(0.2) / np.sqrt(3), 3))
         edges.append(RelativeRotation(k - 1, k, R.as_matrix()))
     agreement = imu_agreement(t, edges, imu)
-    assert np.degrees(geodesic_angle(agreement.R, R_imu_cam)) < 1.0
+    assert np.degrees(geodesic_angle(agreement.R, R_imu_cam)) < 1.0 and agreement.mirrored == mirrored
     assert 0.55 * agreement.pairs < agreement.agreeing < 0.75 * agreement.pairs
     assert imu_agreement(t[:15], edges[:14], imu) is None  # too few frame pairs to tell
 

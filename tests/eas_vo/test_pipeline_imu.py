@@ -162,3 +162,13 @@ def test_a_run_tracked_again_keeps_one_frames_csv_of_the_tracking_it_used(rig, t
     with open(tmp_path / "out" / "frames.csv") as f:
         logged = [int(row["inliers"]) for row in csv.DictReader(f)]
     assert logged == [r.inliers for r in result.records]
+
+
+def test_a_mirrored_gyro_is_named_for_what_it_is(rig):
+    """Rates negated (a left-handed axis convention) are no rotation of the IMU: the warning
+    says to negate them, not a run.imu_rotvec_cam that cannot undo it."""
+    sequence, rows, _, root = rig
+    said, metrics = outcome(with_imu(sequence, root / "mirrored", scaled(rows, -1.0)))
+    assert said == "warned" and metrics["gyro"] == "not used"
+    (line,) = [w for w in metrics["data_warnings"] if "gyro" in w]
+    assert "its axes are mirrored" in line and "negate its rates in the file" in line
