@@ -15,7 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from eas_vo.errors import EasVoError
-from eas_vo.geometry.rotations import geodesic_angle, gyro_rotation
+from eas_vo.geometry.rotations import geodesic_angle, gyro_rotation, matrix_to_rotvec
 from eas_vo.types import MAX_GAP_READINGS, ImuSeries
 
 #: No MEMS gyro measures faster [rad/s]: the widest full scale sold is +-4000 deg/s (e.g.
@@ -95,6 +95,17 @@ MIN_TURN_RAD = float(np.radians(0.5))
 DISAGREEMENT = 0.5
 #: The images can judge the gyro from this many confident pairs that turned.
 MIN_JUDGED_PAIRS = 10
+#: A gyro turning this much more or less than the images (its fitted scale off 1 by more, and
+#: by more than FIT_SIGMAS of the fit's standard error) is wrong: a MEMS gyro's sensitivity is
+#: within 3 % of its datasheet's; right gyros on 2 s simulated sequences fitted 0.88-1.01.
+MAX_SCALE_ERROR = 0.2
+#: A gyro reading this much [rad/s] more than the images turn, constantly (its fitted bias's
+#: norm, and beyond FIT_SIGMAS of the fit's standard error), has a bias the pose graph's prior
+#: cannot absorb (backend.gyro_bias_sigma: 0.01). The images' own systematic error looks like a
+#: bias of up to 0.09 on right gyros (2 s simulated sequences, mostly about the optical axis),
+#: so a smaller bias cannot be told from it.
+MAX_BIAS_RAD_S = 0.15
+FIT_SIGMAS = 4.0
 
 
 @dataclass(frozen=True)
@@ -106,11 +117,28 @@ class GyroVerdict:
             measures, where either turned at least MIN_TURN_RAD.
         disagreeing: those whose angle to the gyro's exceeds DISAGREEMENT of the larger rotation.
         median_off_deg: the median angle [deg] between the two rotations over the judged pairs.
+        scale, scale_se: the gyro's rotation vectors over the judged pairs fitted as scale times
+            the images' plus a constant bias times the interval (least squares), and its
+            standard error.
+        bias_rad_s, bias_se_rad_s: that bias's norm [rad/s] and its standard error.
     """
 
     judged: int
     disagreeing: int
     median_off_deg: float
+    scale: float = 1.0
+    scale_se: float = 0.0
+    bias_rad_s: float = 0.0
+    bias_se_rad_s: float = 0.0
+
+    @property
+    def scale_off(self) -> bool:
+        off = abs(self.scale - 1.0)
+        return off > MAX_SCALE_ERROR and off > FIT_SIGMAS * self.scale_se
+
+    @property
+    def bias_off(self) -> bool:
+        return self.bias_rad_s > MAX_BIAS_RAD_S and self.bias_rad_s > FIT_SIGMAS * self.bias_se_rad_s
 
     @property
     def can_tell(self) -> bool:
@@ -118,8 +146,8 @@ class GyroVerdict:
 
     @property
     def contradicts(self) -> bool:
-        """The images contradict the gyro: most judged pairs disagree."""
-        return self.can_tell and self.disagreeing > self.judged / 2
+        """The images contradict the gyro: most judged pairs disagree, or its scale or bias is off."""
+        return self.can_tell and (self.disagreeing > self.judged / 2 or self.scale_off or self.bias_off)
 
     @property
     def use(self) -> str:
@@ -139,8 +167,7 @@ class GyroVerdict:
                         "it"] + findings
         if self.contradicts:
             again = "; the frames were tracked again without it" if retracked else ""
-            said = (f"the gyro is not used: {self.disagreeing} of {self.judged} confidently measured frame pairs "
-                    f"disagree with it (median {self.median_off_deg:.2f} deg apart){again}")
+            said = f"the gyro is not used: {self._why()}{again}"
             if not findings:
                 return [f"{said}. Check its units (rad/s), signs, axes (run.imu_rotvec_cam) and clock (run.imu_time_offset_s)"]
             return [f"{said}; {findings[0]}"] + findings[1:]
@@ -148,6 +175,17 @@ class GyroVerdict:
             return [f"the gyro is used unchecked: the images measured {self.judged} turning frame pairs confidently, "
                     f"at least {MIN_JUDGED_PAIRS} are needed to check it"] + findings
         return findings
+
+    def _why(self) -> str:
+        if self.disagreeing > self.judged / 2:
+            return (f"{self.disagreeing} of {self.judged} confidently measured frame pairs disagree with it "
+                    f"(median {self.median_off_deg:.2f} deg apart)")
+        if self.scale_off:
+            return (f"it turns {self.scale:.2f} times as far as the images over {self.judged} confidently measured "
+                    f"frame pairs (+-{self.scale_se:.2f}; a MEMS gyro is within a few percent)")
+        return (f"it reads {self.bias_rad_s:.3f} rad/s (+-{self.bias_se_rad_s:.3f}) more than the images turn, "
+                f"constantly, over {self.judged} confidently measured frame pairs: a bias beyond the pose graph's "
+                "prior (calibrate it, or set backend.gyro_bias_sigma)")
 
 
 def judge_gyro(t: np.ndarray, edges, imu: ImuSeries) -> GyroVerdict:
@@ -163,7 +201,26 @@ def judge_gyro(t: np.ndarray, edges, imu: ImuSeries) -> GyroVerdict:
     judged, disagree, off = disagreement(R_gyro, R_vision)
     if not judged.any():
         return GyroVerdict(0, 0, float("nan"))
-    return GyroVerdict(int(judged.sum()), int(disagree.sum()), float(np.degrees(np.median(off[judged]))))
+    dt = np.array([t[e.j] - t[e.i] for e in steps])[judged]
+    fitted = _scale_and_bias(matrix_to_rotvec(R_vision[judged]), matrix_to_rotvec(R_gyro[judged]), dt)
+    return GyroVerdict(int(judged.sum()), int(disagree.sum()), float(np.degrees(np.median(off[judged]))), *fitted)
+
+
+def _scale_and_bias(v: np.ndarray, g: np.ndarray, dt: np.ndarray) -> tuple[float, float, float, float]:
+    """g = scale v + bias dt for rotation vectors v (the images') and g (the gyro's) (N, 3) [rad]
+    over intervals dt (N,) [s], by least squares: the scale, its standard error, the bias's norm
+    [rad/s] and its standard error (the largest axis's)."""
+    A = np.zeros((3 * len(v), 4))
+    A[:, 0] = v.ravel()
+    for axis in range(3):
+        A[axis::3, 1 + axis] = dt
+    if len(v) < 3 or np.linalg.matrix_rank(A) < 4:
+        return 1.0, np.inf, 0.0, np.inf
+    x, *_ = np.linalg.lstsq(A, g.ravel(), rcond=None)
+    residual = g.ravel() - A @ x
+    covariance = residual @ residual / (len(residual) - 4) * np.linalg.inv(A.T @ A)
+    se = np.sqrt(np.diag(covariance))
+    return float(x[0]), float(se[0]), float(np.linalg.norm(x[1:])), float(se[1:].max())
 
 
 def disagreement(R_gyro: np.ndarray, R_vision: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -115,3 +115,18 @@ def test_the_images_say_when_they_cannot_tell():
     some = judge_gyro(FRAMES, edges_from(imu, skip=range(MIN_JUDGED_PAIRS, 40)), changed(imu, rates=-imu.gyro))
     assert some.judged == MIN_JUDGED_PAIRS - 1 and not some.contradicts
     assert "used unchecked" in some.warnings(False, [])[0]
+
+
+@pytest.mark.parametrize("scale, bias, verdict", [
+    (1.0, 0.0, "used"), (1.03, 0.01, "used"),  # within a MEMS gyro's tolerance and the graph's prior
+    (0.7, 0.0, "not used"), (1.3, 0.0, "not used"), (1.0, 0.25, "not used"),
+])
+def test_a_gyro_turning_too_far_or_reading_a_constant_bias_is_contradicted(scale, bias, verdict):
+    imu = gyro()
+    edges = edges_from(imu)
+    wrong = changed(imu, rates=imu.gyro * scale + np.array([bias, -bias, bias]) / np.sqrt(3))
+    judged = judge_gyro(FRAMES, edges, wrong)
+    assert judged.use == verdict and judged.scale == pytest.approx(scale, abs=0.01)
+    assert judged.bias_rad_s == pytest.approx(bias, abs=0.01)
+    if verdict == "not used":
+        assert ("times as far" if scale != 1.0 else "rad/s (+-") in judged.warnings(False, [])[0]

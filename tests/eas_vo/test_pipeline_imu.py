@@ -1,7 +1,12 @@
 """A wrong gyro never gives a confident wrong result: on a simulated sequence with best.toml
 (which fuses the gyro and predicts LK from it), every way a gyro goes wrong is refused before
 any work, warned about in one line, or gives an APE no worse than the run without the IMU
-(plus TOLERANCE_RAD)."""
+(plus TOLERANCE_RAD).
+
+Not covered, because it is not met: a constant bias between about 0.03 and 0.15 rad/s, which
+the images' own systematic error hides on a 2 s sequence (imu_check.MAX_BIAS_RAD_S) and the
+pose graph's bias prior (backend.gyro_bias_sigma) does not absorb: at 0.05 rad/s on seed 0 the
+run reads 0.069 rad against 0.031 without the IMU."""
 
 from __future__ import annotations
 
@@ -78,6 +83,9 @@ CASES = {
     "a 1000 rad/s spike": (lambda r: np.vstack([r[:200], r[200] + [0, 0, 0, 0, 1000, 0, 0], r[201:]]), ()),
     "scaled by 1e6": (lambda r: scaled(r, 1e6), ()),
     "scaled by 20": (lambda r: scaled(r, 20.0), ()),  # within range: misleads LK until nothing is confident
+    "scaled by 0.6": (lambda r: scaled(r, 0.6), ()),
+    "scaled by 1.5": (lambda r: scaled(r, 1.5), ()),
+    "a bias of 0.3 rad/s": (lambda r: r + [0, 0, 0, 0, 0.2, -0.15, 0.15], ()),
     "timestamps in microseconds": (lambda r: scaled(r, 1e6, 0), ()),
     "its clock 1 s off": (lambda r: r, ("run.imu_time_offset_s=1.0",)),
     "axes swapped": (swapped, ()),
@@ -98,10 +106,17 @@ def test_a_grossly_wrong_gyro_is_refused_or_not_used(rig, case):
     assert metrics["ape_mean_rad"] <= without + TOLERANCE_RAD
 
 
-def perturbed(rows: np.ndarray, how: dict) -> tuple[np.ndarray, list[str]]:
-    """The IMU rows changed as hypothesis drew (a unit, a scale, axes, a clock, a gap, a spike, a rate)."""
+#: What each perturbation leaves as it was: hypothesis changes one or two of them per example.
+UNCHANGED = {"axes": np.eye(3), "scale": 1.0, "bias": np.zeros(3), "time_unit": 1.0, "offset": 0.0, "gap": None,
+             "spike": None, "every": 1}
+
+
+def perturbed(rows: np.ndarray, drawn: dict, changes: set) -> tuple[np.ndarray, list[str]]:
+    """The IMU rows changed as hypothesis drew (`drawn`, only the `changes` of UNCHANGED's keys):
+    axes, a scale, a bias, a time unit, a clock offset, a gap, a spike, a rate."""
+    how = {key: drawn[key] if key in changes else value for key, value in UNCHANGED.items()}
     out = rows.copy()
-    out[:, 4:7] = out[:, 4:7] @ how["axes"].T * how["scale"]
+    out[:, 4:7] = out[:, 4:7] @ how["axes"].T * how["scale"] + how["bias"]
     out[:, 0] = out[:, 0] * how["time_unit"]
     if how["gap"] is not None:
         start, length = how["gap"]
@@ -126,26 +141,27 @@ def signed_permutations():
 
 
 perturbations = st.fixed_dictionaries({
-    "axes": st.one_of(st.just(np.eye(3)), st.sampled_from(signed_permutations()),
+    "axes": st.one_of(st.sampled_from(signed_permutations()),
                       st.floats(-np.pi, np.pi).map(lambda a: Rotation.from_rotvec([0.3 * a, -0.5 * a, 0.8 * a]).as_matrix())),
-    "scale": st.sampled_from([1.0, 1.0, np.degrees(1.0), np.radians(1.0), 0.5, 2.0, 1e3, 0.0, -1.0]),
-    "time_unit": st.sampled_from([1.0, 1.0, 1e3, 1e6, 1e9]),
-    "offset": st.sampled_from([0.0, 0.0, 0.005, -0.02, 0.1, -0.5, 1.0, 100.0]),
-    "gap": st.one_of(st.none(), st.tuples(st.floats(0.0, 1.8), st.floats(0.02, 1.0))),
-    "spike": st.one_of(st.none(), st.tuples(st.integers(0, 399), st.sampled_from([5.0, 30.0, -60.0, 1000.0]))),
-    "every": st.sampled_from([1, 1, 2, 5, 20, 200]),
+    "scale": st.sampled_from([np.degrees(1.0), np.radians(1.0), 0.5, 0.7, 1.4, 2.0, 1e3, 0.0, -1.0]),
+    "bias": st.sampled_from([np.array([0.2, -0.15, 0.1]), np.array([0.0, 0.0, -0.5])]),
+    "time_unit": st.sampled_from([1e3, 1e6, 1e9]),
+    "offset": st.sampled_from([0.005, -0.02, 0.1, -0.5, 1.0, 100.0]),
+    "gap": st.tuples(st.floats(0.0, 1.8), st.floats(0.02, 1.0)),
+    "spike": st.tuples(st.integers(0, 399), st.sampled_from([5.0, 30.0, -60.0, 1000.0])),
+    "every": st.sampled_from([2, 5, 20, 200]),
 })
 
 
-@settings(max_examples=25, deadline=None, derandomize=True, suppress_health_check=[HealthCheck.function_scoped_fixture])
-@given(how=perturbations)
-def test_any_wrong_gyro_is_refused_warned_or_harmless(rig, how):
+@settings(max_examples=30, deadline=None, derandomize=True, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(drawn=perturbations, changes=st.sets(st.sampled_from(sorted(UNCHANGED)), min_size=1, max_size=2))
+def test_any_wrong_gyro_is_refused_warned_or_harmless(rig, drawn, changes):
     sequence, rows, without, root = rig
-    made, assignments = perturbed(rows, how)
+    made, assignments = perturbed(rows, drawn, changes)
     folder = root / f"h{len(list(root.iterdir()))}"
     said, metrics = outcome(with_imu(sequence, folder, made), *assignments)
     event(said if metrics is None else f"{said}, gyro {metrics['gyro']}")
-    assert said != "silent" or metrics["ape_mean_rad"] <= without + TOLERANCE_RAD, (how, metrics)
+    assert said != "silent" or metrics["ape_mean_rad"] <= without + TOLERANCE_RAD, (changes, drawn, metrics)
 
 
 def test_a_run_tracked_again_keeps_one_frames_csv_of_the_tracking_it_used(rig, tmp_path):
