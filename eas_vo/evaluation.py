@@ -204,15 +204,21 @@ CLOCK_SEARCH_S = 0.05
 CLOCK_ROUNDS = 4
 
 
+#: The gyro's rates negated are fitted only when its own fit is turned this much [deg] or more.
+MIRROR_TRIED_DEG = 10.0
+
+
 def imu_agreement(t: np.ndarray, edges, imu: ImuSeries) -> ImuAgreement | None:
     """Compare the rotation vectors of the consecutive edges (camera frame) with the gyro's
     over the same frame times [s] (`imu` in the camera frame, on the frames' clock): the
     rotation between them (_fit_axes) and the gyro's clock (_best_clock_shift), redone at the
     new clock until it moves less than 1 ms. None without 20 pairs to compare. The gyro's rates
-    negated are fitted too (a mirrored axis convention, which no rotation undoes: a rotation by
-    180 deg explains the half of them about two axes), and kept, `mirrored`, where more pairs
-    agree with them."""
+    negated are fitted too where the fit is not near the identity (a mirrored axis convention,
+    which no rotation undoes: a rotation by 180 deg explains the half of them about two axes),
+    and kept, `mirrored`, where more pairs agree with them."""
     found = _agreement(t, edges, imu)
+    if found is not None and found.turned_deg < MIRROR_TRIED_DEG:
+        return found
     mirrored = _agreement(t, edges, ImuSeries(imu.t, imu.acc, -imu.gyro))
     if mirrored is not None and (found is None or mirrored.agreeing > found.agreeing):
         return replace(mirrored, mirrored=True)
