@@ -254,12 +254,20 @@ def _names(option: str, text: str) -> list[str]:
     return listed
 
 
-def _refuse_inputs_inside(out: Path, dataset_spec: str, *others: tuple[str, str | None], out_is_file: bool = False) -> None:
-    """An output folder that is, or holds, the dataset (or another input: (what, path or None))
-    it is made from would replace it; so would an output file that is one, or lies inside one."""
+def _refuse_inputs_inside(out: Path, datasets: str | list[str], *others: tuple[str, str | None], out_is_file: bool = False) -> None:
+    """An output folder that is, or holds, a dataset (or another input: (what, path or None))
+    it is made from would replace it; so would an output file that is one, or lies inside one.
+    A dataset spec that names no dataset is left to whoever opens it to report."""
     from eas_vo.registry import resolve_dataset
 
-    for what, path in [("the dataset", resolve_dataset(dataset_spec)[1]), *others]:
+    def location(spec: str) -> str | None:
+        try:
+            return resolve_dataset(spec)[1]
+        except EasVoError:
+            return None
+
+    specs = [datasets] if isinstance(datasets, str) else datasets
+    for what, path in [*(("the dataset", location(spec)) for spec in specs), *others]:
         path = Path(path).expanduser() if path is not None else None
         if path is None or not path.exists():
             continue
@@ -373,12 +381,15 @@ def cmd_compare(args) -> int:
     from eas_vo import compare
     from eas_vo import config as config_mod
     from eas_vo.gallery import PAPER_ORDER
-    from eas_vo.io import check_writable_folder
+    from eas_vo.io import check_grid_folder, check_writable_folder
 
     out = check_writable_folder(args.out)
     run_defaults = config_mod.run_section(args.config, args.assignments)  # e.g. best.toml's tracker and backend
+    datasets = args.datasets or [run_defaults.dataset]
+    _refuse_inputs_inside(out, datasets, ("the --config", args.config))
+    check_grid_folder(out)
     cells = compare.plan(
-        args.datasets or [run_defaults.dataset],
+        datasets,
         _names("--frontends", args.frontends or ",".join(PAPER_ORDER)),
         _names("--trackers", args.trackers or run_defaults.tracker),
         _names("--backends", args.backends or run_defaults.backend),
@@ -489,7 +500,7 @@ def cmd_export(args) -> int:
 
 
 def cmd_evaluate(args) -> int:
-    from eas_vo.io import check_output_folder
+    from eas_vo.io import check_output_folder, figure_text
     from eas_vo.orbslam import evaluate_estimate
 
     if args.out:
@@ -498,14 +509,15 @@ def cmd_evaluate(args) -> int:
     m = evaluate_estimate(args.dataset, args.estimate, args.align, args.max_diff, args.out, args.label,
                           replace=args.overwrite)
     print(f"{args.estimate} vs {m['dataset']} ({m['align']}, {m['matched_poses']} of {m['estimate_poses']} poses matched, "
-          f"scale {m['scale']:.4g}): translation APE mean {m['ape_trans_mean_m']:.4f} m, RMSE {m['ape_trans_rmse_m']:.4f} m; "
-          f"rotation APE mean {m['ape_rot_mean_rad']:.4f} rad" + (f" -> {args.out}" if args.out else ""))
+          f"scale {m['scale']:.4g}): translation APE mean {figure_text(m['ape_trans_mean_m'], 4)} m, "
+          f"RMSE {figure_text(m['ape_trans_rmse_m'], 4)} m; rotation APE mean {m['ape_rot_mean_rad']:.4f} rad" + (f" -> {args.out}" if args.out else ""))
     return 0
 
 
 def cmd_reproduce(args) -> int:
     from eas_vo import reproduce
-    from eas_vo.io import check_writable_folder
+    from eas_vo.datasets.ecd_catalogue import data_dir
+    from eas_vo.io import check_grid_folder, check_writable_folder
 
     estimates = {}
     for text in args.estimates:
@@ -520,6 +532,9 @@ def cmd_reproduce(args) -> int:
     if estimates and args.table != "table2":
         raise EasVoError("--estimate belongs to table2 (ORB-SLAM2 trajectories)")
     out = check_writable_folder(args.out or f"reproduce/{args.table}")
+    _refuse_inputs_inside(out, list(reproduce.SPECS.values()), ("the --config", args.config),
+                          ("the data folder", str(data_dir())), *(("the --estimate", path) for path in estimates.values()))
+    check_grid_folder(out)  # before any download
     progress = not args.quiet and sys.stderr.isatty()
     if args.table == "table1":
         rows, n_run, markdown = reproduce.table1(out, args.duration, _names("--backends", args.backends), args.config,

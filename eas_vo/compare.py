@@ -20,7 +20,7 @@ import numpy as np
 
 from eas_vo.config import parse_set
 from eas_vo.errors import EasVoError, Interrupted, sigterm_as_interrupt
-from eas_vo.io import json_text, markdown_cell, output_folder, remove_stale_temporaries, slug, write_text_atomic
+from eas_vo.io import claim_grid_folder, json_text, markdown_cell, output_folder, remove_stale_temporaries, slug, write_text_atomic
 
 
 @dataclass(frozen=True)
@@ -246,6 +246,7 @@ def run_experiment(cells: list[Cell], out: Path, config_file, assignments, overr
 
     for cell in cells:
         cell_config(cell, config_file, assignments, overrides)
+    claim_grid_folder(out)  # new, empty or compare's own: never someone's table.md
     remove_stale_temporaries(out, OUTPUT_FILES)  # of a compare killed while writing them
     for dataset, dataset_sweep in dict.fromkeys(
         (c.dataset, tuple(f"{k}={v}" for k, v in c.sweep if k.startswith("dataset."))) for c in cells

@@ -225,6 +225,39 @@ def _files_in(folder: Path) -> list[str]:
     return sorted(p.relative_to(folder).as_posix() for p in folder.rglob("*") if not p.is_dir())
 
 
+#: The first line of the marker of a grid folder (compare, reproduce), written in place and
+#: resumed: its cells' folders (each with its own marker) and its tables and figures are eas-vo's.
+GRID_MARKER = "written by eas-vo compare or reproduce, which resume here (each cell's folder lists its own files):"
+
+
+def check_grid_folder(out: str | Path) -> Path:
+    """The absolute folder (check_writable_folder) compare or reproduce may write into: new,
+    empty, or one they marked as their own (claim_grid_folder), which they resume; else a
+    one-line error naming a file it holds."""
+    out = check_writable_folder(out)
+    if out.is_dir() and any(out.iterdir()) and not _is_grid_folder(out):
+        held = next(iter(_files_in(out)), None) or next(out.iterdir()).name
+        raise EasVoError(f"--out {out} holds {held} and is not an earlier compare's or reproduce's output, which "
+                         "they resume; they write only into a new or empty folder: choose another one")
+    return out
+
+
+def claim_grid_folder(out: str | Path) -> Path:
+    """check_grid_folder, then `out` made and marked as a grid folder before anything is written there."""
+    out = check_grid_folder(out)
+    if not _is_grid_folder(out):
+        out.mkdir(parents=True, exist_ok=True)
+        write_text_atomic(out / OUTPUT_MARKER, GRID_MARKER + "\n")
+    return out
+
+
+def _is_grid_folder(folder: Path) -> bool:
+    try:
+        return (folder / OUTPUT_MARKER).read_text(encoding="utf-8").splitlines()[:1] == [GRID_MARKER]
+    except (OSError, UnicodeDecodeError):
+        return False
+
+
 @contextmanager
 def output_folder(out: str | Path, replace: bool = False, keep_partial: bool = True):
     """One writer per folder, and a folder that holds one whole run: lock `out` (a sibling
@@ -397,6 +430,14 @@ def markdown_cell(text: str) -> str:
     """`text` as one cell of a Markdown table: each run of white space or control characters
     (a newline too) made one space, and `|` escaped, so the cell can end neither its row nor itself."""
     return re.sub(r"[\s\x00-\x1f\x7f]+", " ", text).strip().replace("|", "\\|")
+
+
+def figure_text(value: float, decimals: int) -> str:
+    """`value` with `decimals` decimals, or in scientific notation (`2.079e+155`) where that
+    would print more than six integer digits: every figure short enough to read."""
+    if math.isfinite(value) and abs(value) >= 1e6:
+        return f"{value:.{max(decimals, 1)}e}"
+    return f"{value:.{decimals}f}"
 
 
 def slug(text: str) -> str:

@@ -17,7 +17,7 @@ import cv2
 import numpy as np
 
 from eas_vo.errors import DataError, EasVoError
-from eas_vo.io import data_line, json_text, markdown_cell, output_folder, parse_table, write_text_atomic
+from eas_vo.io import data_line, figure_text, json_text, markdown_cell, output_folder, parse_table, write_text_atomic
 from eas_vo.types import CameraModel, PoseSeries
 
 FORMATS = ("tum", "euroc")
@@ -172,5 +172,6 @@ def table2_row(label: str, metrics: dict) -> str:
     RMSE, rotation APE, scale and matched poses beside it."""
     m = metrics
     return ("| source | average APE [m] | RMSE [m] | rotation APE [rad] | scale | poses |\n|---|---|---|---|---|---|\n"
-            f"| {markdown_cell(label)} | {m['ape_trans_mean_m']:.3f} | {m['ape_trans_rmse_m']:.3f} | {m['ape_rot_mean_rad']:.3f} | "
+            f"| {markdown_cell(label)} | {figure_text(m['ape_trans_mean_m'], 3)} | {figure_text(m['ape_trans_rmse_m'], 3)} | "
+            f"{m['ape_rot_mean_rad']:.3f} | "
             f"{m['scale']:.3g} | {m['matched_poses']} |\n")

@@ -15,7 +15,7 @@ import numpy as np
 from eas_vo import compare
 from eas_vo.errors import EasVoError
 from eas_vo.gallery import PAPER_ORDER
-from eas_vo.io import atomic_path, json_text, remove_stale_temporaries, write_text_atomic
+from eas_vo.io import atomic_path, claim_grid_folder, figure_text, json_text, remove_stale_temporaries, write_text_atomic
 
 SEQUENCES = ("hdr_boxes", "hdr_poster")
 
@@ -70,10 +70,12 @@ OUTPUT_FILES = ("table1.md", "table1.json", "table2.md", "table2.json", "fig3_*.
 
 
 def _check(cells, config: str, overrides: dict, out: Path) -> None:
-    """Every cell's configuration resolved (a bad --config, key or backend is an error) before
-    any download; then the temporary files of a reproduce killed while writing into `out` removed."""
+    """Every cell's configuration resolved (a bad --config, key or backend is an error) and
+    `out` claimed (new, empty or a grid folder: io.claim_grid_folder) before any download; then
+    the temporary files of a reproduce killed while writing into `out` removed."""
     for cell in cells:
         compare.cell_config(cell, config, [], overrides)
+    claim_grid_folder(out)
     remove_stale_temporaries(out, OUTPUT_FILES)
 
 
@@ -204,7 +206,7 @@ def table2_markdown(rows: list[dict], slam: dict, duration_s: float) -> str:
     def ours(seq, source, key, fmt):
         if key == "ape_m":
             m = slam.get((seq, source))
-            return f"{m['ape_trans_mean_m']:{fmt}}" if m else "- (no ORB-SLAM2 trajectory given)"
+            return figure_text(m["ape_trans_mean_m"], 3) if m else "- (no ORB-SLAM2 trajectory given)"
         r = by_key.get((seq, source))
         return f"{r[key]:{fmt}}" if r and r["status"] == "ok" and r[key] is not None else "-"
 

@@ -393,7 +393,7 @@ def test_render_writes_over_a_file_only_with_overwrite_and_never_over_an_input(s
     assert estimate.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and not list(tmp_path.glob(".*.tmp"))
 
 
-@pytest.mark.parametrize("command", ["run", "export"])
+@pytest.mark.parametrize("command", [["run", "--overwrite"], ["export", "--overwrite"], ["compare", "--frontends", "original"]])
 def test_an_output_folder_holding_the_config_file_is_refused_even_with_overwrite(short_sequence, tmp_path, capsys, command):
     from helpers import mark_as_eas_vo_output
 
@@ -402,5 +402,23 @@ def test_an_output_folder_holding_the_config_file_is_refused_even_with_overwrite
     config = out / "config.toml"  # an earlier run's resolved config, read again
     config.write_text(f'[run]\ndataset = "{short_sequence}"\nfrontend = "original"\nduration_s = 0.2\n')
     mark_as_eas_vo_output(out)
-    err = one_line_failure([command, "--config", str(config), "--out", str(out), "--overwrite", "--quiet"], capsys)
+    err = one_line_failure([*command, "--config", str(config), "--out", str(out), "--quiet"], capsys)
     assert "holds the --config" in err and config.read_text().startswith("[run]\ndataset")
+    assert sorted(p.name for p in out.iterdir()) == [".eas-vo-output", "config.toml"]
+
+
+@pytest.mark.parametrize("command", [["run", "--overwrite"], ["export", "--overwrite"], ["compare", "--frontends", "original"]])
+@pytest.mark.parametrize("inside", [False, True])
+def test_an_output_folder_that_is_or_holds_the_dataset_is_refused(short_sequence, tmp_path, capsys, command, inside):
+    """--out the dataset's folder, or the folder holding it (marked as an eas-vo output, as
+    `eas-vo simulate` leaves it): refused, nothing written there."""
+    from helpers import mark_as_eas_vo_output
+
+    dataset = tmp_path / "data" / "seq"
+    shutil.copytree(short_sequence, dataset, ignore=shutil.ignore_patterns(".*"))
+    out = dataset if inside else dataset.parent
+    mark_as_eas_vo_output(out)
+    before = sorted(p.relative_to(tmp_path) for p in tmp_path.rglob("*"))
+    err = one_line_failure([*command, "--dataset", str(dataset), "--duration", "0.2", "--out", str(out), "--quiet"], capsys)
+    assert f"holds the dataset {dataset}" in err
+    assert sorted(p.relative_to(tmp_path) for p in tmp_path.rglob("*")) == before

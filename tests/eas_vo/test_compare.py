@@ -347,3 +347,30 @@ def test_a_resume_removes_the_temporaries_of_a_compare_killed_while_writing(one_
     with contextlib.redirect_stdout(io.StringIO()):
         assert main(argv[:-4] + [str(copy), "--jobs", "1", "--quiet"]) == 0
     assert [name for name in stale + kept if (copy / name).exists()] == kept
+
+
+def test_compare_writes_only_into_a_new_empty_or_its_own_folder(one_cell, tmp_path, capsys):
+    """A folder holding someone's table.md, or another command's output (a run's), is refused and
+    left as it was; compare's own folder is resumed, and a run never replaces it."""
+    from helpers import mark_as_eas_vo_output
+
+    out, argv, _ = one_cell
+    mine = tmp_path / "mine"
+    mine.mkdir()
+    (mine / "table.md").write_text("my notes\n")
+    other = tmp_path / "other"
+    other.mkdir()
+    (other / "metrics.json").write_text("{}\n")
+    mark_as_eas_vo_output(other)
+    for folder, holds in ((mine, "table.md"), (other, ".eas-vo-output")):
+        before = {p.name: p.read_bytes() for p in folder.iterdir()}
+        assert main(argv[:-4] + [str(folder), "--jobs", "1", "--quiet"]) == 2
+        assert f"--out {folder} holds {holds} and is not an earlier compare's" in capsys.readouterr().err
+        assert {p.name: p.read_bytes() for p in folder.iterdir()} == before
+    copy = tmp_path / "copy"
+    shutil.copytree(out, copy)
+    assert main(argv[:-4] + [str(copy), "--jobs", "1", "--quiet"]) == 0
+    assert "1 cells (0 run, 1 already complete, 0 failed)" in capsys.readouterr().out
+    dataset = argv[argv.index("--dataset") + 1]
+    assert main(["run", "--dataset", dataset, "--duration", "0.2", "--out", str(copy), "--overwrite", "--quiet"]) == 2
+    assert "which eas-vo did not write" in capsys.readouterr().err and (copy / "table.md").exists()

@@ -237,3 +237,27 @@ def test_a_label_never_breaks_the_table_row():
     header, rule, row = table2_row("eas | v2\nsecond\tline\x1b", metrics).splitlines()
     assert row == "| eas \\| v2 second line | 0.020 | 0.030 | 0.100 | 1.5 | 9 |"
     assert row.replace("\\|", "").count("|") == header.count("|") == 7
+
+
+def test_a_huge_error_is_printed_readably(short_sequence, tmp_path, capsys):
+    """Positions of 1e150 m: the CLI line and the table row give the APE in scientific notation
+    (no 150-digit number), each the metrics.json value to the digits shown."""
+    import re
+
+    from eas_vo.cli import main
+
+    gt = np.loadtxt(short_sequence / "groundtruth.txt")[::10]
+    gt[:, 1:4] = gt[:, 1:4] * 1e150 + 1e150
+    estimate = tmp_path / "huge.tum"
+    estimate.write_text("".join(" ".join(f"{v:.17g}" for v in row) + "\n" for row in gt))
+    out = tmp_path / "ev"
+    assert main(["evaluate", "--dataset", str(short_sequence), "--estimate", str(estimate), "--align", "se3",
+                 "--out", str(out)]) == 0
+    said = capsys.readouterr().out
+    row = (out / "table2_row.md").read_text().splitlines()[2]
+    mean = json.loads((out / "metrics.json").read_text())["ape_trans_mean_m"]
+    assert mean > 1e100
+    for text, digits in ((said, 4), (row, 3)):
+        assert re.search(r"\d{10}", text) is None, text
+        shown = [float(v) for v in re.findall(r"\d\.\d+e\+\d+", text)]
+        assert shown and shown[0] == pytest.approx(mean, rel=10.0**-digits), text

@@ -151,3 +151,33 @@ def test_an_estimate_the_ground_truth_cannot_score_is_refused_before_the_cells_r
     (error,) = [line for line in capsys.readouterr().err.splitlines() if "error" in line]  # after the fetch's lines
     assert "KeyFrameTrajectory.txt" in error and "sim3 alignment needs at least 3" in error
     assert not (out / "hdr_boxes").exists() and not (out / "table2.md").exists()
+
+
+@pytest.mark.parametrize("held", ["config", "table", "data"])
+def test_an_out_that_is_not_reproduces_own_is_refused_before_any_download(paper_site, tmp_path, capsys, monkeypatch, held):
+    """An --out holding the --config, someone's table2.md or the data folder sequences are
+    fetched into: refused in one line, nothing fetched, nothing in it changed."""
+    import shutil
+    from pathlib import Path
+
+    import eas_vo.configs
+
+    out = tmp_path / "mine"
+    out.mkdir()
+    config = out / "paper.toml"
+    if held == "config":
+        shutil.copy(Path(eas_vo.configs.__file__).parent / "paper.toml", config)
+    elif held == "table":
+        (out / "table2.md").write_text("my notes\n")
+    else:
+        (out / "data").mkdir()
+        monkeypatch.setenv("EAS_VO_DATA_DIR", str(out / "data"))
+    before = {p: p.read_bytes() if p.is_file() else None for p in out.rglob("*")}
+    argv = ["reproduce", "table2", "--duration", "0.3", "--out", str(out), "--jobs", "1", "--quiet"]
+    assert main(argv + (["--config", str(config)] if held == "config" else [])) == 2
+    err = capsys.readouterr().err
+    says = {"config": f"holds the --config {config}", "table": "holds table2.md and is not an earlier compare's",
+            "data": f"holds the data folder {out / 'data'}"}[held]
+    assert err.count("\n") == 1 and says in err, err
+    assert paper_site["hdr_boxes.zip"] == 0 and paper_site["hdr_poster.zip"] == 0
+    assert {p: p.read_bytes() if p.is_file() else None for p in out.rglob("*")} == before
