@@ -9,8 +9,7 @@ from typing import Sequence
 import numpy as np
 
 from eas_vo.errors import ConfigError
-from eas_vo.geometry.rotations import gyro_rotation
-from eas_vo.imu_check import CONFIDENT_INLIERS, disagreement
+from eas_vo.imu_check import confident_steps, disagreement
 from eas_vo.plugins import Backend
 from eas_vo.types import ImuSeries, RelativeRotation
 from eas_vo.validation import check_choice, check_range
@@ -140,7 +139,7 @@ class GtsamBackend(Backend):
         bias = gtsam.symbol("b", 0)
         by_frame[0].append(gtsam.PriorFactorVector(bias, np.zeros(3), gtsam.noiseModel.Isotropic.Sigma(3, c.gyro_bias_sigma)))
         measured = imu.covered(times[:-1], times[1:]) & (np.diff(times) > 0)  # no factor over no time
-        contradicted = self._contradicted(times, edges, imu, measured)
+        contradicted = self._contradicted(times, edges, imu)
         for k in np.flatnonzero(measured & ~contradicted) + 1:
             pim = gtsam.PreintegratedAhrsMeasurements(params, np.zeros(3))
             for rate, dt in zip(*imu.rates_between(times[k - 1], times[k])):
@@ -152,20 +151,18 @@ class GtsamBackend(Backend):
                 f"the gyro was left out of {int(contradicted.sum())} frame interval(s), where a confident measurement of "
                 f"the images contradicts it (the first ending at frame {first}, t={times[first]:.6f} s)")
 
-    def _contradicted(self, times: np.ndarray, edges: Sequence[RelativeRotation], imu: ImuSeries,
-                      measured: np.ndarray) -> np.ndarray:
-        """Which consecutive frame intervals (len(times) - 1,), of those the gyro `measured`, a
-        consecutive edge with CONFIDENT_INLIERS or more contradicts: the two rotations differ by
-        more than imu_check.DISAGREEMENT of the larger and by more than GATE_SPREAD times their
-        median difference over the sequence (the images' own errors are heavy-tailed: a gate on
-        their modelled sigma would leave out a right gyro where the images erred)."""
-        steps = [e for e in edges if e.j == e.i + 1 and not e.loop and e.inliers >= CONFIDENT_INLIERS and measured[e.i]]
+    @staticmethod
+    def _contradicted(times: np.ndarray, edges: Sequence[RelativeRotation], imu: ImuSeries) -> np.ndarray:
+        """Which consecutive frame intervals (len(times) - 1,) a confident edge
+        (imu_check.confident_steps) contradicts: the two rotations differ by more than
+        imu_check.DISAGREEMENT of the larger and by more than GATE_SPREAD times their median
+        difference over the sequence (the images' own errors are heavy-tailed: a gate on their
+        modelled sigma would leave out a right gyro where the images erred)."""
+        steps, R_vision, R_gyro = confident_steps(times, edges, imu)
+        judged, disagree, off = disagreement(R_gyro, R_vision)
+        typical = np.median(off[judged]) if judged.any() else np.inf
         out = np.zeros(len(times) - 1, bool)
-        if steps:
-            R_gyro = np.stack([gyro_rotation(imu, times[e.i], times[e.j]) for e in steps])
-            judged, disagree, off = disagreement(R_gyro, np.stack([e.R_i_j for e in steps]))
-            typical = np.median(off[judged]) if judged.any() else np.inf
-            out[[e.i for e in np.array(steps, object)[disagree & (off > GATE_SPREAD * typical)]]] = True
+        out[[e.i for e, gated in zip(steps, disagree & (off > GATE_SPREAD * typical)) if gated]] = True
         return out
 
     def solve(

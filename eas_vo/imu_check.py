@@ -188,16 +188,23 @@ class GyroVerdict:
                 "prior (calibrate it, or set backend.gyro_bias_sigma)")
 
 
-def judge_gyro(t: np.ndarray, edges, imu: ImuSeries) -> GyroVerdict:
-    """Compare the consecutive edges' rotations (frame times `t` [s]) with the gyro's over the
-    same intervals, as configured (no axes or clock fitted): GyroVerdict."""
+def confident_steps(t: np.ndarray, edges, imu: ImuSeries) -> tuple[list, np.ndarray, np.ndarray]:
+    """The consecutive, non-loop edges with CONFIDENT_INLIERS or more over intervals of frame
+    times `t` [s] that last some time and the gyro measures (ImuSeries.covered), with the
+    images' and the gyro's rotations over them, (N, 3, 3) each."""
     steps = [e for e in edges if e.j == e.i + 1 and not e.loop and e.inliers >= CONFIDENT_INLIERS]
-    measured = imu.covered(np.array([t[e.i] for e in steps]), np.array([t[e.j] for e in steps]))
-    steps = [e for e, m in zip(steps, measured) if m]
+    t0, t1 = np.array([t[e.i] for e in steps], float), np.array([t[e.j] for e in steps], float)
+    steps = [e for e, m in zip(steps, imu.covered(t0, t1) & (t1 > t0)) if m]
     if not steps:
-        return GyroVerdict(0, 0, float("nan"))
-    R_vision = np.stack([e.R_i_j for e in steps])
+        return [], np.empty((0, 3, 3)), np.empty((0, 3, 3))
     R_gyro = np.stack([gyro_rotation(imu, t[e.i], t[e.j]) for e in steps])
+    return steps, np.stack([e.R_i_j for e in steps]), R_gyro
+
+
+def judge_gyro(t: np.ndarray, edges, imu: ImuSeries) -> GyroVerdict:
+    """Compare the confident consecutive edges' rotations (confident_steps) with the gyro's over
+    the same intervals, as configured (no axes or clock fitted): GyroVerdict."""
+    steps, R_vision, R_gyro = confident_steps(t, edges, imu)
     judged, disagree, off = disagreement(R_gyro, R_vision)
     if not judged.any():
         return GyroVerdict(0, 0, float("nan"))

@@ -20,8 +20,8 @@ from eas_vo.config import ResolvedConfig
 from eas_vo.errors import EasVoError, Interrupted
 from eas_vo.evaluation import (OFFSET_SEARCH_S, ImuAgreement, RotationErrors, estimate_time_offset, imu_agreement,
                                rotation_errors)
-from eas_vo.imu_check import GyroVerdict, check_readings, judge_gyro
 from eas_vo.geometry.rotations import geodesic_angle, matrix_to_rotvec, quats_from_matrices, rotvec_to_matrix
+from eas_vo.imu_check import GyroVerdict, check_readings, judge_gyro
 from eas_vo.io import atomic_path, json_text, output_folder, write_text_atomic
 from eas_vo.orb import OrbStats
 from eas_vo.plugins import Backend, Dataset, Frontend, Tracker
@@ -376,8 +376,9 @@ CLOCK_GAIN = 0.9
 #: cannot tell how the gyro is turned about it: under 0.05 for a pure pan (a test), 0.5-0.65 on
 #: hand-held sequences (synthetic:default, seed 41, a 30 s one, the real excerpt).
 MIN_SPREAD = 0.2
-#: ... and by more than this many standard deviations of the fit (ImuAgreement.turned_sigma_deg),
-#: so that a short or noisy sequence says nothing it cannot tell. The images' errors are
+#: The axes are taken for off (beyond IMU_DISAGREEMENT_DEG) only beyond this many standard
+#: deviations of the fit too (ImuAgreement.turned_sigma_deg), so that a short or noisy sequence
+#: says nothing it cannot tell. The images' errors are
 #: correlated from pair to pair (lag, blur), which the scatter understates: on right IMUs
 #: (2 s simulated sequences at 240x180, 346x260 and 640x480, eas and histeq) the fit was 0.8-11
 #: deg off, up to 4.3 of its sigmas; an axis swap 65.
