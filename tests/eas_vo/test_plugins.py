@@ -1,5 +1,5 @@
-"""The plugin contracts from outside: `eas-vo list`, the README's four example plugins
-(extracted from README.md at test time) and a pip-installed plugin package, each run
+"""The plugin contracts from outside: `eas-vo list`, the plugin guide's four example plugins
+(extracted from docs/plugins.md at test time) and a pip-installed plugin package, each run
 through the CLI in a subprocess with nothing installed globally."""
 
 import os
@@ -30,10 +30,8 @@ def test_list_shows_every_plugin_with_description_and_keys(capsys):
 
 
 def readme_plugin_guide() -> tuple[str, dict]:
-    """The README's plugin section: its Python blocks joined into one module, and its TOML block."""
-    text = (REPOSITORY / "README.md").read_text()
-    section = text[text.index("## Plugins"):]
-    section = section[: section.index("\n## ", 1)]
+    """The plugin guide (docs/plugins.md): its Python blocks joined into one module, and its TOML block."""
+    section = (REPOSITORY / "docs" / "plugins.md").read_text()
     python = re.findall(r"```python\n(.*?)```", section, re.S)
     toml = re.findall(r"```toml\n(.*?)```", section, re.S)
     assert len(python) == 4 and len(toml) == 1, "the plugin guide holds one example per kind and their registration"
