@@ -43,20 +43,34 @@ def search_times(events: np.ndarray, times) -> np.ndarray:
         hi = np.where(active & ~below, mid, hi)
 
 
+#: Lens models and their distortion coefficients: `radtan`, OpenCV's radial-tangential
+#: (k1, k2, p1, p2, k3: the ECD calib.txt order) and `equidistant`, the Kannala-Brandt fisheye
+#: model of OpenCV's cv2.fisheye and kalibr (k1, k2, k3, k4).
+LENS_MODELS = {"radtan": 5, "equidistant": 4}
+
+
 @dataclass(frozen=True)
 class CameraModel:
-    """Pinhole camera with radial-tangential distortion (OpenCV / ECD calib.txt order).
+    """Pinhole camera with a lens model (LENS_MODELS).
 
     Attributes:
         width, height: sensor size [px].
         K: 3x3 intrinsic matrix [px].
-        dist: distortion coefficients (k1, k2, p1, p2, k3).
+        dist: distortion coefficients in the order of `model`.
+        model: `radtan` (default) or `equidistant`.
     """
 
     width: int
     height: int
     K: np.ndarray
     dist: np.ndarray = field(default_factory=lambda: np.zeros(5))
+    model: str = "radtan"
+
+    def __post_init__(self):
+        if self.model not in LENS_MODELS:
+            raise ValueError(f"unknown lens model {self.model!r}: one of {', '.join(LENS_MODELS)}")
+        if len(self.dist) != LENS_MODELS[self.model]:
+            raise ValueError(f"the {self.model} lens model takes {LENS_MODELS[self.model]} distortion coefficients, not {len(self.dist)}")
 
     @classmethod
     def from_calib(cls, values, width: int = 240, height: int = 180) -> "CameraModel":
@@ -74,6 +88,8 @@ class CameraModel:
         pts = np.ascontiguousarray(pts_px, dtype=np.float64).reshape(-1, 1, 2)
         if len(pts) == 0:
             return np.empty((0, 2))
+        if self.model == "equidistant":
+            return cv2.fisheye.undistortPoints(pts, self.K, self.dist).reshape(-1, 2)
         return cv2.undistortPoints(pts, self.K, self.dist).reshape(-1, 2)
 
     def calib_values(self) -> list[float]:
