@@ -188,3 +188,21 @@ def test_a_mirrored_gyro_is_named_for_what_it_is(rig):
     assert said == "warned" and metrics["gyro"] == "not used"
     (line,) = [w for w in metrics["data_warnings"] if "gyro" in w]
     assert "its axes are mirrored" in line and "negate its rates in the file" in line
+
+
+@pytest.mark.parametrize("reader, assignments", [
+    ("nothing", ("tracker.predict=none", "backend.gyro=false")),
+    ("the backend", ("tracker.predict=none",)),  # best.toml's backend.gyro = "auto"
+    ("the tracker", ("backend.gyro=false",)),  # best.toml's tracker.predict = "auto"
+])
+def test_only_a_run_that_reads_the_imu_checks_its_clock(short_sequence, tmp_path, reader, assignments):
+    """A gyro stamped 40 ms late: a run whose tracker or backend reads it is told the clock the
+    images ask for; a run that reads no IMU says nothing of one (nor reports an IMU clock)."""
+    late = np.loadtxt(short_sequence / "imu.txt", ndmin=2)
+    late[:, 0] += 0.040
+    said, metrics = outcome(with_imu(short_sequence, tmp_path / "late", late), *assignments)
+    if reader == "nothing":
+        assert said == "silent" and metrics["gyro"] is None and "imu_time_offset_s" not in metrics
+    else:
+        assert said == "warned" and metrics["imu_time_offset_s"] == 0.0
+        assert any("run.imu_time_offset_s = 0.0" in w for w in metrics["data_warnings"]), metrics["data_warnings"]
