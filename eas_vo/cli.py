@@ -1,7 +1,10 @@
-"""Command-line interface: `eas-vo run | compare | list | render | reproduce | export | evaluate |
-fetch | simulate`.
+"""Command-line interface: `eas-vo run | compare | list | render | export | evaluate | reproduce |
+fetch | cache | simulate`.
 
-User errors (bad data, bad config) end in one line on stderr and exit code 2.
+Each command is a pair here: `_parse_NAME` declares its arguments and help (the options several
+commands share are declared once, in `_add_*`), and `cmd_NAME` turns the parsed arguments into a
+call of the library function that does the work (eas_vo.pipeline, compare, orbslam, ...) and
+prints its result. User errors (bad data, bad config) end in one line on stderr and exit code 2.
 Ctrl-C and SIGTERM end in one line saying what was kept, and exit code 130 / 143.
 Heavy modules are imported inside the commands, so `--help` is instant.
 """
@@ -16,22 +19,26 @@ from pathlib import Path
 
 from eas_vo.errors import EasVoError, Interrupted, sigterm_as_interrupt
 
-EPILOG_RUN = """\
-outputs (in --out):
-  trajectory.tum   estimated camera-to-world rotation per frame (TUM: t tx ty tz qx qy qz qw)
-  groundtruth.tum  ground truth at the same timestamps (when the dataset has it)
-  metrics.json     average APE (Eq. 3, rad), RMSE, max, average NC, frames, timing
-  frames.csv       per frame: index, t, NC, inliers, status (first, ok, weak, lost, same_time), redetected,
-                   inlier ratio, residual [px], why the frame is weak or lost
-  config.toml      the resolved configuration (re-run with --config config.toml)
-  rotation.png     estimated and true roll/pitch/yaw over time
 
-examples:
-  eas-vo run --frontend eas --backend chain
-  eas-vo run --dataset path/to/hdr_boxes --frontend original --start 0 --duration 25
-  eas-vo run --frontend eas --set frontend.n=8000 --set tracker.threshold1=15
-  eas-vo run --dataset ecd:path/to/folder --tracker klt --config best
-"""
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    try:
+        with sigterm_as_interrupt():
+            return args.func(args)
+    except EasVoError as exc:
+        print(f"eas-vo: error: {exc}", file=sys.stderr)
+        return 2
+    except BrokenPipeError:  # `eas-vo list | head`: the reader left; say nothing more
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 141
+    except OSError as exc:  # the machine's answer to a user's request (a full disk, a path in the way)
+        where = f" ({exc.filename})" if exc.filename else ""
+        print(f"eas-vo: error: {exc.strerror or exc}{where}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt as exc:  # the one place: a command says what it kept in Interrupted
+        kept = exc.kept if isinstance(exc, Interrupted) and exc.kept else "nothing was written"
+        print(f"eas-vo {args.command}: interrupted; {kept}", file=sys.stderr)
+        return 143 if isinstance(exc, Interrupted) and exc.sigterm else 130
 
 
 class _OneLineParser(argparse.ArgumentParser):
@@ -47,195 +54,54 @@ def build_parser() -> argparse.ArgumentParser:
         description="3-DoF rotation estimation from event cameras fused with frames (EAS and peers).",
     )
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND", parser_class=_OneLineParser)
+    for add in (_parse_run, _parse_compare, _parse_list, _parse_render, _parse_export, _parse_evaluate,
+                _parse_reproduce, _parse_fetch, _parse_cache, _parse_simulate):
+        add(sub)
+    return parser
 
-    run = sub.add_parser(
-        "run",
-        help="estimate rotation on a sequence and evaluate it",
-        description="Run one frontend + tracker + backend on a dataset and write the trajectory, metrics and plots.",
-        epilog=EPILOG_RUN,
-        formatter_class=argparse.RawDescriptionHelpFormatter,
-    )
-    run.add_argument(
-        "--dataset",
-        metavar="SPEC",
-        help="a recording (Event Camera Dataset folder or .zip, ROS1 .bag, or what a dataset plugin "
-        "opens), PLUGIN:LOCATION, or synthetic:NAME (default: synthetic:default, simulated once)",
-    )
-    run.add_argument("--frontend", metavar="NAME",
-                     help="image source: original, histeq, slice, ts, sits, eas or a plugin's (eas-vo list; default eas)")
-    run.add_argument("--tracker", metavar="NAME", help="relative rotations from the images: klt (the paper; default) or a plugin's")
-    run.add_argument("--backend", metavar="NAME", help="relative -> absolute rotations: chain or gtsam (default chain)")
-    _add_common_options(run)
-    run.add_argument(
+
+# ----------------------------------------------------------------------------- shared options
+
+DATASET_HELP = ("a recording (Event Camera Dataset folder or .zip, ROS1 .bag, or what a dataset plugin opens), "
+                "PLUGIN:LOCATION, or synthetic:NAME (default: synthetic:default, simulated once)")
+
+
+def _add_dataset(parser, help: str = "as for run (default: synthetic:default)", required: bool = False) -> None:
+    """--dataset SPEC: the recording a command reads."""
+    parser.add_argument("--dataset", required=required, metavar="SPEC", help=help)
+
+
+def _add_config(parser, config_help: str = "TOML config file, or the name of a bundled one (e.g. paper)",
+                set_help: str | None = "override one config value, e.g. frontend.n=8000 (repeatable)") -> None:
+    """--config FILE and --set SECTION.KEY=VALUE (repeatable, into args.assignments)."""
+    parser.add_argument("--config", metavar="FILE", help=config_help)
+    parser.add_argument("--set", dest="assignments", action="append", default=[], metavar="SECTION.KEY=VALUE",
+                        help=set_help)
+
+
+def _add_window(parser) -> None:
+    """--start and --duration [s]: the part of the sequence a command reads."""
+    parser.add_argument("--start", type=_seconds(allow_zero=True), metavar="S", help="skip the first S seconds of the sequence")
+    parser.add_argument("--duration", type=_seconds(allow_zero=False), metavar="S", help="process S seconds (default: all)")
+
+
+def _add_time_offset(parser) -> None:
+    """--time-offset S|auto, for the commands that evaluate against ground truth."""
+    parser.add_argument("--time-offset", metavar="S|auto",
+                        help="ground truth is sampled at frame time + S seconds (default 0); 'auto' estimates S from the data")
+
+
+def _add_quiet(parser, help: str = "no progress bar") -> None:
+    parser.add_argument("--quiet", action="store_true", help=help)
+
+
+def _add_lenient(parser) -> None:
+    """--lenient: the dataset's reader tolerates (and counts) what it would refuse."""
+    parser.add_argument(
         "--lenient",
         action="store_true",
         help="drop malformed lines, out-of-order or out-of-sensor events and missing frames, with counted warnings",
     )
-    _add_output_options(run, required=False, default="runs/DATASET_FRONTEND_TRACKER_BACKEND_TIME")
-    run.set_defaults(func=cmd_run)
-
-    compare = sub.add_parser(
-        "compare",
-        help="run a grid of datasets x frontends x trackers x backends (x sweeps); write the paper's Table 1",
-        description="Run every cell (dataset x frontend x tracker x backend x sweep point) as `eas-vo run` would, "
-        "in parallel processes; cells already complete are not run again. Writes table.md, table.csv, "
-        "table.json (Table 1 of the paper: average NC and APE per source type), ape_bars.png, "
-        "ape_time.png and each cell's own folder.",
-    )
-    compare.add_argument("--dataset", dest="datasets", action="append", metavar="SPEC",
-                         help="a dataset (repeatable; default synthetic:default)")
-    compare.add_argument("--frontends", metavar="A,B,...", help="default: the paper's six sources, original,histeq,slice,ts,sits,eas")
-    compare.add_argument("--trackers", metavar="A,B,...", help="default: the config's [run] tracker (klt without --config)")
-    compare.add_argument("--backends", metavar="A,B,...", help="default: the config's [run] backend (chain without --config)")
-    _add_common_options(compare)
-    compare.add_argument("--sweep", dest="sweeps", action="append", default=[], metavar="SECTION.KEY=V1,V2",
-                         help="values to try (repeatable: the cartesian product is run)")
-    compare.add_argument("--orb", action="store_true", help="also ORB keypoints and matches per source (Table 2)")
-    compare.add_argument("--jobs", type=_positive_int, default=os.cpu_count() or 1, help="parallel processes (default: all cores)")
-    compare.add_argument("--executor", choices=("local", "dask"), default="local",
-                         help="local process pool (default), or an existing Dask distributed cluster")
-    compare.add_argument("--scheduler", metavar="ADDRESS", help="the Dask scheduler, e.g. tcp://10.0.0.5:8786")
-    compare.add_argument("--out", required=True, metavar="DIR")
-    compare.set_defaults(func=cmd_compare)
-
-    lister = sub.add_parser(
-        "list",
-        help="list the installed datasets, frontends, trackers and backends with their config keys",
-        description="Every plugin found through the entry-point groups eas_vo.datasets, eas_vo.frontends, "
-        "eas_vo.trackers and eas_vo.backends: name, description, config keys with defaults.",
-    )
-    lister.set_defaults(func=cmd_list)
-
-    render = sub.add_parser(
-        "render",
-        help="draw every frontend's image of chosen frames side by side (like the paper's Fig. 1)",
-        description="Run every frontend (or --frontends) over a dataset up to the chosen frames and "
-        "draw their images in a grid: one row per frame, one column per frontend.",
-    )
-    render.add_argument("--dataset", metavar="SPEC", help="as for run (default: synthetic:default)")
-    render.add_argument("--frames", required=True, metavar="I,J,...", help="frame indices, e.g. 20,120")
-    render.add_argument("--frontends", metavar="A,B,...", help="frontends to show (default: all installed)")
-    render.add_argument("--config", metavar="FILE", help="config file for the frontends' settings")
-    render.add_argument("--set", dest="assignments", action="append", default=[], metavar="SECTION.KEY=VALUE")
-    render.add_argument("--out", required=True, metavar="PNG", help="output image, e.g. gallery.png")
-    render.add_argument("--overwrite", action="store_true", help="replace an existing --out (never one of the inputs)")
-    render.set_defaults(func=cmd_render)
-
-    export = sub.add_parser(
-        "export",
-        help="write a frontend's images as a sequence ORB-SLAM2 reads (TUM or EuRoC layout) with its settings.yaml",
-        description="Run a frontend (e.g. original or eas) over a dataset window and write its images in the "
-        "layout monocular ORB-SLAM2/ORB-SLAM3 examples read, plus settings.yaml (the dataset's calibration in "
-        "ORB-SLAM2's format, its frame rate, ORB-SLAM2's ORB extractor defaults): the paper's §4.3.",
-        epilog="then, e.g.: ./Examples/Monocular/mono_tum Vocabulary/ORBvoc.txt OUT/settings.yaml OUT  "
-        "(writes KeyFrameTrajectory.txt; score it with eas-vo evaluate)",
-    )
-    export.add_argument("--dataset", metavar="SPEC", help="as for run (default: synthetic:default)")
-    export.add_argument("--frontend", metavar="NAME", help="image source (default eas)")
-    export.add_argument("--format", choices=("tum", "euroc"), default="tum",
-                        help="tum: rgb.txt + rgb/T.png (mono_tum); euroc: mav0/cam0/data/T_NS.png + timestamps.txt (mono_euroc)")
-    _add_common_options(export, evaluated=False)
-    _add_output_options(export, required=True)
-    export.set_defaults(func=cmd_export)
-
-    evaluate = sub.add_parser(
-        "evaluate",
-        help="score an external TUM trajectory (e.g. ORB-SLAM2's KeyFrameTrajectory.txt) against ground truth",
-        description="Associate the estimate's poses with the dataset's ground truth (nearest time within "
-        "--max-diff), align them (sim3: Umeyama with scale, for monocular SLAM; se3; origin) and report the "
-        "translation APE [m] and rotation APE [rad], as evo_ape tum GT EST -as / -a / --align_origin does. "
-        "With --out: metrics.json, table2_row.md, groundtruth.tum, estimate_aligned.tum.",
-    )
-    evaluate.add_argument("--dataset", required=True, metavar="SPEC", help="the dataset the estimate was made on")
-    evaluate.add_argument("--estimate", required=True, metavar="FILE", help="TUM trajectory: t tx ty tz qx qy qz qw")
-    evaluate.add_argument("--align", choices=("sim3", "se3", "origin"), default="sim3", help="default sim3 (evo_ape -as)")
-    evaluate.add_argument("--max-diff", type=_seconds(allow_zero=True), default=0.01, metavar="S",
-                          help="largest time difference of an associated pose pair (default 0.01 s, evo's)")
-    evaluate.add_argument("--label", metavar="TEXT", help="the row's name in table2_row.md (default: the file's name)")
-    _add_output_options(evaluate, required=False)
-    evaluate.set_defaults(func=cmd_evaluate)
-
-    reproduce = sub.add_parser(
-        "reproduce",
-        help="the paper's Table 1 or Table 2 on its own data (hdr_boxes, hdr_poster), beside its figures",
-        description="table1: fetch hdr_boxes and hdr_poster, run the six sources with --config paper on the first "
-        "25 s (time offset estimated) with both backends, and write table1.md (ours beside the paper's, ratios, "
-        "orderings), compare's tables and figures, and Fig. 3-style Euler plots. table2: ORB features and matches "
-        "of original and EAS images and, for ORB-SLAM2 keyframe trajectories given with --estimate (run it on "
-        "`eas-vo export` output), their APE after Sim(3) alignment: table2.md beside the paper's. Resumable: "
-        "the same command runs only what is missing.",
-    )
-    reproduce.add_argument("table", choices=("table1", "table2"))
-    reproduce.add_argument("--out", metavar="DIR", help="output folder (default: reproduce/TABLE)")
-    reproduce.add_argument("--duration", type=_seconds(allow_zero=False), default=25.0, metavar="S", help="seconds of each sequence (default 25, the paper's)")
-    reproduce.add_argument("--config", default="paper", metavar="FILE", help="configuration (default paper, the paper's)")
-    reproduce.add_argument("--backends", default="chain,gtsam", metavar="A,B", help="table1's backends (default chain,gtsam)")
-    reproduce.add_argument("--estimate", dest="estimates", action="append", default=[], metavar="SEQUENCE:SOURCE=FILE",
-                           help="table2: an ORB-SLAM2 KeyFrameTrajectory.txt, e.g. hdr_boxes:eas=KeyFrameTrajectory.txt (repeatable)")
-    reproduce.add_argument("--jobs", type=_positive_int, default=os.cpu_count() or 1, help="parallel processes (default: all cores)")
-    reproduce.add_argument("--quiet", action="store_true", help="no progress bars")
-    reproduce.set_defaults(func=cmd_reproduce)
-
-    fetch = sub.add_parser(
-        "fetch",
-        help="download Event Camera Dataset sequences (verified against their published MD5)",
-        description="Download recordings by name (e.g. hdr_boxes hdr_poster; `eas-vo list` shows the catalogue) "
-        "as the dataset publishes them, check each against its MD5, and skip those already there and whole. "
-        "A download goes to a temporary file moved into place only once verified; an interrupted one is "
-        "restarted by the same command. --dataset ecd:NAME then opens it (and fetches it if missing).",
-        epilog="environment: EAS_VO_DATA_DIR (default folder), EAS_VO_DATA_URL (a mirror), "
-        "EAS_VO_DATA_REGISTRY (a file of 'name md5' lines replacing the built-in registry)",
-    )
-    fetch.add_argument("names", nargs="+", metavar="NAME", help="a sequence name, or PLUGIN:NAME")
-    fetch.add_argument("--dir", metavar="DIR", help="where to keep them (default: $EAS_VO_DATA_DIR, else the cache's data/)")
-    fetch.set_defaults(func=cmd_fetch)
-
-    cache = sub.add_parser(
-        "cache",
-        help="show, or clear, what eas-vo keeps in its cache folder",
-        description="List each folder of the cache (event caches, simulated sequences, downloads, ...) with "
-        "its entries and size; --clear NAME empties one (repeatable). Everything there is rebuilt, simulated "
-        "or downloaded again when next needed; clear it while no eas-vo run is using it.",
-        epilog="environment: EAS_VO_CACHE_DIR (the cache folder; default $XDG_CACHE_HOME/eas-vo or ~/.cache/eas-vo)",
-    )
-    cache.add_argument("--clear", action="append", default=[], metavar="NAME", help="empty this cache folder (e.g. events)")
-    cache.set_defaults(func=cmd_cache)
-
-    sim = sub.add_parser(
-        "simulate",
-        help="write a synthetic dim-scene DAVIS sequence (ECD layout)",
-        description="Simulate a textured HDR room seen by a hand-held DAVIS240: APS frames, events, "
-        "ground truth (200 Hz), IMU (200 Hz), calib.txt, in the Event Camera Dataset text layout.",
-    )
-    _add_output_options(sim, required=True)
-    sim.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
-    sim.add_argument("--duration", type=float, default=10.0, metavar="S", help="length in seconds (default 10)")
-    sim.add_argument("--illumination", type=float, metavar="X",
-                     help="scale of the scene's light (default 1.0, the dim room; 0.1 is ten times darker)")
-    sim.add_argument("--speed", type=float, metavar="X",
-                     help="scale of the camera's speed (default 1.0, hand-held: 44 deg/s mean; 4 gives 177 deg/s, "
-                     "more than the real shapes_rotation's 147): the same path, travelled X times as fast")
-    sim.add_argument("--set", dest="assignments", action="append", default=[], metavar="dataset.KEY=VALUE",
-                     help="a DVS pixel value, as for run (see `eas-vo list`: the synthetic dataset's keys)")
-    sim.add_argument("--stats", action="store_true",
-                     help="print what the simulator knows of its events: rate, noise fraction, noise rate "
-                     "per pixel and median latency in dark and bright regions")
-    sim.set_defaults(func=cmd_simulate)
-    return parser
-
-
-def _add_common_options(parser, evaluated: bool = True) -> None:
-    """Options `run`, `compare` and `export` share: configuration, window, progress, and (for
-    those that evaluate) the ground truth's time offset."""
-    parser.add_argument("--config", metavar="FILE", help="TOML config file, or the name of a bundled one (e.g. paper)")
-    parser.add_argument("--set", dest="assignments", action="append", default=[], metavar="SECTION.KEY=VALUE",
-                        help="override one config value, e.g. frontend.n=8000 (repeatable)")
-    parser.add_argument("--start", type=_seconds(allow_zero=True), metavar="S", help="skip the first S seconds of the sequence")
-    parser.add_argument("--duration", type=_seconds(allow_zero=False), metavar="S", help="process S seconds (default: all)")
-    if evaluated:
-        parser.add_argument("--time-offset", metavar="S|auto",
-                            help="ground truth is sampled at frame time + S seconds (default 0); 'auto' estimates S from the data")
-    parser.add_argument("--quiet", action="store_true", help="no progress bar")
 
 
 def _add_output_options(parser, required: bool, default: str | None = None) -> None:
@@ -244,6 +110,67 @@ def _add_output_options(parser, required: bool, default: str | None = None) -> N
     parser.add_argument("--out", required=required, metavar="DIR", help=f"output folder ({where})")
     parser.add_argument("--overwrite", action="store_true",
                         help="replace a non-empty --out that holds only an earlier eas-vo output")
+
+
+def _add_jobs(parser) -> None:
+    parser.add_argument("--jobs", type=_positive_int, default=os.cpu_count() or 1, help="parallel processes (default: all cores)")
+
+
+def _positive_int(text: str) -> int:
+    """argparse type: an integer of at least 1."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a whole number, got {text!r}") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"must be at least 1, got {value}")
+    return value
+
+
+def _seconds(allow_zero: bool):
+    """argparse type: a finite number of seconds, positive (or, with `allow_zero`, not negative)."""
+    def parse(text: str) -> float:
+        try:
+            value = float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected a number of seconds, got {text!r}") from None
+        if not math.isfinite(value) or value < 0 or (value == 0 and not allow_zero):
+            raise argparse.ArgumentTypeError(f"must be {'at least 0' if allow_zero else 'more than 0'} seconds, got {text}")
+        return value
+    return parse
+
+
+def _assignments(args) -> list[str]:
+    """The --set assignments, with --lenient's."""
+    return args.assignments + (["dataset.lenient=true"] if args.lenient else [])
+
+
+def _window_overrides(args) -> dict:
+    """The [run] values given by --start and --duration."""
+    return {"start_s": args.start, "duration_s": args.duration}
+
+
+def _shared_overrides(args) -> dict:
+    """The [run] values given by the window and --time-offset."""
+    offset, auto = _time_offset(args.time_offset)
+    return {**_window_overrides(args), "time_offset_s": offset, "time_offset_auto": auto}
+
+
+def _time_offset(text: str | None) -> tuple[float | None, bool | None]:
+    """--time-offset value -> (offset_s, auto)."""
+    if text is None:
+        return None, None
+    if text.strip().lower() == "auto":
+        return None, True
+    try:
+        return float(text), False
+    except ValueError:
+        raise EasVoError(f"--time-offset takes seconds or 'auto', got {text!r}") from None
+
+
+def _progress(args) -> bool:
+    """Whether to draw progress bars: not --quiet, and stderr is a terminal."""
+    return not args.quiet and sys.stderr.isatty()
 
 
 def _names(option: str, text: str) -> list[str]:
@@ -277,55 +204,46 @@ def _refuse_inputs_inside(out: Path, datasets: str | list[str], *others: tuple[s
             raise EasVoError(f"--out {out} is {what} {path}, or inside it; writing there would replace it")
 
 
-def _positive_int(text: str) -> int:
-    """argparse type: an integer of at least 1."""
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a whole number, got {text!r}") from None
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"must be at least 1, got {value}")
-    return value
+# ----------------------------------------------------------------------------- run
+
+EPILOG_RUN = """\
+outputs (in --out):
+  trajectory.tum   estimated camera-to-world rotation per frame (TUM: t tx ty tz qx qy qz qw)
+  groundtruth.tum  ground truth at the same timestamps (when the dataset has it)
+  metrics.json     average APE (Eq. 3, rad), RMSE, max, average NC, frames, timing
+  frames.csv       per frame: index, t, NC, inliers, status (first, ok, weak, lost, same_time), redetected,
+                   inlier ratio, residual [px], why the frame is weak or lost
+  config.toml      the resolved configuration (re-run with --config config.toml)
+  rotation.png     estimated and true roll/pitch/yaw over time
+
+examples:
+  eas-vo run --frontend eas --backend chain
+  eas-vo run --dataset path/to/hdr_boxes --frontend original --start 0 --duration 25
+  eas-vo run --frontend eas --set frontend.n=8000 --set tracker.threshold1=15
+  eas-vo run --dataset ecd:path/to/folder --tracker klt --config best
+"""
 
 
-def _seconds(allow_zero: bool):
-    """argparse type: a finite number of seconds, positive (or, with `allow_zero`, not negative)."""
-    def parse(text: str) -> float:
-        try:
-            value = float(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"expected a number of seconds, got {text!r}") from None
-        if not math.isfinite(value) or value < 0 or (value == 0 and not allow_zero):
-            raise argparse.ArgumentTypeError(f"must be {'at least 0' if allow_zero else 'more than 0'} seconds, got {text}")
-        return value
-    return parse
-
-
-def _shared_overrides(args) -> dict:
-    """The [run] values given by the shared options."""
-    offset, auto = _time_offset(args.time_offset)
-    return {"start_s": args.start, "duration_s": args.duration, "time_offset_s": offset, "time_offset_auto": auto}
-
-
-def main(argv: list[str] | None = None) -> int:
-    args = build_parser().parse_args(argv)
-    try:
-        with sigterm_as_interrupt():
-            return args.func(args)
-    except EasVoError as exc:
-        print(f"eas-vo: error: {exc}", file=sys.stderr)
-        return 2
-    except BrokenPipeError:  # `eas-vo list | head`: the reader left; say nothing more
-        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
-        return 141
-    except OSError as exc:  # the machine's answer to a user's request (a full disk, a path in the way)
-        where = f" ({exc.filename})" if exc.filename else ""
-        print(f"eas-vo: error: {exc.strerror or exc}{where}", file=sys.stderr)
-        return 2
-    except KeyboardInterrupt as exc:  # the one place: a command says what it kept in Interrupted
-        kept = exc.kept if isinstance(exc, Interrupted) and exc.kept else "nothing was written"
-        print(f"eas-vo {args.command}: interrupted; {kept}", file=sys.stderr)
-        return 143 if isinstance(exc, Interrupted) and exc.sigterm else 130
+def _parse_run(sub) -> None:
+    run = sub.add_parser(
+        "run",
+        help="estimate rotation on a sequence and evaluate it",
+        description="Run one frontend + tracker + backend on a dataset and write the trajectory, metrics and plots.",
+        epilog=EPILOG_RUN,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    _add_dataset(run, help=DATASET_HELP)
+    run.add_argument("--frontend", metavar="NAME",
+                     help="image source: original, histeq, slice, ts, sits, eas or a plugin's (eas-vo list; default eas)")
+    run.add_argument("--tracker", metavar="NAME", help="relative rotations from the images: klt (the paper; default) or a plugin's")
+    run.add_argument("--backend", metavar="NAME", help="relative -> absolute rotations: chain or gtsam (default chain)")
+    _add_config(run)
+    _add_window(run)
+    _add_time_offset(run)
+    _add_quiet(run)
+    _add_lenient(run)
+    _add_output_options(run, required=False, default="runs/DATASET_FRONTEND_TRACKER_BACKEND_TIME")
+    run.set_defaults(func=cmd_run)
 
 
 def cmd_run(args) -> int:
@@ -333,12 +251,11 @@ def cmd_run(args) -> int:
     from eas_vo import pipeline
     from eas_vo.io import check_output_folder, slug
 
-    assignments = args.assignments + (["dataset.lenient=true"] if args.lenient else [])
     config = config_mod.resolve(
         args.config,
         {"dataset": args.dataset, "frontend": args.frontend, "tracker": args.tracker, "backend": args.backend,
          **_shared_overrides(args)},
-        assignments,
+        _assignments(args),
     )
     rc = config.run
     if args.out:
@@ -348,7 +265,7 @@ def cmd_run(args) -> int:
         import time
 
         out = Path(f"runs/{slug(rc.dataset)}_{rc.frontend}_{rc.tracker}_{rc.backend}_{time.strftime('%Y%m%d-%H%M%S')}")
-    result = pipeline.run(config, out, progress=not args.quiet and sys.stderr.isatty(), replace=args.overwrite)
+    result = pipeline.run(config, out, progress=_progress(args), replace=args.overwrite)
     m = result.metrics
     for line in m["data_warnings"]:
         print(f"eas-vo: warning: {line}", file=sys.stderr)
@@ -377,6 +294,38 @@ def _status_text(counts: dict, reasons: dict) -> str:
     return "; ".join(parts) if any(": " in p for p in parts) else ", ".join(parts)
 
 
+# ----------------------------------------------------------------------------- compare
+
+def _parse_compare(sub) -> None:
+    compare = sub.add_parser(
+        "compare",
+        help="run a grid of datasets x frontends x trackers x backends (x sweeps); write the paper's Table 1",
+        description="Run every cell (dataset x frontend x tracker x backend x sweep point) as `eas-vo run` would, "
+        "in parallel processes; cells already complete are not run again. Writes table.md, table.csv, "
+        "table.json (Table 1 of the paper: average NC and APE per source type), ape_bars.png, "
+        "ape_time.png and each cell's own folder.",
+    )
+    compare.add_argument("--dataset", dest="datasets", action="append", metavar="SPEC",
+                         help="a dataset (repeatable; default synthetic:default)")
+    compare.add_argument("--frontends", metavar="A,B,...", help="default: the paper's six sources, original,histeq,slice,ts,sits,eas")
+    compare.add_argument("--trackers", metavar="A,B,...", help="default: the config's [run] tracker (klt without --config)")
+    compare.add_argument("--backends", metavar="A,B,...", help="default: the config's [run] backend (chain without --config)")
+    _add_config(compare)
+    _add_window(compare)
+    _add_time_offset(compare)
+    _add_quiet(compare)
+    compare.add_argument("--sweep", dest="sweeps", action="append", default=[], metavar="SECTION.KEY=V1,V2",
+                         help="values to try (repeatable: the cartesian product is run)")
+    compare.add_argument("--orb", action="store_true", help="also ORB keypoints and matches per source (Table 2)")
+    _add_jobs(compare)
+    compare.add_argument("--executor", choices=("local", "dask"), default="local",
+                         help="local process pool (default), or an existing Dask distributed cluster")
+    compare.add_argument("--scheduler", metavar="ADDRESS", help="the Dask scheduler, e.g. tcp://10.0.0.5:8786")
+    compare.add_argument("--out", required=True, metavar="DIR",
+                         help="the grid's folder: new, empty, or an earlier compare's, which is resumed")
+    compare.set_defaults(func=cmd_compare)
+
+
 def cmd_compare(args) -> int:
     from eas_vo import compare
     from eas_vo import config as config_mod
@@ -399,7 +348,7 @@ def cmd_compare(args) -> int:
         raise EasVoError("--executor dask needs --scheduler ADDRESS")
     overrides = {**_shared_overrides(args), "orb_stats": True if args.orb else None}
     rows, n_run = compare.run_experiment(cells, out, args.config, args.assignments, overrides, args.jobs,
-                                         progress=not args.quiet and sys.stderr.isatty(),
+                                         progress=_progress(args),
                                          scheduler=args.scheduler if args.executor == "dask" else None)
     return _report_cells(rows, n_run, out / "table.md", compare.table_markdown(rows))
 
@@ -420,6 +369,18 @@ def _report_cells(rows: list[dict], n_run: int, table: Path, markdown: str) -> i
     print(f"{len(rows)} cells ({n_run} run, {len(rows) - n_run} already complete, {len(failed)} failed) -> {table}")
     print(markdown, end="")
     return 1 if failed else 0
+
+
+# ----------------------------------------------------------------------------- list
+
+def _parse_list(sub) -> None:
+    lister = sub.add_parser(
+        "list",
+        help="list the installed datasets, frontends, trackers and backends with their config keys",
+        description="Every plugin found through the entry-point groups eas_vo.datasets, eas_vo.frontends, "
+        "eas_vo.trackers and eas_vo.backends: name, description, config keys with defaults.",
+    )
+    lister.set_defaults(func=cmd_list)
 
 
 def cmd_list(args) -> int:
@@ -446,6 +407,25 @@ def cmd_list(args) -> int:
     return 0
 
 
+# ----------------------------------------------------------------------------- render
+
+def _parse_render(sub) -> None:
+    render = sub.add_parser(
+        "render",
+        help="draw every frontend's image of chosen frames side by side (like the paper's Fig. 1)",
+        description="Run every frontend (or --frontends) over a dataset up to the chosen frames and "
+        "draw their images in a grid: one row per frame, one column per frontend.",
+    )
+    _add_dataset(render)
+    render.add_argument("--frames", required=True, metavar="I,J,...", help="frame indices, e.g. 20,120")
+    render.add_argument("--frontends", metavar="A,B,...", help="frontends to show (default: all installed)")
+    _add_config(render, config_help="config file for the frontends' settings",
+                set_help="override one config value, e.g. frontend.n=8000 (repeatable)")
+    render.add_argument("--out", required=True, metavar="PNG", help="output image, e.g. gallery.png")
+    render.add_argument("--overwrite", action="store_true", help="replace an existing --out (never one of the inputs)")
+    render.set_defaults(func=cmd_render)
+
+
 def cmd_render(args) -> int:
     from eas_vo import config as config_mod
     from eas_vo.gallery import frontend_images
@@ -469,16 +449,27 @@ def cmd_render(args) -> int:
     return 0
 
 
-def _time_offset(text: str | None) -> tuple[float | None, bool | None]:
-    """--time-offset value -> (offset_s, auto)."""
-    if text is None:
-        return None, None
-    if text.strip().lower() == "auto":
-        return None, True
-    try:
-        return float(text), False
-    except ValueError:
-        raise EasVoError(f"--time-offset takes seconds or 'auto', got {text!r}") from None
+# ----------------------------------------------------------------------------- export
+
+def _parse_export(sub) -> None:
+    export = sub.add_parser(
+        "export",
+        help="write a frontend's images as a sequence ORB-SLAM2 reads (TUM or EuRoC layout) with its settings.yaml",
+        description="Run a frontend (e.g. original or eas) over a dataset window and write its images in the "
+        "layout monocular ORB-SLAM2/ORB-SLAM3 examples read, plus settings.yaml (the dataset's calibration in "
+        "ORB-SLAM2's format, its frame rate, ORB-SLAM2's ORB extractor defaults): the paper's §4.3.",
+        epilog="then, e.g.: ./Examples/Monocular/mono_tum Vocabulary/ORBvoc.txt OUT/settings.yaml OUT  "
+        "(writes KeyFrameTrajectory.txt; score it with eas-vo evaluate)",
+    )
+    _add_dataset(export)
+    export.add_argument("--frontend", metavar="NAME", help="image source (default eas)")
+    export.add_argument("--format", choices=("tum", "euroc"), default="tum",
+                        help="tum: rgb.txt + rgb/T.png (mono_tum); euroc: mav0/cam0/data/T_NS.png + timestamps.txt (mono_euroc)")
+    _add_config(export)
+    _add_window(export)
+    _add_quiet(export)
+    _add_output_options(export, required=True)
+    export.set_defaults(func=cmd_export)
 
 
 def cmd_export(args) -> int:
@@ -488,15 +479,36 @@ def cmd_export(args) -> int:
 
     config = config_mod.resolve(
         args.config,
-        {"dataset": args.dataset, "frontend": args.frontend, "start_s": args.start, "duration_s": args.duration},
+        {"dataset": args.dataset, "frontend": args.frontend, **_window_overrides(args)},
         args.assignments,
     )
     out = check_output_folder(args.out, replace=args.overwrite)
     _refuse_inputs_inside(out, config.run.dataset, ("the --config", args.config))
-    done = export(config, out, args.format, progress=not args.quiet and sys.stderr.isatty(), replace=args.overwrite)
+    done = export(config, out, args.format, progress=_progress(args), replace=args.overwrite)
     print(f"wrote {done['frames']} {done['frontend']} images of {done['dataset']} ({done['format']} layout, "
           f"{done['fps']:.2f} frames/s) and settings.yaml to {out}")
     return 0
+
+
+# ----------------------------------------------------------------------------- evaluate
+
+def _parse_evaluate(sub) -> None:
+    evaluate = sub.add_parser(
+        "evaluate",
+        help="score an external TUM trajectory (e.g. ORB-SLAM2's KeyFrameTrajectory.txt) against ground truth",
+        description="Associate the estimate's poses with the dataset's ground truth (nearest time within "
+        "--max-diff), align them (sim3: Umeyama with scale, for monocular SLAM; se3; origin) and report the "
+        "translation APE [m] and rotation APE [rad], as evo_ape tum GT EST -as / -a / --align_origin does. "
+        "With --out: metrics.json, table2_row.md, groundtruth.tum, estimate_aligned.tum.",
+    )
+    _add_dataset(evaluate, help="the dataset the estimate was made on", required=True)
+    evaluate.add_argument("--estimate", required=True, metavar="FILE", help="TUM trajectory: t tx ty tz qx qy qz qw")
+    evaluate.add_argument("--align", choices=("sim3", "se3", "origin"), default="sim3", help="default sim3 (evo_ape -as)")
+    evaluate.add_argument("--max-diff", type=_seconds(allow_zero=True), default=0.01, metavar="S",
+                          help="largest time difference of an associated pose pair (default 0.01 s, evo's)")
+    evaluate.add_argument("--label", metavar="TEXT", help="the row's name in table2_row.md (default: the file's name)")
+    _add_output_options(evaluate, required=False)
+    evaluate.set_defaults(func=cmd_evaluate)
 
 
 def cmd_evaluate(args) -> int:
@@ -512,6 +524,31 @@ def cmd_evaluate(args) -> int:
           f"scale {m['scale']:.4g}): translation APE mean {figure_text(m['ape_trans_mean_m'], 4)} m, "
           f"RMSE {figure_text(m['ape_trans_rmse_m'], 4)} m; rotation APE mean {m['ape_rot_mean_rad']:.4f} rad" + (f" -> {args.out}" if args.out else ""))
     return 0
+
+
+# ----------------------------------------------------------------------------- reproduce
+
+def _parse_reproduce(sub) -> None:
+    reproduce = sub.add_parser(
+        "reproduce",
+        help="the paper's Table 1 or Table 2 on its own data (hdr_boxes, hdr_poster), beside its figures",
+        description="table1: fetch hdr_boxes and hdr_poster, run the six sources with --config paper on the first "
+        "25 s (time offset estimated) with both backends, and write table1.md (ours beside the paper's, ratios, "
+        "orderings), compare's tables and figures, and Fig. 3-style Euler plots. table2: ORB features and matches "
+        "of original and EAS images and, for ORB-SLAM2 keyframe trajectories given with --estimate (run it on "
+        "`eas-vo export` output), their APE after Sim(3) alignment: table2.md beside the paper's. Resumable: "
+        "the same command runs only what is missing.",
+    )
+    reproduce.add_argument("table", choices=("table1", "table2"))
+    reproduce.add_argument("--out", metavar="DIR", help="output folder (default: reproduce/TABLE)")
+    reproduce.add_argument("--duration", type=_seconds(allow_zero=False), default=25.0, metavar="S", help="seconds of each sequence (default 25, the paper's)")
+    reproduce.add_argument("--config", default="paper", metavar="FILE", help="configuration (default paper, the paper's)")
+    reproduce.add_argument("--backends", default="chain,gtsam", metavar="A,B", help="table1's backends (default chain,gtsam)")
+    reproduce.add_argument("--estimate", dest="estimates", action="append", default=[], metavar="SEQUENCE:SOURCE=FILE",
+                           help="table2: an ORB-SLAM2 KeyFrameTrajectory.txt, e.g. hdr_boxes:eas=KeyFrameTrajectory.txt (repeatable)")
+    _add_jobs(reproduce)
+    _add_quiet(reproduce, help="no progress bars")
+    reproduce.set_defaults(func=cmd_reproduce)
 
 
 def cmd_reproduce(args) -> int:
@@ -535,13 +572,31 @@ def cmd_reproduce(args) -> int:
     _refuse_inputs_inside(out, list(reproduce.SPECS.values()), ("the --config", args.config),
                           ("the data folder", str(data_dir())), *(("the --estimate", path) for path in estimates.values()))
     check_grid_folder(out)  # before any download
-    progress = not args.quiet and sys.stderr.isatty()
+    progress = _progress(args)
     if args.table == "table1":
         rows, n_run, markdown = reproduce.table1(out, args.duration, _names("--backends", args.backends), args.config,
                                                  args.jobs, progress)
     else:
         rows, n_run, markdown = reproduce.table2(out, estimates, args.duration, args.config, args.jobs, progress)
     return _report_cells(rows, n_run, out / f"{args.table}.md", markdown)
+
+
+# ----------------------------------------------------------------------------- fetch
+
+def _parse_fetch(sub) -> None:
+    fetch = sub.add_parser(
+        "fetch",
+        help="download Event Camera Dataset sequences (verified against their published MD5)",
+        description="Download recordings by name (e.g. hdr_boxes hdr_poster; `eas-vo list` shows the catalogue) "
+        "as the dataset publishes them, check each against its MD5, and skip those already there and whole. "
+        "A download goes to a temporary file moved into place only once verified; an interrupted one is "
+        "restarted by the same command. --dataset ecd:NAME then opens it (and fetches it if missing).",
+        epilog="environment: EAS_VO_DATA_DIR (default folder), EAS_VO_DATA_URL (a mirror), "
+        "EAS_VO_DATA_REGISTRY (a file of 'name md5' lines replacing the built-in registry)",
+    )
+    fetch.add_argument("names", nargs="+", metavar="NAME", help="a sequence name, or PLUGIN:NAME")
+    fetch.add_argument("--dir", metavar="DIR", help="where to keep them (default: $EAS_VO_DATA_DIR, else the cache's data/)")
+    fetch.set_defaults(func=cmd_fetch)
 
 
 def cmd_fetch(args) -> int:
@@ -552,6 +607,21 @@ def cmd_fetch(args) -> int:
         path = plugin.fetch(name, args.dir, progress=sys.stderr.isatty())
         print(f"{name}: {path} (verified)")
     return 0
+
+
+# ----------------------------------------------------------------------------- cache
+
+def _parse_cache(sub) -> None:
+    cache = sub.add_parser(
+        "cache",
+        help="show, or clear, what eas-vo keeps in its cache folder",
+        description="List each folder of the cache (event caches, simulated sequences, downloads, ...) with "
+        "its entries and size; --clear NAME empties one (repeatable). Everything there is rebuilt, simulated "
+        "or downloaded again when next needed; clear it while no eas-vo run is using it.",
+        epilog="environment: EAS_VO_CACHE_DIR (the cache folder; default $XDG_CACHE_HOME/eas-vo or ~/.cache/eas-vo)",
+    )
+    cache.add_argument("--clear", action="append", default=[], metavar="NAME", help="empty this cache folder (e.g. events)")
+    cache.set_defaults(func=cmd_cache)
 
 
 def cmd_cache(args) -> int:
@@ -577,6 +647,31 @@ def _size(n_bytes: int) -> str:
         if n_bytes >= scale:
             return f"{n_bytes / scale:.1f} {unit}"
     return f"{n_bytes} B"
+
+
+# ----------------------------------------------------------------------------- simulate
+
+def _parse_simulate(sub) -> None:
+    sim = sub.add_parser(
+        "simulate",
+        help="write a synthetic dim-scene DAVIS sequence (ECD layout)",
+        description="Simulate a textured HDR room seen by a hand-held DAVIS240: APS frames, events, "
+        "ground truth (200 Hz), IMU (200 Hz), calib.txt, in the Event Camera Dataset text layout.",
+    )
+    _add_output_options(sim, required=True)
+    sim.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    sim.add_argument("--duration", type=float, default=10.0, metavar="S", help="length in seconds (default 10)")
+    sim.add_argument("--illumination", type=float, metavar="X",
+                     help="scale of the scene's light (default 1.0, the dim room; 0.1 is ten times darker)")
+    sim.add_argument("--speed", type=float, metavar="X",
+                     help="scale of the camera's speed (default 1.0, hand-held: 44 deg/s mean; 4 gives 177 deg/s, "
+                     "more than the real shapes_rotation's 147): the same path, travelled X times as fast")
+    sim.add_argument("--set", dest="assignments", action="append", default=[], metavar="dataset.KEY=VALUE",
+                     help="a DVS pixel value, as for run (see `eas-vo list`: the synthetic dataset's keys)")
+    sim.add_argument("--stats", action="store_true",
+                     help="print what the simulator knows of its events: rate, noise fraction, noise rate "
+                     "per pixel and median latency in dark and bright regions")
+    sim.set_defaults(func=cmd_simulate)
 
 
 def cmd_simulate(args) -> int:
