@@ -16,7 +16,7 @@ from __future__ import annotations
 import functools
 import math
 import sys
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from pathlib import Path, PurePosixPath, PureWindowsPath
 
@@ -295,16 +295,19 @@ def write_ecd_folder(
     root: str | Path,
     camera: CameraModel,
     frame_times: np.ndarray,
-    frames: list[np.ndarray],
+    frames: Iterable[np.ndarray] | None,
     events: np.ndarray,
     ground_truth: PoseSeries | None = None,
     imu: ImuSeries | None = None,
 ) -> None:
-    """Write a sequence in the Event Camera Dataset text layout (each file atomically)."""
+    """Write a sequence in the Event Camera Dataset text layout (each file atomically).
+
+    `frames`: the uint8 frame at each of `frame_times` [s], taken one at a time (a generator
+    keeps one in memory); None for an event-only stream (no images/ nor images.txt)."""
     root = Path(root)
-    (root / "images").mkdir(parents=True, exist_ok=True)
+    root.mkdir(parents=True, exist_ok=True)
     lines = []
-    for k, (t, frame) in enumerate(zip(frame_times, frames)):
+    for k, (t, frame) in enumerate(zip(frame_times, () if frames is None else frames)):
         name = f"images/frame_{k:08d}.png"
         with atomic_path(root / name) as tmp:
             tmp.write_bytes(cv2.imencode(".png", frame)[1].tobytes())
@@ -316,8 +319,8 @@ def write_ecd_folder(
     if imu is not None:
         write_text_atomic(root / "imu.txt", _format_rows(np.column_stack([imu.t, imu.acc, imu.gyro])))
     write_events_text(root / "events.txt", events, camera.width, camera.height)
-    # images.txt last: a folder is complete only once its frame list exists.
-    write_text_atomic(root / "images.txt", "\n".join(lines) + "\n")
+    if frames is not None:  # images.txt last: a folder is complete only once its frame list exists.
+        write_text_atomic(root / "images.txt", "\n".join(lines) + "\n")
 
 
 def _format_rows(table: np.ndarray) -> str:

@@ -1,9 +1,9 @@
-"""Command-line interface: `eas-vo run | compare | list | render | export | evaluate | reproduce |
-fetch | cache | simulate`.
+"""Command-line interface: `eas-vo run | compare | list | info | render | export | convert | evaluate |
+reproduce | fetch | cache | simulate`.
 
 Each command is a pair here: `_parse_NAME` declares its arguments and help (the options several
 commands share are declared once, in `_add_*`), and `cmd_NAME` turns the parsed arguments into a
-call of the library function that does the work (eas_vo.pipeline, compare, orbslam, ...) and
+call of the library function that does the work (eas_vo.pipeline, compare, sequence, ...) and
 prints its result. User errors (bad data, bad config) end in one line on stderr and exit code 2.
 Ctrl-C and SIGTERM end in one line saying what was kept, and exit code 130 / 143.
 Heavy modules are imported inside the commands, so `--help` is instant.
@@ -54,8 +54,8 @@ def build_parser() -> argparse.ArgumentParser:
         description="3-DoF rotation estimation from event cameras fused with frames (EAS and peers).",
     )
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND", parser_class=_OneLineParser)
-    for add in (_parse_run, _parse_compare, _parse_list, _parse_render, _parse_export, _parse_evaluate,
-                _parse_reproduce, _parse_fetch, _parse_cache, _parse_simulate):
+    for add in (_parse_run, _parse_compare, _parse_list, _parse_info, _parse_render, _parse_export, _parse_convert,
+                _parse_evaluate, _parse_reproduce, _parse_fetch, _parse_cache, _parse_simulate):
         add(sub)
     return parser
 
@@ -407,6 +407,32 @@ def cmd_list(args) -> int:
     return 0
 
 
+# ----------------------------------------------------------------------------- info
+
+def _parse_info(sub) -> None:
+    info = sub.add_parser(
+        "info",
+        help="say what a recording holds (streams, sensor, camera, spans, rates) before any long work",
+        description="Open a dataset through its plugin and print the streams it holds (frames, events, IMU, ground "
+        "truth), the sensor size, the camera model and intrinsics, and each stream's span, count and rate. "
+        "Reads the frame list and at most one frame; the event stream is read once (and cached for later runs).",
+    )
+    _add_dataset(info)
+    _add_config(info, config_help="config file for the dataset's settings (its [dataset] table)",
+                set_help="override one dataset setting, e.g. dataset.sample_rate_hz=100 (repeatable)")
+    _add_lenient(info)
+    info.set_defaults(func=cmd_info)
+
+
+def cmd_info(args) -> int:
+    from eas_vo import config as config_mod
+    from eas_vo.sequence import describe
+
+    config = config_mod.resolve(args.config, {"dataset": args.dataset}, _assignments(args))
+    print("\n".join(describe(config).lines()))
+    return 0
+
+
 # ----------------------------------------------------------------------------- render
 
 def _parse_render(sub) -> None:
@@ -487,6 +513,49 @@ def cmd_export(args) -> int:
     done = export(config, out, args.format, progress=_progress(args), replace=args.overwrite)
     print(f"wrote {done['frames']} {done['frontend']} images of {done['dataset']} ({done['format']} layout, "
           f"{done['fps']:.2f} frames/s) and settings.yaml to {out}")
+    return 0
+
+
+# ----------------------------------------------------------------------------- convert
+
+def _parse_convert(sub) -> None:
+    convert = sub.add_parser(
+        "convert",
+        help="write any readable sequence (or a window of it) as an Event Camera Dataset folder",
+        description="Read a dataset through its plugin and write it in the Event Camera Dataset text layout: "
+        "images/ and images.txt (the APS frames, as PNG; none for an event-only stream), events.txt, imu.txt "
+        "and groundtruth.txt (when it has them) and calib.txt. With --start/--duration, the frames of that "
+        "window, the events from the frame before it to the frame after it, and the IMU readings and poses "
+        "over that span and one more at each end. The folder is written whole, or not at all.",
+        epilog="then, e.g.: eas-vo run --dataset OUT --config paper",
+    )
+    _add_dataset(convert)
+    _add_config(convert, config_help="config file for the dataset's settings (its [dataset] table)",
+                set_help="override one dataset setting, e.g. dataset.sample_rate_hz=100 (repeatable)")
+    _add_window(convert)
+    _add_quiet(convert)
+    _add_lenient(convert)
+    _add_output_options(convert, required=True)
+    convert.set_defaults(func=cmd_convert)
+
+
+def cmd_convert(args) -> int:
+    from eas_vo import config as config_mod
+    from eas_vo.io import check_output_folder
+    from eas_vo.sequence import convert
+
+    config = config_mod.resolve(args.config, {"dataset": args.dataset, **_window_overrides(args)}, _assignments(args))
+    out = check_output_folder(args.out, replace=args.overwrite)
+    _refuse_inputs_inside(out, config.run.dataset, ("the --config", args.config))
+    done = convert(config, out, progress=_progress(args), replace=args.overwrite)
+    for line in done.warnings:
+        print(f"eas-vo: warning: {line}", file=sys.stderr)
+    print(f"wrote {done.frames} frames, {done.events} events, {done.imu} IMU readings and {done.poses} poses of "
+          f"{done.label} ({done.span_s:.3f} s) as an Event Camera Dataset folder to {out}")
+    if not done.frames:
+        width, height = done.sensor
+        print(f"  an event-only stream: open it with --set dataset.width={width} --set dataset.height={height} "
+              "(without frames, its sensor size is not in the folder)")
     return 0
 
 

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from eas_vo.cli import main
-from helpers import run_eas_vo
+from helpers import one_line_failure, run_eas_vo
 
 OUTPUTS = ("trajectory.tum", "groundtruth.tum", "metrics.json", "frames.csv", "config.toml", "rotation.png")
 
@@ -247,17 +247,6 @@ def test_results_are_strict_json_with_or_without_ground_truth(sequence_copy, tmp
     assert main(["run", "--dataset", str(sequence_copy), "--out", str(tmp_path / "nogt"), "--quiet"]) == 0
     metrics = strict_json(tmp_path / "nogt" / "metrics.json")
     assert "ape_mean_rad" not in metrics and metrics["frames_evaluated"] == 0
-
-
-def one_line_failure(argv, capsys) -> str:
-    """Run the CLI in-process; it must fail with status 2 and exactly one line on stderr."""
-    try:
-        status = main(argv)
-    except SystemExit as exit_:  # argparse's usage errors
-        status = exit_.code
-    err = capsys.readouterr().err
-    assert status == 2 and err.count("\n") == 1 and "Traceback" not in err, (status, err)
-    return err
 
 
 @pytest.mark.parametrize("argv, says", [

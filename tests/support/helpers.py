@@ -9,7 +9,7 @@ import cv2
 import numpy as np
 import pytest
 
-from eas_vo.types import EVENT_DTYPE, CameraModel
+from eas_vo.types import EVENT_DTYPE, CameraModel, ImuSeries, PoseSeries
 
 SHARED_DATA = Path(__file__).resolve().parents[3] / "shared" / "data"
 SHAPES_ROTATION = SHARED_DATA / "ecd" / "shapes_rotation_0-30s"
@@ -89,6 +89,19 @@ def run_eas_vo(*argv: str, env: dict | None = None):
         return subprocess.run([sys.executable, "-m", "eas_vo", *argv], capture_output=True, text=True, env=env, cwd=neutral)
 
 
+
+def one_line_failure(argv, capsys) -> str:
+    """Run the CLI in-process; it must fail with status 2 and exactly one line on stderr."""
+    from eas_vo.cli import main
+
+    try:
+        status = main(argv)
+    except SystemExit as exit_:  # argparse's usage errors
+        status = exit_.code
+    err = capsys.readouterr().err
+    assert status == 2 and err.count("\n") == 1 and "Traceback" not in err, (status, err)
+    return err
+
 # ----------------------------------------------------------------------------- synthetic views
 
 #: A pinhole camera without distortion for warped-image tests.
@@ -156,3 +169,33 @@ def mark_as_eas_vo_output(folder: Path) -> None:
 
     files = sorted(p.relative_to(folder).as_posix() for p in folder.rglob("*") if p.is_file())
     (folder / OUTPUT_MARKER).write_text("".join(f"{line}\n" for line in ["written by eas-vo:", *files]))
+
+
+# ----------------------------------------------------------------------------- a written sequence
+
+#: known_sequence's content: frames every 1/25 s from 0.5 s, events over 0.4-1.0 s, ground
+#: truth at 200 Hz from 0.45 s, IMU at 250 Hz from 0.42 s (to 1.016 s, the latest of all).
+N_FRAMES, FRAME_T0, FRAME_HZ = 12, 0.5, 25.0
+N_EVENTS, N_POSES, N_READINGS = 5000, 100, 150
+
+
+def known_sequence(folder: Path, width: int = 346, height: int = 260, frames: bool = True) -> Path:
+    """An ECD folder of random content with the module's counts and rates; the camera's focal
+    length and centre follow the sensor size."""
+    from eas_vo.datasets.ecd import write_ecd_folder
+
+    rng = np.random.default_rng(7)
+    f = 0.8 * width
+    camera = CameraModel(width, height, np.array([[f, 0, width / 2 - 0.3], [0, f * 1.01, height / 2 + 0.7], [0, 0, 1]]),
+                         np.array([-0.21, 0.047, 1.3e-4, -2.1e-4, 0.0]))
+    times = FRAME_T0 + np.arange(N_FRAMES) / FRAME_HZ
+    images = [rng.integers(0, 256, (height, width), dtype=np.uint8) for _ in times]
+    events = np.zeros(N_EVENTS, EVENT_DTYPE)
+    events["t"] = np.sort(rng.uniform(0.4, 1.0, N_EVENTS))
+    events["x"], events["y"] = rng.integers(0, width, N_EVENTS), rng.integers(0, height, N_EVENTS)
+    events["p"] = rng.integers(0, 2, N_EVENTS)
+    q = rng.normal(size=(N_POSES, 4))
+    poses = PoseSeries(0.45 + np.arange(N_POSES) / 200.0, rng.normal(size=(N_POSES, 3)), q / np.linalg.norm(q, axis=1, keepdims=True))
+    imu = ImuSeries(0.42 + np.arange(N_READINGS) / 250.0, rng.normal(size=(N_READINGS, 3)), rng.normal(size=(N_READINGS, 3)))
+    write_ecd_folder(folder, camera, times, images if frames else None, events, poses, imu)
+    return folder

@@ -1,0 +1,234 @@
+"""What a recording holds (`describe`, for `eas-vo info`) and the recording, or a window of it,
+written in the Event Camera Dataset text layout (`convert`, for `eas-vo convert`).
+
+Both read a dataset through the Dataset contract only (eas_vo.plugins), so they work for
+every dataset plugin. Times are the dataset's own [s]: frames on the frames' clock, the IMU
+on its own clock, ground truth on the ground truth's (before any run.*time_offset*).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from eas_vo import registry
+from eas_vo.config import ResolvedConfig
+from eas_vo.errors import EasVoError
+from eas_vo.io import output_folder
+from eas_vo.types import CameraModel, ImuSeries, PoseSeries, search_times
+
+
+@dataclass(frozen=True)
+class Span:
+    """A timed stream: `count` items from `t0_s` to `t1_s` [s] (both NaN when empty)."""
+
+    count: int
+    t0_s: float
+    t1_s: float
+
+    @classmethod
+    def of(cls, t: np.ndarray) -> "Span":
+        """The span of sorted times `t` [s] (reads only their ends)."""
+        return cls(len(t), float(t[0]), float(t[-1])) if len(t) else cls(0, math.nan, math.nan)
+
+    @property
+    def duration_s(self) -> float:
+        return self.t1_s - self.t0_s if self.count else 0.0
+
+    @property
+    def rate_hz(self) -> float:
+        """Mean rate [1/s]: intervals per second (NaN without two items some time apart)."""
+        return (self.count - 1) / self.duration_s if self.count > 1 and self.duration_s > 0 else math.nan
+
+    def text(self, what: str) -> str:
+        """'1234 WHAT, 0.000-59.998 s (59.998 s), 20.6 Hz'."""
+        if not self.count:
+            return f"0 {what}"
+        rate = f", {_si(self.rate_hz)}Hz" if math.isfinite(self.rate_hz) else ""
+        return f"{self.count} {what}, {self.t0_s:.3f}-{self.t1_s:.3f} s ({self.duration_s:.3f} s){rate}"
+
+
+@dataclass(frozen=True)
+class SequenceInfo:
+    """What `describe` found.
+
+    Attributes:
+        label, plugin: the dataset as its plugin labels it, and the plugin's name.
+        camera: sensor size, lens model, intrinsics [px] and distortion.
+        frames: the APS frames' times, or None for an event-only stream (`no_frames_reason`
+            says why), whose samples (the times it is processed at) are then `samples`.
+        samples: the times the dataset yields samples at (Dataset.frame_times).
+        events, imu, ground_truth: each stream's span, None when the dataset has none.
+        warnings: what the reader tolerated (--lenient), one line per kind.
+    """
+
+    label: str
+    plugin: str
+    camera: CameraModel
+    frames: Span | None
+    samples: Span
+    no_frames_reason: str
+    events: Span | None
+    imu: Span | None
+    ground_truth: Span | None
+    warnings: tuple[str, ...] = ()
+
+    @property
+    def span(self) -> Span:
+        """From the earliest item of any stream to the latest [s] (count: the streams)."""
+        spans = [s for s in (self.samples, self.events, self.imu, self.ground_truth) if s is not None and s.count]
+        if not spans:
+            return Span(0, math.nan, math.nan)
+        return Span(len(spans), min(s.t0_s for s in spans), max(s.t1_s for s in spans))
+
+    def lines(self) -> list[str]:
+        """The report `eas-vo info` prints."""
+        c = self.camera
+        fx, fy, cx, cy = c.K[0, 0], c.K[1, 1], c.K[0, 2], c.K[1, 2]
+        dist = ", ".join(f"{v:.6g}" for v in c.dist)
+        present = [name for name, s in (("frames", self.frames), ("events", self.events), ("IMU", self.imu),
+                                        ("ground truth", self.ground_truth)) if s is not None and s.count]
+        span = self.span
+        out = [
+            f"{self.label} (dataset plugin {self.plugin})",
+            f"  streams       {', '.join(present) or 'none'}",
+            f"  sensor        {c.width} x {c.height} px",
+            f"  camera        {c.model} lens: fx {fx:.6g} fy {fy:.6g} cx {cx:.6g} cy {cy:.6g} px, distortion [{dist}]",
+            f"  duration      {span.duration_s:.3f} s ({span.t0_s:.3f}-{span.t1_s:.3f} s, all streams)" if span.count
+            else "  duration      0 s (no stream holds anything)",
+        ]
+        if self.frames is not None:
+            out.append(f"  frames        {self.frames.text('APS frames')}")
+        else:
+            out.append(f"  frames        none: {self.no_frames_reason}")
+            out.append(f"  samples       {self.samples.text('samples from the events')}")
+        if self.events is None or not self.events.count:
+            out.append("  events        none")
+        else:
+            e = self.events
+            rate = f", {_si(e.count / e.duration_s).rstrip()} events/s" if e.duration_s > 0 else ""
+            out.append(f"  events        {e.count} events, {e.t0_s:.3f}-{e.t1_s:.3f} s ({e.duration_s:.3f} s){rate}")
+        out.append(f"  IMU           {self.imu.text('readings') if self.imu is not None else 'none'}")
+        out.append(f"  ground truth  {self.ground_truth.text('poses') if self.ground_truth is not None else 'none'}")
+        out += [f"  warning       {line}" for line in self.warnings]
+        return out
+
+
+def _si(value: float) -> str:
+    """A rate with an SI prefix and the space before the unit: '20.6 ', '1.23 M'."""
+    for prefix, scale in (("G", 1e9), ("M", 1e6), ("k", 1e3)):
+        if abs(value) >= scale:
+            return f"{value / scale:.3g} {prefix}"
+    return f"{value:.3g} "
+
+
+def describe(config: ResolvedConfig) -> SequenceInfo:
+    """Open `config.run.dataset` (with the [dataset] settings) and say what it holds. Reads
+    the frame list and at most one frame (whether there are frames at all), and the event
+    stream once (its first read caches it)."""
+    dataset = registry.open_dataset(config.run.dataset, config.dataset)
+    samples = dataset.frame_times()
+    has_frames = len(samples) > 0 and dataset.load_frame(0) is not None
+    events = dataset.events()
+    return SequenceInfo(
+        label=dataset.label,
+        plugin=type(dataset).name,
+        camera=dataset.camera,
+        frames=Span.of(samples) if has_frames else None,
+        samples=Span.of(samples),
+        no_frames_reason="" if has_frames else dataset.no_frames_reason,
+        events=Span.of(events["t"]) if len(events) else None,
+        imu=None if dataset.imu is None else Span.of(dataset.imu.t),
+        ground_truth=None if dataset.ground_truth is None else Span.of(dataset.ground_truth.t),
+        warnings=tuple(dataset.data_warnings()),
+    )
+
+
+@dataclass(frozen=True)
+class Converted:
+    """What `convert` wrote: counts of each stream, the time span of its frames (or samples)
+    [s], the sensor size [px] (which an event-only folder, without frames to read it from,
+    must be opened with: dataset.width, dataset.height), the dataset's label, and what its
+    reader tolerated (--lenient)."""
+
+    label: str
+    sensor: tuple[int, int]
+    frames: int
+    events: int
+    imu: int
+    poses: int
+    span_s: float
+    warnings: tuple[str, ...] = ()
+
+
+def convert(config: ResolvedConfig, out: str | Path, progress: bool = False, replace: bool = False) -> Converted:
+    """Write `config.run.dataset` in the Event Camera Dataset layout into `out` (one writer,
+    moved into place whole: io.output_folder; an existing output only if `replace`).
+
+    The window `run.start_s`/`run.duration_s` (Dataset.window) selects the frames (for an
+    event-only stream, no frames are written: its samples are the reader's to make again);
+    the events are kept from the time of the frame before the window's first (the recording's
+    start if none) to that of the frame after its last (its end if none), so a full window
+    keeps everything and a part what the frontends read of its first frame's past; IMU
+    readings and poses over the same span, and one more at each end (to interpolate at
+    every frame), each on its own clock.
+    """
+    from tqdm import tqdm
+
+    from eas_vo.datasets.ecd import write_ecd_folder
+
+    rc = config.run
+    dataset = registry.open_dataset(rc.dataset, config.dataset)
+    if dataset.camera.model != "radtan":
+        raise EasVoError(f"{dataset.label}: its {dataset.camera.model} lens model cannot be written as an Event Camera "
+                         "Dataset calib.txt, which holds radial-tangential coefficients (fx fy cx cy k1 k2 p1 p2 k3)")
+    window = dataset.window(rc.start_s, rc.duration_s)
+    if len(window) == 0:
+        raise EasVoError(f"{dataset.label}: the window start={rc.start_s} s, duration={rc.duration_s} s holds no sample")
+    times = dataset.frame_times()
+    t_lo, t_hi = _kept_span(times, window)
+    has_frames = dataset.load_frame(0) is not None
+    lo, hi = search_times(dataset.events(), [t_lo, t_hi])
+    events = dataset.events()[lo:hi]
+    if len(events) and events["t"][0] < 0:
+        raise EasVoError(f"{dataset.label}: its events start at {events['t'][0]:.9f} s; events.txt cannot hold "
+                         "negative times")
+    imu = None if dataset.imu is None else _imu_within(dataset.imu, t_lo, t_hi)
+    poses = None if dataset.ground_truth is None else _poses_within(dataset.ground_truth, t_lo, t_hi)
+    frames = None
+    if has_frames:
+        frames = (dataset.load_frame(int(k)) for k in tqdm(window, disable=not progress, unit="frame",
+                                                              desc=f"convert {dataset.label}"))
+    with output_folder(out, replace, keep_partial=False) as staging:
+        write_ecd_folder(staging, dataset.camera, times[window], frames, events, poses, imu)
+    return Converted(dataset.label, (dataset.camera.width, dataset.camera.height), len(window) if has_frames else 0, len(events), 0 if imu is None else len(imu.t),
+                     0 if poses is None else len(poses.t), float(times[window[-1]] - times[window[0]]),
+                     tuple(dataset.data_warnings()))
+
+
+def _kept_span(times: np.ndarray, window: np.ndarray) -> tuple[float, float]:
+    """[t_lo, t_hi) [s]: from the time of the frame before the window (-inf without one) to that
+    of the frame after it (+inf without one)."""
+    first, last = int(window[0]), int(window[-1])
+    t_lo = float(times[first - 1]) if first > 0 else -math.inf
+    t_hi = float(times[last + 1]) if last + 1 < len(times) else math.inf
+    return t_lo, t_hi
+
+
+def _rows_around(t: np.ndarray, t_lo: float, t_hi: float) -> slice:
+    """The rows of sorted times `t` [s] within [t_lo, t_hi), and the one before and the one
+    after, so that poses and rates interpolate at every kept frame."""
+    return slice(max(int(np.searchsorted(t, t_lo)) - 1, 0), int(np.searchsorted(t, t_hi)) + 1)
+
+
+def _imu_within(imu: ImuSeries, t_lo: float, t_hi: float) -> ImuSeries:
+    keep = _rows_around(imu.t, t_lo, t_hi)
+    return ImuSeries(imu.t[keep], imu.acc[keep], imu.gyro[keep])
+
+
+def _poses_within(poses: PoseSeries, t_lo: float, t_hi: float) -> PoseSeries:
+    keep = _rows_around(poses.t, t_lo, t_hi)
+    return PoseSeries(poses.t[keep], poses.p_w_c[keep], poses.q_w_c[keep])
