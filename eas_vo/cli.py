@@ -72,7 +72,7 @@ def _add_dataset(parser, help: str = "as for run (default: synthetic:default)", 
 
 
 def _add_config(parser, config_help: str = "TOML config file, or the name of a bundled one (e.g. paper)",
-                set_help: str | None = "override one config value, e.g. frontend.n=8000 (repeatable)") -> None:
+                set_help: str = "override one config value, e.g. frontend.n=8000 (repeatable)") -> None:
     """--config FILE and --set SECTION.KEY=VALUE (repeatable, into args.assignments)."""
     parser.add_argument("--config", metavar="FILE", help=config_help)
     parser.add_argument("--set", dest="assignments", action="append", default=[], metavar="SECTION.KEY=VALUE",
@@ -415,7 +415,7 @@ def _parse_info(sub) -> None:
         help="say what a recording holds (streams, sensor, camera, spans, rates) before any long work",
         description="Open a dataset through its plugin and print the streams it holds (frames, events, IMU, ground "
         "truth), the sensor size, the camera model and intrinsics, and each stream's span, count and rate. "
-        "Reads the frame list and at most one frame; the event stream is read once (and cached for later runs).",
+        "Reads the frame list and at most one frame, and the event stream once (a text reader caches it for later runs).",
     )
     _add_dataset(info)
     _add_config(info, config_help="config file for the dataset's settings (its [dataset] table)",

@@ -204,9 +204,16 @@ def convert(config: ResolvedConfig, out: str | Path, progress: bool = False, rep
                                                               desc=f"convert {dataset.label}"))
     with output_folder(out, replace, keep_partial=False) as staging:
         write_ecd_folder(staging, dataset.camera, times[window], frames, events, poses, imu)
-    return Converted(dataset.label, (dataset.camera.width, dataset.camera.height), len(window) if has_frames else 0, len(events), 0 if imu is None else len(imu.t),
-                     0 if poses is None else len(poses.t), float(times[window[-1]] - times[window[0]]),
-                     tuple(dataset.data_warnings()))
+    return Converted(
+        label=dataset.label,
+        sensor=(dataset.camera.width, dataset.camera.height),
+        frames=len(window) if has_frames else 0,
+        events=len(events),
+        imu=0 if imu is None else len(imu.t),
+        poses=0 if poses is None else len(poses.t),
+        span_s=float(times[window[-1]] - times[window[0]]),
+        warnings=tuple(dataset.data_warnings()),
+    )
 
 
 def _kept_span(times: np.ndarray, window: np.ndarray) -> tuple[float, float]:
