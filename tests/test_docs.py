@@ -145,6 +145,13 @@ def comparable(summary: str) -> str:
     return re.sub(r", [0-9.]+ frames/s -> \S+$", "", summary.strip())
 
 
+def test_the_summary_check_ignores_only_speed_and_folder():
+    line = f"{FIRST_RUN} 200 frames (1 first, 199 ok), average NC 226.5, average APE 0.1663 rad (9.53 deg), 13.6 frames/s -> runs/a"
+    assert comparable(line) == comparable(line.replace("13.6", "250.1").replace("runs/a", "/tmp/b c"[:6]))
+    assert comparable(line) != comparable(line.replace("0.1663", "0.1662"))
+    assert comparable(line) != comparable(line.replace("199 ok", "198 ok, 1 weak"))
+
+
 @pytest.mark.slow
 def test_the_readme_quotes_the_first_runs_summary_line(tmp_path, capsys):
     """The README's first command, run (the embedded default sequence, about a minute once
