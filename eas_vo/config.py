@@ -39,7 +39,7 @@ class RunConfig:
         imu_rotvec_cam: the rig's camera-to-IMU rotation R_imu_cam as a rotation vector [rad]
             (v_imu = R_imu_cam v_cam): trackers and backends get the IMU's readings rotated
             into the camera frame by it. The identity: the simulator's (and, within 1 deg, the
-            Event Camera Dataset's: README "An IMU"). Every run checks it against the images (a warning).
+            Event Camera Dataset's: docs/imu.md). Every run checks it against the images (a warning).
         imu_time_offset_s: IMU time = frame time + this [s].
         imu_time_offset_auto: the backend reads the gyro on the clock the images ask for when
             they clearly ask for another (the run's IMU check; metrics.json reports the offset
