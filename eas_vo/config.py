@@ -257,7 +257,7 @@ def resolve(
         "tracker": registry.get("trackers", run.tracker),
         "backend": registry.get("backends", run.backend),
     }
-    sections = {name: build(cls.Config, _plugin_table(raw[name], name, cls), name) for name, cls in chosen.items()}
+    sections = {name: build(cls.Config, _plugin_table(raw[name], name, cls), f"{name}.{cls.name}") for name, cls in chosen.items()}
     return ResolvedConfig(run=run, **sections)
 
 
