@@ -1,13 +1,17 @@
-"""What the recording readers (`ecd`, `rosbag`) share: their reading options, checks of
-timed tables, and the sampling of event-only streams. Not a plugin."""
+"""What the recording readers (`ecd`, `rosbag`, `aedat4`) share: their reading options, checks
+of timed tables, TUM ground-truth files, and the sampling of event-only streams. Not a plugin."""
 
 from __future__ import annotations
 
+import functools
+from collections.abc import Callable
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
 from eas_vo.errors import DataError
+from eas_vo.io import data_line, parse_table
 from eas_vo.types import PoseSeries
 from eas_vo.validation import check_range
 
@@ -70,3 +74,33 @@ def pose_series(where: str, table: np.ndarray, line_of=_row_number) -> PoseSerie
     # Normalise only what is not unit already, so that re-reading written poses is exact.
     q = np.where(np.abs(norms - 1.0)[:, None] > 1e-12, q / norms[:, None], q)
     return PoseSeries(t=table[:, 0], p_w_c=table[:, 1:4], q_w_c=q)
+
+
+def timed_table(data: bytes, where: str, ncols: int, what: str) -> tuple[np.ndarray, Callable[[int], int]]:
+    """The rows of a whitespace table (`what` describes one; `#` comments) whose first column, a
+    time [s], increases, and row index -> file line; at least 2 rows (to interpolate between)."""
+    table = parse_table(data, where, ncols, what)
+    if len(table) < 2:
+        raise DataError(where, f"holds {len(table)} row(s) of '{what}'; at least 2 are needed to interpolate (or remove the file)")
+    line_of = functools.partial(data_line, data)
+    check_increasing(where, table[:, 0], line_of)
+    return table, line_of
+
+
+def ground_truth_table(data: bytes, where: str, time_offset_s: float = 0.0) -> PoseSeries:
+    """TUM rows `t px py pz qx qy qz qw` (camera-to-world; t [s], p [m], unit q) -> PoseSeries,
+    `time_offset_s` added to each t (the ground truth's clock -> the recording's)."""
+    table, line_of = timed_table(data, where, 8, "t px py pz qx qy qz qw")
+    poses = pose_series(where, table, line_of)
+    if time_offset_s == 0.0:
+        return poses
+    return PoseSeries(poses.t + time_offset_s, poses.p_w_c, poses.q_w_c)
+
+
+def read_tum_ground_truth(path: str | Path, time_offset_s: float = 0.0) -> PoseSeries:
+    """A TUM ground-truth file (see ground_truth_table), errors naming the file and its line."""
+    try:
+        data = Path(path).read_bytes()
+    except OSError as exc:
+        raise DataError(str(path), f"cannot read the ground truth: {exc.strerror or exc}") from None
+    return ground_truth_table(data, str(path), time_offset_s)
