@@ -4,13 +4,13 @@ sequence giving the same data and the same trajectory as its ECD folder."""
 
 from __future__ import annotations
 
-from datetime import timedelta
+import json
 
 import numpy as np
 import pytest
 
 from eas_vo.datasets.aedat4 import Aedat4Config, Aedat4Dataset
-from eas_vo.errors import DataError, DataWarnings, EasVoError
+from eas_vo.errors import DataError
 
 dv = pytest.importorskip("dv_processing", reason="dv-processing (the AEDAT4 reader's library) is not installed")
 
@@ -190,3 +190,120 @@ def test_ground_truth_from_a_tum_file_with_a_clock_offset(tmp_path):
     tum.write_text("10.0 1 2 3 0 0 0 1\n9.0 1 2 3 0 0 0 1\n")
     with pytest.raises(DataError, match=r"gt.tum:2: timestamp 9.000000000 does not increase"):
         Aedat4Dataset(path, Aedat4Config(calibration=str(write_calib(tmp_path)), ground_truth=str(tum)))
+
+
+def test_truncated_files_are_named_errors_or_read_whole(tmp_path):
+    """An AEDAT4 cut at any byte: a one-line error naming the file, or (accepted) exactly what the
+    whole file holds: every event, frame and IMU reading."""
+    from hypothesis import given, strategies as st
+
+    from helpers import hostile_settings
+
+    events = random_stream(4000, seed=5)
+    t0 = int(events[0][0])
+    image = np.random.default_rng(6).integers(0, 256, (HEIGHT, WIDTH), dtype=np.uint8)
+    whole = tmp_path / "whole.aedat4"
+    write_aedat4(whole, events=events, frames=[(t0 + 40_000 * k, 5000, image) for k in range(4)],
+                 imu=[(t0 + 5000 * k, 0.0, -1.0, 0.0, 1.0, 2.0, 3.0) for k in range(8)])
+    data = whole.read_bytes()
+    config = Aedat4Config(calibration=str(write_calib(tmp_path)))
+    expected = Aedat4Dataset(whole, config)
+    cut = tmp_path / "cut.aedat4"
+
+    @hostile_settings(60)
+    @given(st.integers(0, len(data) - 1))
+    def check(offset):
+        cut.write_bytes(data[:offset])
+        try:
+            ds = Aedat4Dataset(cut, config)
+            got = ds.events(), ds.frame_times(), [ds.load_frame(k) for k in range(len(ds.frame_times()))], ds.imu
+        except DataError as exc:
+            assert str(exc).startswith(str(cut)) and "\n" not in str(exc)
+            return
+        np.testing.assert_array_equal(got[0], expected.events())
+        np.testing.assert_array_equal(got[1], expected.frame_times())
+        assert all((frame == image).all() for frame in got[2])
+        np.testing.assert_array_equal(got[3].gyro, expected.imu.gyro)
+
+    check()
+
+
+# -- the same sequence as an ECD folder and as an AEDAT4 --------------------------------------
+
+
+def write_ecd_as_aedat4(ecd, path, exposure_us):
+    """An ECD sequence as a DAVIS would have recorded it in DV: microsecond timestamps, frames
+    stamped at the start of an exposure of `exposure_us` centred on the ECD's frame time,
+    IMU in g and deg/s (dv-processing stores them as float32)."""
+    ev = ecd.events()
+    frames = [(round(t * 1e6) - exposure_us // 2, exposure_us, ecd.load_frame(k)) for k, t in enumerate(ecd.frame_times())]
+    imu = np.column_stack([np.round(ecd.imu.t * 1e6), ecd.imu.acc / 9.80665, np.degrees(ecd.imu.gyro)])
+    write_aedat4(path, events=(np.round(ev["t"] * 1e6).astype(np.int64), ev["x"], ev["y"], ev["p"]), frames=frames,
+                 imu=imu.tolist(), size=(ecd.camera.width, ecd.camera.height))
+
+
+@pytest.fixture(scope="module")
+def both_formats(tmp_path_factory):
+    """`eas-vo simulate --duration 1` (ECD folder `sim`); the same with its nanosecond event times
+    rounded to the microseconds an AEDAT4 holds (`sim_us`); that written to AEDAT4 by
+    dv-processing (`sim.aedat4`)."""
+    from helpers import run_eas_vo
+
+    from eas_vo.datasets.ecd import EcdFolderDataset, write_ecd_folder
+    from eas_vo.datasets.simulator import SimConfig
+
+    root = tmp_path_factory.mktemp("aedat4_identity")
+    done = run_eas_vo("simulate", "--out", str(root / "sim"), "--duration", "1")
+    assert done.returncode == 0, done.stderr
+    sim = EcdFolderDataset(root / "sim")
+    events = sim.events().copy()
+    events["t"] = np.round(events["t"] * 1e6) / 1e6
+    frames = [sim.load_frame(k) for k in range(len(sim.frame_times()))]
+    write_ecd_folder(root / "sim_us", sim.camera, sim.frame_times(), frames, events, sim.ground_truth, sim.imu)
+    write_ecd_as_aedat4(EcdFolderDataset(root / "sim_us"), root / "sim.aedat4", round(SimConfig().aps.exposure_s * 1e6))
+    return root
+
+
+def test_an_aedat4_holds_what_the_ecd_folder_holds(both_formats):
+    from eas_vo.datasets.ecd import EcdFolderDataset
+
+    root = both_formats
+    sim = EcdFolderDataset(root / "sim")
+    ds = Aedat4Dataset(root / "sim.aedat4", Aedat4Config(calibration=str(root / "sim" / "calib.txt"),
+                                                         ground_truth=str(root / "sim" / "groundtruth.txt")))
+    assert (ds.camera.width, ds.camera.height, ds.camera.model) == (sim.camera.width, sim.camera.height, sim.camera.model)
+    np.testing.assert_array_equal(ds.camera.K, sim.camera.K)
+    np.testing.assert_array_equal(ds.camera.dist, sim.camera.dist)
+    ours, theirs = ds.events(), sim.events()
+    assert len(ours) == len(theirs) > 100_000
+    np.testing.assert_array_equal(np.round(ours["t"] * 1e6).astype(np.int64), np.round(theirs["t"] * 1e6).astype(np.int64))
+    for name in ("x", "y", "p"):
+        np.testing.assert_array_equal(ours[name], theirs[name])
+    np.testing.assert_array_equal(np.round(ds.frame_times() * 1e6), np.round(sim.frame_times() * 1e6))
+    np.testing.assert_array_equal(ds.frame_times(), sim.frame_times())
+    for k in range(len(sim.frame_times())):
+        np.testing.assert_array_equal(ds.load_frame(k), sim.load_frame(k))
+    np.testing.assert_array_equal(ds.imu.t, sim.imu.t)
+    np.testing.assert_allclose(ds.imu.acc, sim.imu.acc, rtol=2e-7)  # float32 in the file: 6e-8 apart
+    np.testing.assert_allclose(ds.imu.gyro, sim.imu.gyro, rtol=2e-7)
+    for field in ("t", "p_w_c", "q_w_c"):
+        np.testing.assert_array_equal(getattr(ds.ground_truth, field), getattr(sim.ground_truth, field))
+
+
+def test_the_paper_run_gives_the_same_trajectory_from_both(both_formats, tmp_path):
+    from helpers import run_eas_vo
+
+    root = both_formats
+    ecd = run_eas_vo("run", "--config", "paper", "--dataset", str(root / "sim_us"), "--out", str(tmp_path / "ecd"), "--quiet")
+    aedat = run_eas_vo("run", "--config", "paper", "--dataset", str(root / "sim.aedat4"),
+                       "--set", f"dataset.calibration={root / 'sim' / 'calib.txt'}",
+                       "--set", f"dataset.ground_truth={root / 'sim' / 'groundtruth.txt'}",
+                       "--out", str(tmp_path / "aedat"), "--quiet")
+    assert ecd.returncode == 0 and aedat.returncode == 0, ecd.stderr + aedat.stderr
+    for name in ("trajectory.tum", "groundtruth.tum"):
+        a, b = (np.loadtxt(tmp_path / run / name) for run in ("ecd", "aedat"))
+        assert a.shape == b.shape == (20, 8)
+        np.testing.assert_allclose(b, a, rtol=0, atol=1e-6)
+    metrics = [json.loads((tmp_path / run / "metrics.json").read_text()) for run in ("ecd", "aedat")]
+    assert metrics[1]["nc_mean"] == metrics[0]["nc_mean"] and metrics[1]["status_counts"] == metrics[0]["status_counts"]
+    assert metrics[1]["ape_mean_rad"] == pytest.approx(metrics[0]["ape_mean_rad"], abs=1e-6)
