@@ -17,6 +17,7 @@ from __future__ import annotations
 import argparse
 import io
 import json
+import os
 import resource
 import subprocess
 import sys
@@ -66,14 +67,15 @@ def make_aedat4(text: Path) -> Path:
     import dv_processing as dv
 
     from eas_vo.eventfile import file_identity, load_event_text
-    from eas_vo.io import atomic_path, write_text_atomic
+    from eas_vo.io import write_text_atomic
 
     path = text.with_suffix(".aedat4")
     write_text_atomic(path.with_name("calib.txt"), "200 200 120 90 0 0 0 0 0\n")
     if path.exists():
         return path
     events = load_event_text(lambda: open(text, "rb"), file_identity(text), str(text), 240, 180)
-    with atomic_path(path) as tmp:
+    with tempfile.TemporaryDirectory(dir=path.parent) as folder:  # the writer wants a new file named *.aedat4
+        tmp = Path(folder) / path.name
         writer = dv.io.MonoCameraWriter(str(tmp), dv.io.MonoCameraWriter.EventOnlyConfig("bench", (240, 180)))
         for start in range(0, len(events), 100_000):
             chunk = events[start : start + 100_000]
@@ -83,14 +85,13 @@ def make_aedat4(text: Path) -> Path:
                 store.push_back(t, x, y, p > 0)
             writer.writeEvents(store)
         del writer  # closing writes the file's index
+        os.replace(tmp, path)
     return path
 
 
 def aedat4_stage(name: str, path: Path, repeat: int, out: dict) -> None:
     """dv-processing's batch reading of the AEDAT4 (`aedat4_dv`), the aedat4 reader's first read
     into a fresh cache (`aedat4_first`) and its cached read (`aedat4_cached`)."""
-    import os
-
     from eas_vo.datasets.aedat4 import Aedat4Config, Aedat4Dataset
 
     config = Aedat4Config(calibration=str(path.with_name("calib.txt")))

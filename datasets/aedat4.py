@@ -100,6 +100,9 @@ class Aedat4Dataset(Dataset):
             raise DataError(self.path, "AEDAT4 file not found")
         if not is_aedat4(self.path):
             raise DataError(self.path, f"not an AEDAT4 file (it does not start with {MAGIC.decode().strip()!r})")
+        if self.path.suffix != ".aedat4":
+            raise DataError(self.path, "dv-processing opens AEDAT4 files only under a name ending in '.aedat4' "
+                                       "(lower case): rename or link it")
         self.recording = self._dv(lambda: dv.io.MonoCameraRecording(str(self.path)), "the file's header or index")
         width, height = self._sensor_size()
         if not c.calibration:

@@ -63,6 +63,11 @@ def test_can_open_wants_the_suffix_and_the_magic(tmp_path):
     assert not Aedat4Dataset.can_open(str(tmp_path / "absent.aedat4"))
     with pytest.raises(DataError, match=r"notes.aedat4: not an AEDAT4 file"):
         Aedat4Dataset(text, Aedat4Config(calibration=str(write_calib(tmp_path))))
+    shouting = tmp_path / "REC.AEDAT4"
+    shouting.write_bytes(good.read_bytes())
+    assert Aedat4Dataset.can_open(str(shouting))
+    with pytest.raises(DataError, match=r"REC.AEDAT4: dv-processing opens AEDAT4 files only under a name ending in '.aedat4'"):
+        Aedat4Dataset(shouting, Aedat4Config(calibration=str(write_calib(tmp_path))))
 
 
 def test_a_missing_calibration_says_what_to_pass(tmp_path):
