@@ -78,7 +78,7 @@ def is_aedat4(path: Path) -> bool:
     try:
         with open(path, "rb") as fh:
             return fh.read(len(MAGIC)) == MAGIC
-    except OSError:
+    except (OSError, ValueError):  # ValueError: a NUL in the name
         return False
 
 
@@ -252,7 +252,7 @@ class Aedat4Dataset(Dataset):
                     first = read
                     events = validate(raw["timestamp"] / 1e6, raw["x"].astype(np.int64), raw["y"].astype(np.int64),
                                       raw["polarity"].astype(np.int64), lambda row: first + row)
-                    out.write(events.tobytes())
+                    out.write(events.data)
                     read, kept = read + len(raw), kept + len(events)
             finally:
                 r.resetSequentialRead()

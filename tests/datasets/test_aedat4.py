@@ -60,7 +60,8 @@ def test_can_open_wants_the_suffix_and_the_magic(tmp_path):
     renamed.write_bytes(good.read_bytes())
     assert Aedat4Dataset.can_open(str(good))
     assert not Aedat4Dataset.can_open(str(text)) and not Aedat4Dataset.can_open(str(renamed))
-    assert not Aedat4Dataset.can_open(str(tmp_path / "absent.aedat4"))
+    assert not Aedat4Dataset.can_open(str(tmp_path / "absent.aedat4")) and not Aedat4Dataset.can_open("a\0b.aedat4")
+    assert not Aedat4Dataset.can_open(str(tmp_path))
     with pytest.raises(DataError, match=r"notes.aedat4: not an AEDAT4 file"):
         Aedat4Dataset(text, Aedat4Config(calibration=str(write_calib(tmp_path))))
     shouting = tmp_path / "REC.AEDAT4"

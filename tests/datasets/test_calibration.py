@@ -258,3 +258,16 @@ def test_truncated_files_are_named_errors_or_the_whole_calibration(tmp_path, fmt
         assert_camera(model, FISHEYE)
 
     check()
+
+
+def test_camera_info_fields_as_a_bag_gives_them():
+    """The sensor_msgs/CameraInfo fields a ROS bag's message holds: the lens model follows
+    distortion_model (an empty one, as old drivers leave it, is plumb_bob)."""
+    from eas_vo.datasets.calibration import camera_from_camera_info
+
+    K = K_of(FISHEYE).ravel()
+    assert_camera(camera_from_camera_info("x.bag:/dvs/camera_info:0", 346, 260, K, FISHEYE["dist"], "equidistant"), FISHEYE)
+    radtan = camera_from_camera_info("x.bag:/dvs/camera_info:0", 346, 260, K_of(RADTAN).ravel(), RADTAN["dist"], "")
+    assert_camera(radtan, RADTAN)
+    with pytest.raises(DataError, match=r"^x.bag:/dvs/camera_info:0: K/D: the equidistant lens model takes 4"):
+        camera_from_camera_info("x.bag:/dvs/camera_info:0", 346, 260, K, RADTAN["dist"], "equidistant")
