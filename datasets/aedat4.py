@@ -121,7 +121,7 @@ class Aedat4Dataset(Dataset):
         """`call()`, dv-processing's errors turned into a one-line DataError naming `what` was read."""
         try:
             return call()
-        except (RuntimeError, ValueError, TypeError, OSError) as exc:
+        except (RuntimeError, ValueError, IndexError, OSError) as exc:  # what pybind11 makes of std:: exceptions
             where = f"{self.path}:{stream}" if stream else str(self.path)
             raise DataError(where, f"damaged or truncated AEDAT4 data, reading {what} ({_said(exc)})") from None
 
