@@ -24,13 +24,8 @@ import cv2
 import numpy as np
 
 from eas_vo.datasets import ecd_catalogue
-from eas_vo.datasets.recording import (
-    StreamConfig,
-    calibration_problem,
-    check_increasing,
-    event_sample_times,
-    pose_series,
-)
+from eas_vo.datasets.calibration import parse_ecd_calib
+from eas_vo.datasets.recording import StreamConfig, check_increasing, event_sample_times, pose_series
 from eas_vo.datasets.sources import MARKERS, open_source
 from eas_vo.errors import DataError, DataWarnings
 from eas_vo.eventfile import load_event_text, write_events_text
@@ -252,19 +247,7 @@ class EcdFolderDataset(Dataset):
         where = self.source.label("calib.txt")
         if not self.source.exists("calib.txt"):
             raise DataError(where, "file not found: calib.txt holds the intrinsics 'fx fy cx cy k1 k2 p1 p2 k3'")
-        fields = self.source.read_bytes("calib.txt").decode(errors="replace").split()
-        try:
-            values = [float(v) for v in fields]
-        except ValueError:
-            raise DataError(where, "calibration values must be numbers", 1) from None
-        if len(values) not in (4, 8, 9):
-            raise DataError(where, f"expected 4, 8 or 9 values (fx fy cx cy k1 k2 p1 p2 k3), found {len(values)}", 1)
-        if not all(map(math.isfinite, values)):
-            raise DataError(where, "calibration values must be finite (found NaN or infinity)", 1)
-        problem = calibration_problem(values, width, height)
-        if problem:
-            raise DataError(where, problem, 1)
-        return CameraModel.from_calib(values, width, height)
+        return parse_ecd_calib(self.source.read_bytes("calib.txt"), where, width, height)
 
     def _read_timed_table(self, name: str, ncols: int, what: str) -> tuple[np.ndarray, Callable] | None:
         """The table of `name` with times increasing, and row index -> file line; None if absent."""

@@ -70,21 +70,3 @@ def pose_series(where: str, table: np.ndarray, line_of=_row_number) -> PoseSerie
     # Normalise only what is not unit already, so that re-reading written poses is exact.
     q = np.where(np.abs(norms - 1.0)[:, None] > 1e-12, q / norms[:, None], q)
     return PoseSeries(t=table[:, 0], p_w_c=table[:, 1:4], q_w_c=q)
-
-
-def calibration_problem(values: list[float], width: int, height: int) -> str | None:
-    """What makes `fx fy cx cy [k1 k2 p1 p2 [k3]]` impossible for a width x height pinhole camera
-    with radial-tangential distortion, or None: focal lengths between 0.1 and 100 sensor widths
-    (fields of view of about 160 down to 0.6 degrees), the principal point on the sensor,
-    |k1|, |k2|, |k3| <= 10 and |p1|, |p2| <= 1 (beyond, the model no longer maps the sensor)."""
-    fx, fy, cx, cy = values[:4]
-    side = max(width, height)
-    if not (0.1 * side <= fx <= 100 * side and 0.1 * side <= fy <= 100 * side):
-        return f"focal lengths fx = {fx:g}, fy = {fy:g} px are not those of a {width}x{height} camera " \
-               f"({0.1 * side:g} to {100 * side:g} px)"
-    if not (0 <= cx <= width and 0 <= cy <= height):
-        return f"principal point cx = {cx:g}, cy = {cy:g} px lies off the {width}x{height} sensor"
-    dist = (values[4:] + [0.0] * 5)[:5]
-    if max(abs(dist[0]), abs(dist[1]), abs(dist[4])) > 10 or max(abs(dist[2]), abs(dist[3])) > 1:
-        return f"distortion k1 k2 p1 p2 k3 = {' '.join(f'{d:g}' for d in dist)} out of range (|k| <= 10, |p| <= 1)"
-    return None
