@@ -4,7 +4,10 @@ Prints, each stage in its own process (so peak memory is its own):
   - first parse (text -> binary cache) events/s and MB/s, beside pandas.read_csv (C engine)
     on the same file;
   - cached load: map the cache and read every event, events/s;
-  - a 1 s window of the cached stream through the pipeline's sample views: bytes touched.
+  - a 1 s window of the cached stream through the pipeline's sample views: bytes touched;
+  - the same events as an MVSEC HDF5 file (davis/left/events, x y t p float64 rows): the
+    `mvsec` reader's first read (validated, into the cache) and cached read, beside h5py
+    reading the whole array into memory.
 
     python benchmarks/bench_events.py [--events 20000000]
 """
@@ -57,6 +60,43 @@ def make_file(n_events: int) -> Path:
     return path
 
 
+#: A pinhole 240x180 camera (the simulator's size) for the MVSEC file, as a kalibr camchain.
+BENCH_CAMCHAIN = """cam0:
+  camera_model: pinhole
+  intrinsics: [200.0, 200.0, 120.0, 90.0]
+  distortion_model: none
+  distortion_coeffs: [0.0, 0.0, 0.0, 0.0]
+  resolution: [240, 180]
+"""
+
+
+def make_mvsec_file(text: Path) -> Path:
+    """The events of `text` as an MVSEC NAME_data.hdf5 (davis/left/events only), with a camchain beside it."""
+    import h5py
+
+    from eas_vo.io import atomic_path, write_text_atomic
+
+    path = text.with_name(text.stem + "_data.hdf5")
+    write_text_atomic(text.with_name(text.stem + "_camchain.yaml"), BENCH_CAMCHAIN)
+    if path.exists():
+        return path
+    events = load_text(text)
+    with atomic_path(path) as tmp, h5py.File(tmp, "w") as f:
+        dset = f.create_dataset("davis/left/events", shape=(len(events), 4), dtype=np.float64)
+        step = 1 << 20
+        for start in range(0, len(events), step):
+            chunk = events[start : start + step]
+            dset[start : start + len(chunk)] = np.column_stack([chunk["x"], chunk["y"], chunk["t"],
+                                                               np.where(chunk["p"] > 0, 1.0, -1.0)])
+    return path
+
+
+def load_text(path: Path) -> np.ndarray:
+    from eas_vo.eventfile import file_identity, load_event_text
+
+    return load_event_text(lambda: open(path, "rb"), file_identity(path), str(path), 240, 180)
+
+
 def timed(fn, repeat: int) -> tuple[float, object]:
     """Best wall time of `repeat` calls (the machine is shared: the minimum is the signal)."""
     best, result = float("inf"), None
@@ -68,7 +108,7 @@ def timed(fn, repeat: int) -> tuple[float, object]:
 
 
 def stage(name: str, path: Path, repeat: int) -> dict:
-    from eas_vo.eventfile import build_cache, convert_text_to_cache, file_identity, load_event_text
+    from eas_vo.eventfile import build_cache, convert_text_to_cache
     from eas_vo.types import search_times
 
     size_mb = path.stat().st_size / 1e6
@@ -82,6 +122,35 @@ def stage(name: str, path: Path, repeat: int) -> dict:
 
         out["seconds"], frame = timed(parse, repeat)
         out["events"] = len(frame)
+    elif name.startswith("mvsec"):
+        import os
+
+        import h5py
+
+        from eas_vo.datasets.mvsec import MvsecConfig, MvsecDataset
+
+        config = MvsecConfig(calibration=str(path.with_name(path.name.replace("_data.hdf5", "_camchain.yaml"))),
+                             width=240, height=180)
+        if name == "mvsec_h5py":
+            def read():  # the whole (N, 4) float64 array into memory, unchecked
+                with h5py.File(path, "r") as f:
+                    return len(f["davis/left/events"][()])
+        elif name == "mvsec_first":
+            MvsecDataset(path, config)  # h5py, hdf5plugin and numba's compiled kernels loaded once
+
+            def read():  # open, check and cache every event, in a fresh cache each time
+                with tempfile.TemporaryDirectory() as tmp:
+                    os.environ["EAS_VO_CACHE_DIR"] = tmp
+                    return len(MvsecDataset(path, config).events())
+        else:
+            MvsecDataset(path, config).events()  # build the cache once
+
+            def read():  # open, map the cache, read every byte of every record once
+                events = MvsecDataset(path, config).events()
+                float(events.view(np.uint8).sum(dtype=np.uint64))
+                return len(events)
+
+        out["seconds"], out["events"] = timed(read, repeat)
     elif name in ("parse", "parse_to_cache"):
         warm = time.perf_counter()
         with open(path, "rb") as fh:  # load the compiled kernels from numba's cache (once per process)
@@ -107,7 +176,7 @@ def stage(name: str, path: Path, repeat: int) -> dict:
         out["seconds"], out["events"] = timed(parse if name == "parse" else parse_to_cache, repeat)
     else:
         def load():
-            return load_event_text(lambda: open(path, "rb"), file_identity(path), str(path), 240, 180)
+            return load_text(path)
 
         load()  # build the cache once
         rss0 = peak_rss_mb()
@@ -146,9 +215,11 @@ def main() -> None:
         print(json.dumps(stage(args.stage, Path(args.path), args.repeat)))
         return
     path = make_file(args.events)
+    h5 = make_mvsec_file(path)
     results = {}
-    for name in ("pandas", "parse", "parse_to_cache", "cached", "window"):
-        out = subprocess.run([sys.executable, __file__, "--stage", name, "--path", str(path), "--repeat", str(args.repeat)],
+    for name in ("pandas", "parse", "parse_to_cache", "cached", "window", "mvsec_h5py", "mvsec_first", "mvsec_cached"):
+        source = h5 if name.startswith("mvsec") else path
+        out = subprocess.run([sys.executable, __file__, "--stage", name, "--path", str(source), "--repeat", str(args.repeat)],
                              capture_output=True, text=True, check=True)
         results[name] = json.loads(out.stdout.strip().splitlines()[-1])
     size = results["parse"]["size_mb"]
@@ -168,6 +239,11 @@ def main() -> None:
     r = results["window"]
     print(f"  1 s window of the cached stream: {r['events']:,} events in {r['seconds'] * 1e3:.1f} ms, "
           f"RSS growth {r['rss_growth_mb']:.0f} MB = {r['rss_growth_mb'] * 1e6 / max(r['events'], 1):.1f} B/event in the window")
+    print(f"{h5.name}: the same events as MVSEC's (N, 4) float64 rows, {results['mvsec_h5py']['size_mb']:.0f} MB")
+    for name, label in (("mvsec_h5py", "h5py, whole array (unchecked)"), ("mvsec_first", "eas-vo mvsec first read"),
+                        ("mvsec_cached", "eas-vo mvsec cached read")):
+        r = results[name]
+        print(f"  {label:30s} {r['events'] / r['seconds'] / 1e6:7.1f} M events/s  peak RSS {r['peak_rss_mb']:7.0f} MB")
 
 
 if __name__ == "__main__":
