@@ -4,7 +4,7 @@ their HDF5 layout, read with h5py (and hdf5plugin's filters for compressed datas
     NAME_data.hdf5   davis/{left,right}/
         events         (N, 4) float64   x y t p   (x, y [px], t [s], p in {-1, 1})
         image_raw      (M, H, W) uint8  APS frames
-        image_raw_ts   (M,) float64     [s], libcaer's frame time: the middle of the exposure
+        image_raw_ts   (M,) float64     [s], taken as each frame's time unchanged
         imu            (K, 6) float64   ax ay az [m/s^2], gx gy gz [rad/s] (sensor_msgs/Imu)
         imu_ts         (K,) float64     [s]
     NAME_gt.hdf5     davis/left/
@@ -13,6 +13,8 @@ their HDF5 layout, read with h5py (and hdf5plugin's filters for compressed datas
 
 The files hold no intrinsics: MVSEC publishes them as kalibr camchain YAMLs (equidistant lens
 model; cam0 the left DAVIS, cam1 the right). Rows are named by their h5py index (from 0).
+Frame times are those MVSEC's converter took from its bags (the DAVIS driver stamps a frame
+with libcaer's frame time, the middle of its exposure); events and frames share that clock.
 """
 
 from __future__ import annotations

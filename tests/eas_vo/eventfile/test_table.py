@@ -47,6 +47,18 @@ def test_blocks_carry_the_last_time():
     assert pack_rows(rows[60:], (0, 1, 2, 3), validate, 60)["t"][0] == rows[59, 0]
 
 
+@pytest.mark.parametrize("column, value", [(1, 0.5), (2, 17.25), (3, 0.5), (3, -0.5), (1, np.nan), (2, -np.inf)])
+def test_a_pixel_or_polarity_not_whole_is_named_or_dropped(column, value):
+    rows = table(10)
+    rows[[4, 7], column] = value
+    with pytest.raises(DataError, match=r"^f.h5:events:4: pixel coordinates and polarity must be integers: x y p = "):
+        pack_rows(rows, (0, 1, 2, 3), validator(), 0)
+    warnings = DataWarnings()
+    kept = pack_rows(rows, (0, 1, 2, 3), validator(True, warnings), 0)
+    np.testing.assert_array_equal(kept["t"], rows[[0, 1, 2, 3, 5, 6, 8, 9], 0])
+    assert warnings.lines() == ["f.h5:events: 2 dropped: pixel or polarity not an integer (first at row 4)"]
+
+
 @hostile_settings(80)
 @given(damage=st.lists(st.tuples(st.integers(0, 199), st.integers(0, 3),
                                  st.sampled_from([-1.0, 0.0, 0.5, 2.0, 479.0, 480.0, 640.0, 1e20, np.nan, np.inf, -5.0])),
