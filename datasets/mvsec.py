@@ -255,8 +255,9 @@ class MvsecDataset(Dataset):
         return np.array(times), rows
 
     def _sensor_size(self) -> tuple[int, int]:
-        """(width, height) [px]: of the frames, else the configured ones."""
-        if not self._frame_rows:
+        """(width, height) [px]: of the frames (image_raw's shape, even when it holds none), else
+        the configured ones."""
+        if self._images is None:
             return self.config.width, self.config.height
         height, width = self._images.shape[1:]
         if not (1 <= width <= MAX_SENSOR_PX and 1 <= height <= MAX_SENSOR_PX):

@@ -296,7 +296,8 @@ def test_empty_streams(tmp_path):
     assert len(ds.events()) == 0 and len(ds.frame_times()) == 3
     events_only = write_file(tmp_path / "e_data.hdf5", **{"davis/left/events": event_table(1000),
                                                           "davis/left/image_raw": np.zeros((0, 260, 346), np.uint8)})
-    ds = MvsecDataset(events_only, MvsecConfig(sample_every_events=100))
+    ds = MvsecDataset(events_only, MvsecConfig(sample_every_events=100, width=640, height=480))  # size: image_raw's
+    assert (ds.camera.width, ds.camera.height) == (346, 260)
     assert ds.load_frame(0) is None and len(ds.frame_times()) == 10 and "event-only" in ds.no_frames_reason
     nothing = write_file(tmp_path / "n_data.hdf5", **{"davis/left/events": np.zeros((0, 4))})
     ds = MvsecDataset(nothing)
