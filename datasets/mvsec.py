@@ -19,6 +19,7 @@ with libcaer's frame time, the middle of its exposure); events and frames share 
 
 from __future__ import annotations
 
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -46,6 +47,11 @@ KALIBR_CAMERA = {"left": "cam0", "right": "cam1"}
 #: What h5py raises on a damaged file or an unreadable dataset (a truncated file, a filter
 #: missing); KeyError and ValueError for a broken object header or link.
 H5_ERRORS = (OSError, KeyError, ValueError, RuntimeError)
+
+
+def _write(out, events: np.ndarray) -> int:
+    out.write(events.data)
+    return len(events)
 
 
 def _said(exc: Exception) -> str:
@@ -330,18 +336,25 @@ class MvsecDataset(Dataset):
         block_rows = max(1, BLOCK_ROWS // chunk) * chunk  # whole chunks per read
 
         def fill(out, warnings):
+            """Read block k+1 (h5py, holding the GIL) while a worker packs block k (compiled, without
+            it); blocks are packed in order, and a bad row is named before a later unreadable block."""
             validate = Validator(where, self.camera.width, self.camera.height, c.time_tolerance_s, c.lenient, warnings, "row")
-            block = np.empty((min(block_rows, n), 4), np.float64)
-            total = 0
-            for start in range(0, n, block_rows):
-                rows = block[: min(block_rows, n - start)]
-                try:
-                    dset.read_direct(rows, np.s_[start : start + len(rows)], np.s_[0 : len(rows)])
-                except H5_ERRORS as exc:
-                    raise DataError(where, f"unreadable from this row on ({_said(exc)})", start) from None
-                events = pack_rows(rows, (2, 0, 1, 3), validate, start)
-                out.write(events.data)
-                total += len(events)
+            buffers = [np.empty((min(block_rows, n), 4), np.float64) for _ in range(2)]
+            total, packing = 0, None
+            with ThreadPoolExecutor(1) as worker:
+                for k, start in enumerate(range(0, n, block_rows)):
+                    rows = buffers[k % 2][: min(block_rows, n - start)]
+                    try:
+                        dset.read_direct(rows, np.s_[start : start + len(rows)], np.s_[0 : len(rows)])
+                    except H5_ERRORS as exc:
+                        if packing is not None:
+                            packing.result()
+                        raise DataError(where, f"unreadable from this row on ({_said(exc)})", start) from None
+                    if packing is not None:
+                        total += _write(out, packing.result())
+                    packing = worker.submit(pack_rows, rows, (2, 0, 1, 3), validate, start)
+                if packing is not None:
+                    total += _write(out, packing.result())
             return total
 
         key = cache_key("mvsec", *file_identity(self.path), self.group, self.camera.width, self.camera.height,
