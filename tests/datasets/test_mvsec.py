@@ -353,3 +353,26 @@ def test_truncated_or_damaged_file_is_named_or_read_exactly(tmp_path_factory, cu
     assert len(events) <= len(table) and len(frames) <= 3
     if not flip % 2:
         assert events.tobytes() == expected_events(table).tobytes()
+
+
+@pytest.mark.parametrize("bad_row", [None, 150, 250, 450])
+def test_a_damaged_chunk_is_named_by_its_first_row_after_earlier_bad_rows(tmp_path, monkeypatch, bad_row):
+    monkeypatch.setattr(mvsec, "BLOCK_ROWS", 100)
+    camchain(tmp_path)
+    table = event_table(1000)
+    if bad_row is not None:
+        table[bad_row, 0] = 999.0  # off the sensor
+    path = tmp_path / "x_data.hdf5"
+    with h5py.File(path, "w") as f:
+        f.create_dataset("davis/left/events", data=table, chunks=(100, 4), compression="gzip")
+        info = f["davis/left/events"].id.get_chunk_info(3)  # rows 300-399
+    data = bytearray(path.read_bytes())
+    data[info.byte_offset : info.byte_offset + info.size] = bytes(info.size)
+    path.write_bytes(bytes(data))
+    with pytest.raises(DataError) as err:
+        MvsecDataset(path).events()
+    if bad_row in (150, 250):  # 250: in the block packed while the damaged one is read
+        assert str(err.value).startswith(f"{path}:davis/left/events:{bad_row}: pixel outside the 346x260 sensor")
+    else:
+        assert str(err.value).startswith(f"{path}:davis/left/events:300: unreadable from this row on (")
+    assert "\n" not in str(err.value)
