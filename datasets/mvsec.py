@@ -204,7 +204,7 @@ class MvsecDataset(Dataset):
         expected = f"{ndim} dimensions" + (f", {columns} columns" if columns else "")
         if len(dims) != ndim or (columns and dims[-1] != columns):
             raise DataError(where, f"has shape {shape}, expected {expected}")
-        if dset.dtype != wanted:
+        if dset.dtype.newbyteorder("=") != wanted:  # either byte order: HDF5 converts on reading
             raise DataError(where, f"holds {dset.dtype}, expected {wanted}")
         return dset
 

@@ -122,6 +122,16 @@ def test_paper_run_gives_the_same_trajectory_from_both(h5_path, ecd_folder, tmp_
     np.testing.assert_allclose(runs["mvsec"], runs["ecd"], rtol=0, atol=1e-6)
 
 
+def test_big_endian_datasets_read_alike(tmp_path):
+    camchain(tmp_path)
+    table = event_table(500)
+    native = MvsecDataset(write_file(tmp_path / "n_data.hdf5", **{**GOOD, "davis/left/events": table}))
+    swapped = {name: np.asarray(value).astype(np.asarray(value).dtype.newbyteorder(">")) for name, value in GOOD.items()}
+    big = MvsecDataset(write_file(tmp_path / "b_data.hdf5", **{**swapped, "davis/left/events": table.astype(">f8")}))
+    assert big.events().tobytes() == native.events().tobytes() == expected_events(table).tobytes()
+    np.testing.assert_array_equal(big.imu.t, native.imu.t)
+
+
 def test_compressed_events_read_through_hdf5plugin(ecd, ecd_folder, tmp_path):
     import hdf5plugin
 
