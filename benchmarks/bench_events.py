@@ -7,9 +7,12 @@ Prints, each stage in its own process (so peak memory is its own):
   - a 1 s window of the cached stream through the pipeline's sample views: bytes touched;
   - the same events as an AEDAT4 (written by dv-processing, as DV records: LZ4): the aedat4
     reader's first read (validated, into the cache) and cached read, beside dv-processing's own
-    batch reading of the file.
+    batch reading of the file;
+  - the same events as an MVSEC HDF5 file (davis/left/events, x y t p float64 rows): the
+    `mvsec` reader's first read (validated, into the cache) and cached read, beside h5py
+    reading the whole array into memory.
 
-    python benchmarks/bench_events.py [--events 20000000] [--only aedat4]
+    python benchmarks/bench_events.py [--events 20000000] [--only text|aedat4|mvsec]
 """
 
 from __future__ import annotations
@@ -122,6 +125,76 @@ def aedat4_stage(name: str, path: Path, repeat: int, out: dict) -> None:
         out["seconds"], (_, out["events"]) = timed(cached, repeat)
 
 
+#: A pinhole 240x180 camera (the simulator's size) for the MVSEC file, as a kalibr camchain.
+BENCH_CAMCHAIN = """cam0:
+  camera_model: pinhole
+  intrinsics: [200.0, 200.0, 120.0, 90.0]
+  distortion_model: none
+  distortion_coeffs: [0.0, 0.0, 0.0, 0.0]
+  resolution: [240, 180]
+"""
+
+
+def make_mvsec_file(text: Path) -> Path:
+    """The events of `text` as an MVSEC NAME_data.hdf5 (davis/left/events only), with a camchain beside it."""
+    import h5py
+
+    from eas_vo.io import atomic_path, write_text_atomic
+
+    path = text.with_name(text.stem + "_data.hdf5")
+    write_text_atomic(text.with_name(text.stem + "_camchain.yaml"), BENCH_CAMCHAIN)
+    if path.exists():
+        return path
+    events = load_text(text)
+    with atomic_path(path) as tmp, h5py.File(tmp, "w") as f:
+        dset = f.create_dataset("davis/left/events", shape=(len(events), 4), dtype=np.float64)
+        step = 1 << 20
+        for start in range(0, len(events), step):
+            chunk = events[start : start + step]
+            dset[start : start + len(chunk)] = np.column_stack([chunk["x"], chunk["y"], chunk["t"],
+                                                               np.where(chunk["p"] > 0, 1.0, -1.0)])
+    return path
+
+
+def load_text(path: Path) -> np.ndarray:
+    from eas_vo.eventfile import file_identity, load_event_text
+
+    return load_event_text(lambda: open(path, "rb"), file_identity(path), str(path), 240, 180)
+
+
+def mvsec_stage(name: str, path: Path, repeat: int, out: dict) -> None:
+    """h5py reading the whole event array (`mvsec_h5py`), the mvsec reader's first read into a
+    fresh cache (`mvsec_first`) and its cached read (`mvsec_cached`)."""
+    import os
+
+    import h5py
+
+    from eas_vo.datasets.mvsec import MvsecConfig, MvsecDataset
+
+    config = MvsecConfig(calibration=str(path.with_name(path.name.replace("_data.hdf5", "_camchain.yaml"))),
+                         width=240, height=180)
+    if name == "mvsec_h5py":
+        def read():  # the whole (N, 4) float64 array into memory, unchecked
+            with h5py.File(path, "r") as f:
+                return len(f["davis/left/events"][()])
+    elif name == "mvsec_first":
+        MvsecDataset(path, config)  # h5py, hdf5plugin and numba's compiled kernels loaded once
+
+        def read():  # open, check and cache every event, in a fresh cache each time
+            with tempfile.TemporaryDirectory() as tmp:
+                os.environ["EAS_VO_CACHE_DIR"] = tmp
+                return len(MvsecDataset(path, config).events())
+    else:
+        MvsecDataset(path, config).events()  # build the cache once
+
+        def read():  # open, map the cache, read every byte of every record once
+            events = MvsecDataset(path, config).events()
+            float(events.view(np.uint8).sum(dtype=np.uint64))
+            return len(events)
+
+    out["seconds"], out["events"] = timed(read, repeat)
+
+
 def timed(fn, repeat: int) -> tuple[float, object]:
     """Best wall time of `repeat` calls (the machine is shared: the minimum is the signal)."""
     best, result = float("inf"), None
@@ -140,6 +213,8 @@ def stage(name: str, path: Path, repeat: int) -> dict:
     out = {"stage": name, "size_mb": size_mb}
     if name.startswith("aedat4"):
         aedat4_stage(name, path, repeat, out)
+    elif name.startswith("mvsec"):
+        mvsec_stage(name, path, repeat, out)
     elif name == "pandas":
         import pandas as pd
 
@@ -202,11 +277,24 @@ def stage(name: str, path: Path, repeat: int) -> dict:
     return out
 
 
+#: Each format: how its file is made from the events.txt, its stages (the library's own reader
+#: first) and their labels.
+FORMATS = {
+    "text": (lambda path: path, ["pandas", "parse", "parse_to_cache", "cached", "window"], []),
+    "aedat4": (make_aedat4, ["aedat4_dv", "aedat4_first", "aedat4_cached"],
+               ["dv-processing batch reading", "eas-vo aedat4 first read (validated + cache write)",
+                "eas-vo aedat4 cached read (map + read all)"]),
+    "mvsec": (make_mvsec_file, ["mvsec_h5py", "mvsec_first", "mvsec_cached"],
+              ["h5py, whole array (unchecked)", "eas-vo mvsec first read (validated + cache write)",
+               "eas-vo mvsec cached read (map + read all)"]),
+}
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--events", type=int, default=20_000_000)
     parser.add_argument("--repeat", type=int, default=3, help="runs per stage; the best is reported")
-    parser.add_argument("--only", choices=["aedat4"], help="run only the AEDAT4 rows")
+    parser.add_argument("--only", choices=list(FORMATS), help="run only this format's rows")
     parser.add_argument("--stage", help=argparse.SUPPRESS)
     parser.add_argument("--path", help=argparse.SUPPRESS)
     args = parser.parse_args()
@@ -215,21 +303,27 @@ def main() -> None:
         return
     path = make_file(args.events)
     results = {}
-    stages = [] if args.only == "aedat4" else ["pandas", "parse", "parse_to_cache", "cached", "window"]
-    aedat4 = make_aedat4(path)
-    for name in stages + ["aedat4_dv", "aedat4_first", "aedat4_cached"]:
-        source = aedat4 if name.startswith("aedat4") else path
-        out = subprocess.run([sys.executable, __file__, "--stage", name, "--path", str(source), "--repeat", str(args.repeat)],
-                             capture_output=True, text=True, check=True)
-        results[name] = json.loads(out.stdout.strip().splitlines()[-1])
-    if stages:
-        print_text_rows(path, results, args.repeat)
-    print(f"{aedat4.name}: {results['aedat4_dv']['events']:,} events, {results['aedat4_dv']['size_mb']:.0f} MB of AEDAT4 (LZ4)")
-    for name, label in (("aedat4_dv", "dv-processing batch reading"), ("aedat4_first", "eas-vo aedat4 first read (validated + cache write)"),
-                        ("aedat4_cached", "eas-vo aedat4 cached read (map + read all)")):
+    for fmt, (make, stages, _) in FORMATS.items():
+        if args.only not in (None, fmt):
+            continue
+        source = make(path)
+        for name in stages:
+            out = subprocess.run([sys.executable, __file__, "--stage", name, "--path", str(source), "--repeat", str(args.repeat)],
+                                 capture_output=True, text=True, check=True)
+            results[name] = json.loads(out.stdout.strip().splitlines()[-1])
+        if fmt == "text":
+            print_text_rows(path, results, args.repeat)
+        else:
+            print_format_rows(source, results, stages, FORMATS[fmt][2], args.repeat)
+
+
+def print_format_rows(source: Path, results: dict, stages: list, labels: list, repeat: int) -> None:
+    r = results[stages[0]]
+    print(f"{source.name}: {r['events']:,} events, {r['size_mb']:.0f} MB")
+    for name, label in zip(stages, labels):
         r = results[name]
         print(f"  {label:52s} {r['events'] / r['seconds'] / 1e6:7.1f} M events/s  peak RSS {r['peak_rss_mb']:7.0f} MB")
-    print(f"  (best of {args.repeat} each)")
+    print(f"  (best of {repeat} each)")
 
 
 def print_text_rows(path: Path, results: dict, repeat: int) -> None:
