@@ -12,6 +12,7 @@ Modules (each imports only those above it):
 - `blocks`: text in blocks of whole lines; the parallel block parser.
 - `validate`: row checks carrying the last timestamp from block to block.
 - `slowpath`: the line-by-line path for pieces the compiled parser rejected.
+- `table`: events held as rows of numbers (HDF5 arrays), checked and packed block by block.
 - `convert`: the streaming text -> cache converter tying the above together.
 - `cache`: the cache file format: naming, writing, mapping, loading event text through it.
 - `text`: writing event text (and priming its cache).
@@ -32,6 +33,7 @@ from eas_vo.eventfile.cache import (
     write_cache,
 )
 from eas_vo.eventfile.convert import convert_text_to_cache
+from eas_vo.eventfile.table import pack_rows
 from eas_vo.eventfile.text import format_events, write_events_text
 from eas_vo.eventfile.validate import Validator
 
@@ -48,6 +50,7 @@ __all__ = [
     "load_cached",
     "load_event_text",
     "open_cache",
+    "pack_rows",
     "parse_block",
     "prime_text_cache",
     "write_cache",

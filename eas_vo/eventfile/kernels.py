@@ -141,3 +141,24 @@ def check_and_pack(t, x, y, p, last_t, width, height, tolerance_s, out):
         last_t = ti
         _pack(out, i, ti, x[i], y[i], p[i], scratch)
     return -1, last_t
+
+
+@numba.njit(cache=True, nogil=True)
+def check_and_pack_rows(rows, col_t, col_x, col_y, col_p, last_t, width, height, tolerance_s, out):
+    """check_and_pack for events held as float64 rows of a table (columns col_t, col_x, col_y,
+    col_p of `rows`): a pixel coordinate or polarity that is not a whole number is a problem too.
+    Returns (index of the first row with any problem or -1, the last timestamp)."""
+    scratch = np.empty(1, np.float64)
+    for i in range(rows.shape[0]):
+        xf, yf, pf = rows[i, col_x], rows[i, col_y], rows[i, col_p]
+        if not (0.0 <= xf < 65536.0 and 0.0 <= yf < 65536.0 and -1.0 <= pf <= 1.0):  # also NaN
+            return i, last_t
+        x, y, p = np.int64(xf), np.int64(yf), np.int64(pf)
+        if x != xf or y != yf or p != pf:
+            return i, last_t
+        ok, t = _accept(rows[i, col_t], x, y, p, last_t, width, height, tolerance_s)
+        if not ok:
+            return i, last_t
+        last_t = t
+        _pack(out, i, t, x, y, p, scratch)
+    return -1, last_t

@@ -1,0 +1,362 @@
+"""MVSEC recordings (Zhu et al., "The Multivehicle Stereo Event Camera Dataset", RA-L 2018) in
+their HDF5 layout, read with h5py (and hdf5plugin's filters for compressed datasets):
+
+    NAME_data.hdf5   davis/{left,right}/
+        events         (N, 4) float64   x y t p   (x, y [px], t [s], p in {-1, 1})
+        image_raw      (M, H, W) uint8  APS frames
+        image_raw_ts   (M,) float64     [s], taken as each frame's time unchanged
+        imu            (K, 6) float64   ax ay az [m/s^2], gx gy gz [rad/s] (sensor_msgs/Imu)
+        imu_ts         (K,) float64     [s]
+    NAME_gt.hdf5     davis/left/
+        pose           (L, 4, 4) float64  T_w_c, camera-to-world (the left DAVIS's)
+        pose_ts        (L,) float64       [s]
+
+The files hold no intrinsics: MVSEC publishes them as kalibr camchain YAMLs (equidistant lens
+model; cam0 the left DAVIS, cam1 the right). Rows are named by their h5py index (from 0).
+Frame times are those MVSEC's converter took from its bags (the DAVIS driver stamps a frame
+with libcaer's frame time, the middle of its exposure); events and frames share that clock.
+"""
+
+from __future__ import annotations
+
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from eas_vo.datasets.calibration import read_calibration
+from eas_vo.datasets.recording import StreamConfig, check_increasing, event_sample_times
+from eas_vo.errors import DataError, DataWarnings
+from eas_vo.eventfile import Validator, cache_key, file_identity, load_cached, pack_rows
+from eas_vo.geometry.rotations import quats_from_matrices
+from eas_vo.plugins import Dataset
+from eas_vo.types import CameraModel, ImuSeries, PoseSeries, empty_events
+from eas_vo.validation import check_choice, check_range
+
+#: How an HDF5 file begins (its superblock signature; at byte 0 unless a user block precedes it).
+HDF5_SIGNATURE = b"\x89HDF\r\n\x1a\n"
+#: Offsets at which the HDF5 signature may stand (0, then 512 doubling: the user block sizes).
+SIGNATURE_OFFSETS = (0, 512, 1024, 2048, 4096)
+#: Events read from the file per block: 32 MiB of float64 rows, memory bounded by it.
+BLOCK_ROWS = 1 << 20
+#: The largest sensor side [px] a recording may have (as for the ECD reader).
+MAX_SENSOR_PX = 16384
+#: MVSEC's kalibr camera of each DAVIS.
+KALIBR_CAMERA = {"left": "cam0", "right": "cam1"}
+#: What h5py raises on a damaged file or an unreadable dataset (a truncated file, a filter
+#: missing); KeyError and ValueError for a broken object header or link.
+H5_ERRORS = (OSError, KeyError, ValueError, RuntimeError)
+
+
+def _write(out, events: np.ndarray) -> int:
+    out.write(events.data)
+    return len(events)
+
+
+def _said(exc: Exception) -> str:
+    """h5py's message, on one line."""
+    text = str(exc).strip().splitlines()
+    return text[0] if text else type(exc).__name__
+
+
+@dataclass(frozen=True)
+class MvsecConfig(StreamConfig):
+    """StreamConfig plus MVSEC's choices.
+
+    Attributes:
+        side: the DAVIS read, `left` or `right` (its group davis/SIDE).
+        calibration: the intrinsics' file (kalibr camchain, or what read_calibration reads);
+            default: the one `*camchain*.yaml` beside the data file.
+        calibration_camera: the kalibr camera in it; default cam0 for left, cam1 for right.
+        ground_truth: the poses' file; default NAME_gt.hdf5 beside NAME_data.hdf5, if it exists.
+        width, height: sensor size [px] of a recording without frames (default: MVSEC's DAVIS m346).
+    """
+
+    side: str = "left"
+    calibration: str = ""
+    calibration_camera: str = ""
+    ground_truth: str = ""
+    width: int = 346
+    height: int = 260
+
+    def validate(self) -> None:
+        super().validate()
+        check_choice(self, "side", KALIBR_CAMERA)
+        check_range(self, "width", 1, MAX_SENSOR_PX)
+        check_range(self, "height", 1, MAX_SENSOR_PX)
+
+
+def _has_signature(path: Path) -> bool:
+    """Whether `path` holds an HDF5 superblock signature where one may stand (cheap: a few reads)."""
+    try:
+        with open(path, "rb") as fh:
+            for offset in SIGNATURE_OFFSETS:
+                fh.seek(offset)
+                if fh.read(len(HDF5_SIGNATURE)) == HDF5_SIGNATURE:
+                    return True
+    except OSError:
+        pass
+    return False
+
+
+class MvsecDataset(Dataset):
+    """An MVSEC `NAME_data.hdf5` (events, frames, IMU of one DAVIS) with its `NAME_gt.hdf5` poses."""
+
+    name = "mvsec"
+    description = "MVSEC HDF5 recording: NAME_data.hdf5 (davis/left|right events, image_raw, imu) + NAME_gt.hdf5 poses"
+    Config = MvsecConfig
+
+    def __init__(self, location: str | Path, config: MvsecConfig | None = None):
+        import h5py
+        import hdf5plugin  # noqa: F401  (registers the filters of compressed datasets: blosc, zstd, lz4...)
+
+        self.config = c = config or MvsecConfig()
+        self.path = Path(location)
+        self.label = str(self.path)
+        self.warnings = DataWarnings()
+        self.group = f"davis/{c.side}"
+        self.file = self._open(h5py, self.path)
+        if self.group not in self.file:
+            raise DataError(self.path, f"has no group {self.group} (an MVSEC NAME_data.hdf5 holds davis/left and davis/right)")
+        side = self.file[self.group]
+        self._events_dset = self._dataset(side, "events", 2, 4, "f8") if "events" in side else None
+        self._images = self._dataset(side, "image_raw", 3, None, "u1") if "image_raw" in side else None
+        if self._events_dset is None and self._images is None:
+            raise DataError(self.path, f"{self.group} holds neither events nor image_raw")
+        self._times, self._frame_rows = self._read_frame_times()
+        if not self._frame_rows:
+            self.no_frames_reason = f"{self.path} has no frames in {self.group}/image_raw (an event-only stream)"
+        self.camera = self._read_camera()
+        self.imu = self._read_imu()
+        self.ground_truth = self._read_ground_truth(h5py)
+        self._events: np.ndarray | None = None
+
+    # -- plugin contract ---------------------------------------------------------------
+
+    @classmethod
+    def can_open(cls, location: str) -> bool:
+        """A path ending in `.hdf5` or `.h5` that holds an HDF5 file with a `davis` group."""
+        path = Path(location)
+        if path.suffix.lower() not in (".hdf5", ".h5") or not path.is_file() or not _has_signature(path):
+            return False
+        import h5py
+
+        try:
+            with h5py.File(path, "r") as f:
+                return isinstance(f.get("davis"), h5py.Group)
+        except H5_ERRORS:
+            return False
+
+    def data_warnings(self) -> list[str]:
+        return self.warnings.lines()
+
+    def frame_times(self) -> np.ndarray:
+        if self._times is None:  # event-only: samples from the events
+            c = self.config
+            self._times = event_sample_times(self.events()["t"], c.sample_rate_hz, c.sample_every_events)
+        return self._times
+
+    def load_frame(self, k: int) -> np.ndarray | None:
+        if not self._frame_rows:
+            return None
+        row = self._frame_rows[k]
+        try:
+            return np.ascontiguousarray(self._images[row])
+        except H5_ERRORS as exc:
+            raise DataError(self._where("image_raw"), f"cannot read frame {k} ({_said(exc)})", row) from None
+
+    def events(self) -> np.ndarray:
+        if self._events is None:
+            self._events = empty_events() if self._events_dset is None else self._load_events()
+        return self._events
+
+    # -- readers -----------------------------------------------------------------------
+
+    @staticmethod
+    def _open(h5py, path: Path):
+        if not path.is_file():
+            raise DataError(path, "file not found")
+        try:
+            return h5py.File(path, "r")
+        except H5_ERRORS as exc:
+            raise DataError(path, f"not a readable HDF5 file ({_said(exc)})") from None
+
+    def _where(self, name: str, path: Path | None = None) -> str:
+        return f"{path or self.path}:{self.group}/{name}"
+
+    def _dataset(self, group, name: str, ndim: int, columns: int | None, dtype: str, path: Path | None = None):
+        """group[name], checked to be an HDF5 dataset of `ndim` dimensions (the last `columns`
+        wide) holding `dtype` (float64 for times and measurements, as MVSEC writes them: float32
+        would round a time of 1.5e9 s to 128 s)."""
+        import h5py
+
+        where = self._where(name, path)
+        try:
+            dset = group[name]
+        except H5_ERRORS as exc:
+            raise DataError(where, f"unreadable ({_said(exc)})") from None
+        if not isinstance(dset, h5py.Dataset):
+            raise DataError(where, "is a group, expected a dataset")
+        wanted = np.dtype(dtype)
+        dims = dset.shape or ()  # None: a null dataspace (h5py.Empty)
+        shape = "null" if dset.shape is None else " x ".join(map(str, dims)) or "scalar"
+        expected = f"{ndim} dimensions" + (f", {columns} columns" if columns else "")
+        if len(dims) != ndim or (columns and dims[-1] != columns):
+            raise DataError(where, f"has shape {shape}, expected {expected}")
+        if dset.dtype.newbyteorder("=") != wanted:  # either byte order: HDF5 converts on reading
+            raise DataError(where, f"holds {dset.dtype}, expected {wanted}")
+        return dset
+
+    def _read(self, dset, where: str) -> np.ndarray:
+        """A whole (small) dataset in memory; damage is named."""
+        try:
+            return np.asarray(dset[()], dtype=np.float64)
+        except H5_ERRORS as exc:
+            raise DataError(where, f"unreadable ({_said(exc)})") from None
+
+    def _timed(self, group, name: str, ndim: int, columns: int | None, path: Path | None = None):
+        """(values, times [s]) of `name` and `name_ts`, both finite, as many of each, the times increasing."""
+        values = self._read(self._dataset(group, name, ndim, columns, "f8", path), self._where(name, path))
+        ts_where = self._where(name + "_ts", path)
+        if name + "_ts" not in group:
+            raise DataError(ts_where, f"missing: the times of {self.group}/{name}")
+        t = self._read(self._dataset(group, name + "_ts", 1, None, "f8", path), ts_where)
+        if len(t) != len(values):
+            raise DataError(ts_where, f"holds {len(t)} times for {len(values)} rows of {self.group}/{name}")
+        if len(t) < 2:
+            raise DataError(self._where(name, path), f"holds {len(t)} row(s); at least 2 are needed to interpolate")
+        for data, at in ((t, ts_where), (values.reshape(len(values), -1), self._where(name, path))):
+            bad = np.flatnonzero(~np.isfinite(data).reshape(len(data), -1).all(axis=1))
+            if len(bad):
+                raise DataError(at, "holds a value that is not finite (NaN or infinity)", int(bad[0]))
+        check_increasing(ts_where, t, int)
+        return values, t
+
+    def _read_frame_times(self) -> tuple[np.ndarray | None, list[int]]:
+        """The frame times [s] and the image_raw row of each frame kept (lenient: those going back dropped)."""
+        if self._images is None or len(self._images) == 0:
+            return None, []
+        side = self.file[self.group]
+        where = self._where("image_raw_ts")
+        if "image_raw_ts" not in side:
+            raise DataError(where, f"missing: the times of {self.group}/image_raw")
+        t = self._read(self._dataset(side, "image_raw_ts", 1, None, "f8"), where)
+        if len(t) != len(self._images):
+            raise DataError(where, f"holds {len(t)} times for {len(self._images)} frames of {self.group}/image_raw")
+        times, rows = [], []
+        for row, ti in enumerate(t):
+            problem = None
+            if not np.isfinite(ti):
+                problem = ("timestamp not finite", f"timestamp {ti} is not finite")
+            elif times and ti < times[-1]:
+                problem = ("timestamp going back", f"timestamp {ti:.9f} goes back (previous {times[-1]:.9f})")
+            if problem is not None:
+                if not self.config.lenient:
+                    raise DataError(where, problem[1], row)
+                self.warnings.add(where, problem[0], f"row {row}")
+                continue
+            times.append(float(ti))
+            rows.append(row)
+        return np.array(times), rows
+
+    def _sensor_size(self) -> tuple[int, int]:
+        """(width, height) [px]: of the frames (image_raw's shape, even when it holds none), else
+        the configured ones."""
+        if self._images is None:
+            return self.config.width, self.config.height
+        height, width = self._images.shape[1:]
+        if not (1 <= width <= MAX_SENSOR_PX and 1 <= height <= MAX_SENSOR_PX):
+            raise DataError(self._where("image_raw"), f"frames are {width}x{height}, not an event camera's "
+                                                      f"(at most {MAX_SENSOR_PX} px a side)")
+        return width, height
+
+    def _calibration_file(self) -> Path:
+        if self.config.calibration:
+            return Path(self.config.calibration)
+        found = sorted(self.path.parent.glob("*camchain*.yaml"))
+        if len(found) == 1:
+            return found[0]
+        if not found:
+            raise DataError(self.path, "the intrinsics are unknown: an MVSEC HDF5 file holds none; give its kalibr "
+                                       "camchain YAML with --set dataset.calibration=FILE")
+        raise DataError(self.path, f"{len(found)} camchain YAMLs beside it ({', '.join(p.name for p in found)}); "
+                                   "choose one with --set dataset.calibration=FILE")
+
+    def _read_camera(self) -> CameraModel:
+        width, height = self._sensor_size()
+        camera = self.config.calibration_camera or KALIBR_CAMERA[self.config.side]
+        return read_calibration(self._calibration_file(), width=width, height=height, camera=camera)
+
+    def _read_imu(self) -> ImuSeries | None:
+        side = self.file[self.group]
+        if "imu" not in side:
+            return None
+        table, t = self._timed(side, "imu", 2, 6)
+        return ImuSeries(t=t, acc=table[:, :3], gyro=table[:, 3:])
+
+    def _ground_truth_file(self) -> Path | None:
+        if self.config.ground_truth:
+            return Path(self.config.ground_truth)
+        stem = self.path.stem
+        if not stem.endswith("_data"):
+            return None
+        beside = self.path.with_name(stem[: -len("_data")] + "_gt" + self.path.suffix)
+        return beside if beside.is_file() else None
+
+    def _read_ground_truth(self, h5py) -> PoseSeries | None:
+        path = self._ground_truth_file()
+        if path is None:
+            return None
+        with self._open(h5py, path) as f:
+            if self.group not in f or "pose" not in f[self.group]:
+                if self.config.ground_truth:
+                    raise DataError(path, f"has no {self.group}/pose")
+                return None  # MVSEC's poses are the left DAVIS's: davis/right has none
+            T, t = self._timed(f[self.group], "pose", 3, 4, path)
+        where = self._where("pose", path)
+        if T.shape[1] != 4:
+            raise DataError(where, f"has shape {' x '.join(map(str, T.shape))}, expected L x 4 x 4 (T_w_c)")
+        R = T[:, :3, :3]
+        off = np.abs(T[:, 3] - [0.0, 0.0, 0.0, 1.0]).max(axis=1) > 1e-6
+        off |= np.abs(np.einsum("nji,njk->nik", R, R) - np.eye(3)).max(axis=(1, 2)) > 1e-2
+        off |= np.linalg.det(R) <= 0
+        if off.any():
+            row = int(np.argmax(off))
+            raise DataError(where, "is not a rigid transform (rotation not orthonormal with det 1, or last row "
+                                   "not 0 0 0 1)", row)
+        return PoseSeries(t=t, p_w_c=T[:, :3, 3].copy(), q_w_c=quats_from_matrices(R))
+
+    def _load_events(self) -> np.ndarray:
+        c = self.config
+        dset = self._events_dset
+        where = self._where("events")
+        n = len(dset)
+        chunk = dset.chunks[0] if dset.chunks else 1
+        block_rows = max(1, BLOCK_ROWS // chunk) * chunk  # whole chunks per read
+
+        def fill(out, warnings):
+            """Read block k+1 (h5py, holding the GIL) while a worker packs block k (compiled, without
+            it); blocks are packed in order, and a bad row is named before a later unreadable block."""
+            validate = Validator(where, self.camera.width, self.camera.height, c.time_tolerance_s, c.lenient, warnings, "row")
+            buffers = [np.empty((min(block_rows, n), 4), np.float64) for _ in range(2)]
+            total, packing = 0, None
+            with ThreadPoolExecutor(1) as worker:
+                for k, start in enumerate(range(0, n, block_rows)):
+                    rows = buffers[k % 2][: min(block_rows, n - start)]
+                    try:
+                        dset.read_direct(rows, np.s_[start : start + len(rows)], np.s_[0 : len(rows)])
+                    except H5_ERRORS as exc:
+                        if packing is not None:
+                            packing.result()
+                        raise DataError(where, f"unreadable from this row on ({_said(exc)})", start) from None
+                    if packing is not None:
+                        total += _write(out, packing.result())
+                    packing = worker.submit(pack_rows, rows, (2, 0, 1, 3), validate, start)
+                if packing is not None:
+                    total += _write(out, packing.result())
+            return total
+
+        key = cache_key("mvsec", *file_identity(self.path), self.group, self.camera.width, self.camera.height,
+                        c.time_tolerance_s)
+        return load_cached(key, c.lenient, self.warnings, fill, where, n)
