@@ -182,14 +182,14 @@ def report(table: Table, before: tuple, after: tuple) -> None:
               f"{percentiles(table.ratio[r])} | {percentiles(table.ratio[w])} | {percentiles(table.residual[r])} | "
               f"{percentiles(table.residual[w])} | {percentiles(table.inliers[r])} | {percentiles(table.inliers[w])} |")
     print("\n## Rates (mean over the runs): right measurements called weak, wrong ones called ok\n")
-    print("| config | thresholds (min_inliers, min_inlier_ratio, max_residual_px) | data | right called weak | wrong called ok | frames weak |")
+    print("| config | thresholds (min_inliers, min_inlier_ratio, max_residual_px) | data | right called weak | wrong called ok | all measurements weak |")
     print("|---|---|---|---|---|---|")
     best = config.resolve("best").tracker  # it keeps the thresholds it was selected with: they also steer its fallback
     own = (best.min_inliers, best.min_inlier_ratio, best.max_residual_px)
     for file, name, combo in (("paper", "before", before), ("paper", "after", after), ("best", "its own", own)):
         weak = table.weak(*combo)
-        for split, (kind, real) in itertools.product(("choice", "held-out"), (("synthetic", False), ("real", True))):
-            keep = (table.config == file) & (table.split == split) & (table.real == real)
+        for split, (kind, real) in itertools.product(("choice", "held-out"), (("all", None), ("synthetic", False), ("real", True))):
+            keep = (table.config == file) & (table.split == split) & ((table.real == real) if real is not None else True)
             if keep.any():
                 right_weak, wrong_ok = table.rates(weak, keep)
                 print(f"| {file} | {name} {', '.join(f'{v:g}' for v in combo)} | {split}, {kind} | {right_weak:.1%} | "
