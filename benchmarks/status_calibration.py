@@ -19,8 +19,8 @@ thresholds before (--before) and the ones chosen, and for best.toml with its own
                                             [--only LABEL ...] [--rows FILE] [--from FILE ...] [--before I,R,P]
 
 --rows writes every measurement (one CSV line each); --from reads such files instead of
-running (the choice and the tables only); --only runs some of the data (e.g. 'seed 41'). Seeds are simulated once into
-$EAS_VO_CACHE_DIR/simulated/seed-N (about 40 s each).
+running (the choice and the tables only); --only runs some of the data (e.g. 'seed 41').
+Seeds are simulated once into $EAS_VO_CACHE_DIR/simulated/seed-N (about 40 s each).
 """
 
 from __future__ import annotations
@@ -134,7 +134,7 @@ class Table:
 
     def weak(self, min_inliers: float, min_inlier_ratio: float, max_residual_px: float) -> np.ndarray:
         """Whether each measurement is weak under these thresholds (measurement.weakness itself,
-        on each measurement's quality as its record gives it, per focal pixel of 1)."""
+        on each measurement's quality as its record gives it: its residual already in px)."""
         thresholds = TwoViewConfig(min_inliers=int(min_inliers), min_inlier_ratio=float(min_inlier_ratio),
                                    max_residual_px=float(max_residual_px))
         return np.array([bool(weakness(thresholds, edge, 1.0)) for edge in self.edges], dtype=bool)
