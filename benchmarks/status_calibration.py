@@ -222,10 +222,14 @@ def main() -> None:
                 writer.writeheader()
                 writer.writerows(rows)
     table = Table(rows)
-    after, rates = choose(table, before)
     print(f"right: error below {RIGHT_PX} px of focal length, wrong: above {WRONG_PX} px; {len(table.rows)} measurements")
-    print(f"chosen on the choice data: min_inliers {after[0]:g}, min_inlier_ratio {after[1]:g}, max_residual_px {after[2]:g} "
-          f"(right called weak {rates[0]:.1%}, wrong called ok {rates[1]:.1%})")
+    if not ((table.split == "choice") & (table.config == "paper") & table.right).any():
+        print("no right measurement of the paper configuration on the choice data: nothing chosen, --before reported")
+        after = before
+    else:
+        after, rates = choose(table, before)
+        print(f"chosen on the choice data: min_inliers {after[0]:g}, min_inlier_ratio {after[1]:g}, max_residual_px {after[2]:g} "
+              f"(right called weak {rates[0]:.1%}, wrong called ok {rates[1]:.1%})")
     report(table, before, after)
 
 
