@@ -4,9 +4,12 @@ Prints, each stage in its own process (so peak memory is its own):
   - first parse (text -> binary cache) events/s and MB/s, beside pandas.read_csv (C engine)
     on the same file;
   - cached load: map the cache and read every event, events/s;
-  - a 1 s window of the cached stream through the pipeline's sample views: bytes touched.
+  - a 1 s window of the cached stream through the pipeline's sample views: bytes touched;
+  - the same events as an AEDAT4 (written by dv-processing, as DV records: LZ4): the aedat4
+    reader's first read (validated, into the cache) and cached read, beside dv-processing's own
+    batch reading of the file.
 
-    python benchmarks/bench_events.py [--events 20000000]
+    python benchmarks/bench_events.py [--events 20000000] [--only aedat4]
 """
 
 from __future__ import annotations
@@ -14,6 +17,7 @@ from __future__ import annotations
 import argparse
 import io
 import json
+import os
 import resource
 import subprocess
 import sys
@@ -43,7 +47,7 @@ def make_file(n_events: int) -> Path:
     path = bench / f"events_{n_events}.txt"
     if path.exists():
         return path
-    duration = 25.0
+    duration = 25.0 * min(1.0, n_events / 20e6)  # about 0.8 M events/s
     while True:
         folder = bench / f"sim_{duration:g}s"
         if not (folder / "images.txt").exists():
@@ -55,6 +59,67 @@ def make_file(n_events: int) -> Path:
         duration *= 1.2 * n_events / len(events)
     write_events_text(path, np.asarray(events[:n_events]), 240, 180)
     return path
+
+
+def make_aedat4(text: Path) -> Path:
+    """The events of the events.txt `text` as an events-only AEDAT4 written by dv-processing
+    (DV's own writer, LZ4-compressed packets as DV records them), with a calib.txt beside it."""
+    import dv_processing as dv
+
+    from eas_vo.eventfile import file_identity, load_event_text
+    from eas_vo.io import write_text_atomic
+
+    path = text.with_suffix(".aedat4")
+    write_text_atomic(path.with_name("calib.txt"), "200 200 120 90 0 0 0 0 0\n")
+    if path.exists():
+        return path
+    events = load_event_text(lambda: open(text, "rb"), file_identity(text), str(text), 240, 180)
+    with tempfile.TemporaryDirectory(dir=path.parent) as folder:  # the writer wants a new file named *.aedat4
+        tmp = Path(folder) / path.name
+        writer = dv.io.MonoCameraWriter(str(tmp), dv.io.MonoCameraWriter.EventOnlyConfig("bench", (240, 180)))
+        for start in range(0, len(events), 100_000):
+            chunk = events[start : start + 100_000]
+            store = dv.EventStore()
+            for t, x, y, p in zip(np.round(chunk["t"] * 1e6).astype(np.int64).tolist(), chunk["x"].tolist(),
+                                  chunk["y"].tolist(), chunk["p"].tolist()):
+                store.push_back(t, x, y, p > 0)
+            writer.writeEvents(store)
+        del writer  # closing writes the file's index
+        os.replace(tmp, path)
+    return path
+
+
+def aedat4_stage(name: str, path: Path, repeat: int, out: dict) -> None:
+    """dv-processing's batch reading of the AEDAT4 (`aedat4_dv`), the aedat4 reader's first read
+    into a fresh cache (`aedat4_first`) and its cached read (`aedat4_cached`)."""
+    from eas_vo.datasets.aedat4 import Aedat4Config, Aedat4Dataset
+
+    config = Aedat4Config(calibration=str(path.with_name("calib.txt")))
+    if name == "aedat4_dv":
+        import dv_processing as dv
+
+        def read():
+            recording, n = dv.io.MonoCameraRecording(str(path)), 0
+            while (batch := recording.getNextEventBatch()) is not None:
+                n += len(batch.numpy())
+            return n
+
+        out["seconds"], out["events"] = timed(read, repeat)
+    elif name == "aedat4_first":
+        def first():
+            with tempfile.TemporaryDirectory() as cache:
+                os.environ["EAS_VO_CACHE_DIR"] = cache
+                return len(Aedat4Dataset(path, config).events())
+
+        out["seconds"], out["events"] = timed(first, repeat)
+    else:
+        Aedat4Dataset(path, config).events()  # build the cache once
+
+        def cached():  # open, map, then read every byte of every record once
+            events = Aedat4Dataset(path, config).events()
+            return float(events.view(np.uint8).sum(dtype=np.uint64)), len(events)
+
+        out["seconds"], (_, out["events"]) = timed(cached, repeat)
 
 
 def timed(fn, repeat: int) -> tuple[float, object]:
@@ -73,7 +138,9 @@ def stage(name: str, path: Path, repeat: int) -> dict:
 
     size_mb = path.stat().st_size / 1e6
     out = {"stage": name, "size_mb": size_mb}
-    if name == "pandas":
+    if name.startswith("aedat4"):
+        aedat4_stage(name, path, repeat, out)
+    elif name == "pandas":
         import pandas as pd
 
         def parse():
@@ -139,6 +206,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--events", type=int, default=20_000_000)
     parser.add_argument("--repeat", type=int, default=3, help="runs per stage; the best is reported")
+    parser.add_argument("--only", choices=["aedat4"], help="run only the AEDAT4 rows")
     parser.add_argument("--stage", help=argparse.SUPPRESS)
     parser.add_argument("--path", help=argparse.SUPPRESS)
     args = parser.parse_args()
@@ -147,10 +215,24 @@ def main() -> None:
         return
     path = make_file(args.events)
     results = {}
-    for name in ("pandas", "parse", "parse_to_cache", "cached", "window"):
-        out = subprocess.run([sys.executable, __file__, "--stage", name, "--path", str(path), "--repeat", str(args.repeat)],
+    stages = [] if args.only == "aedat4" else ["pandas", "parse", "parse_to_cache", "cached", "window"]
+    aedat4 = make_aedat4(path)
+    for name in stages + ["aedat4_dv", "aedat4_first", "aedat4_cached"]:
+        source = aedat4 if name.startswith("aedat4") else path
+        out = subprocess.run([sys.executable, __file__, "--stage", name, "--path", str(source), "--repeat", str(args.repeat)],
                              capture_output=True, text=True, check=True)
         results[name] = json.loads(out.stdout.strip().splitlines()[-1])
+    if stages:
+        print_text_rows(path, results, args.repeat)
+    print(f"{aedat4.name}: {results['aedat4_dv']['events']:,} events, {results['aedat4_dv']['size_mb']:.0f} MB of AEDAT4 (LZ4)")
+    for name, label in (("aedat4_dv", "dv-processing batch reading"), ("aedat4_first", "eas-vo aedat4 first read (validated + cache write)"),
+                        ("aedat4_cached", "eas-vo aedat4 cached read (map + read all)")):
+        r = results[name]
+        print(f"  {label:52s} {r['events'] / r['seconds'] / 1e6:7.1f} M events/s  peak RSS {r['peak_rss_mb']:7.0f} MB")
+    print(f"  (best of {args.repeat} each)")
+
+
+def print_text_rows(path: Path, results: dict, repeat: int) -> None:
     size = results["parse"]["size_mb"]
     print(f"{path.name}: {results['parse']['events']:,} events, {size:.0f} MB of text")
     for name, label in (("pandas", "pandas.read_csv (C engine)"), ("parse", "eas-vo parse (validated)"),
@@ -160,7 +242,7 @@ def main() -> None:
               f"peak RSS {r['peak_rss_mb']:7.0f} MB")
     for name in ("parse", "parse_to_cache"):
         print(f"  {name} vs pandas: {results['pandas']['seconds'] / results[name]['seconds']:.2f}x")
-    print(f"  (best of {args.repeat} each; excluded: eas-vo's one-time kernel load {results['parse']['jit_load_s']:.2f} s, pandas' import)")
+    print(f"  (best of {repeat} each; excluded: eas-vo's one-time kernel load {results['parse']['jit_load_s']:.2f} s, pandas' import)")
     r = results["cached"]
     print(f"  cached load (map + read all)  {r['events'] / r['seconds'] / 1e6:7.1f} M events/s  "
           f"RSS growth {r['rss_growth_mb']:.0f} MB = {r['rss_growth_mb'] * 1e6 / r['events']:.1f} B/event")

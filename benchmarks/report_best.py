@@ -1,4 +1,4 @@
-"""configs/best.toml reported on data that did not choose it (README "Fast motion"), beside
+"""configs/best.toml reported on data that did not choose it (docs/best_config.md), beside
 `paper.toml` and v0.1's `best.toml`: average APE [rad] on the real excerpt's last 10 and 5 s
 and whole 30 s (`histeq`, time offset 0.01 s) and on simulator seeds (`eas`) that
 benchmarks/select_best.py never sees; then frames/s and real-time factor of `best.toml`

@@ -1,4 +1,4 @@
-"""How the chosen values of configs/best.toml are selected, reproducibly (README "Fast motion").
+"""How the chosen values of configs/best.toml are selected, reproducibly (docs/best_config.md).
 
 Each candidate (best.toml with one combination of the varied values) runs on the selection data
 issue 11 names: the real excerpt's first 20 s (`histeq`, time offset 0.01 s) and
@@ -12,7 +12,7 @@ held-out data (benchmarks/report_best.py) is for reporting, never here.
 
     python benchmarks/select_best.py [--real DIR] [--selection-seeds N ...] [--vary KEY=V1,V2 ...]
 
-The defaults reproduce best.toml's choice; README "Fast motion" gives the second round's
+The defaults reproduce best.toml's choice; docs/best_config.md gives the second round's
 command (`--selection-seeds 1 2 3` and other `--vary`). Seeds are simulated once into
 $EAS_VO_CACHE_DIR/simulated/seed-N (about 40 s each).
 """
@@ -38,8 +38,8 @@ CANDIDATES = {
     "tracker.loop_every": (5, 10),
     "backend.gyro": ("false", "auto"),
 }
-#: Seeds that took part in a selection (README "Fast motion"): never report on them; at speed 4,
-#: the seeds the gyro model was corrected on (README "Fast motion").
+#: Seeds that took part in a selection (docs/best_config.md): never report on them; at speed 4,
+#: the seeds the gyro model was corrected on (docs/best_config.md).
 SELECTION_SEEDS = (1, 2, 3)
 DEVELOPMENT_FAST_SEEDS = (71, 72, 73)
 REAL_TIME_BAR = 10.0

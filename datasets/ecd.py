@@ -13,10 +13,8 @@ rate or every N events.
 
 from __future__ import annotations
 
-import functools
 import math
 import sys
-from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path, PurePosixPath, PureWindowsPath
 
@@ -24,17 +22,12 @@ import cv2
 import numpy as np
 
 from eas_vo.datasets import ecd_catalogue
-from eas_vo.datasets.recording import (
-    StreamConfig,
-    calibration_problem,
-    check_increasing,
-    event_sample_times,
-    pose_series,
-)
+from eas_vo.datasets.calibration import parse_ecd_calib
+from eas_vo.datasets.recording import StreamConfig, event_sample_times, ground_truth_table, timed_table
 from eas_vo.datasets.sources import MARKERS, open_source
 from eas_vo.errors import DataError, DataWarnings
 from eas_vo.eventfile import load_event_text, write_events_text
-from eas_vo.io import atomic_path, data_line, parse_table, silenced_stderr, write_text_atomic
+from eas_vo.io import atomic_path, silenced_stderr, write_text_atomic
 from eas_vo.plugins import Dataset
 from eas_vo.types import CameraModel, ImuSeries, PoseSeries, empty_events
 from eas_vo.validation import check_range
@@ -252,42 +245,17 @@ class EcdFolderDataset(Dataset):
         where = self.source.label("calib.txt")
         if not self.source.exists("calib.txt"):
             raise DataError(where, "file not found: calib.txt holds the intrinsics 'fx fy cx cy k1 k2 p1 p2 k3'")
-        fields = self.source.read_bytes("calib.txt").decode(errors="replace").split()
-        try:
-            values = [float(v) for v in fields]
-        except ValueError:
-            raise DataError(where, "calibration values must be numbers", 1) from None
-        if len(values) not in (4, 8, 9):
-            raise DataError(where, f"expected 4, 8 or 9 values (fx fy cx cy k1 k2 p1 p2 k3), found {len(values)}", 1)
-        if not all(map(math.isfinite, values)):
-            raise DataError(where, "calibration values must be finite (found NaN or infinity)", 1)
-        problem = calibration_problem(values, width, height)
-        if problem:
-            raise DataError(where, problem, 1)
-        return CameraModel.from_calib(values, width, height)
-
-    def _read_timed_table(self, name: str, ncols: int, what: str) -> tuple[np.ndarray, Callable] | None:
-        """The table of `name` with times increasing, and row index -> file line; None if absent."""
-        if not self.source.exists(name):
-            return None
-        where = self.source.label(name)
-        data = self.source.read_bytes(name)
-        table = parse_table(data, where, ncols, what)
-        if len(table) < 2:
-            raise DataError(where, f"holds {len(table)} row(s) of '{what}'; at least 2 are needed to interpolate (or remove the file)")
-        line_of = functools.partial(data_line, data)
-        check_increasing(where, table[:, 0], line_of)
-        return table, line_of
+        return parse_ecd_calib(self.source.read_bytes("calib.txt"), where, width, height)
 
     def _read_ground_truth(self) -> PoseSeries | None:
-        read = self._read_timed_table("groundtruth.txt", 8, "t px py pz qx qy qz qw")
-        return None if read is None else pose_series(self.source.label("groundtruth.txt"), *read)
+        if not self.source.exists("groundtruth.txt"):
+            return None
+        return ground_truth_table(self.source.read_bytes("groundtruth.txt"), self.source.label("groundtruth.txt"))
 
     def _read_imu(self) -> ImuSeries | None:
-        read = self._read_timed_table("imu.txt", 7, "t ax ay az gx gy gz")
-        if read is None:
+        if not self.source.exists("imu.txt"):
             return None
-        table, _ = read
+        table, _ = timed_table(self.source.read_bytes("imu.txt"), self.source.label("imu.txt"), 7, "t ax ay az gx gy gz")
         return ImuSeries(t=table[:, 0], acc=table[:, 1:4], gyro=table[:, 4:7])
 
 

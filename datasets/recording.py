@@ -1,13 +1,17 @@
-"""What the recording readers (`ecd`, `rosbag`) share: their reading options, checks of
-timed tables, and the sampling of event-only streams. Not a plugin."""
+"""What the recording readers (`ecd`, `rosbag`, `aedat4`) share: their reading options, checks
+of timed tables, TUM ground-truth files, and the sampling of event-only streams. Not a plugin."""
 
 from __future__ import annotations
 
+import functools
+from collections.abc import Callable
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
 from eas_vo.errors import DataError
+from eas_vo.io import data_line, parse_table
 from eas_vo.types import PoseSeries
 from eas_vo.validation import check_range
 
@@ -72,19 +76,31 @@ def pose_series(where: str, table: np.ndarray, line_of=_row_number) -> PoseSerie
     return PoseSeries(t=table[:, 0], p_w_c=table[:, 1:4], q_w_c=q)
 
 
-def calibration_problem(values: list[float], width: int, height: int) -> str | None:
-    """What makes `fx fy cx cy [k1 k2 p1 p2 [k3]]` impossible for a width x height pinhole camera
-    with radial-tangential distortion, or None: focal lengths between 0.1 and 100 sensor widths
-    (fields of view of about 160 down to 0.6 degrees), the principal point on the sensor,
-    |k1|, |k2|, |k3| <= 10 and |p1|, |p2| <= 1 (beyond, the model no longer maps the sensor)."""
-    fx, fy, cx, cy = values[:4]
-    side = max(width, height)
-    if not (0.1 * side <= fx <= 100 * side and 0.1 * side <= fy <= 100 * side):
-        return f"focal lengths fx = {fx:g}, fy = {fy:g} px are not those of a {width}x{height} camera " \
-               f"({0.1 * side:g} to {100 * side:g} px)"
-    if not (0 <= cx <= width and 0 <= cy <= height):
-        return f"principal point cx = {cx:g}, cy = {cy:g} px lies off the {width}x{height} sensor"
-    dist = (values[4:] + [0.0] * 5)[:5]
-    if max(abs(dist[0]), abs(dist[1]), abs(dist[4])) > 10 or max(abs(dist[2]), abs(dist[3])) > 1:
-        return f"distortion k1 k2 p1 p2 k3 = {' '.join(f'{d:g}' for d in dist)} out of range (|k| <= 10, |p| <= 1)"
-    return None
+def timed_table(data: bytes, where: str, ncols: int, what: str) -> tuple[np.ndarray, Callable[[int], int]]:
+    """The rows of a whitespace table (`what` describes one; `#` comments) whose first column, a
+    time [s], increases, and row index -> file line; at least 2 rows (to interpolate between)."""
+    table = parse_table(data, where, ncols, what)
+    if len(table) < 2:
+        raise DataError(where, f"holds {len(table)} row(s) of '{what}'; at least 2 are needed to interpolate (or remove the file)")
+    line_of = functools.partial(data_line, data)
+    check_increasing(where, table[:, 0], line_of)
+    return table, line_of
+
+
+def ground_truth_table(data: bytes, where: str, time_offset_s: float = 0.0) -> PoseSeries:
+    """TUM rows `t px py pz qx qy qz qw` (camera-to-world; t [s], p [m], unit q) -> PoseSeries,
+    `time_offset_s` added to each t (the ground truth's clock -> the recording's)."""
+    table, line_of = timed_table(data, where, 8, "t px py pz qx qy qz qw")
+    poses = pose_series(where, table, line_of)
+    if time_offset_s == 0.0:
+        return poses
+    return PoseSeries(poses.t + time_offset_s, poses.p_w_c, poses.q_w_c)
+
+
+def read_tum_ground_truth(path: str | Path, time_offset_s: float = 0.0) -> PoseSeries:
+    """A TUM ground-truth file (see ground_truth_table), errors naming the file and its line."""
+    try:
+        data = Path(path).read_bytes()
+    except OSError as exc:
+        raise DataError(str(path), f"cannot read the ground truth: {exc.strerror or exc}") from None
+    return ground_truth_table(data, str(path), time_offset_s)

@@ -16,7 +16,8 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from eas_vo.datasets.recording import StreamConfig, calibration_problem, check_increasing, event_sample_times, pose_series
+from eas_vo.datasets.calibration import camera_from_camera_info
+from eas_vo.datasets.recording import StreamConfig, check_increasing, event_sample_times, pose_series
 from eas_vo.errors import DataError, DataWarnings
 from eas_vo.eventfile import Validator, cache_key, file_identity, load_cached
 from eas_vo.plugins import Dataset
@@ -174,15 +175,8 @@ class RosbagDataset(Dataset):
     def _read_camera(self) -> CameraModel:
         c = self.config
         for index, msg in self._messages(c.camera_info_topic, "sensor_msgs/msg/CameraInfo"):
-            K = np.asarray(msg.K, float)
-            dist = list(np.asarray(msg.D, float)[:5])
-            if len(K) != 9 or not np.isfinite(K).all() or not np.isfinite(dist).all():
-                raise DataError(f"{self.path}:{c.camera_info_topic}", "invalid intrinsics K or distortion D", index)
-            values = [K[0], K[4], K[2], K[5], *dist]
-            problem = calibration_problem(values, int(msg.width), int(msg.height))
-            if problem:
-                raise DataError(f"{self.path}:{c.camera_info_topic}", problem, index)
-            return CameraModel.from_calib(values, int(msg.width), int(msg.height))
+            where = f"{self.path}:{c.camera_info_topic}:{index}"
+            return camera_from_camera_info(where, int(msg.width), int(msg.height), msg.K, msg.D, msg.distortion_model)
         raise DataError(self.path, f"no {c.camera_info_topic} message: the camera intrinsics are unknown")
 
     def _read_poses(self):

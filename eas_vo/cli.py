@@ -355,7 +355,7 @@ def cmd_run(args) -> int:
     ape = m.get("ape_mean_rad")
     ape_text = f"average APE {ape:.4f} rad ({ape * 57.29577951:.2f} deg)" if ape is not None else "no ground truth"
     if m["time_offset_estimated"]:
-        ape_text += f" (time offset {m['time_offset_s'] * 1e3:+.1f} ms, estimated)"
+        ape_text += f" (time offset {m['time_offset_s'] * 1e3:+.1f} ms, estimated on the ground truth it scores against)"
     statuses = _status_text(m["status_counts"], m["status_reasons"])
     meaning = f" [{WEAK_MEANS}]" if m["status_counts"].get("weak") else ""
     loops = f"{m['loop_count']} loop(s) closed, " if m["loop_count"] is not None else ""

@@ -39,7 +39,7 @@ class RunConfig:
         imu_rotvec_cam: the rig's camera-to-IMU rotation R_imu_cam as a rotation vector [rad]
             (v_imu = R_imu_cam v_cam): trackers and backends get the IMU's readings rotated
             into the camera frame by it. The identity: the simulator's (and, within 1 deg, the
-            Event Camera Dataset's: README "An IMU"). Every run checks it against the images (a warning).
+            Event Camera Dataset's: docs/imu.md). Every run checks it against the images (a warning).
         imu_time_offset_s: IMU time = frame time + this [s].
         imu_time_offset_auto: the backend reads the gyro on the clock the images ask for when
             they clearly ask for another (the run's IMU check; metrics.json reports the offset
@@ -259,7 +259,7 @@ def resolve(
         "tracker": registry.get("trackers", run.tracker),
         "backend": registry.get("backends", run.backend),
     }
-    sections = {name: build(cls.Config, _plugin_table(raw[name], name, cls), name) for name, cls in chosen.items()}
+    sections = {name: build(cls.Config, _plugin_table(raw[name], name, cls), f"{name}.{cls.name}") for name, cls in chosen.items()}
     origin = " ".join([Path(config_file).name if config_file else "defaults"] + [f"--set {a}" for a in assignments])
     return ResolvedConfig(run=run, **sections, origin=origin)
 

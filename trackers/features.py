@@ -6,7 +6,7 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from eas_vo.trackers.measurement import TwoViewConfig, measure, weakness
+from eas_vo.trackers.measurement import PixelScale, TwoViewConfig, measure, weakness
 from eas_vo.trackers.motion import lk_params, lk_track
 from eas_vo.types import CameraModel, RelativeRotation
 
@@ -88,7 +88,9 @@ class RefinedMatching:
     Args:
         features: the keypoint detector and matcher.
         fine: the geometry of the LK refinement (the coarse one: rotation-only with the fixed
-            RANSAC_THRESHOLD_PX, MAX_RESIDUAL_PX and COARSE_MIN_INLIER_RATIO).
+            RANSAC_THRESHOLD_PX, MAX_RESIDUAL_PX and COARSE_MIN_INLIER_RATIO). LK's pyramid
+            is OpenCV's default (3 levels of 21 px) converted to the camera
+            (measurement.PixelScale).
         min_inliers: fewer matches, or inliers, and nothing is measured.
     """
 
@@ -97,7 +99,8 @@ class RefinedMatching:
         self.coarse = TwoViewConfig(geometry="rotation", ransac_threshold_px=RANSAC_THRESHOLD_PX,
                                     max_residual_px=MAX_RESIDUAL_PX, min_inliers=min_inliers,
                                     min_inlier_ratio=COARSE_MIN_INLIER_RATIO)
-        self.lk = lk_params()
+        levels, window = PixelScale.of(camera).pyramid(3, 21)
+        self.lk = lk_params(window, levels)
 
     def rotation(
         self, source: np.ndarray, corners: np.ndarray, source_detected: tuple, image: np.ndarray, detected: tuple, i: int, j: int,

@@ -20,7 +20,7 @@ from eas_vo.plugins import Tracker
 from eas_vo.trackers.alignment import PhotometricAlignment
 from eas_vo.trackers.features import DETECTORS, Features, RefinedMatching
 from eas_vo.trackers.loops import LoopClosureConfig, LoopCloser
-from eas_vo.trackers.measurement import TwoViewConfig, frame_record, measure, weakness
+from eas_vo.trackers.measurement import PixelScale, TwoViewConfig, frame_record, measure, weakness
 from eas_vo.trackers.motion import lk_params, lk_track, scaled_rotation
 from eas_vo.types import CameraModel, FrameRecord, ImuSeries, RelativeRotation
 from eas_vo.validation import check_choice, check_range
@@ -37,6 +37,9 @@ class KltConfig(LoopClosureConfig, TwoViewConfig):
     Attributes:
         max_corners, quality_level, min_distance_px, block_size: Shi-Tomasi detection.
         lk_win_size, lk_max_level: pyramidal Lucas-Kanade window [px] and pyramid levels.
+            These four extents are stated for a 200 px focal length (the DAVIS240's) and
+            follow the camera's (measurement.PixelScale: at 400 px, corners 14 px apart in
+            blocks of 14 px, one pyramid level more of the same window).
         lk_max_iterations, lk_epsilon_px: each pyramid level stops after this many iterations
             or once a step is shorter than this [px] (OpenCV's defaults 30 and 0.01).
         threshold1: with fewer correspondences the previous rotation is kept.
@@ -118,6 +121,7 @@ class KltConfig(LoopClosureConfig, TwoViewConfig):
 class KltTracker(Tracker):
     """Tracks corners frame to frame and measures the relative rotation of each pair.
 
+    Its `config` holds the extents in pixels converted to its camera (measurement.PixelScale).
     Feed frames in order with `process`; it returns what happened and the measured
     rotations: `R_{k-1}_{k}` between the previous and this frame (the paper) and, with
     `keyframe_interval` > 0, `R_{kf}_{k}` from the corners tracked since the keyframe kf.
@@ -128,7 +132,7 @@ class KltTracker(Tracker):
     Config = KltConfig
 
     def __init__(self, config: KltConfig | None = None, camera: CameraModel | None = None, *, imu: ImuSeries | None = None):
-        super().__init__(config, camera, imu=imu)
+        super().__init__(PixelScale.of(camera).config(config or KltConfig()), camera, imu=imu)
         c = self.config
         self._lk_params = lk_params(c.lk_win_size, c.lk_max_level, c.lk_max_iterations, c.lk_epsilon_px)
         self._predict = c.predict if c.predict != "auto" else ("gyro" if imu is not None else "velocity")

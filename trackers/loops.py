@@ -13,7 +13,7 @@ import numpy as np
 
 from eas_vo.geometry.rotations import geodesic_angle
 from eas_vo.trackers.features import DETECTORS, Features, RefinedMatching
-from eas_vo.trackers.measurement import TwoViewConfig
+from eas_vo.trackers.measurement import PixelScale, TwoViewConfig
 from eas_vo.types import CameraModel, RelativeRotation
 from eas_vo.validation import check_choice, check_range
 
@@ -79,6 +79,7 @@ class LoopCloser:
     def __init__(self, config: LoopClosureConfig, camera: CameraModel):
         self.config, self.camera = config, camera
         self.features = Features(config.loop_detector)
+        self._min_distance_px, self._block_size = PixelScale.of(camera).corners(7.0, 7)
         fine = TwoViewConfig(geometry=config.loop_geometry, min_inliers=config.loop_min_inliers)
         self.matching = RefinedMatching(self.features, camera, fine, config.loop_min_inliers)
         self.keyframes: list[_Keyframe] = []
@@ -123,7 +124,7 @@ class LoopCloser:
     def _corners(self, keyframe: _Keyframe) -> np.ndarray:
         """The keyframe's Shi-Tomasi corners [px], detected the first time they are needed."""
         if keyframe.corners is None:
-            corners = cv2.goodFeaturesToTrack(keyframe.image, 300, 0.01, 7.0, blockSize=7)
+            corners = cv2.goodFeaturesToTrack(keyframe.image, 300, 0.01, self._min_distance_px, blockSize=self._block_size)
             keyframe.corners = np.empty((0, 2), np.float32) if corners is None else corners.reshape(-1, 2)
         return keyframe.corners
 

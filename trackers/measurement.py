@@ -3,13 +3,61 @@ two-view geometry, and judging whether that measurement is weak. Not a plugin.""
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import math
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from eas_vo.geometry.two_view import ESSENTIAL_METHODS, GEOMETRIES, rotation_from_correspondences
 from eas_vo.types import CameraModel, FrameRecord, RelativeRotation
 from eas_vo.validation import check_choice, check_range
+
+
+#: The focal length [px] a tracker's extents in pixels are stated for: the DAVIS240's, whose
+#: images the defaults were set on. A tracker converts them to its camera by PixelScale, so a
+#: view seen through more pixels (a larger sensor of the same field of view) is tracked alike:
+#: its corners as far apart in angle, its corner and flow windows and its pyramid as wide.
+#: Precisions in pixels (inlier thresholds, residuals, LK's step and forward-backward
+#: tolerances) stay the sensor's: a pixel's measurement noise does not grow with the sensor.
+REFERENCE_FOCAL_PX = 200.0
+
+
+@dataclass(frozen=True)
+class PixelScale:
+    """Converts extents stated at REFERENCE_FOCAL_PX to a camera of `factor` times that focal
+    length. Lengths scale in proportion; a pyramid gains (or loses) a level per whole octave
+    of the factor (`octaves`, rounded towards zero) and its window takes the rest, so the
+    coarsest level and its window see the same angles (a 2x copy of the images is tracked as
+    the original, one level down) and a window is never more than halved or doubled."""
+
+    factor: float
+
+    @classmethod
+    def of(cls, camera: CameraModel | None) -> "PixelScale":
+        return cls(1.0 if camera is None else camera.focal_px / REFERENCE_FOCAL_PX)
+
+    @property
+    def octaves(self) -> int:
+        return int(math.log2(self.factor))
+
+    def length(self, px: float) -> float:
+        return px * self.factor
+
+    def corners(self, min_distance_px: float, block_size: int) -> tuple[float, int]:
+        """Shi-Tomasi's (min_distance [px], block_size [px]) for this camera."""
+        return self.length(min_distance_px), max(3, round(self.length(block_size)))
+
+    def pyramid(self, levels: int, window_px: int) -> tuple[int, int]:
+        """(levels, window [px]) of a pyramid stated as `levels` above the full image with
+        `window_px` per level."""
+        return max(0, levels + self.octaves), max(3, round(window_px * self.factor / 2.0**self.octaves))
+
+    def config(self, config):
+        """A KLT-like `config` (a frozen dataclass) with its extents converted:
+        `min_distance_px` and `block_size` (corners), `lk_max_level` and `lk_win_size` (flow)."""
+        min_distance_px, block_size = self.corners(config.min_distance_px, config.block_size)
+        lk_max_level, lk_win_size = self.pyramid(config.lk_max_level, config.lk_win_size)
+        return replace(config, min_distance_px=min_distance_px, block_size=block_size, lk_max_level=lk_max_level, lk_win_size=lk_win_size)
 
 
 @dataclass(frozen=True)

@@ -39,11 +39,11 @@ def test_per_plugin_tables_apply_only_to_their_plugin(tmp_path):
 @pytest.mark.parametrize(
     "assignment,match",
     [
-        ("frontend.bogus=1", "unknown key frontend.bogus"),
-        ("frontend.n=abc", "frontend.n must be int"),
-        ("frontend.n={a=1}", "frontend.n must be int"),  # a table where a number goes: the key's own message
-        ("frontend.n=0", "n = 0 is out of range"),
-        ("tracker.threshold1=500", "threshold1 .* must not exceed threshold2"),
+        ("frontend.bogus=1", "unknown key frontend.eas.bogus"),
+        ("frontend.n=abc", "frontend.eas.n must be int"),
+        ("frontend.n={a=1}", "frontend.eas.n must be int"),  # a table where a number goes: the key's own message
+        ("frontend.n=0", "frontend.eas.n = 0 is out of range"),
+        ("tracker.threshold1=500", "tracker.klt.threshold1 .* must not exceed threshold2"),
         ("nosection.x=1", "SECTION.KEY=VALUE"),
         ("run.frontend=nope", "unknown frontend 'nope'; installed: "),
         ("run.tracker=nope", "unknown tracker 'nope'; installed: "),

@@ -218,13 +218,17 @@ def test_imu_agreement_finds_how_late_the_gyro_is_stamped(late_s):
     assert gain < 0.7 if late_s else gain > 0.95
 
 
-def test_auto_time_offset_on_the_real_excerpt(tmp_path):
+def test_auto_time_offset_on_the_real_excerpt(tmp_path, capsys):
+    """--time-offset auto finds the excerpt's offset, and the summary line says it was fitted
+    on the ground truth the APE is measured against."""
     folder = str(require(SHAPES_ROTATION))
     out = tmp_path / "auto"
     assert main(["run", "--dataset", folder, "--frontend", "original", "--duration", "25", "--time-offset", "auto", "--out", str(out), "--quiet"]) == 0
     metrics = json.loads((out / "metrics.json").read_text())
     # The excerpt's README: frames lead ground truth by about 10 ms. Measured: +9.1 ms.
     assert metrics["time_offset_estimated"] and 0.005 < metrics["time_offset_s"] < 0.015
+    said = capsys.readouterr().out
+    assert f"(time offset {metrics['time_offset_s'] * 1e3:+.1f} ms, estimated on the ground truth it scores against)" in said
 
 
 def test_tum_files_are_scored_like_the_run(tmp_path):

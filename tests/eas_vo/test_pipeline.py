@@ -24,7 +24,7 @@ def test_eas_tracks_more_correspondences_than_original(default_results):
 
 
 def test_eas_is_more_accurate_than_original(default_results):
-    # Measured: eas 0.166 rad, original 0.402 rad (see README "Results"); the claim is the ordering.
+    # Measured: eas 0.166 rad, original 0.402 rad (docs/results.md); the claim is the ordering.
     assert default_results["eas"]["ape_mean_rad"] < 0.5 * default_results["original"]["ape_mean_rad"]
 
 
@@ -49,7 +49,7 @@ def test_original_frames_on_the_real_excerpt():
 
 def test_best_config_beats_the_paper_config():
     """configs/best.toml against configs/paper.toml. Measured: synthetic eas 0.0172 vs
-    0.166 rad; the real excerpt (histeq, 25 s) 0.0444 vs 0.486 rad."""
+    0.166 rad; the real excerpt (histeq, 25 s) 0.0270 vs 0.486 rad (docs/results.md)."""
     paper = pipeline.run(config.resolve("paper", {"frontend": "eas"})).metrics
     best = pipeline.run(config.resolve("best", {"frontend": "eas"})).metrics
     assert best["ape_mean_rad"] < 0.5 * paper["ape_mean_rad"]
@@ -70,7 +70,7 @@ def test_a_gyro_on_another_clock_is_found_on_real_images(tmp_path, benchmarks_im
     ms; made as benchmarks/gyro_clock.py makes it): read as if on the frames' clock, the run
     over the last, fastest 10 s says so and names the offset; read with it, no warning; with
     run.imu_time_offset_auto the backend reads it there. (What the offset is worth in APE
-    moves with its exact value: README, not asserted.)"""
+    moves with its exact value: docs/imu.md, not asserted.)"""
     from gyro_clock import with_gyro_from_ground_truth
 
     rig = with_gyro_from_ground_truth(require(SHAPES_ROTATION), tmp_path / "with_gyro", seed=0)

@@ -50,7 +50,7 @@ def install_privately(folder, dist: str, module: str, source: str, entry_points:
 
 
 def write_npz(dataset, path) -> None:
-    """A recording in the README's .npz layout."""
+    """A recording in the plugin guide's .npz layout (docs/plugins.md)."""
     gt = dataset.ground_truth
     frames = np.stack([dataset.load_frame(k) for k in range(len(dataset.frame_times()))])
     np.savez(path, frames=frames, frame_times=dataset.frame_times(), events=np.asarray(dataset.events()),

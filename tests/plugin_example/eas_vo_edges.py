@@ -3,7 +3,6 @@
 from dataclasses import dataclass
 
 import cv2
-import numpy as np
 
 from eas_vo.plugins import Frontend
 
@@ -20,6 +19,6 @@ class EdgesFrontend(Frontend):
     Config = EdgesConfig
     needs_frames = True
 
-    def __call__(self, sample) -> np.ndarray:
+    def __call__(self, sample):
         frame = cv2.equalizeHist(sample.frame)
         return cv2.GaussianBlur(cv2.Canny(frame, self.config.low, self.config.high), (5, 5), 1.0)

@@ -1,0 +1,278 @@
+"""AEDAT4 recordings (iniVation's DV software), read with dv-processing.
+
+From the file: the `events` stream (x, y, polarity, microsecond timestamps), the `frames`
+stream (APS frames with their start-of-exposure timestamp and exposure duration), the `imu`
+stream (accelerometer in g, gyro in deg/s) and the sensor size. An AEDAT4 holds no lens
+calibration and no ground truth: `dataset.calibration` names a calibration file (any format of
+datasets/calibration.py) and `dataset.ground_truth` a TUM file (`t px py pz qx qy qz qw`,
+camera-to-world).
+
+Time: microseconds on the camera's clock -> float64 seconds. A frame's time is the middle of
+its exposure (start + exposure / 2), the instant the DAVIS ROS driver, and so the Event Camera
+Dataset and the `ecd` reader, gives a frame; units: g -> m/s^2 (standard gravity), deg/s -> rad/s.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from datetime import timedelta
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from eas_vo.datasets.calibration import read_calibration
+from eas_vo.datasets.recording import StreamConfig, check_increasing, event_sample_times, read_tum_ground_truth
+from eas_vo.errors import DataError, DataWarnings
+from eas_vo.eventfile import Validator, cache_key, file_identity, load_cached
+from eas_vo.plugins import Dataset
+from eas_vo.types import ImuSeries, empty_events
+from eas_vo.validation import check_range
+
+#: The first bytes of every AEDAT 4.0 file.
+MAGIC = b"#!AER-DAT4.0\r\n"
+#: Standard gravity [m/s^2]: the g of accelerometer datasheets, in which DV stores readings.
+STANDARD_GRAVITY = 9.80665
+#: Calibration formats, for messages.
+CALIBRATION_FORMATS = "a DV calibration XML, a kalibr camchain YAML, a ROS camera_info YAML or an ECD calib.txt"
+
+
+@dataclass(frozen=True)
+class Aedat4Config(StreamConfig):
+    """StreamConfig plus where calibration and ground truth come from.
+
+    Attributes:
+        calibration: calibration file (CALIBRATION_FORMATS); required.
+        camera: which camera of the calibration file (a kalibr `camN`, a DV XML camera node);
+            empty: cam0, or the only one.
+        ground_truth: TUM file of camera-to-world poses; empty: none.
+        ground_truth_time_offset_s: added to the ground truth's times to put them on the
+            recording's clock [s].
+    """
+
+    calibration: str = ""
+    camera: str = ""
+    ground_truth: str = ""
+    ground_truth_time_offset_s: float = 0.0
+
+    def validate(self) -> None:
+        super().validate()
+        check_range(self, "ground_truth_time_offset_s", -1e10, 1e10)
+
+
+def _said(exc: Exception) -> str:
+    """What dv-processing said, without its C++ location and stack trace."""
+    lines = [line.strip() for line in str(exc).splitlines() if line.strip()]
+    if lines and lines[0].startswith("/") and len(lines) > 1:  # "/project/include/...hpp(313): void ...()"
+        lines = lines[1:]
+    kept = []
+    for line in lines:
+        if line.startswith("Stacktrace:"):
+            break
+        kept.append(line.replace("Error info: ", ""))
+    return " ".join(kept) or type(exc).__name__
+
+
+def is_aedat4(path: Path) -> bool:
+    """Whether `path` is a file starting with the AEDAT 4.0 magic bytes (never raises)."""
+    try:
+        with open(path, "rb") as fh:
+            return fh.read(len(MAGIC)) == MAGIC
+    except (OSError, ValueError):  # ValueError: a NUL in the name
+        return False
+
+
+class Aedat4Dataset(Dataset):
+    """An AEDAT4 recording of a DAVIS (or any DV camera): events, frames, IMU."""
+
+    name = "aedat4"
+    description = "AEDAT4 recording (iniVation DV): events, frames, IMU; --set dataset.calibration=FILE"
+    Config = Aedat4Config
+
+    def __init__(self, location: str | Path, config: Aedat4Config | None = None):
+        import dv_processing as dv
+
+        self.config = c = config or Aedat4Config()
+        self.path = Path(location)
+        self.label = str(self.path)
+        self.warnings = DataWarnings()
+        if not self.path.is_file():
+            raise DataError(self.path, "AEDAT4 file not found")
+        if not is_aedat4(self.path):
+            raise DataError(self.path, f"not an AEDAT4 file (it does not start with {MAGIC.decode().strip()!r})")
+        if self.path.suffix != ".aedat4":
+            raise DataError(self.path, "dv-processing opens AEDAT4 files only under a name ending in '.aedat4' "
+                                       "(lower case): rename or link it")
+        self.recording = self._dv(lambda: dv.io.MonoCameraRecording(str(self.path)), "the file's header or index")
+        width, height = self._sensor_size()
+        if not c.calibration:
+            raise DataError(self.path, f"an AEDAT4 file holds no lens calibration: give one with --set "
+                                       f"dataset.calibration=FILE ({CALIBRATION_FORMATS})")
+        self.camera = read_calibration(c.calibration, width=width, height=height, camera=c.camera or None)
+        self._frame_times = self._read_frame_times()
+        self._times = self._frame_times
+        if self._frame_times is None:
+            self.no_frames_reason = f"{self.path} has no frames stream (an event-only recording)"
+        self.imu = self._read_imu()
+        self.ground_truth = read_tum_ground_truth(c.ground_truth, c.ground_truth_time_offset_s) if c.ground_truth else None
+        self._events: np.ndarray | None = None
+
+    def _dv(self, call, what: str, stream: str = ""):
+        """`call()`, dv-processing's errors turned into a one-line DataError naming `what` was read."""
+        try:
+            return call()
+        except (RuntimeError, ValueError, IndexError, OSError) as exc:  # what pybind11 makes of std:: exceptions
+            where = f"{self.path}:{stream}" if stream else str(self.path)
+            raise DataError(where, f"damaged or truncated AEDAT4 data, reading {what} ({_said(exc)})") from None
+
+    def _sensor_size(self) -> tuple[int, int]:
+        """(width, height) [px] from the events' or the frames' stream metadata (equal if both)."""
+        r = self.recording
+        sizes = {}
+        if r.isEventStreamAvailable():
+            sizes["events"] = r.getEventResolution()
+        if r.isFrameStreamAvailable():
+            sizes["frames"] = r.getFrameResolution()
+        sizes = {k: tuple(map(int, v)) for k, v in sizes.items() if v is not None}
+        if not sizes:
+            raise DataError(self.path, "neither an events nor a frames stream with a resolution: the sensor size is unknown")
+        if len(set(sizes.values())) > 1:
+            raise DataError(self.path, "the events stream is {0[0]}x{0[1]} px, the frames stream {1[0]}x{1[1]}".format(
+                sizes["events"], sizes["frames"]))
+        return next(iter(sizes.values()))
+
+    # -- frames --------------------------------------------------------------------------
+
+    def _frames(self):
+        """(index, dv.Frame) of the frames stream in order, read from its start."""
+        r = self.recording
+        index = 0
+        while True:
+            frame = self._dv(r.getNextFrame, f"frame {index}", "frames")
+            if frame is None:
+                return
+            yield index, frame
+            index += 1
+
+    def _read_frame_times(self) -> np.ndarray | None:
+        """Frame times [s] (mid-exposure) of the frames kept, None without frames; frames going
+        back in time are errors (dropped and counted with --lenient). Notes where to find each
+        kept frame again: its start-of-exposure timestamp [us] and its rank among the frames
+        that start then."""
+        if not self.recording.isFrameStreamAvailable():
+            return None
+        where = f"{self.path}:frames"
+        middles, self._frame_index, self._frame_at = [], [], []
+        starting: dict[int, int] = {}
+        for index, frame in self._frames():
+            start = int(frame.timestamp)
+            rank = starting.get(start, 0)
+            starting[start] = rank + 1
+            middle_us = start + (frame.exposure // timedelta(microseconds=1)) / 2
+            if middles and middle_us < middles[-1]:
+                if not self.config.lenient:
+                    raise DataError(where, f"frame time {middle_us / 1e6:.6f} s goes back (previous {middles[-1] / 1e6:.6f})",
+                                    index)
+                self.warnings.add(where, "frame time going back", f"frame {index}")
+                continue
+            self._check_frame(frame, index)
+            middles.append(middle_us)
+            self._frame_index.append(index)
+            self._frame_at.append((start, rank))
+        self.recording.resetSequentialRead()
+        return np.array(middles) / 1e6 if middles else None
+
+    def _check_frame(self, frame, index: int) -> None:
+        image = frame.image
+        size = (image.shape[1], image.shape[0]) if image is not None and image.ndim >= 2 else (0, 0)
+        expected = self.camera.width, self.camera.height
+        if size != expected or frame.positionX or frame.positionY:
+            raise DataError(f"{self.path}:frames", f"frame is {size[0]}x{size[1]} px at ({frame.positionX}, "
+                                                   f"{frame.positionY}), not the {expected[0]}x{expected[1]} sensor", index)
+        if image.dtype != np.uint8 or (image.ndim == 3 and image.shape[2] not in (1, 3, 4)):
+            raise DataError(f"{self.path}:frames", f"frame of {image.dtype} with shape {image.shape}: 8-bit grey, "
+                                                   "BGR or BGRA are read", index)
+
+    def load_frame(self, k: int) -> np.ndarray | None:
+        if self._frame_times is None:
+            return None
+        (start, rank), index = self._frame_at[k], self._frame_index[k]
+        batch = self._dv(lambda: self.recording.getFramesTimeRange(start, start + 1), f"frame {index}", "frames")
+        if batch is None or rank >= len(batch):
+            raise DataError(f"{self.path}:frames", "frame unreadable on a second read (did the file change?)", index)
+        image = batch[rank].image
+        if image.ndim == 3:
+            image = image[..., 0] if image.shape[2] == 1 else cv2.cvtColor(
+                image, cv2.COLOR_BGR2GRAY if image.shape[2] == 3 else cv2.COLOR_BGRA2GRAY)
+        return np.ascontiguousarray(image)
+
+    # -- IMU, events -------------------------------------------------------------------------
+
+    def _read_imu(self) -> ImuSeries | None:
+        """The imu stream in the project's units, or None without one (or with fewer than 2
+        readings: nothing to interpolate between)."""
+        r = self.recording
+        if not r.isImuStreamAvailable():
+            return None
+        rows = []
+        while True:
+            batch = self._dv(r.getNextImuBatch, f"IMU reading {len(rows)}", "imu")
+            if batch is None:
+                break
+            rows.extend((m.timestamp, m.accelerometerX, m.accelerometerY, m.accelerometerZ,
+                         m.gyroscopeX, m.gyroscopeY, m.gyroscopeZ) for m in batch)
+        r.resetSequentialRead()
+        if len(rows) < 2:
+            return None
+        table = np.array(rows, dtype=float)
+        t = table[:, 0] / 1e6
+        check_increasing(f"{self.path}:imu", t, lambda row: row)
+        return ImuSeries(t=t, acc=table[:, 1:4] * STANDARD_GRAVITY, gyro=np.deg2rad(table[:, 4:7]))
+
+    def events(self) -> np.ndarray:
+        if self._events is None:
+            self._events = self._load_events() if self.recording.isEventStreamAvailable() else empty_events()
+        return self._events
+
+    def _load_events(self) -> np.ndarray:
+        c = self.config
+        where = f"{self.path}:events"
+        r = self.recording
+
+        def fill(out, warnings):
+            validate = Validator(where, self.camera.width, self.camera.height, c.time_tolerance_s, c.lenient, warnings, "event")
+            read = kept = 0  # events read from the file (the index messages name), events kept
+            r.resetSequentialRead()
+            try:
+                while True:
+                    batch = self._dv(r.getNextEventBatch, f"the events after event {read}", "events")
+                    if batch is None:
+                        return kept
+                    raw = batch.numpy()
+                    first = read
+                    events = validate(raw["timestamp"] / 1e6, raw["x"].astype(np.int64), raw["y"].astype(np.int64),
+                                      raw["polarity"].astype(np.int64), lambda row: first + row)
+                    out.write(events.data)
+                    read, kept = read + len(raw), kept + len(events)
+            finally:
+                r.resetSequentialRead()
+
+        key = cache_key("aedat4", *file_identity(self.path), self.camera.width, self.camera.height, c.time_tolerance_s)
+        return load_cached(key, c.lenient, self.warnings, fill, where)
+
+    # -- plugin contract ---------------------------------------------------------------
+
+    @classmethod
+    def can_open(cls, location: str) -> bool:
+        """A path ending in `.aedat4` whose first bytes are the AEDAT 4.0 magic."""
+        path = Path(location)
+        return path.suffix.lower() == ".aedat4" and is_aedat4(path)
+
+    def data_warnings(self) -> list[str]:
+        return self.warnings.lines()
+
+    def frame_times(self) -> np.ndarray:
+        if self._times is None:
+            c = self.config
+            self._times = event_sample_times(self.events()["t"], c.sample_rate_hz, c.sample_every_events)
+        return self._times

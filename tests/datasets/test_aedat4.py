@@ -1,0 +1,315 @@
+"""The AEDAT4 reader: files written by dv-processing's own MonoCameraWriter (not our code), read
+back exactly; units, frame times, validation, the cache, hostile files; and a simulated
+sequence giving the same data and the same trajectory as its ECD folder."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from eas_vo.datasets.aedat4 import Aedat4Config, Aedat4Dataset
+from eas_vo.errors import DataError
+
+dv = pytest.importorskip("dv_processing", reason="dv-processing (the AEDAT4 reader's library) is not installed")
+
+WIDTH, HEIGHT = 120, 90  # not the DAVIS240's: nothing here may assume 240x180
+
+
+def write_aedat4(path, *, events=None, frames=(), imu=None, size=(WIDTH, HEIGHT), kind="davis"):
+    """An AEDAT4 written by dv-processing. events: (t_us, x, y, p) columns; frames: (start_us,
+    exposure_us, uint8 image); imu: rows (t_us, acc [g] x3, gyro [deg/s] x3)."""
+    config = {"davis": dv.io.MonoCameraWriter.DAVISConfig, "events": dv.io.MonoCameraWriter.EventOnlyConfig,
+              "frames": dv.io.MonoCameraWriter.FrameOnlyConfig}[kind]("DAVIS_test", size)
+    writer = dv.io.MonoCameraWriter(str(path), config)
+    if events is not None:
+        t, x, y, p = (np.asarray(c).tolist() for c in events)
+        for start in range(0, len(t), 50_000):  # one packet each; the writer checks order between packets only
+            packet = dv.EventPacket()
+            for k in range(start, min(start + 50_000, len(t))):
+                packet.elements.append(dv.Event(t[k], x[k], y[k], bool(p[k])))
+            writer.writeEventPacket(packet)
+    for start_us, exposure_us, image in frames:
+        writer.writeFrame(dv.Frame(int(start_us), int(exposure_us), 0, 0, image, dv.FrameSource.SENSOR))
+    for row in imu if imu is not None else ():
+        t_us, ax, ay, az, gx, gy, gz = row
+        writer.writeImu(dv.IMU(int(t_us), 25.0, ax, ay, az, gx, gy, gz, 0.0, 0.0, 0.0))
+    del writer  # closing writes the file's index
+
+
+def write_calib(folder, width=WIDTH, height=HEIGHT):
+    path = folder / "calib.txt"
+    path.write_text(f"{0.9 * width} {0.9 * width} {width / 2} {height / 2} -0.1 0.01 0 0 0\n")
+    return path
+
+
+def random_stream(n, seed=0, t0_us=1_700_000_000_000_000):
+    """n events in time order (Unix microseconds, as DV records them) on the test sensor."""
+    rng = np.random.default_rng(seed)
+    t = t0_us + np.sort(rng.integers(0, 2_000_000, n))
+    return t, rng.integers(0, WIDTH, n), rng.integers(0, HEIGHT, n), rng.integers(0, 2, n)
+
+
+def test_can_open_wants_the_suffix_and_the_magic(tmp_path):
+    good = tmp_path / "rec.aedat4"
+    write_aedat4(good, events=random_stream(10), kind="events")
+    text = tmp_path / "notes.aedat4"
+    text.write_text("t x y p\n0.1 2 3 1\n")
+    renamed = tmp_path / "rec.bin"
+    renamed.write_bytes(good.read_bytes())
+    assert Aedat4Dataset.can_open(str(good))
+    assert not Aedat4Dataset.can_open(str(text)) and not Aedat4Dataset.can_open(str(renamed))
+    assert not Aedat4Dataset.can_open(str(tmp_path / "absent.aedat4")) and not Aedat4Dataset.can_open("a\0b.aedat4")
+    assert not Aedat4Dataset.can_open(str(tmp_path))
+    with pytest.raises(DataError, match=r"notes.aedat4: not an AEDAT4 file"):
+        Aedat4Dataset(text, Aedat4Config(calibration=str(write_calib(tmp_path))))
+    shouting = tmp_path / "REC.AEDAT4"
+    shouting.write_bytes(good.read_bytes())
+    assert Aedat4Dataset.can_open(str(shouting))
+    with pytest.raises(DataError, match=r"REC.AEDAT4: dv-processing opens AEDAT4 files only under a name ending in '.aedat4'"):
+        Aedat4Dataset(shouting, Aedat4Config(calibration=str(write_calib(tmp_path))))
+
+
+def test_a_missing_calibration_says_what_to_pass(tmp_path):
+    path = tmp_path / "rec.aedat4"
+    write_aedat4(path, events=random_stream(10), kind="events")
+    with pytest.raises(DataError, match=r"rec.aedat4: an AEDAT4 file holds no lens calibration: give one with "
+                                        r"--set dataset.calibration=FILE"):
+        Aedat4Dataset(path)
+
+
+def test_events_frames_imu_in_the_projects_units_and_instants(tmp_path):
+    """Known answers: events [us] -> s; a frame's time is the middle of its exposure (as the ECD's
+    frames are stamped by the DAVIS ROS driver); 1 g -> 9.80665 m/s^2, 180 deg/s -> pi rad/s."""
+    events = random_stream(5000)
+    t0 = int(events[0][0])
+    image = np.random.default_rng(1).integers(0, 256, (HEIGHT, WIDTH), dtype=np.uint8)
+    frames = [(t0 + 1000, 8000, image), (t0 + 51_000, 3001, image[::-1].copy())]
+    imu = [(t0, 0.0, -1.0, 0.5, 180.0, 0.0, -90.0), (t0 + 5000, 1.0, 0.0, 0.0, 0.0, 360.0, 0.0)]
+    path = tmp_path / "rec.aedat4"
+    write_aedat4(path, events=events, frames=frames, imu=imu)
+    ds = Aedat4Dataset(path, Aedat4Config(calibration=str(write_calib(tmp_path))))
+
+    assert (ds.camera.width, ds.camera.height) == (WIDTH, HEIGHT)
+    ev = ds.events()
+    np.testing.assert_array_equal(np.round(ev["t"] * 1e6).astype(np.int64), events[0])
+    np.testing.assert_array_equal(ev["t"], events[0] / 1e6)
+    for k, name in ((1, "x"), (2, "y"), (3, "p")):
+        np.testing.assert_array_equal(ev[name], events[k])
+    np.testing.assert_array_equal(ds.frame_times(), [(t0 + 1000 + 4000) / 1e6, (t0 + 51_000 + 1500.5) / 1e6])
+    np.testing.assert_array_equal(ds.load_frame(0), image)
+    np.testing.assert_array_equal(ds.load_frame(1), image[::-1])
+    np.testing.assert_array_equal(ds.imu.t, [t0 / 1e6, (t0 + 5000) / 1e6])
+    np.testing.assert_allclose(ds.imu.acc, [[0.0, -9.80665, 0.5 * 9.80665], [9.80665, 0.0, 0.0]], rtol=1e-7)
+    np.testing.assert_allclose(ds.imu.gyro, [[np.pi, 0.0, -np.pi / 2], [0.0, 2 * np.pi, 0.0]], rtol=1e-7)
+    samples = list(ds.samples())
+    assert [s.event_index for s in samples] == list(np.searchsorted(ev["t"], ds.frame_times()))
+
+
+def test_events_are_cached_and_the_cache_is_used(tmp_path):
+    path = tmp_path / "rec.aedat4"
+    events = random_stream(20_000, seed=2)
+    write_aedat4(path, events=events, kind="events")
+    config = Aedat4Config(calibration=str(write_calib(tmp_path)))
+    first = Aedat4Dataset(path, config).events()
+    second = Aedat4Dataset(path, config).events()
+    assert isinstance(second, np.memmap)
+    np.testing.assert_array_equal(first, second)
+    np.testing.assert_array_equal(second["x"], events[1])
+
+
+@pytest.mark.parametrize("damage, what, shown, row", [
+    ("back", "timestamp goes backwards", "", 700),
+    ("off", f"pixel outside the {WIDTH}x{HEIGHT} sensor", f"({WIDTH}, ", 300),
+])
+def test_bad_events_name_the_event_and_lenient_drops_and_counts(tmp_path, damage, what, shown, row):
+    t, x, y, p = (c.copy() for c in random_stream(1000, seed=3))
+    if damage == "back":
+        t[row] -= 500_000  # half a second back, inside one packet (the writer checks only between packets)
+    else:
+        x[row] = WIDTH
+    path = tmp_path / "rec.aedat4"
+    write_aedat4(path, events=(t, x, y, p), kind="events")
+    calib = str(write_calib(tmp_path))
+    with pytest.raises(DataError) as info:
+        Aedat4Dataset(path, Aedat4Config(calibration=calib)).events()
+    assert str(info.value).startswith(f"{path}:events:{row}: {what}: {shown}")
+    ds = Aedat4Dataset(path, Aedat4Config(calibration=calib, lenient=True))
+    ev = ds.events()
+    keep = np.arange(len(t)) != row
+    np.testing.assert_array_equal(ev["x"], x[keep])
+    np.testing.assert_array_equal(ev["t"], t[keep] / 1e6)
+    assert ds.data_warnings() == [f"{path}:events: 1 dropped: {what} (first at event {row})"]
+
+
+def test_frames_going_back_are_named_or_dropped(tmp_path):
+    image = np.zeros((HEIGHT, WIDTH), np.uint8)
+    # Starts in order (the writer wants that), middles not: the second's long exposure puts its
+    # middle (1.051 s) after the third's (1.0025 s).
+    frames = [(1_000_000, 1000, image), (1_001_000, 100_000, image + 1), (1_002_000, 1000, image + 2)]
+    path = tmp_path / "rec.aedat4"
+    write_aedat4(path, frames=frames, kind="frames")
+    calib = str(write_calib(tmp_path))
+    with pytest.raises(DataError, match=r"rec.aedat4:frames:2: frame time 1.002500 s goes back \(previous 1.051000\)$"):
+        Aedat4Dataset(path, Aedat4Config(calibration=calib))
+    ds = Aedat4Dataset(path, Aedat4Config(calibration=calib, lenient=True))
+    np.testing.assert_array_equal(ds.frame_times(), [1.0005, 1.051])
+    assert ds.load_frame(1)[0, 0] == 1
+    assert ds.data_warnings() == [f"{path}:frames: 1 dropped: frame time going back (first at frame 2)"]
+
+
+def test_event_only_and_frame_only_recordings(tmp_path):
+    from helpers import run_eas_vo
+
+    calib = write_calib(tmp_path)
+    events_only = tmp_path / "events.aedat4"
+    events = random_stream(3000, seed=4)
+    write_aedat4(events_only, events=events, kind="events")
+    ds = Aedat4Dataset(events_only, Aedat4Config(calibration=str(calib), sample_rate_hz=10.0))
+    assert ds.load_frame(0) is None and ds.imu is None and ds.ground_truth is None
+    np.testing.assert_allclose(np.diff(ds.frame_times()), 0.1, rtol=0, atol=1e-6)  # (Unix seconds: ulp 2.4e-7 s)
+    assert "events.aedat4 has no frames stream (an event-only recording)" in ds.no_frames_reason
+    done = run_eas_vo("run", "--dataset", str(events_only), "--frontend", "original", "--set", f"dataset.calibration={calib}",
+                      "--out", str(tmp_path / "out"), "--quiet")
+    assert done.returncode == 2 and done.stderr.count("\n") == 1, done.stderr
+    assert "needs APS frames" in done.stderr and "has no frames stream (an event-only recording)" in done.stderr
+
+    frames_only = tmp_path / "frames.aedat4"
+    image = np.full((HEIGHT, WIDTH), 7, np.uint8)
+    write_aedat4(frames_only, frames=[(5_000_000 + 40_000 * k, 2000, image) for k in range(3)], kind="frames")
+    ds = Aedat4Dataset(frames_only, Aedat4Config(calibration=str(calib)))
+    assert len(ds.events()) == 0 and ds.events().dtype.names == ("t", "x", "y", "p")
+    np.testing.assert_array_equal(ds.frame_times(), (5_001_000 + 40_000 * np.arange(3)) / 1e6)
+    assert all(s.frame is not None and len(s.events_after) == 0 for s in ds.samples())
+
+
+def test_ground_truth_from_a_tum_file_with_a_clock_offset(tmp_path):
+    path = tmp_path / "rec.aedat4"
+    write_aedat4(path, events=random_stream(10), kind="events")
+    tum = tmp_path / "gt.tum"
+    tum.write_text("# t px py pz qx qy qz qw\n10.0 1 2 3 0 0 0 1\n10.5 1 2 4 0 0 0.6 0.8\n")
+    ds = Aedat4Dataset(path, Aedat4Config(calibration=str(write_calib(tmp_path)), ground_truth=str(tum),
+                                          ground_truth_time_offset_s=1_700_000_000.0 - 10.0))
+    np.testing.assert_array_equal(ds.ground_truth.t, [1_700_000_000.0, 1_700_000_000.5])
+    np.testing.assert_array_equal(ds.ground_truth.q_w_c[1], [0, 0, 0.6, 0.8])
+    tum.write_text("10.0 1 2 3 0 0 0 1\n9.0 1 2 3 0 0 0 1\n")
+    with pytest.raises(DataError, match=r"gt.tum:2: timestamp 9.000000000 does not increase"):
+        Aedat4Dataset(path, Aedat4Config(calibration=str(write_calib(tmp_path)), ground_truth=str(tum)))
+
+
+def test_truncated_files_are_named_errors_or_read_whole(tmp_path):
+    """An AEDAT4 cut at any byte: a one-line error naming the file, or (accepted) exactly what the
+    whole file holds: every event, frame and IMU reading."""
+    from hypothesis import given, strategies as st
+
+    from helpers import hostile_settings
+
+    events = random_stream(4000, seed=5)
+    t0 = int(events[0][0])
+    image = np.random.default_rng(6).integers(0, 256, (HEIGHT, WIDTH), dtype=np.uint8)
+    whole = tmp_path / "whole.aedat4"
+    write_aedat4(whole, events=events, frames=[(t0 + 40_000 * k, 5000, image) for k in range(4)],
+                 imu=[(t0 + 5000 * k, 0.0, -1.0, 0.0, 1.0, 2.0, 3.0) for k in range(8)])
+    data = whole.read_bytes()
+    config = Aedat4Config(calibration=str(write_calib(tmp_path)))
+    expected = Aedat4Dataset(whole, config)
+    cut = tmp_path / "cut.aedat4"
+
+    @hostile_settings(60)
+    @given(st.integers(0, len(data) - 1))
+    def check(offset):
+        cut.write_bytes(data[:offset])
+        try:
+            ds = Aedat4Dataset(cut, config)
+            got = ds.events(), ds.frame_times(), [ds.load_frame(k) for k in range(len(ds.frame_times()))], ds.imu
+        except DataError as exc:
+            assert str(exc).startswith(str(cut)) and "\n" not in str(exc)
+            return
+        np.testing.assert_array_equal(got[0], expected.events())
+        np.testing.assert_array_equal(got[1], expected.frame_times())
+        assert all((frame == image).all() for frame in got[2])
+        np.testing.assert_array_equal(got[3].gyro, expected.imu.gyro)
+
+    check()
+
+
+# -- the same sequence as an ECD folder and as an AEDAT4 --------------------------------------
+
+
+def write_ecd_as_aedat4(ecd, path, exposure_us):
+    """An ECD sequence as a DAVIS would have recorded it in DV: microsecond timestamps, frames
+    stamped at the start of an exposure of `exposure_us` centred on the ECD's frame time,
+    IMU in g and deg/s (dv-processing stores them as float32)."""
+    ev = ecd.events()
+    frames = [(round(t * 1e6) - exposure_us // 2, exposure_us, ecd.load_frame(k)) for k, t in enumerate(ecd.frame_times())]
+    imu = np.column_stack([np.round(ecd.imu.t * 1e6), ecd.imu.acc / 9.80665, np.degrees(ecd.imu.gyro)])
+    write_aedat4(path, events=(np.round(ev["t"] * 1e6).astype(np.int64), ev["x"], ev["y"], ev["p"]), frames=frames,
+                 imu=imu.tolist(), size=(ecd.camera.width, ecd.camera.height))
+
+
+@pytest.fixture(scope="module")
+def both_formats(tmp_path_factory):
+    """`eas-vo simulate --duration 1` (ECD folder `sim`); the same with its nanosecond event times
+    rounded to the microseconds an AEDAT4 holds (`sim_us`); that written to AEDAT4 by
+    dv-processing (`sim.aedat4`)."""
+    from helpers import run_eas_vo
+
+    from eas_vo.datasets.ecd import EcdFolderDataset, write_ecd_folder
+    from eas_vo.datasets.simulator import SimConfig
+
+    root = tmp_path_factory.mktemp("aedat4_identity")
+    done = run_eas_vo("simulate", "--out", str(root / "sim"), "--duration", "1")
+    assert done.returncode == 0, done.stderr
+    sim = EcdFolderDataset(root / "sim")
+    events = sim.events().copy()
+    events["t"] = np.round(events["t"] * 1e6) / 1e6
+    frames = [sim.load_frame(k) for k in range(len(sim.frame_times()))]
+    write_ecd_folder(root / "sim_us", sim.camera, sim.frame_times(), frames, events, sim.ground_truth, sim.imu)
+    write_ecd_as_aedat4(EcdFolderDataset(root / "sim_us"), root / "sim.aedat4", round(SimConfig().aps.exposure_s * 1e6))
+    return root
+
+
+def test_an_aedat4_holds_what_the_ecd_folder_holds(both_formats):
+    from eas_vo.datasets.ecd import EcdFolderDataset
+
+    root = both_formats
+    sim = EcdFolderDataset(root / "sim")
+    ds = Aedat4Dataset(root / "sim.aedat4", Aedat4Config(calibration=str(root / "sim" / "calib.txt"),
+                                                         ground_truth=str(root / "sim" / "groundtruth.txt")))
+    assert (ds.camera.width, ds.camera.height, ds.camera.model) == (sim.camera.width, sim.camera.height, sim.camera.model)
+    np.testing.assert_array_equal(ds.camera.K, sim.camera.K)
+    np.testing.assert_array_equal(ds.camera.dist, sim.camera.dist)
+    ours, theirs = ds.events(), sim.events()
+    assert len(ours) == len(theirs) > 100_000
+    np.testing.assert_array_equal(np.round(ours["t"] * 1e6).astype(np.int64), np.round(theirs["t"] * 1e6).astype(np.int64))
+    for name in ("x", "y", "p"):
+        np.testing.assert_array_equal(ours[name], theirs[name])
+    np.testing.assert_array_equal(np.round(ds.frame_times() * 1e6), np.round(sim.frame_times() * 1e6))
+    np.testing.assert_array_equal(ds.frame_times(), sim.frame_times())
+    for k in range(len(sim.frame_times())):
+        np.testing.assert_array_equal(ds.load_frame(k), sim.load_frame(k))
+    np.testing.assert_array_equal(ds.imu.t, sim.imu.t)
+    np.testing.assert_allclose(ds.imu.acc, sim.imu.acc, rtol=2e-7)  # float32 in the file: 6e-8 apart
+    np.testing.assert_allclose(ds.imu.gyro, sim.imu.gyro, rtol=2e-7)
+    for field in ("t", "p_w_c", "q_w_c"):
+        np.testing.assert_array_equal(getattr(ds.ground_truth, field), getattr(sim.ground_truth, field))
+
+
+def test_the_paper_run_gives_the_same_trajectory_from_both(both_formats, tmp_path):
+    from helpers import run_eas_vo
+
+    root = both_formats
+    ecd = run_eas_vo("run", "--config", "paper", "--dataset", str(root / "sim_us"), "--out", str(tmp_path / "ecd"), "--quiet")
+    aedat = run_eas_vo("run", "--config", "paper", "--dataset", str(root / "sim.aedat4"),
+                       "--set", f"dataset.calibration={root / 'sim' / 'calib.txt'}",
+                       "--set", f"dataset.ground_truth={root / 'sim' / 'groundtruth.txt'}",
+                       "--out", str(tmp_path / "aedat"), "--quiet")
+    assert ecd.returncode == 0 and aedat.returncode == 0, ecd.stderr + aedat.stderr
+    for name in ("trajectory.tum", "groundtruth.tum"):
+        a, b = (np.loadtxt(tmp_path / run / name) for run in ("ecd", "aedat"))
+        assert a.shape == b.shape == (20, 8)
+        np.testing.assert_allclose(b, a, rtol=0, atol=1e-6)
+    metrics = [json.loads((tmp_path / run / "metrics.json").read_text()) for run in ("ecd", "aedat")]
+    assert metrics[1]["nc_mean"] == metrics[0]["nc_mean"] and metrics[1]["status_counts"] == metrics[0]["status_counts"]
+    assert metrics[1]["ape_mean_rad"] == pytest.approx(metrics[0]["ape_mean_rad"], abs=1e-6)
