@@ -274,14 +274,19 @@ def cmd_run(args) -> int:
     if m["time_offset_estimated"]:
         ape_text += f" (time offset {m['time_offset_s'] * 1e3:+.1f} ms, estimated on the ground truth it scores against)"
     statuses = _status_text(m["status_counts"], m["status_reasons"])
+    meaning = f" [{WEAK_MEANS}]" if m["status_counts"].get("weak") else ""
     loops = f"{m['loop_count']} loop(s) closed, " if m["loop_count"] is not None else ""
     gyro = f"gyro {m['gyro']}, " if m["gyro"] else ""
     print(
-        f"{rc.frontend}+{rc.tracker}+{rc.backend} on {rc.dataset}: {m['frames']} frames ({statuses}), "
+        f"{rc.frontend}+{rc.tracker}+{rc.backend} on {rc.dataset}: {m['frames']} frames ({statuses}){meaning}, "
         f"average NC {m['nc_mean']:.1f}, {loops}{gyro}"
         f"{ape_text}, {m['frames_per_s']:.1f} frames/s -> {out}"
     )
     return 0
+
+
+#: What a weak frame is, after the status counts (docs/frame_status.md has the calibration).
+WEAK_MEANS = "weak: less reliable than usual, not necessarily wrong; 2-42 % of frames with the paper's settings"
 
 
 def _status_text(counts: dict, reasons: dict) -> str:

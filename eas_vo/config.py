@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import math
 import tomllib
-from dataclasses import dataclass, fields
+from dataclasses import dataclass, field, fields
 from importlib import resources
 from pathlib import Path
 from typing import Any, get_type_hints
@@ -69,13 +69,15 @@ class RunConfig:
 
 @dataclass(frozen=True)
 class ResolvedConfig:
-    """Every section, resolved against the chosen plugins."""
+    """Every section, resolved against the chosen plugins; `origin` says what made it for
+    titles ("paper.toml --set tracker.geometry=rotation", "defaults"), not part of its identity."""
 
     run: RunConfig
     dataset: Any
     frontend: Any
     tracker: Any
     backend: Any
+    origin: str = field(default="", compare=False)
 
     def to_toml(self) -> str:
         """The resolved configuration as TOML; loading it reproduces this object."""
@@ -258,7 +260,8 @@ def resolve(
         "backend": registry.get("backends", run.backend),
     }
     sections = {name: build(cls.Config, _plugin_table(raw[name], name, cls), f"{name}.{cls.name}") for name, cls in chosen.items()}
-    return ResolvedConfig(run=run, **sections)
+    origin = " ".join([Path(config_file).name if config_file else "defaults"] + [f"--set {a}" for a in assignments])
+    return ResolvedConfig(run=run, **sections, origin=origin)
 
 
 def _move_to_run(raw: dict) -> None:

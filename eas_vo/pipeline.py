@@ -111,7 +111,7 @@ def _run_into(parts: Pipeline, config: ResolvedConfig, out: Path | None, progres
         metrics["data_warnings"] = parts.imu_warnings + metrics["data_warnings"] + list(parts.backend.solver_warnings)
         result = RunResult(t, R_w_c, tracked.records, tracked.edges, errors, metrics, parts.backend.causal_R_w_c)
         if out is not None:
-            write_outputs(out, result, parts.dataset.label)
+            write_outputs(out, result, parts.dataset.label, config.origin)
     except KeyboardInterrupt as exc:  # before there was anything to evaluate, or while writing
         kept = f"{final} holds an incomplete run (no metrics.json): rerun with --overwrite" if final else ""
         raise Interrupted.keeping(exc, kept) from None
@@ -505,8 +505,9 @@ def _imu_axes_warning(config: ResolvedConfig, agreement) -> str:
             f"({how}), not {vector(config.run.imu_rotvec_cam)}; check it and the camera calibration")
 
 
-def write_outputs(out: Path, result: RunResult, label: str) -> None:
-    """trajectory.tum, groundtruth.tum, metrics.json and rotation.png (each written atomically)."""
+def write_outputs(out: Path, result: RunResult, label: str, origin: str = "") -> None:
+    """trajectory.tum, groundtruth.tum, metrics.json and rotation.png (each written atomically);
+    `label` names the dataset and `origin` the configuration (ResolvedConfig.origin) in its title."""
     zeros = np.zeros((len(result.t), 3))
     write_text_atomic(out / "trajectory.tum", format_tum(result.t, zeros, result.R_w_c))
     if result.causal_R_w_c is not None:
@@ -518,7 +519,8 @@ def write_outputs(out: Path, result: RunResult, label: str) -> None:
     from eas_vo.plots import plot_rotation
 
     with atomic_path(out / "rotation.png") as tmp:
-        plot_rotation(tmp, result, title=f"{result.metrics['frontend']} + {result.metrics['backend']}: {label}")
+        m = result.metrics
+        plot_rotation(tmp, result, title=f"{m['frontend']} + {m['tracker']} + {m['backend']} ({origin or 'defaults'}): {label}")
 
 
 def format_tum(t: np.ndarray, p: np.ndarray, R: np.ndarray) -> str:

@@ -25,7 +25,7 @@ def _figure(**kwargs):
     return fig
 
 
-#: How a frame's status is shaded in the tracking panel (ok and first: not at all).
+#: How a frame's status is drawn in the status row (ok and first: not at all), bottom to top.
 STATUS_COLOURS = {"weak": "tab:orange", "lost": "tab:red"}
 
 
@@ -37,12 +37,14 @@ def plot_rotation(path: str | Path, result, title: str = "") -> None:
 def rotation_figure(result, title: str = ""):
     """Estimated (aligned to ground truth at the first frame) and true roll/pitch/yaw over time,
     like the paper's Fig. 3, over a tracking panel: the rotation error [deg] per frame (with
-    ground truth), weak and lost frames shaded (through every panel), loop closures marked at
-    the frame that closed them. Without ground truth only the estimate is drawn."""
+    ground truth) and loop closures marked at the frame that closed them; under it a thin
+    status row, one line per status, marking the weak and lost frames. Without ground truth
+    only the estimate is drawn. The title's second line gives the APE, the NC and the ground
+    truth's time offset the errors were measured with (metrics, where present)."""
     t0 = result.t[0]
     errors = result.errors
-    fig = _figure(figsize=(8, 8), layout="constrained")
-    axes = fig.subplots(4, 1, sharex=True, height_ratios=(1, 1, 1, 0.8))
+    fig = _figure(figsize=(8, 8.4), layout="constrained")
+    axes = fig.subplots(5, 1, sharex=True, height_ratios=(1, 1, 1, 0.8, 0.16))
     if errors is not None and errors.valid.any():
         _draw_euler(axes[:3], result.t[errors.valid] - t0, errors.R_w_c_aligned, errors.R_w_c_gt)
         axes[3].plot(result.t[errors.valid] - t0, np.degrees(errors.ape_rad), color="k", lw=0.9, label="error")
@@ -51,7 +53,7 @@ def rotation_figure(result, title: str = ""):
         _draw_euler(axes[:3], result.t - t0, result.R_w_c)
         axes[3].set_yticks([])
         axes[3].set_ylabel("tracking")
-    _shade_statuses(axes, result.records, t0)
+    _status_row(axes[4], result.records, t0)
     for k, j in enumerate(sorted({e.j for e in result.edges if e.loop and 0 <= e.j < len(result.t)})):
         axes[3].axvline(result.t[j] - t0, color="tab:blue", lw=0.8, label="loop closed" if k == 0 else None)
     axes[0].legend(loc="best", fontsize="small")
@@ -60,27 +62,36 @@ def rotation_figure(result, title: str = ""):
     axes[3].grid(alpha=0.3)
     axes[-1].set_xlabel("time [s]")
     m = result.metrics
+    facts = []
     if "ape_mean_rad" in m:
-        title += f"\naverage APE {m['ape_mean_rad']:.4f} rad, average NC {m['nc_mean']:.1f}"
+        facts.append(f"average APE {m['ape_mean_rad']:.4f} rad, average NC {m['nc_mean']:.1f}")
+    if "time_offset_s" in m and errors is not None:
+        facts.append(f"ground truth time offset {m['time_offset_s'] * 1e3:+.1f} ms"
+                     + (" (estimated)" if m.get("time_offset_estimated") else ""))
+    if facts:
+        title += "\n" + ", ".join(facts)
     fig.suptitle(title, fontsize="medium")
     return fig
 
 
-def _shade_statuses(axes, records, t0: float) -> None:
-    """Shade each run of consecutive weak (or lost) frames in every axis, from the previous
-    frame's time to its own (the interval its measurement covers): one collection per status
-    and axis, labelled in the last."""
+def _status_row(ax, records, t0: float) -> None:
+    """Mark each run of consecutive weak (or lost) frames on its status's line of `ax`, from the
+    previous frame's time to its own (the interval its measurement covers); the lines are
+    labelled with the status and its frame count."""
     runs = {status: [] for status in STATUS_COLOURS}  # (start [s], width [s]) per status
     for status, run in itertools.groupby(zip(records, records[1:]), key=lambda pair: pair[1].status):
         run = list(run)
         if status in runs:
             start, end = run[0][0].t, run[-1][1].t  # from the frame before the run to its last
             runs[status].append((start - t0, end - start))
-    for status, spans in runs.items():
-        for ax in axes:
-            if spans:
-                ax.broken_barh(spans, (0, 1), transform=ax.get_xaxis_transform(), color=STATUS_COLOURS[status],
-                               alpha=0.2, lw=0, label=status if ax is axes[-1] else None)
+    counts = {status: sum(r.status == status for r in records) for status in STATUS_COLOURS}
+    for row, (status, spans) in enumerate(runs.items()):
+        if spans:
+            ax.broken_barh(spans, (row + 0.1, 0.8), color=STATUS_COLOURS[status], lw=0)
+    ax.set_ylim(0, len(runs))
+    ax.set_yticks(np.arange(len(runs)) + 0.5, [f"{status} ({counts[status]})" for status in runs], fontsize="x-small")
+    ax.tick_params(axis="y", length=0)
+    ax.grid(axis="x", alpha=0.3)
 
 
 def _draw_euler(column, t: np.ndarray, R_est: np.ndarray, R_gt: np.ndarray | None = None, labels: bool = True) -> None:

@@ -15,9 +15,13 @@ MATCHINGS = ("ratio", "crosscheck")
 
 #: Measuring from matched keypoints: they are localised on an image pyramid (ORB: scale 1.2
 #: per level) to about half a pixel or worse at the base level, unlike LK's sub-pixel tracks,
-#: so the inlier threshold and the residual above which a fit is weak are twice LK's [px].
+#: so the inlier threshold and the residual above which a fit is weak are twice LK's [px]
+#: (the residual: twice the 0.5 px LK's was when the fallback was developed).
 RANSAC_THRESHOLD_PX = 2.0
 MAX_RESIDUAL_PX = 1.0
+#: The inlier ratio below which a coarse (matched) rotation is no measurement: the value the
+#: fallback was developed with (the status's calibration covers LK's measurements only).
+COARSE_MIN_INLIER_RATIO = 0.5
 #: With fewer matches nothing is measured.
 MIN_MATCHES = 10
 
@@ -84,8 +88,8 @@ class RefinedMatching:
     Args:
         features: the keypoint detector and matcher.
         fine: the geometry of the LK refinement (the coarse one: rotation-only with the fixed
-            RANSAC_THRESHOLD_PX and MAX_RESIDUAL_PX, twice the TwoViewConfig defaults). LK's
-            pyramid is OpenCV's default (3 levels of 21 px) converted to the camera
+            RANSAC_THRESHOLD_PX, MAX_RESIDUAL_PX and COARSE_MIN_INLIER_RATIO). LK's pyramid
+            is OpenCV's default (3 levels of 21 px) converted to the camera
             (measurement.PixelScale).
         min_inliers: fewer matches, or inliers, and nothing is measured.
     """
@@ -93,7 +97,8 @@ class RefinedMatching:
     def __init__(self, features: Features, camera: CameraModel, fine: TwoViewConfig, min_inliers: int = MIN_MATCHES):
         self.features, self.camera, self.fine, self.min_inliers = features, camera, fine, min_inliers
         self.coarse = TwoViewConfig(geometry="rotation", ransac_threshold_px=RANSAC_THRESHOLD_PX,
-                                    max_residual_px=MAX_RESIDUAL_PX, min_inliers=min_inliers)
+                                    max_residual_px=MAX_RESIDUAL_PX, min_inliers=min_inliers,
+                                    min_inlier_ratio=COARSE_MIN_INLIER_RATIO)
         levels, window = PixelScale.of(camera).pyramid(3, 21)
         self.lk = lk_params(window, levels)
 

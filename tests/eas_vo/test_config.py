@@ -89,6 +89,15 @@ def test_bundled_config_by_name():
     assert cfg.run.frontend == "eas" and cfg.run.backend == "chain"
 
 
+def test_a_resolved_config_says_what_made_it_without_that_being_part_of_it(tmp_path):
+    assert resolve().origin == "defaults"
+    cfg = resolve("paper", {}, ["tracker.threshold2=99"])
+    assert cfg.origin == "paper --set tracker.threshold2=99"
+    path = tmp_path / "config.toml"
+    path.write_text(cfg.to_toml())
+    assert resolve(path).origin == "config.toml" and resolve(path) == cfg
+
+
 def test_bad_toml_file(tmp_path):
     path = tmp_path / "bad.toml"
     path.write_text("[run\n")

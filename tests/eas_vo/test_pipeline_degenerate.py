@@ -9,7 +9,8 @@ import cv2
 import numpy as np
 import pytest
 
-from eas_vo.cli import main
+from eas_vo.cli import WEAK_MEANS, main
+from eas_vo.trackers.measurement import TwoViewConfig
 
 FRONTENDS = ("original", "histeq", "slice", "ts", "sits", "eas")
 
@@ -109,10 +110,14 @@ def test_a_run_made_to_fail_says_so_frame_by_frame(sequence_copy, tmp_path, caps
     rows = list(csv.DictReader(open(out / "frames.csv")))[1:]
     assert all(r["status"] in ("weak", "lost") and r["reason"] for r in rows), [r for r in rows if r["status"] == "ok"][:3]
     weak = [r for r in rows if r["status"] == "weak"]
-    assert all(float(r["inlier_ratio"]) < 0.5 or float(r["residual_px"]) > 0.5 or int(r["inliers"]) < 15 for r in weak)
+    c = TwoViewConfig()
+    assert all(float(r["inlier_ratio"]) < c.min_inlier_ratio or float(r["residual_px"]) > c.max_residual_px
+               or int(r["inliers"]) < c.min_inliers for r in weak)
     reasons = {s: Counter(r["reason"].split(" (")[0] for r in rows if r["status"] == s) for s in ("weak", "lost")}
     assert json.loads((out / "metrics.json").read_text())["status_reasons"] == reasons
-    said = capsys.readouterr().out.split(" frames (", 1)[1].split("), ")[0].split("; ")
+    line = capsys.readouterr().out
+    assert f") [{WEAK_MEANS}], average NC" in line  # what weak means, once, after the counts
+    said = line.split(" frames (", 1)[1].split(") [")[0].split("; ")
     assert said[0] == "1 first" and len(said) == 1 + sum(1 for c in reasons.values() if c)
     for part in said[1:]:  # e.g. "40 weak: 31 low inlier ratio, 9 few inliers"
         head, why = part.split(": ")

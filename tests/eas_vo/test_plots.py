@@ -47,18 +47,38 @@ def test_the_rotation_plot_shows_where_tracking_was_weak_or_lost_and_where_loops
     for errors in (None, rotation_errors(t, R_w_c, gt)):
         result = SimpleNamespace(t=t, R_w_c=R_w_c, errors=errors, records=records, edges=edges, metrics={})
         axes = plots.rotation_figure(result).axes
-        for ax in axes:  # the runs of weak frames (2-3, 7) and the lost frame (5), in every panel
-            shaded = {status: [] for status in plots.STATUS_COLOURS}
-            for collection in ax.collections:
-                colour = collection.get_facecolor()[0][:3]
-                status = next(s for s, c in plots.STATUS_COLOURS.items() if np.allclose(matplotlib.colors.to_rgb(c), colour))
-                shaded[status] += [tuple(np.round(p.get_extents().intervalx, 6)) for p in collection.get_paths()]
-            assert shaded == {"weak": [(0.1, 0.3), (0.6, 0.7)], "lost": [(0.4, 0.5)]}, shaded
+        assert all(not ax.collections for ax in axes[:4])  # the panels themselves are not shaded
+        strip = axes[4]  # the status row: the runs of weak frames (2-3, 7) and the lost frame (5), each on its line
+        spans = {}
+        for collection in strip.collections:
+            colour = collection.get_facecolor()[0][:3]
+            status = next(s for s, c in plots.STATUS_COLOURS.items() if np.allclose(matplotlib.colors.to_rgb(c), colour))
+            spans[status] = [np.round(p.get_extents().intervalx, 6).tolist() + [round(p.get_extents().y0, 6)]
+                             for p in collection.get_paths()]
+        assert spans == {"weak": [[0.1, 0.3, 0.1], [0.6, 0.7, 0.1]], "lost": [[0.4, 0.5, 1.1]]}, spans
+        assert [label.get_text() for label in strip.get_yticklabels()] == ["weak (3)", "lost (1)"]
         marks = [line for line in axes[3].lines if line.get_label() != "error"]
         np.testing.assert_allclose([line.get_xdata()[0] for line in marks], [0.6, 0.8])  # loops closed at frames 6 and 8
         labels = set(axes[3].get_legend_handles_labels()[1])
-        assert labels == {"weak", "lost", "loop closed"} | ({"error"} if errors is not None else set())
+        assert labels == {"loop closed"} | ({"error"} if errors is not None else set())
         if errors is not None:  # the error [deg] of frames 2-9, aligned at frame 2
             (curve,) = [line for line in axes[3].lines if line.get_label() == "error"]
             np.testing.assert_allclose(curve.get_xdata(), t[2:])
             np.testing.assert_allclose(curve.get_ydata(), np.degrees(0.01 * np.arange(8)), atol=1e-9)
+
+
+def test_the_rotation_plot_title_gives_the_ground_truth_time_offset_it_was_measured_with():
+    from types import SimpleNamespace
+
+    from eas_vo.evaluation import rotation_errors
+    from eas_vo.types import FrameRecord, PoseSeries
+
+    t = 0.1 * np.arange(4)
+    gt = PoseSeries(t, np.zeros((4, 3)), np.tile([0.0, 0.0, 0.0, 1.0], (4, 1)))
+    records = [FrameRecord(k, t[k], 0, 0, "ok", False) for k in range(4)]
+    R_w_c = np.tile(np.eye(3), (4, 1, 1))
+    for estimated, words in ((False, "ground truth time offset +10.0 ms"), (True, "ground truth time offset +10.0 ms (estimated)")):
+        metrics = {"ape_mean_rad": 0.0, "nc_mean": 5.0, "time_offset_s": 0.01, "time_offset_estimated": estimated}
+        result = SimpleNamespace(t=t, R_w_c=R_w_c, errors=rotation_errors(t, R_w_c, gt), records=records, edges=[], metrics=metrics)
+        title = plots.rotation_figure(result, "eas + klt + chain (paper): a sequence").get_suptitle()
+        assert title == f"eas + klt + chain (paper): a sequence\naverage APE 0.0000 rad, average NC 5.0, {words}"
