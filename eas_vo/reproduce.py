@@ -136,6 +136,8 @@ def table1_markdown(rows: list[dict], config: str, duration_s: float) -> str:
         flags = "".join(f" --set {k}={v}" for k, v in settings)
         same = {r["same_as"] for r in rows if r["method"] == method}
         equal = f" Its trajectories are {same.pop()}'s (same NC, same rotations)." if len(same) == 1 and "" not in same else ""
+        if method != PAPER.label:
+            equal += f" The paper's columns are its own method's ({PAPER.label})."
         head = ["Source"] + [f"{s} {h}" for s in SEQUENCES for h in ("NC", "NC paper", "APE", "APE paper", "APE ours/paper")]
         lines += [f"## {method}", "", f"Configuration: `--config {config}{flags}`.{equal}", "",
                   "| " + " | ".join(head) + " |", "|" + "---|" * len(head)]

@@ -76,7 +76,7 @@ def test_compare_interrupted_writes_its_table_and_resumes(short_sequence, tmp_pa
     monkeypatch.setattr(compare, "run_cell", interrupting)
     out = tmp_path / "cmp"
     argv = ["compare", "--dataset", str(short_sequence), "--frontends", "original,slice,eas",
-            "--out", str(out), "--jobs", "1", "--quiet"]
+            "--backends", "chain", "--out", str(out), "--jobs", "1", "--quiet"]
     assert main(argv) == 130
     err = capsys.readouterr().err
     assert err == f"eas-vo compare: interrupted; the table of the 1 finished cells was written to {out}; the same command resumes the rest\n"

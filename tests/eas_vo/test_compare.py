@@ -65,8 +65,7 @@ def test_a_second_invocation_runs_nothing(grid, capsys):
 def test_a_failing_cell_is_reported_the_rest_complete_and_the_exit_says_so(short_sequence, tmp_path, capsys):
     out = tmp_path / "sweep"
     argv = ["compare", "--dataset", str(short_sequence), "--frontends", "slice", "--backends", "chain",
-            "--sweep", "run.start_s=0,100",
-            "--out", str(out), "--jobs", "1", "--quiet"]
+            "--sweep", "run.start_s=0,100", "--out", str(out), "--jobs", "1", "--quiet"]
     assert main(argv) == 1
     captured = capsys.readouterr()
     assert "2 cells (2 run, 0 already complete, 1 failed)" in captured.out
@@ -100,8 +99,7 @@ def test_a_data_warning_is_said_once_with_the_cells_it_came_from(short_sequence,
 def test_a_configuration_error_stops_compare_before_any_work(short_sequence, tmp_path, capsys):
     out = tmp_path / "bad"
     argv = ["compare", "--dataset", str(short_sequence), "--frontends", "slice", "--backends", "chain",
-            "--sweep", "frontend.n=2000,0",
-            "--out", str(out), "--quiet"]
+            "--sweep", "frontend.n=2000,0", "--out", str(out), "--quiet"]
     assert main(argv) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "n = 0 is out of range" in err
@@ -272,8 +270,7 @@ def one_cell(short_sequence, tmp_path_factory):
     """A finished one-cell compare folder (1 s of the short sequence), its argv and its table row."""
     out = tmp_path_factory.mktemp("cmp") / "one"
     argv = ["compare", "--dataset", str(short_sequence), "--frontends", "eas", "--backends", "chain",
-            "--duration", "1", "--out", str(out),
-            "--jobs", "1", "--quiet"]
+            "--duration", "1", "--out", str(out), "--jobs", "1", "--quiet"]
     assert main(argv) == 0
     (row,) = json.loads((out / "table.json").read_text())
     return out, argv, row
@@ -346,8 +343,7 @@ def test_a_pool_never_has_more_workers_than_cells(short_sequence, tmp_path, monk
 
     monkeypatch.setattr(compare, "ProcessPoolExecutor", Recording)
     argv = ["compare", "--dataset", str(short_sequence), "--frontends", "original,histeq", "--backends", "chain",
-            "--duration", "0.5",
-            "--out", str(tmp_path / "cmp"), "--jobs", "100000", "--quiet"]
+            "--duration", "0.5", "--out", str(tmp_path / "cmp"), "--jobs", "100000", "--quiet"]
     assert main(argv) == 0
     assert sizes == [2]
     assert main(argv) == 0 and sizes == [2]  # nothing left to run: no pool at all
