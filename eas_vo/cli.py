@@ -314,7 +314,9 @@ def _parse_compare(sub) -> None:
                          help="a dataset (repeatable; default synthetic:default)")
     compare.add_argument("--frontends", metavar="A,B,...", help="default: the paper's six sources, original,histeq,slice,ts,sits,eas")
     compare.add_argument("--trackers", metavar="A,B,...", help="default: the config's [run] tracker (klt without --config)")
-    compare.add_argument("--backends", metavar="A,B,...", help="default: the config's [run] backend (chain without --config)")
+    compare.add_argument("--backends", metavar="A,B,...",
+                         help="default: the config's [run] backend; where that is the paper's klt+chain (as without "
+                         "--config), also klt+gtsam with keyframe edges (tracker.klt.keyframe_interval=3)")
     _add_config(compare)
     _add_window(compare)
     _add_time_offset(compare)
@@ -336,19 +338,19 @@ def cmd_compare(args) -> int:
     from eas_vo import config as config_mod
     from eas_vo.gallery import PAPER_ORDER
     from eas_vo.io import check_grid_folder, check_writable_folder
+    from eas_vo.reproduce import default_methods
 
     out = check_writable_folder(args.out)
     run_defaults = config_mod.run_section(args.config, args.assignments)  # e.g. best.toml's tracker and backend
     datasets = args.datasets or [run_defaults.dataset]
     _refuse_inputs_inside(out, datasets, ("the --config", args.config))
     check_grid_folder(out)
-    cells = compare.plan(
-        datasets,
-        _names("--frontends", args.frontends or ",".join(PAPER_ORDER)),
-        _names("--trackers", args.trackers or run_defaults.tracker),
-        _names("--backends", args.backends or run_defaults.backend),
-        args.sweeps,
-    )
+    if args.trackers or args.backends:
+        methods = compare.grid_methods(_names("--trackers", args.trackers or run_defaults.tracker),
+                                       _names("--backends", args.backends or run_defaults.backend))
+    else:
+        methods = default_methods(run_defaults.tracker, run_defaults.backend)
+    cells = compare.plan(datasets, _names("--frontends", args.frontends or ",".join(PAPER_ORDER)), methods, args.sweeps)
     if args.executor == "dask" and not args.scheduler:
         raise EasVoError("--executor dask needs --scheduler ADDRESS")
     overrides = {**_shared_overrides(args), "orb_stats": True if args.orb else None}
@@ -617,7 +619,9 @@ def _parse_reproduce(sub) -> None:
     reproduce.add_argument("--out", metavar="DIR", help="output folder (default: reproduce/TABLE)")
     reproduce.add_argument("--duration", type=_seconds(allow_zero=False), default=25.0, metavar="S", help="seconds of each sequence (default 25, the paper's)")
     reproduce.add_argument("--config", default="paper", metavar="FILE", help="configuration (default paper, the paper's)")
-    reproduce.add_argument("--backends", default="chain,gtsam", metavar="A,B", help="table1's backends (default chain,gtsam)")
+    reproduce.add_argument("--backends", default="chain,gtsam", metavar="A,B",
+                           help="table1's backends (default chain,gtsam): chain on klt's consecutive edges (the paper), "
+                           "any other fed also its keyframe edges (tracker.klt.keyframe_interval=3, as configs/best.toml)")
     reproduce.add_argument("--estimate", dest="estimates", action="append", default=[], metavar="SEQUENCE:SOURCE=FILE",
                            help="table2: an ORB-SLAM2 KeyFrameTrajectory.txt, e.g. hdr_boxes:eas=KeyFrameTrajectory.txt (repeatable)")
     _add_jobs(reproduce)

@@ -24,6 +24,27 @@ from eas_vo.io import claim_grid_folder, json_text, markdown_cell, output_folder
 
 
 @dataclass(frozen=True)
+class Method:
+    """A column of the table: a tracker, a backend and the settings ((key, value text), ...)
+    its cells run with beyond the grid's configuration."""
+
+    tracker: str
+    backend: str
+    settings: tuple = ()
+
+    @property
+    def label(self) -> str:
+        """`klt+gtsam`, with its settings: `klt+gtsam (keyframe_interval=3)`."""
+        keys = " ".join(f"{k.split('.')[-1]}={v}" for k, v in self.settings)
+        return f"{self.tracker}+{self.backend}" + (f" ({keys})" if keys else "")
+
+
+def grid_methods(trackers: list[str], backends: list[str]) -> list[Method]:
+    """Every tracker with every backend, as configured."""
+    return [Method(t, b) for t, b in itertools.product(trackers, backends)]
+
+
+@dataclass(frozen=True)
 class Cell:
     """One run of the grid; `folder` is relative to the experiment's output folder."""
 
@@ -33,6 +54,12 @@ class Cell:
     backend: str
     sweep: tuple  # ((key, value text), ...)
     dataset_name: str = ""  # distinct within its grid (plan); default: the dataset's slug
+    settings: tuple = ()  # the method's own ((key, value text), ...): Method.settings
+
+    @property
+    def method(self) -> Method:
+        """The table column the cell belongs to."""
+        return Method(self.tracker, self.backend, self.settings)
 
     @property
     def sweep_label(self) -> str:
@@ -40,7 +67,8 @@ class Cell:
 
     @property
     def folder(self) -> str:
-        parts = [f"{self.frontend}_{self.tracker}_{self.backend}"] + [f"{k.split('.')[-1]}-{v}" for k, v in self.sweep]
+        parts = [f"{self.frontend}_{self.tracker}_{self.backend}"]
+        parts += [f"{k.split('.')[-1]}-{v}" for k, v in self.settings + self.sweep]
         return f"{self.dataset_name or slug(self.dataset)}/{slug('_'.join(parts))}"
 
 
@@ -57,16 +85,14 @@ def parse_sweeps(sweeps: list[str]) -> list[tuple[str, list[str]]]:
     return out
 
 
-def plan(
-    datasets: list[str], frontends: list[str], trackers: list[str], backends: list[str], sweeps: list[str]
-) -> list[Cell]:
+def plan(datasets: list[str], frontends: list[str], methods: list[Method], sweeps: list[str]) -> list[Cell]:
     """The cartesian grid of cells."""
     parsed = parse_sweeps(sweeps)
     points = [tuple(zip([k for k, _ in parsed], combo)) for combo in itertools.product(*[v for _, v in parsed])]
     names = dataset_names(datasets)
     return [
-        Cell(d, f, t, b, point, names[d])
-        for d, f, t, b, point in itertools.product(datasets, frontends, trackers, backends, points or [()])
+        Cell(d, f, m.tracker, m.backend, point, names[d], m.settings)
+        for d, f, m, point in itertools.product(datasets, frontends, dict.fromkeys(methods), points or [()])
     ]
 
 
@@ -96,7 +122,7 @@ def cell_config(cell: Cell, config_file, assignments: list[str], run_overrides: 
     return config.resolve(
         config_file,
         {**run_overrides, "dataset": cell.dataset, "frontend": cell.frontend, "tracker": cell.tracker, "backend": cell.backend},
-        list(assignments) + [f"{k}={v}" for k, v in cell.sweep],
+        list(assignments) + [f"{k}={v}" for k, v in cell.settings + cell.sweep],
     )
 
 
@@ -262,7 +288,7 @@ def run_experiment(cells: list[Cell], out: Path, config_file, assignments, overr
         results, n_run = run_grid(cells, out, config_file, assignments, overrides, jobs, progress, scheduler, results)
     except KeyboardInterrupt as exc:  # write the table of what finished; a new invocation resumes
         interrupted, n_run = exc, sum(r["status"] != "not run" for r in results.values())
-    rows = table_rows(cells, results)
+    rows = mark_identical(out, cells, table_rows(cells, results))
     write_tables(out, rows)
     write_figures(out, cells, rows)
     if interrupted is not None:
@@ -276,28 +302,32 @@ OUTPUT_FILES = ("table.md", "table.csv", "table.json", "ape_bars.png", "ape_time
 
 
 def write_figures(out: Path, cells: list[Cell], rows: list[dict]) -> None:
-    """ape_bars.png (APE per source), ape_time.png (APE over time of each finished cell) and,
-    for a grid swept over one numeric key, ape_sweep.png."""
+    """ape_bars.png (APE and NC per source), ape_time.png (APE over time of each finished cell)
+    and, for a grid swept over one numeric key, ape_sweep.png; a method whose results are an
+    earlier one's (row `same_as`) drawn once, under both names; a frontend in one colour throughout."""
     from eas_vo.evaluation import tum_rotation_errors
+    from eas_vo.gallery import PAPER_COLOURS
     from eas_vo.io import atomic_path
-    from eas_vo.plots import plot_ape_bars, plot_ape_time, plot_sweep
+    from eas_vo.plots import frontend_colours, plot_ape_bars, plot_ape_time, plot_sweep
 
+    colours = frontend_colours((c.frontend for c in cells), PAPER_COLOURS)  # every figure the same
+    equal = equal_methods(rows)
+    drawn = [(cell, row) for cell, row in zip(cells, rows) if not row["same_as"]]
     with atomic_path(out / "ape_bars.png") as tmp:
-        plot_ape_bars(tmp, rows)
+        plot_ape_bars(tmp, [row for _, row in drawn], equal, colours)
     series = {}
-    for cell, row in zip(cells, rows):
+    for cell, row in drawn:
         if row["status"] == "ok":
             curve = tum_rotation_errors(out / cell.folder / "trajectory.tum", out / cell.folder / "groundtruth.tum")
             if curve is not None:
-                label = " ".join(filter(None, [cell.frontend, f"{cell.tracker}+{cell.backend}", cell.sweep_label]))
-                series[(cell.dataset, label)] = curve
+                series[(cell.dataset, row["method"], cell.frontend, row["sweep"])] = curve
     if series:
         with atomic_path(out / "ape_time.png") as tmp:
-            plot_ape_time(tmp, series)
+            plot_ape_time(tmp, series, equal, colours)
     swept = sweep_curves(cells, rows)
     if swept is not None and swept[1]:
         with atomic_path(out / "ape_sweep.png") as tmp:
-            plot_sweep(tmp, *swept)
+            plot_sweep(tmp, *swept, colours)
 
 
 # ----------------------------------------------------------------------------- tables
@@ -308,7 +338,7 @@ def table_rows(cells: list[Cell], results: dict) -> list[dict]:
     return [
         {
             **asdict(cell),
-            "method": f"{cell.tracker}+{cell.backend}",
+            "method": cell.method.label,
             "sweep": cell.sweep_label,
             "folder": cell.folder,
             "status": results.get(cell, {}).get("status", "not run"),
@@ -319,9 +349,48 @@ def table_rows(cells: list[Cell], results: dict) -> list[dict]:
             "orb_keypoints_mean": results.get(cell, {}).get("orb_keypoints_mean"),
             "orb_matches_mean": results.get(cell, {}).get("orb_matches_mean"),
             "data_warnings": results.get(cell, {}).get("data_warnings", []),
+            "same_as": "",
         }
         for cell in cells
     ]
+
+
+def same_trajectory(a: Path, b: Path, tol: float = 1e-9) -> bool:
+    """Whether two TUM trajectories hold the same timestamps and the same rotations to `tol`
+    in every quaternion component (q and -q alike; 1e-9 is about 2e-9 rad, far above the
+    files' 12 decimals); False if either is unreadable."""
+    from eas_vo.io import read_tum
+
+    try:
+        (t_a, _, q_a), (t_b, _, q_b) = read_tum(a), read_tum(b)
+    except (OSError, ValueError):
+        return False
+    if t_a.shape != t_b.shape or not np.array_equal(t_a, t_b):
+        return False
+    gap = np.minimum(np.abs(q_a - q_b).max(axis=1), np.abs(q_a + q_b).max(axis=1))
+    return bool(np.all(gap <= tol))
+
+
+def mark_identical(out_root: Path, cells: list[Cell], rows: list[dict]) -> list[dict]:
+    """`rows` (table_rows of `cells`) with `same_as` set to the label of the first earlier method
+    of the same dataset whose results are this method's: the same cells (source, sweep point),
+    every one finished in both with the same average NC and the same trajectory
+    (same_trajectory), as a pose graph fed only the consecutive edges a chain multiplies gives;
+    "" where there is none (a failed cell proves nothing)."""
+    columns: dict = {}  # (dataset, method) -> {(frontend, sweep): (nc, trajectory file) or None if not finished}
+    for cell, row in zip(cells, rows):
+        columns.setdefault((cell.dataset, row["method"]), {})[(cell.frontend, row["sweep"])] = (
+            (row["nc_mean"], out_root / cell.folder / "trajectory.tum") if row["status"] == "ok" else None)
+
+    def same(a: dict, b: dict) -> bool:
+        return a.keys() == b.keys() and all(a[k] is not None and b[k] is not None and a[k][0] == b[k][0]
+                                            and same_trajectory(a[k][1], b[k][1]) for k in a)
+
+    same_as: dict = {}
+    for (dataset, method), column in columns.items():  # each against the earlier columns of its own
+        own = [m for (d, m), other in same_as.items() if d == dataset and not other]
+        same_as[(dataset, method)] = next((m for m in own if same(column, columns[(dataset, m)])), "")
+    return [{**row, "same_as": same_as[(row["dataset"], row["method"])]} for row in rows]
 
 
 def sweep_curves(cells: list[Cell], rows: list[dict]) -> tuple[str, dict] | None:
@@ -357,39 +426,51 @@ def _best(rows: list[dict], key: str, lower: bool) -> dict:
 
 def table_markdown(rows: list[dict]) -> str:
     """The paper's Table 1: a row per source type (and sweep point), per sequence and method
-    (tracker+backend) the average NC and average APE [rad]; the best of each column in bold."""
-    datasets = list(dict.fromkeys(r["dataset"] for r in rows))
-    methods = list(dict.fromkeys(r["method"] for r in rows))
+    (tracker+backend) the average NC and average APE [rad]; the best of each column in bold.
+    A method whose results are an earlier one's (row `same_as`) is no column of its own: that
+    one's header names it."""
     sources = list(dict.fromkeys((r["frontend"], r["sweep"]) for r in rows))
     by_key = {(r["dataset"], r["method"], r["frontend"], r["sweep"]): r for r in rows}
     best_nc, best_ape = _best(rows, "nc_mean", lower=False), _best(rows, "ape_mean_rad", lower=True)
     name = {r["dataset"]: r.get("dataset_name") or slug(r["dataset"]) for r in rows}
-    head1 = ["Sequence"] + [f"{name[d]} ({m})" for d in datasets for m in methods for _ in (0, 1)]
-    head2 = ["Source type"] + ["average NC", "average APE"] * (len(datasets) * len(methods))
-    lines = ["| " + " | ".join(head1) + " |", "|" + "---|" * len(head1), "| " + " | ".join(head2) + " |"]
+    columns = equal_methods(rows)
+    head = ["Source type"]
+    for (d, m), equals in columns.items():
+        title = markdown_cell(" = ".join([f"{name[d]} {m}", *equals]))
+        head += [f"{title}: average NC", f"{title}: average APE [rad]"]
+    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for frontend, sweep in sources:
         cells = [markdown_cell(frontend + (f" ({sweep})" if sweep else ""))]
-        for d in datasets:
-            for m in methods:
-                r = by_key.get((d, m, frontend, sweep))
-                if r is None or r["status"] != "ok":
-                    cells += ["failed" if r else "", markdown_cell((r or {}).get("error", "")[:60])]
-                    continue
-                nc, ape = r["nc_mean"], r["ape_mean_rad"]
-                nc_text = f"{nc:.0f}"
-                ape_text = f"{ape:.3f}" if ape == ape else "n/a"
-                if nc == best_nc.get((d, m)):
-                    nc_text = f"**{nc_text}**"
-                if ape == best_ape.get((d, m)):
-                    ape_text = f"**{ape_text}**"
-                cells += [nc_text, ape_text]
+        for d, m in columns:
+            r = by_key.get((d, m, frontend, sweep))
+            if r is None or r["status"] != "ok":
+                cells += ["failed" if r else "", markdown_cell((r or {}).get("error", "")[:60])]
+                continue
+            nc, ape = r["nc_mean"], r["ape_mean_rad"]
+            nc_text = f"{nc:.0f}"
+            ape_text = f"{ape:.3f}" if ape == ape else "n/a"
+            if nc == best_nc.get((d, m)):
+                nc_text = f"**{nc_text}**"
+            if ape == best_ape.get((d, m)):
+                ape_text = f"**{ape_text}**"
+            cells += [nc_text, ape_text]
         lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n"
 
 
+def equal_methods(rows: list[dict]) -> dict[tuple[str, str], list[str]]:
+    """Each (dataset, method) of `rows` that is a column of its own, dataset by dataset in table
+    order, with the methods whose results are its own (row `same_as`, mark_identical)."""
+    datasets = list(dict.fromkeys(r["dataset"] for r in rows))
+    methods = list(dict.fromkeys(r["method"] for r in rows))
+    same_as = {(r["dataset"], r["method"]): r["same_as"] for r in rows}
+    return {(d, m): [o for o in methods if same_as.get((d, o)) == m]
+            for d in datasets for m in methods if same_as.get((d, m)) == ""}
+
+
 def table_csv(rows: list[dict]) -> str:
     fields = ["dataset", "frontend", "tracker", "backend", "method", "sweep", "status", "nc_mean", "ape_mean_rad",
-              "orb_keypoints_mean", "orb_matches_mean", "best_nc", "best_ape", "folder", "error"]
+              "orb_keypoints_mean", "orb_matches_mean", "best_nc", "best_ape", "same_as", "folder", "error"]
     best_nc, best_ape = _best(rows, "nc_mean", lower=False), _best(rows, "ape_mean_rad", lower=True)
     buffer = io.StringIO()
     writer = csv.DictWriter(buffer, fieldnames=fields, extrasaction="ignore", lineterminator="\n")  # LF, as every file we write

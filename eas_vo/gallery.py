@@ -11,6 +11,11 @@ from eas_vo.errors import EasVoError
 #: The paper's order of image sources (Fig. 1, Table 1); other frontends follow by name.
 PAPER_ORDER = ("original", "histeq", "slice", "ts", "sits", "eas")
 
+#: Each of the paper's sources' colour in every figure of compare (and reproduce); other
+#: frontends take plots.SPARE_COLOURS.
+PAPER_COLOURS = {"original": "tab:blue", "histeq": "tab:orange", "slice": "tab:green", "eas": "tab:red",
+                 "ts": "tab:purple", "sits": "tab:brown"}
+
 
 def frontend_images(
     dataset_spec: str | None,

@@ -131,61 +131,141 @@ def plot_gallery(path: str | Path, names: list[str], images: dict, frame_indices
     fig.savefig(path, dpi=100, format="png")
 
 
-def plot_ape_bars(path: str | Path, rows: list[dict]) -> None:
-    """Average APE per source type (bars) and method, tracker+backend (colours), one panel per
-    dataset; `rows` as compare.table_rows makes them."""
-    ok = [r for r in rows if r["status"] == "ok" and r["ape_mean_rad"] is not None]
+#: The colours of frontends that have no fixed one (compare fixes the paper's six:
+#: gallery.PAPER_COLOURS), taken in turn.
+SPARE_COLOURS = ("tab:pink", "tab:gray", "tab:olive", "tab:cyan", "#393b79", "#637939", "#8c6d31", "#843c39", "#7b4173")
+
+#: How the sweep points of one frontend are told apart: a line style (ape_time) and a hatch (ape_bars) each.
+SWEEP_STYLES = ("-", "--", ":", "-.")
+SWEEP_HATCHES = ("", "//", "..", "xx", "\\\\", "++")
+
+
+def frontend_colours(frontends, fixed: dict | None = None) -> dict[str, str]:
+    """A colour per frontend: `fixed`'s where it has one, SPARE_COLOURS (cycled) for the others
+    in the order given; give every figure of a grid the same mapping."""
+    fixed = fixed or {}
+    others = [f for f in dict.fromkeys(frontends) if f not in fixed]
+    return {**fixed, **{f: SPARE_COLOURS[k % len(SPARE_COLOURS)] for k, f in enumerate(others)}}
+
+
+def _method_title(method: str, equals: list[str]) -> str:
+    """A method's name, and those whose results are its own."""
+    return method + "".join(f"\n= {other}" for other in equals) + (" (same trajectories)" if equals else "")
+
+
+def _panel_name(dataset: str) -> str:
+    return Path(dataset.rstrip("/")).name or dataset
+
+
+def plot_ape_bars(path: str | Path, rows: list[dict], equal: dict | None = None, colours: dict | None = None) -> None:
+    """ape_bars_figure, saved as PNG."""
+    ape_bars_figure(rows, equal, colours).savefig(path, dpi=110, format="png")
+
+
+def ape_bars_figure(rows: list[dict], equal: dict | None = None, colours: dict | None = None):
+    """Average APE [rad] (top) and average NC (bottom) of each finished cell, a column of panels
+    per dataset: a group of bars per method (tracker+backend), named with the methods
+    `equal[(dataset, method)]` whose results are its own; a bar per source coloured by frontend
+    (frontend_colours), hatched per sweep point, its value on it ("failed" on a failed cell's
+    empty bar). `rows` as compare's table."""
+    equal = equal or {}
+    colours = colours or frontend_colours(r["frontend"] for r in rows)
     datasets = list(dict.fromkeys(r["dataset"] for r in rows))
-    backends = list(dict.fromkeys(r["method"] for r in rows))
-    sources = list(dict.fromkeys(r["frontend"] + (f"\n{r['sweep']}" if r["sweep"] else "") for r in rows))
-    panel_width = max(5.0, 0.8 * len(sources) * len(backends) + 2.0)
-    fig = _figure(figsize=(panel_width * len(datasets), 3.8), layout="constrained")
-    axes = fig.subplots(1, len(datasets), squeeze=False)
-    width = 0.8 / max(1, len(backends))
-    for ax, dataset in zip(axes[0], datasets):
-        for b, backend in enumerate(backends):
-            values = []
-            for source in sources:
-                match = [r for r in ok if r["dataset"] == dataset and r["method"] == backend
-                         and r["frontend"] + (f"\n{r['sweep']}" if r["sweep"] else "") == source]
-                values.append(match[0]["ape_mean_rad"] if match else np.nan)
-            ax.bar(np.arange(len(sources)) + b * width, values, width, label=backend)
-        ax.set_xticks(np.arange(len(sources)) + width * (len(backends) - 1) / 2, sources, fontsize="small")
-        ax.set_ylabel("average APE [rad]")
-        ax.set_title(Path(dataset.rstrip("/")).name or dataset, fontsize="medium")
-        ax.grid(axis="y", alpha=0.3)
-    axes[0][0].legend(fontsize="small")
-    fig.savefig(path, dpi=110, format="png")
+    sources = list(dict.fromkeys((r["frontend"], r["sweep"]) for r in rows))
+    sweeps = list(dict.fromkeys(r["sweep"] for r in rows))
+    by_key = {(r["dataset"], r["method"], r["frontend"], r["sweep"]): r for r in rows}
+    columns = {d: list(dict.fromkeys(r["method"] for r in rows if r["dataset"] == d)) for d in datasets}
+    most = max(len(c) for c in columns.values())
+    panel_width = max(4.0, 0.42 * len(sources) * most + 1.6)
+    fig = _figure(figsize=(panel_width * len(datasets), 6.4), layout="constrained")
+    axes = fig.subplots(2, len(datasets), squeeze=False, sharex="col")
+    width = 0.8 / len(sources)
+    for c, dataset in enumerate(datasets):
+        methods = columns[dataset]
+        for ax, key, what, fmt in ((axes[0][c], "ape_mean_rad", "average APE [rad]", "{:.3f}"),
+                                   (axes[1][c], "nc_mean", "average NC", "{:.0f}")):
+            for s, (frontend, sweep) in enumerate(sources):
+                cells = [by_key.get((dataset, m, frontend, sweep)) for m in methods]
+                values = np.array([np.nan if r is None else 0.0 if r["status"] != "ok" else np.nan if r[key] is None else r[key]
+                                   for r in cells], dtype=float)
+                texts = ["failed" if r is not None and r["status"] != "ok" else "" if v != v else fmt.format(v)
+                         for r, v in zip(cells, values)]
+                bars = ax.bar(np.arange(len(methods)) + (s - (len(sources) - 1) / 2) * width, values, width,
+                              color=colours[frontend], hatch=SWEEP_HATCHES[sweeps.index(sweep) % len(SWEEP_HATCHES)],
+                              edgecolor="white", linewidth=0.5, label=" ".join(filter(None, [frontend, sweep])))
+                ax.bar_label(bars, labels=texts, fontsize="x-small",
+                             rotation=90 if len(sources) * len(methods) > 8 else 0, padding=2)
+            ax.set_ylabel(what)
+            ax.margins(y=0.18)
+            ax.grid(axis="y", alpha=0.3)
+        axes[0][c].set_title(_panel_name(dataset), fontsize="medium")
+        axes[1][c].set_xticks(np.arange(len(methods)), [_method_title(m, equal.get((dataset, m), [])) for m in methods],
+                              fontsize="small")
+    handles, labels = axes[0][0].get_legend_handles_labels()
+    fig.legend(handles, labels, loc="outside right upper", fontsize="small", title="source")
+    return fig
 
 
-def plot_ape_time(path: str | Path, series: dict) -> None:
-    """APE over time: {(dataset, label): (t, ape)}, one panel per dataset, a line per label."""
-    datasets = list(dict.fromkeys(d for d, _ in series))
-    fig = _figure(figsize=(8, 3 * max(1, len(datasets))), layout="constrained")
-    axes = fig.subplots(len(datasets), 1, squeeze=False)
-    for ax, dataset in zip(axes[:, 0], datasets):
-        for (d, label), (t, ape) in series.items():
-            if d == dataset:
-                ax.plot(t, ape, lw=1.0, label=label)
-        ax.set_title(Path(dataset.rstrip("/")).name or dataset, fontsize="medium")
-        ax.set_ylabel("APE [rad]")
-        ax.grid(alpha=0.3)
-        ax.legend(fontsize="small", ncol=3)
-    axes[-1, 0].set_xlabel("time [s]")
-    fig.savefig(path, dpi=110, format="png")
+def plot_ape_time(path: str | Path, series: dict, equal: dict | None = None, colours: dict | None = None) -> None:
+    """ape_time_figure, saved as PNG."""
+    ape_time_figure(series, equal, colours).savefig(path, dpi=110, format="png")
 
 
-def plot_sweep(path: str | Path, key: str, curves: dict) -> None:
+def ape_time_figure(series: dict, equal: dict | None = None, colours: dict | None = None):
+    """APE [rad] over time [s]: {(dataset, method, frontend, sweep label): (t, ape)}, a row of
+    panels per dataset and in it a panel per method (its title also naming the methods
+    `equal[(dataset, method)]` whose trajectories are its own), a line per source coloured by
+    frontend (frontend_colours), styled per sweep point; one shared APE axis."""
+    colours = colours or frontend_colours(f for _, _, f, _ in series)
+    equal = equal or {}
+    datasets = list(dict.fromkeys(d for d, _, _, _ in series))
+    panels = {d: list(dict.fromkeys(m for d2, m, _, _ in series if d2 == d)) for d in datasets}
+    sweeps = list(dict.fromkeys(s for _, _, _, s in series))
+    ncols = max(len(p) for p in panels.values())
+    fig = _figure(figsize=(1.2 + 4.2 * ncols, 0.6 + 2.9 * len(datasets)), layout="constrained")
+    axes = fig.subplots(len(datasets), ncols, squeeze=False, sharey=True)
+    for r, dataset in enumerate(datasets):
+        for c in range(ncols):
+            ax = axes[r][c]
+            if c >= len(panels[dataset]):
+                ax.set_axis_off()
+                continue
+            method = panels[dataset][c]
+            for (d, m, frontend, sweep), (t, ape) in series.items():
+                if (d, m) == (dataset, method):
+                    ax.plot(t, ape, lw=1.0, color=colours[frontend], ls=SWEEP_STYLES[sweeps.index(sweep) % len(SWEEP_STYLES)],
+                            label=" ".join(filter(None, [frontend, sweep])))
+            name = _panel_name(dataset) + ": " if len(datasets) > 1 else ""
+            ax.set_title(name + _method_title(method, equal.get((dataset, method), [])), fontsize="medium")
+            ax.grid(alpha=0.3)
+            ax.set_xlabel("time [s]")
+            if c == 0:
+                ax.set_ylabel("APE [rad]")
+    labels = {}
+    for ax in axes.flat:
+        for handle, label in zip(*ax.get_legend_handles_labels()):
+            labels.setdefault(label, handle)
+    fig.legend(list(labels.values()), list(labels), loc="outside right upper", fontsize="small", title="source")
+    if len(datasets) == 1:
+        fig.suptitle(_panel_name(datasets[0]), fontsize="medium")
+    return fig
+
+
+def plot_sweep(path: str | Path, key: str, curves: dict, colours: dict | None = None) -> None:
     """Average APE and NC against a swept value: {(dataset, method, frontend): (n, 3) array of
-    (value, NC, APE)}, a line per frontend (and method and dataset when there are several);
-    a logarithmic value axis when the values span more than a decade."""
-    fig = _figure(figsize=(11, 4), layout="constrained")
+    (value, NC, APE)}, a line per frontend coloured by it (frontend_colours), styled per method
+    and labelled with the method and dataset when there are several; a logarithmic value axis
+    when the values span more than a decade."""
+    colours = colours or frontend_colours(f for _, _, f in curves)
+    methods = list(dict.fromkeys(m for _, m, _ in curves))
+    fig = _figure(figsize=(13, 4), layout="constrained")
     ape_ax, nc_ax = fig.subplots(1, 2)
     several = {part: len({k[i] for k in curves}) > 1 for i, part in enumerate(("dataset", "method", "frontend"))}
     for (dataset, method, frontend), xy in curves.items():
         label = " ".join([frontend] + ([method] if several["method"] else []) + ([Path(dataset).name or dataset] if several["dataset"] else []))
-        ape_ax.plot(xy[:, 0], xy[:, 2], "o-", lw=1.2, ms=4, label=label)
-        nc_ax.plot(xy[:, 0], xy[:, 1], "o-", lw=1.2, ms=4, label=label)
+        style = {"color": colours[frontend], "ls": SWEEP_STYLES[methods.index(method) % len(SWEEP_STYLES)], "lw": 1.2, "ms": 4}
+        ape_ax.plot(xy[:, 0], xy[:, 2], "o", label=label, **style)
+        nc_ax.plot(xy[:, 0], xy[:, 1], "o", label=label, **style)
     values = np.concatenate([xy[:, 0] for xy in curves.values()]) if curves else np.array([1.0])
     for ax, what in ((ape_ax, "average APE [rad]"), (nc_ax, "average NC")):
         if values.min() > 0 and values.max() > 10 * values.min():
@@ -194,7 +274,7 @@ def plot_sweep(path: str | Path, key: str, curves: dict) -> None:
         ax.set_ylabel(what)
         ax.grid(alpha=0.3, which="both")
     ape_ax.set_yscale("log")
-    ape_ax.legend(fontsize="small")
+    fig.legend(*ape_ax.get_legend_handles_labels(), loc="outside right upper", fontsize="small")
     fig.savefig(path, dpi=110, format="png")
 
 

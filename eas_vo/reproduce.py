@@ -15,7 +15,7 @@ import numpy as np
 from eas_vo import compare
 from eas_vo.errors import EasVoError
 from eas_vo.gallery import PAPER_ORDER
-from eas_vo.io import atomic_path, claim_grid_folder, figure_text, json_text, remove_stale_temporaries, write_text_atomic
+from eas_vo.io import atomic_path, claim_grid_folder, figure_text, json_text, remove_stale_temporaries, slug, write_text_atomic
 
 SEQUENCES = ("hdr_boxes", "hdr_poster")
 
@@ -52,9 +52,33 @@ def fetch_sequences(progress: bool) -> None:
         plugin.fetch(name, progress=progress)
 
 
-def _cells(frontends, backends) -> list[compare.Cell]:
+#: The paper's method: klt's consecutive edges chained.
+PAPER = compare.Method("klt", "chain")
+
+#: The smoothed method beside it in the default grids (reproduce table1, compare without
+#: --trackers/--backends): klt also measures keyframe edges (a keyframe every 3rd frame, as
+#: configs/best.toml has it) and the gtsam pose graph fits all edges. On consecutive edges
+#: alone a pose graph has nothing to smooth: its trajectory is the chain's.
+SMOOTHED = compare.Method("klt", "gtsam", (("tracker.klt.keyframe_interval", "3"),))
+
+
+def default_methods(tracker: str, backend: str) -> list[compare.Method]:
+    """compare's methods when neither trackers nor backends are given: the configuration's,
+    and beside the paper's klt+chain the smoothed one (SMOOTHED)."""
+    method = compare.Method(tracker, backend)
+    return [method, SMOOTHED] if method == PAPER else [method]
+
+
+def table1_methods(backends) -> list[compare.Method]:
+    """Table 1's columns: the paper's klt+chain, and klt with each other backend (a pose graph)
+    fed klt's keyframe edges as SMOOTHED is: on the paper's consecutive edges alone it would
+    only repeat the chain's trajectory."""
+    return [PAPER if b == PAPER.backend else compare.Method("klt", b, SMOOTHED.settings) for b in backends]
+
+
+def _cells(frontends, methods) -> list[compare.Cell]:
     """The grid, each sequence's cells in a folder named after it."""
-    cells = compare.plan(list(SPECS.values()), list(frontends), ["klt"], list(backends), [])
+    cells = compare.plan(list(SPECS.values()), list(frontends), list(methods), [])
     names = {spec: name for name, spec in SPECS.items()}
     return [dataclasses.replace(c, dataset_name=names[c.dataset]) for c in cells]
 
@@ -84,10 +108,11 @@ def _check(cells, config: str, overrides: dict, out: Path) -> None:
 
 def table1(out: Path, duration_s: float = PAPER_DURATION_S, backends=("chain", "gtsam"), config: str = "paper",
            jobs: int = 1, progress: bool = False) -> tuple[list[dict], int, str]:
-    """The six sources on both sequences with `config`; writes compare's tables and figures,
-    table1.md (ours beside the paper's, ratios, orderings), table1.json and one Fig. 3-style
-    Euler plot per sequence and backend. Returns (rows, cells run, table1 markdown)."""
-    cells, overrides = _cells(PAPER_ORDER, backends), _overrides(duration_s, orb=False)
+    """The six sources on both sequences with `config` and each method of table1_methods(backends);
+    writes compare's tables and figures, table1.md (ours beside the paper's, ratios, orderings),
+    table1.json and one Fig. 3-style Euler plot per sequence and method. Returns (rows, cells
+    run, table1 markdown)."""
+    cells, overrides = _cells(PAPER_ORDER, table1_methods(backends)), _overrides(duration_s, orb=False)
     _check(cells, config, overrides, out)
     fetch_sequences(progress)
     rows, n_run = compare.run_experiment(cells, out, config, [], overrides, jobs, progress)
@@ -100,15 +125,22 @@ def table1(out: Path, duration_s: float = PAPER_DURATION_S, backends=("chain", "
 
 
 def table1_markdown(rows: list[dict], config: str, duration_s: float) -> str:
-    """Per method (tracker+backend): a row per source with our NC and APE beside the paper's
-    and the ratio ours/paper; then each sequence's ordering of sources by APE, ours and the
-    paper's, and their Spearman rank correlation."""
+    """Per method (tracker+backend), headed by the configuration it ran with: a row per source
+    with our NC and APE beside the paper's and the ratio ours/paper; then each sequence's
+    ordering of sources by APE, ours and the paper's, and their Spearman rank correlation. A
+    method whose results are another's on both sequences (row `same_as`) says so."""
     lines = [f"# Table 1: ours (`--config {config}`, first {duration_s:g} s, time offset estimated) beside the paper's", ""]
     by_key = {(r["dataset_name"], r["method"], r["frontend"]): r for r in rows}
     ape = {key: r["ape_mean_rad"] for key, r in by_key.items() if r["status"] == "ok" and r["ape_mean_rad"] is not None}
-    for method in dict.fromkeys(r["method"] for r in rows):
+    for method, settings in {r["method"]: r["settings"] for r in rows}.items():
+        flags = "".join(f" --set {k}={v}" for k, v in settings)
+        same = {r["same_as"] for r in rows if r["method"] == method}
+        equal = f" Its trajectories are {same.pop()}'s (same NC, same rotations)." if len(same) == 1 and "" not in same else ""
+        if method != PAPER.label:
+            equal += f" The paper's columns are its own method's ({PAPER.label})."
         head = ["Source"] + [f"{s} {h}" for s in SEQUENCES for h in ("NC", "NC paper", "APE", "APE paper", "APE ours/paper")]
-        lines += [f"## {method}", "", "| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+        lines += [f"## {method}", "", f"Configuration: `--config {config}{flags}`.{equal}", "",
+                  "| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
         for source in PAPER_ORDER:
             cells = [source]
             for seq in SEQUENCES:
@@ -162,7 +194,7 @@ def _euler_figures(out: Path, cells: list[compare.Cell], rows: list[dict]) -> No
             label = f"{cell.frontend} (APE {row['ape_mean_rad']:.3f})"
             panels.setdefault((cell.dataset_name, row["method"]), []).append((label, *aligned))
     for (seq, method), grid in panels.items():
-        with atomic_path(out / f"fig3_{seq}_{method.replace('+', '-')}.png") as tmp:
+        with atomic_path(out / f"fig3_{seq}_{slug(method)}.png") as tmp:
             plot_euler_grid(tmp, grid, title=f"{seq}, {method}: estimated (red) and true Euler angles")
 
 
@@ -180,7 +212,7 @@ def table2(out: Path, estimates: dict[tuple[str, str], str], duration_s: float =
         if seq not in SEQUENCES or source not in ("original", "eas"):
             raise EasVoError(f"--estimate {seq}:{source}: the paper's Table 2 has {', '.join(SEQUENCES)} x original, eas")
         read_estimate(path)  # a missing or malformed file is an error before any download
-    cells, overrides = _cells(("original", "eas"), ("chain",)), _overrides(duration_s, orb=True)
+    cells, overrides = _cells(("original", "eas"), [PAPER]), _overrides(duration_s, orb=True)
     _check(cells, config, overrides, out)
     fetch_sequences(progress)
     # scored before the cells run: an estimate the ground truth cannot score is an error before that work

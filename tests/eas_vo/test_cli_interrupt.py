@@ -48,7 +48,8 @@ def test_existing_results_need_overwrite(short_sequence, tmp_path, capsys):
 
 def test_compare_reruns_a_partial_cell(short_sequence, tmp_path, capsys):
     out = tmp_path / "cmp"
-    argv = ["compare", "--dataset", str(short_sequence), "--frontends", "original", "--out", str(out), "--jobs", "1", "--quiet"]
+    argv = ["compare", "--dataset", str(short_sequence), "--frontends", "original", "--backends", "chain",
+            "--out", str(out), "--jobs", "1", "--quiet"]
     assert main(argv) == 0
     (metrics_path,) = out.rglob("metrics.json")
     metrics = json.loads(metrics_path.read_text())
@@ -74,7 +75,8 @@ def test_compare_interrupted_writes_its_table_and_resumes(short_sequence, tmp_pa
 
     monkeypatch.setattr(compare, "run_cell", interrupting)
     out = tmp_path / "cmp"
-    argv = ["compare", "--dataset", str(short_sequence), "--frontends", "original,slice,eas", "--out", str(out), "--jobs", "1", "--quiet"]
+    argv = ["compare", "--dataset", str(short_sequence), "--frontends", "original,slice,eas",
+            "--backends", "chain", "--out", str(out), "--jobs", "1", "--quiet"]
     assert main(argv) == 130
     err = capsys.readouterr().err
     assert err == f"eas-vo compare: interrupted; the table of the 1 finished cells was written to {out}; the same command resumes the rest\n"
@@ -96,7 +98,7 @@ def test_sigterm_to_a_parallel_compare_stops_it_at_once_without_orphans(short_se
 
     out = tmp_path / "cmp"
     argv = [sys.executable, "-m", "eas_vo", "compare", "--dataset", str(short_sequence), "--frontends", "original,slice,eas",
-            "--sweep", "tracker.max_corners=100,200,300,400", "--out", str(out), "--jobs", "2", "--quiet"]
+            "--backends", "chain", "--sweep", "tracker.max_corners=100,200,300,400", "--out", str(out), "--jobs", "2", "--quiet"]
     parent = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=tempfile.gettempdir())
     deadline = time.monotonic() + 120
     while not [f for f in out.glob("*/*/metrics.json") if not f.parent.name.startswith(".")] and time.monotonic() < deadline:
@@ -122,7 +124,7 @@ def test_kill_9_of_a_parallel_compare_leaves_no_worker_and_the_rerun_completes(s
 
     out = tmp_path / "cmp"
     argv = [sys.executable, "-m", "eas_vo", "compare", "--dataset", str(short_sequence), "--frontends", "original,slice,eas",
-            "--sweep", "tracker.max_corners=100,200,300,400", "--out", str(out), "--jobs", "2", "--quiet"]
+            "--backends", "chain", "--sweep", "tracker.max_corners=100,200,300,400", "--out", str(out), "--jobs", "2", "--quiet"]
     parent = subprocess.Popen(argv, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, cwd=tempfile.gettempdir())
     deadline = time.monotonic() + 120
     while not [f for f in out.glob("*/*/metrics.json") if not f.parent.name.startswith(".")] and time.monotonic() < deadline:

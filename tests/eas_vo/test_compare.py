@@ -8,6 +8,7 @@ import shutil
 import tempfile
 from pathlib import Path
 
+import numpy as np
 import pytest
 from hypothesis import given
 from hypothesis import strategies as st
@@ -35,11 +36,22 @@ def test_table_equals_each_cells_metrics(grid):
         assert r["nc_mean"] == metrics["nc_mean"] and r["ape_mean_rad"] == metrics["ape_mean_rad"]
         assert (out / r["folder"] / "rotation.png").exists()
     md = (out / "table.md").read_text()
-    assert "| Source type | average NC | average APE |" in md and md.count("**") >= 4
+    name = rows[0]["dataset_name"]
+    assert md.splitlines()[0] == (f"| Source type | {name} klt+chain = klt+gtsam: average NC | "
+                                  f"{name} klt+chain = klt+gtsam: average APE [rad] |")
+    assert md.count("**") >= 4
     assert b"\r" not in (out / "table.csv").read_bytes()
     csv_lines = (out / "table.csv").read_text().splitlines()
     assert len(csv_lines) == 5 and csv_lines[0].startswith("dataset,frontend,tracker,backend,method")
     assert (out / "ape_bars.png").exists() and (out / "ape_time.png").exists()
+
+
+def test_a_pose_graph_on_consecutive_edges_alone_is_found_to_be_the_chain(grid):
+    """klt gives only consecutive edges without keyframes: gtsam then returns the chain's
+    trajectory, which compare finds and says (one column, one panel) instead of repeating it."""
+    out, _ = grid
+    rows = json.loads((out / "table.json").read_text())
+    assert {(r["backend"], r["same_as"]) for r in rows} == {("chain", ""), ("gtsam", "klt+chain")}
 
 
 def test_a_second_invocation_runs_nothing(grid, capsys):
@@ -52,8 +64,8 @@ def test_a_second_invocation_runs_nothing(grid, capsys):
 
 def test_a_failing_cell_is_reported_the_rest_complete_and_the_exit_says_so(short_sequence, tmp_path, capsys):
     out = tmp_path / "sweep"
-    argv = ["compare", "--dataset", str(short_sequence), "--frontends", "slice", "--sweep", "run.start_s=0,100",
-            "--out", str(out), "--jobs", "1", "--quiet"]
+    argv = ["compare", "--dataset", str(short_sequence), "--frontends", "slice", "--backends", "chain",
+            "--sweep", "run.start_s=0,100", "--out", str(out), "--jobs", "1", "--quiet"]
     assert main(argv) == 1
     captured = capsys.readouterr()
     assert "2 cells (2 run, 0 already complete, 1 failed)" in captured.out
@@ -86,8 +98,8 @@ def test_a_data_warning_is_said_once_with_the_cells_it_came_from(short_sequence,
 
 def test_a_configuration_error_stops_compare_before_any_work(short_sequence, tmp_path, capsys):
     out = tmp_path / "bad"
-    argv = ["compare", "--dataset", str(short_sequence), "--frontends", "slice", "--sweep", "frontend.n=2000,0",
-            "--out", str(out), "--quiet"]
+    argv = ["compare", "--dataset", str(short_sequence), "--frontends", "slice", "--backends", "chain",
+            "--sweep", "frontend.n=2000,0", "--out", str(out), "--quiet"]
     assert main(argv) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "n = 0 is out of range" in err
@@ -119,9 +131,30 @@ def test_one_and_two_jobs_give_the_same_table(grid, short_sequence, tmp_path):
 
 
 def test_plan_is_the_cartesian_product():
-    cells = plan(["a", "b"], ["x"], ["klt", "other"], ["chain", "gtsam"], ["frontend.n=1,2", "frontend.beta=3,4,5"])
+    from eas_vo.compare import Method, grid_methods
+
+    cells = plan(["a", "b"], ["x"], grid_methods(["klt", "other"], ["chain", "gtsam"]), ["frontend.n=1,2", "frontend.beta=3,4,5"])
     assert len(cells) == 2 * 2 * 2 * 2 * 3
     assert Cell("a", "x", "other", "chain", (("frontend.n", "1"), ("frontend.beta", "3")), "a") in cells
+    (smoothed,) = plan(["a"], ["x"], [Method("klt", "gtsam", (("tracker.klt.keyframe_interval", "3"),))], [])
+    assert smoothed.folder == "a/x_klt_gtsam_keyframe_interval-3" and smoothed.method.label == "klt+gtsam (keyframe_interval=3)"
+
+
+def test_compares_default_grid_runs_the_smoothed_method_beside_the_chain(short_sequence, tmp_path):
+    """No --backends: klt+chain as the paper and klt+gtsam on klt's keyframe edges (interval 3,
+    the cell's resolved config says so), which is not the chain's trajectory."""
+    import tomllib
+
+    out = tmp_path / "cmp"
+    assert main(["compare", "--dataset", str(short_sequence), "--frontends", "eas", "--duration", "1", "--out", str(out),
+                 "--jobs", "2", "--quiet"]) == 0
+    rows = {r["method"]: r for r in json.loads((out / "table.json").read_text())}
+    assert list(rows) == ["klt+chain", "klt+gtsam (keyframe_interval=3)"]
+    intervals = {m: tomllib.loads((out / r["folder"] / "config.toml").read_text())["tracker"]["keyframe_interval"]
+                 for m, r in rows.items()}
+    assert intervals == {"klt+chain": 0, "klt+gtsam (keyframe_interval=3)": 3}
+    assert [r["same_as"] for r in rows.values()] == ["", ""]
+    assert "klt+gtsam (keyframe_interval=3): average APE [rad]" in (out / "table.md").read_text().splitlines()[0]
 
 
 def test_datasets_sharing_a_folder_name_never_share_cells(short_sequence, tmp_path, capsys):
@@ -134,12 +167,13 @@ def test_datasets_sharing_a_folder_name_never_share_cells(short_sequence, tmp_pa
     lines = (b / "images.txt").read_text().splitlines()
     (b / "images.txt").write_text("\n".join(lines[:20]) + "\n")  # b: a different (shorter) sequence
     out = tmp_path / "cmp"
-    argv = ["compare", "--dataset", str(a), "--dataset", str(b), "--frontends", "original", "--out", str(out), "--jobs", "1", "--quiet"]
+    argv = ["compare", "--dataset", str(a), "--dataset", str(b), "--frontends", "original", "--backends", "chain",
+            "--out", str(out), "--jobs", "1", "--quiet"]
     assert main(argv) == 0
     first = capsys.readouterr().out
     rows = {r["dataset"]: r for r in json.loads((out / "table.json").read_text())}
     assert rows[str(a)]["folder"] != rows[str(b)]["folder"]
-    assert "a-seq (klt+chain)" in first and "b-seq (klt+chain)" in first
+    assert "a-seq klt+chain: average NC" in first and "b-seq klt+chain: average NC" in first
     frames = {d: json.loads((out / r["folder"] / "metrics.json").read_text())["frames"] for d, r in rows.items()}
     assert frames[str(b)] == 20 and frames[str(a)] > 20
     assert main(argv) == 0  # the rerun reads each its own
@@ -148,7 +182,8 @@ def test_datasets_sharing_a_folder_name_never_share_cells(short_sequence, tmp_pa
 
 def test_a_cell_is_reused_only_if_made_with_the_same_inputs(short_sequence, tmp_path, capsys):
     out = tmp_path / "cmp"
-    base = ["compare", "--dataset", str(short_sequence), "--frontends", "original", "--out", str(out), "--jobs", "1", "--quiet"]
+    base = ["compare", "--dataset", str(short_sequence), "--frontends", "original", "--backends", "chain",
+            "--out", str(out), "--jobs", "1", "--quiet"]
     assert main(base + ["--duration", "1"]) == 0
     assert "1 cells (1 run, 0 already complete" in capsys.readouterr().out
     assert main(base + ["--duration", "1"]) == 0
@@ -161,11 +196,62 @@ def test_a_cell_is_reused_only_if_made_with_the_same_inputs(short_sequence, tmp_
 
 def test_markdown_marks_the_best_of_each_column():
     rows = [
-        {"dataset": "d", "method": "klt+chain", "frontend": f, "sweep": "", "status": "ok", "nc_mean": nc, "ape_mean_rad": ape}
+        {"dataset": "d", "method": "klt+chain", "frontend": f, "sweep": "", "status": "ok", "nc_mean": nc, "ape_mean_rad": ape,
+         "same_as": ""}
         for f, nc, ape in (("original", 20.0, 0.6), ("eas", 60.0, 0.2))
     ]
     md = table_markdown(rows)
     assert "| original | 20 | 0.600 |" in md and "| eas | **60** | **0.200** |" in md
+
+
+def test_markdown_has_one_header_row_and_a_column_pair_per_distinct_method():
+    """Two sequences x three methods, the second of which repeats the first on sequence a only:
+    one header row naming sequence, method and figure; the repeated method's column dropped
+    where it repeats and named in the header of the one it repeats."""
+    rows = [{"dataset": d, "dataset_name": d, "method": m, "frontend": f, "sweep": "", "status": "ok",
+             "nc_mean": nc + k, "ape_mean_rad": 0.1 * (k + 1), "same_as": "klt+chain" if (d, m) == ("a", "klt+gtsam") else ""}
+            for d in ("a", "b") for k, m in enumerate(("klt+chain", "klt+gtsam", "other+chain")) for f, nc in (("original", 20), ("eas", 60))]
+    lines = table_markdown(rows).splitlines()
+    assert lines[0] == ("| Source type | a klt+chain = klt+gtsam: average NC | a klt+chain = klt+gtsam: average APE [rad] "
+                        "| a other+chain: average NC | a other+chain: average APE [rad] "
+                        "| b klt+chain: average NC | b klt+chain: average APE [rad] | b klt+gtsam: average NC "
+                        "| b klt+gtsam: average APE [rad] | b other+chain: average NC | b other+chain: average APE [rad] |")
+    assert lines[1] == "|" + "---|" * 11
+    assert lines[2:] == ["| original | 20 | **0.100** | 22 | **0.300** | 20 | **0.100** | 21 | **0.200** | 22 | **0.300** |",
+                         "| eas | **60** | **0.100** | **62** | **0.300** | **60** | **0.100** | **61** | **0.200** | **62** | **0.300** |"]
+
+
+def _write_tum(path: Path, t, R) -> None:
+    from eas_vo.pipeline import format_tum
+
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(format_tum(np.asarray(t, float), np.zeros((len(t), 3)), R))
+
+
+def test_identical_methods_are_found_exactly(tmp_path):
+    """Known answers on written trajectories: a copy (one with every quaternion negated, the same
+    rotations) is identical; a rotation moved by 1e-7 rad, a shifted timestamp, another NC or a
+    failed cell is not; a third copy names the first method, never the second."""
+    from scipy.spatial.transform import Rotation
+
+    from eas_vo.compare import mark_identical, table_rows
+
+    R = Rotation.from_rotvec(np.random.default_rng(0).normal(0, 0.5, (30, 3))).as_matrix()
+    t = 0.05 * np.arange(30)
+    tilted = R.copy()
+    tilted[17] = Rotation.from_rotvec([1e-7, 0, 0]).as_matrix() @ R[17]
+    methods = {"a+x": (t, R), "b+x": (t, R), "c+x": (t, R), "tilt+x": (t, tilted), "late+x": (t + np.r_[np.zeros(29), 1e-3], R),
+               "nc+x": (t, R), "failed+x": (t, R)}
+    cells = [Cell("d", f, m.split("+")[0], "x", ()) for m in methods for f in ("eas", "slice")]
+    for cell in cells:
+        _write_tum(tmp_path / cell.folder / "trajectory.tum", *methods[cell.method.label])
+    text = (tmp_path / cells[2].folder / "trajectory.tum").read_text().splitlines()  # b+x eas: every quaternion negated
+    (tmp_path / cells[2].folder / "trajectory.tum").write_text("".join(
+        " ".join(v[:4] + [f"{-float(q):.12f}" for q in v[4:]]) + "\n" for v in (line.split() for line in text)))
+    results = {c: {"status": "ok", "nc_mean": 50.0 + (c.tracker == "nc"), "ape_mean_rad": 0.1} for c in cells}
+    results[cells[-1]] = {"status": "failed", "error": "boom"}
+    same_as = {r["method"]: r["same_as"] for r in mark_identical(tmp_path, cells, table_rows(cells, results))}
+    assert same_as == {"a+x": "", "b+x": "a+x", "c+x": "a+x", "tilt+x": "", "late+x": "", "nc+x": "", "failed+x": ""}
 
 
 def test_dask_executor_gives_the_same_table(grid, tmp_path):
@@ -183,8 +269,8 @@ def test_dask_executor_gives_the_same_table(grid, tmp_path):
 def one_cell(short_sequence, tmp_path_factory):
     """A finished one-cell compare folder (1 s of the short sequence), its argv and its table row."""
     out = tmp_path_factory.mktemp("cmp") / "one"
-    argv = ["compare", "--dataset", str(short_sequence), "--frontends", "eas", "--duration", "1", "--out", str(out),
-            "--jobs", "1", "--quiet"]
+    argv = ["compare", "--dataset", str(short_sequence), "--frontends", "eas", "--backends", "chain",
+            "--duration", "1", "--out", str(out), "--jobs", "1", "--quiet"]
     assert main(argv) == 0
     (row,) = json.loads((out / "table.json").read_text())
     return out, argv, row
@@ -256,8 +342,8 @@ def test_a_pool_never_has_more_workers_than_cells(short_sequence, tmp_path, monk
             super().__init__(max_workers, *args, **kwargs)
 
     monkeypatch.setattr(compare, "ProcessPoolExecutor", Recording)
-    argv = ["compare", "--dataset", str(short_sequence), "--frontends", "original,histeq", "--duration", "0.5",
-            "--out", str(tmp_path / "cmp"), "--jobs", "100000", "--quiet"]
+    argv = ["compare", "--dataset", str(short_sequence), "--frontends", "original,histeq", "--backends", "chain",
+            "--duration", "0.5", "--out", str(tmp_path / "cmp"), "--jobs", "100000", "--quiet"]
     assert main(argv) == 0
     assert sizes == [2]
     assert main(argv) == 0 and sizes == [2]  # nothing left to run: no pool at all
@@ -267,7 +353,8 @@ def test_a_cell_is_run_again_when_its_dataset_changed_at_the_same_path(sequence_
     """Class 3 with the data, not the options, changed: the folder replaced by other content
     under the same path (here the same recording, its frames list cut to 1 s)."""
     out = tmp_path / "cmp"
-    argv = ["compare", "--dataset", str(sequence_copy), "--frontends", "original", "--out", str(out), "--jobs", "1", "--quiet"]
+    argv = ["compare", "--dataset", str(sequence_copy), "--frontends", "original", "--backends", "chain",
+            "--out", str(out), "--jobs", "1", "--quiet"]
     assert main(argv) == 0
     shutil.rmtree(sequence_copy)
     shutil.copytree(short_sequence, sequence_copy)

@@ -22,10 +22,69 @@ def test_plotting_leaves_the_backend_and_pyplot_alone(tmp_path):
 
 
 def draw(tmp_path):
-    rows = [{"dataset": "d", "method": "klt+chain", "frontend": f, "sweep": "", "status": "ok", "ape_mean_rad": v}
+    rows = [{"dataset": "d", "method": "klt+chain", "frontend": f, "sweep": "", "status": "ok", "ape_mean_rad": v, "nc_mean": 30.0}
             for f, v in (("original", 0.4), ("eas", 0.04))]
     plots.plot_ape_bars(tmp_path / "bars.png", rows)
-    plots.plot_ape_time(tmp_path / "time.png", {("d", "eas"): (np.arange(5.0), np.linspace(0, 0.1, 5))})
+    plots.plot_ape_time(tmp_path / "time.png", {("d", "klt+chain", "eas", ""): (np.arange(5.0), np.linspace(0, 0.1, 5))})
+
+
+def _compare_rows(frontends, methods=("klt+chain", "klt+gtsam")):
+    """Rows as compare's table, APE and NC distinct per cell (k: the cell's index)."""
+    cells = [(m, f) for m in methods for f in frontends]
+    return [{"dataset": "d", "method": m, "frontend": f, "sweep": "", "status": "ok", "ape_mean_rad": 0.01 * (k + 1),
+             "nc_mean": 100.0 + k} for k, (m, f) in enumerate(cells)]
+
+
+def _frontend_of(label: str) -> str:
+    return label.split()[0]
+
+
+def test_a_frontend_has_one_colour_in_every_compare_figure():
+    """Bars, time curves and sweep lines: each built-in frontend in its fixed colour whatever
+    the order or the set of frontends, a plugin's in the first spare one; no two alike."""
+    from eas_vo.gallery import PAPER_COLOURS
+
+    to_rgb = matplotlib.colors.to_rgb
+    frontends = ["eas", "mine", "sits", "original", "histeq", "ts", "slice"]
+    colours = plots.frontend_colours(frontends, PAPER_COLOURS)
+    assert colours["mine"] == plots.SPARE_COLOURS[0] and len({to_rgb(c) for c in colours.values()}) == len(colours)
+    assert plots.frontend_colours(["original", "eas"], PAPER_COLOURS) == PAPER_COLOURS  # the same without the plugin
+    bars = plots.ape_bars_figure(_compare_rows(frontends), colours=colours)
+    seen = {}
+    for ax in bars.axes[:2]:
+        for container in ax.containers:
+            for patch in container:
+                seen.setdefault(_frontend_of(container.get_label()), set()).add(to_rgb(patch.get_facecolor()))
+    series = {("d", m, f, ""): (np.arange(3.0), np.full(3, 0.1)) for m in ("klt+chain", "klt+gtsam") for f in reversed(frontends)}
+    for ax in plots.ape_time_figure(series, colours=colours).axes:
+        for line in ax.lines:
+            seen.setdefault(_frontend_of(line.get_label()), set()).add(to_rgb(line.get_color()))
+    assert seen == {f: {to_rgb(colours[f])} for f in frontends}
+    assert {f: to_rgb(c) for f, c in colours.items() if f in PAPER_COLOURS} == {
+        "original": to_rgb("tab:blue"), "histeq": to_rgb("tab:orange"), "slice": to_rgb("tab:green"),
+        "eas": to_rgb("tab:red"), "ts": to_rgb("tab:purple"), "sits": to_rgb("tab:brown")}
+
+
+def test_the_bars_carry_their_apes_and_ncs():
+    """Two rows of panels, APE over NC, every bar labelled with its value (a failed cell's with
+    "failed"); a method whose results are another's is not drawn, its name is under the one it equals."""
+    rows = _compare_rows(["original", "eas", "slice"])[:3]
+    rows[2] = {**rows[2], "status": "failed", "ape_mean_rad": None, "nc_mean": None}
+    fig = plots.ape_bars_figure(rows, equal={("d", "klt+chain"): ["klt+gtsam"]})
+    ape_ax, nc_ax = fig.axes[:2]
+    texts = lambda ax: sorted(t.get_text() for t in ax.texts if t.get_text())  # noqa: E731
+    assert texts(ape_ax) == ["0.010", "0.020", "failed"] and texts(nc_ax) == ["100", "101", "failed"]
+    assert ape_ax.get_ylabel() == "average APE [rad]" and nc_ax.get_ylabel() == "average NC"
+    assert [t.get_text() for t in nc_ax.get_xticklabels()] == ["klt+chain\n= klt+gtsam (same trajectories)"]
+
+
+def test_ape_over_time_has_a_panel_per_method_and_draws_an_equal_one_once():
+    t = np.arange(4.0)
+    series = {("d", m, f, ""): (t, 0.1 * t) for m in ("klt+chain", "klt+gtsam (keyframe_interval=3)") for f in ("original", "eas")}
+    fig = plots.ape_time_figure(series, equal={("d", "klt+chain"): ["klt+gtsam"]})
+    drawn = [ax for ax in fig.axes if ax.lines]
+    assert [ax.get_title() for ax in drawn] == ["klt+chain\n= klt+gtsam (same trajectories)", "klt+gtsam (keyframe_interval=3)"]
+    assert [[line.get_label() for line in ax.lines] for ax in drawn] == [["original", "eas"]] * 2
 
 
 def test_the_rotation_plot_shows_where_tracking_was_weak_or_lost_and_where_loops_closed():

@@ -40,7 +40,15 @@ def test_table1_in_one_command_beside_the_papers(paper_site, tmp_path, capsys):
     rows = json.loads((out / "table.json").read_text())
     assert len(rows) == 24 and {r["status"] for r in rows} == {"ok"}
     table = (out / "table1.md").read_text()
-    for method in ("klt+chain", "klt+gtsam"):
+    smoothed = "klt+gtsam (keyframe_interval=3)"  # the pose graph on klt's keyframe edges, beside the paper's chain
+    assert {r["method"] for r in rows} == {"klt+chain", smoothed} and {r["same_as"] for r in rows} == {""}
+    for r in rows:
+        resolved = (out / r["folder"] / "config.toml").read_text()
+        assert f"keyframe_interval = {3 if r['backend'] == 'gtsam' else 0}\n" in resolved
+    assert "Configuration: `--config paper`." in table.split("## klt+chain")[1].split("## ")[0]
+    assert ("Configuration: `--config paper --set tracker.klt.keyframe_interval=3`. The paper's columns are its own "
+            "method's (klt+chain).") in table.split(f"## {smoothed}")[1]
+    for method in ("klt+chain", smoothed):
         section = table.split(f"## {method}")[1].split("## ")[0]
         for source in ("original", "histeq", "slice", "ts", "sits", "eas"):
             line = next(x for x in section.splitlines() if x.startswith(f"| {source} |"))
@@ -55,7 +63,7 @@ def test_table1_in_one_command_beside_the_papers(paper_site, tmp_path, capsys):
         assert section.count("sources by APE (best first): ours ") == 2
         assert "paper eas < " in section and "Spearman rank correlation" in section
     for seq in ("hdr_boxes", "hdr_poster"):
-        for method in ("klt-chain", "klt-gtsam"):
+        for method in ("klt-chain", "klt-gtsam-keyframe_interval=3"):
             assert (out / f"fig3_{seq}_{method}.png").stat().st_size > 10_000
     assert (out / "ape_bars.png").exists() and (out / "hdr_boxes" / "eas_klt_chain" / "metrics.json").exists()
     capsys.readouterr()
@@ -68,13 +76,35 @@ def test_table1_marks_a_cell_whose_time_offset_could_not_be_estimated():
     from eas_vo.reproduce import PAPER_ORDER, SEQUENCES, table1_markdown
 
     cells = [(seq, source) for seq in SEQUENCES for source in PAPER_ORDER]
-    rows = [{"dataset_name": seq, "method": "klt+chain", "frontend": source, "status": "ok", "nc_mean": 100.0,
-             "ape_mean_rad": 0.05 + 0.01 * k, "time_offset_estimated": True} for k, (seq, source) in enumerate(cells)]
+    rows = [{"dataset_name": seq, "method": "klt+chain", "settings": (), "frontend": source, "status": "ok", "nc_mean": 100.0,
+             "ape_mean_rad": 0.05 + 0.01 * k, "time_offset_estimated": True, "same_as": ""} for k, (seq, source) in enumerate(cells)]
     table = table1_markdown(rows, "paper", 25.0)
     assert "* |" not in table and "could not be estimated" not in table
     rows[3]["time_offset_estimated"] = False
     table = table1_markdown(rows, "paper", 25.0)
     assert table.count("* |") == 1 and "| 0.080* |" in table and "could not be estimated for this cell" in table
+
+
+def test_compares_default_methods_are_the_papers_chain_and_the_smoothed_pose_graph():
+    from eas_vo.compare import Method
+    from eas_vo.reproduce import PAPER, SMOOTHED, default_methods
+
+    assert default_methods("klt", "chain") == [PAPER, SMOOTHED] and SMOOTHED.settings == (("tracker.klt.keyframe_interval", "3"),)
+    assert default_methods("klt", "gtsam") == [Method("klt", "gtsam")]  # a config's own method: as it is configured
+
+
+def test_table1s_grid_is_the_papers_chain_beside_the_smoothed_pose_graph():
+    from eas_vo.reproduce import PAPER, PAPER_ORDER, SEQUENCES, SMOOTHED, _cells, table1_markdown, table1_methods
+
+    assert table1_methods(("chain", "gtsam")) == [PAPER, SMOOTHED]
+    cells = _cells(PAPER_ORDER, table1_methods(("chain", "gtsam")))
+    assert {(c.dataset_name, c.method) for c in cells} == {(s, m) for s in SEQUENCES for m in (PAPER, SMOOTHED)}
+    assert sum(c.folder.endswith("_klt_gtsam_keyframe_interval-3") for c in cells) == 2 * len(PAPER_ORDER)
+    rows = [{"dataset_name": seq, "method": m, "settings": (), "frontend": source, "status": "ok", "nc_mean": 100.0,
+             "ape_mean_rad": 0.1 + 0.01 * k, "time_offset_estimated": True, "same_as": "klt+chain" if m == "klt+gtsam" else ""}
+            for seq in SEQUENCES for m in ("klt+chain", "klt+gtsam") for k, source in enumerate(PAPER_ORDER)]
+    table = table1_markdown(rows, "paper", 25.0)  # a pose graph on consecutive edges alone: said to be the chain
+    assert table.count("Its trajectories are klt+chain's") == 1 and "## klt+gtsam\n\nConfiguration: `--config paper`. Its" in table
 
 
 def test_table2_orb_statistics_and_a_slam_trajectorys_ape(paper_site, short_sequence, tmp_path):
