@@ -6,6 +6,8 @@ as an extracted folder or as the dataset's `.zip`, read in place.
     groundtruth.txt  t px py pz qx qy qz qw   (camera-to-world)
     imu.txt          t ax ay az gx gy gz
     calib.txt        fx fy cx cy k1 k2 p1 p2 k3
+    camchain.yaml    instead of calib.txt, for a lens calib.txt cannot hold (fisheye): a kalibr
+                     camchain, its cam0 (docs/camera_models.md)
 
 Without `images.txt` the sequence is an event-only stream, sampled at a fixed
 rate or every N events.
@@ -36,9 +38,15 @@ from eas_vo.errors import DataError, DataWarnings
 from eas_vo.eventfile import load_event_text, write_events_text
 from eas_vo.io import atomic_path, data_line, parse_table, silenced_stderr, write_text_atomic
 from eas_vo.plugins import Dataset
-from eas_vo.types import CameraModel, ImuSeries, PoseSeries, empty_events
+from eas_vo.types import LENS_MODELS, CameraModel, ImuSeries, PoseSeries, empty_events
 from eas_vo.validation import check_range
 
+
+#: The calibration of a fisheye sequence in this layout: calib.txt has only the radial-tangential
+#: model, so (as fisheye datasets in this layout ship, e.g. UZH-FPV's DAVIS) it is kalibr's camchain.
+CAMCHAIN = "camchain.yaml"
+#: kalibr's distortion_model names that are lens models here (under the same names).
+KALIBR_MODELS = ("radtan", "equidistant")
 
 #: The largest sensor side [px] a dataset may have (the largest event sensors are a few thousand).
 MAX_SENSOR_PX = 16384
@@ -251,7 +259,10 @@ class EcdFolderDataset(Dataset):
     def _read_calib(self, width: int, height: int) -> CameraModel:
         where = self.source.label("calib.txt")
         if not self.source.exists("calib.txt"):
-            raise DataError(where, "file not found: calib.txt holds the intrinsics 'fx fy cx cy k1 k2 p1 p2 k3'")
+            if self.source.exists(CAMCHAIN):
+                return self._read_camchain(width, height)
+            raise DataError(where, f"file not found: calib.txt holds the intrinsics 'fx fy cx cy k1 k2 p1 p2 k3' "
+                                   f"(or {CAMCHAIN}, a kalibr camchain, those of a fisheye)")
         fields = self.source.read_bytes("calib.txt").decode(errors="replace").split()
         try:
             values = [float(v) for v in fields]
@@ -265,6 +276,40 @@ class EcdFolderDataset(Dataset):
         if problem:
             raise DataError(where, problem, 1)
         return CameraModel.from_calib(values, width, height)
+
+    def _read_camchain(self, width: int, height: int) -> CameraModel:
+        """cam0 of a kalibr camchain: pinhole `intrinsics` [fu fv pu pv], `distortion_model`
+        radtan (k1 k2 p1 p2) or equidistant (k1 k2 k3 k4) `distortion_coeffs`, `resolution` [w h]."""
+        import yaml
+
+        where = self.source.label(CAMCHAIN)
+        keys = ("camera_model", "intrinsics", "distortion_model", "distortion_coeffs", "resolution")
+        try:
+            document = yaml.safe_load(self.source.read_bytes(CAMCHAIN).decode(errors="replace"))
+        except yaml.YAMLError as e:
+            raise DataError(where, f"not YAML: {' '.join(str(e).split())}") from None
+        cam = document.get("cam0") if isinstance(document, dict) else None
+        missing = [key for key in keys if key not in cam] if isinstance(cam, dict) else ["cam0"]
+        if missing:
+            raise DataError(where, f"no {'cam0.' * isinstance(cam, dict)}{missing[0]}: a kalibr camchain's cam0 "
+                                   f"holds {', '.join(keys)}")
+        kind, model = cam["camera_model"], cam["distortion_model"]
+        numbers = [cam[k] for k in ("intrinsics", "distortion_coeffs", "resolution")]
+        if kind != "pinhole" or model not in KALIBR_MODELS:
+            raise DataError(where, f"cam0: camera_model {kind!r} with distortion_model {model!r}: eas-vo reads pinhole "
+                                   f"with {' or '.join(KALIBR_MODELS)}")
+        for key, value, n in zip(("intrinsics", "distortion_coeffs", "resolution"), numbers, (4, 4, 2)):
+            if not (isinstance(value, list) and len(value) == n and all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in value)):
+                raise DataError(where, f"cam0.{key} must be {n} finite numbers, found {value!r}")
+        intrinsics, dist, resolution = numbers
+        if tuple(resolution) != (width, height):
+            raise DataError(where, f"cam0.resolution {resolution[0]}x{resolution[1]} is not the frames' {width}x{height}")
+        dist = [float(v) for v in dist] + [0.0] * (len(LENS_MODELS[model]) - 4)  # radtan: k3 = 0
+        problem = calibration_problem([*map(float, intrinsics), *dist], width, height, model)
+        if problem:
+            raise DataError(where, f"cam0: {problem}")
+        fx, fy, cx, cy = map(float, intrinsics)
+        return CameraModel(width, height, np.array([[fx, 0.0, cx], [0.0, fy, cy], [0.0, 0.0, 1.0]]), np.array(dist), model)
 
     def _read_timed_table(self, name: str, ncols: int, what: str) -> tuple[np.ndarray, Callable] | None:
         """The table of `name` with times increasing, and row index -> file line; None if absent."""
@@ -300,7 +345,8 @@ def write_ecd_folder(
     ground_truth: PoseSeries | None = None,
     imu: ImuSeries | None = None,
 ) -> None:
-    """Write a sequence in the Event Camera Dataset text layout (each file atomically)."""
+    """Write a sequence in the Event Camera Dataset text layout (each file atomically); the
+    calibration as calib.txt, or for a fisheye as CAMCHAIN."""
     root = Path(root)
     (root / "images").mkdir(parents=True, exist_ok=True)
     lines = []
@@ -309,7 +355,10 @@ def write_ecd_folder(
         with atomic_path(root / name) as tmp:
             tmp.write_bytes(cv2.imencode(".png", frame)[1].tobytes())
         lines.append(f"{t:.9f} {name}")
-    write_text_atomic(root / "calib.txt", " ".join(f"{v:.12g}" for v in camera.calib_values()) + "\n")
+    if camera.model == "radtan":
+        write_text_atomic(root / "calib.txt", " ".join(f"{v:.12g}" for v in camera.calib_values()) + "\n")
+    else:
+        write_text_atomic(root / CAMCHAIN, camchain_yaml(camera))
     if ground_truth is not None:
         table = np.column_stack([ground_truth.t, ground_truth.p_w_c, ground_truth.q_w_c])
         write_text_atomic(root / "groundtruth.txt", _format_rows(table))
@@ -318,6 +367,20 @@ def write_ecd_folder(
     write_events_text(root / "events.txt", events, camera.width, camera.height)
     # images.txt last: a folder is complete only once its frame list exists.
     write_text_atomic(root / "images.txt", "\n".join(lines) + "\n")
+
+
+def camchain_yaml(camera: CameraModel) -> str:
+    """An equidistant `camera` as cam0 of a kalibr camchain (kalibr's radtan has no k3: those
+    go into calib.txt)."""
+    if camera.model != "equidistant":
+        raise ValueError(f"{camera.model} cameras go into calib.txt")
+    K = camera.K
+    return (f"# written by eas-vo: the camera of this sequence, in kalibr's camchain format\n"
+            f"cam0:\n  camera_model: pinhole\n"
+            f"  intrinsics: [{', '.join(repr(float(v)) for v in (K[0, 0], K[1, 1], K[0, 2], K[1, 2]))}]\n"
+            f"  distortion_model: {camera.model}\n"
+            f"  distortion_coeffs: [{', '.join(repr(float(v)) for v in camera.dist)}]\n"
+            f"  resolution: [{camera.width}, {camera.height}]\n")
 
 
 def _format_rows(table: np.ndarray) -> str:

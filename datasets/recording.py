@@ -8,7 +8,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from eas_vo.errors import DataError
-from eas_vo.types import PoseSeries
+from eas_vo.types import LENS_MODELS, PoseSeries
 from eas_vo.validation import check_range
 
 
@@ -72,11 +72,12 @@ def pose_series(where: str, table: np.ndarray, line_of=_row_number) -> PoseSerie
     return PoseSeries(t=table[:, 0], p_w_c=table[:, 1:4], q_w_c=q)
 
 
-def calibration_problem(values: list[float], width: int, height: int) -> str | None:
-    """What makes `fx fy cx cy [k1 k2 p1 p2 [k3]]` impossible for a width x height pinhole camera
-    with radial-tangential distortion, or None: focal lengths between 0.1 and 100 sensor widths
-    (fields of view of about 160 down to 0.6 degrees), the principal point on the sensor,
-    |k1|, |k2|, |k3| <= 10 and |p1|, |p2| <= 1 (beyond, the model no longer maps the sensor)."""
+def calibration_problem(values: list[float], width: int, height: int, model: str = "radtan") -> str | None:
+    """What makes `fx fy cx cy` and the distortion coefficients of lens `model` (LENS_MODELS order;
+    radtan's may be cut after p2 or left out) impossible for a width x height camera, or None:
+    focal lengths between 0.1 and 100 sensor widths (fields of view of about 160 down to 0.6
+    degrees), the principal point on the sensor, radial coefficients |k| <= 10 and tangential
+    ones |p| <= 1 (beyond, the model no longer maps the sensor)."""
     fx, fy, cx, cy = values[:4]
     side = max(width, height)
     if not (0.1 * side <= fx <= 100 * side and 0.1 * side <= fy <= 100 * side):
@@ -84,7 +85,8 @@ def calibration_problem(values: list[float], width: int, height: int) -> str | N
                f"({0.1 * side:g} to {100 * side:g} px)"
     if not (0 <= cx <= width and 0 <= cy <= height):
         return f"principal point cx = {cx:g}, cy = {cy:g} px lies off the {width}x{height} sensor"
-    dist = (values[4:] + [0.0] * 5)[:5]
-    if max(abs(dist[0]), abs(dist[1]), abs(dist[4])) > 10 or max(abs(dist[2]), abs(dist[3])) > 1:
-        return f"distortion k1 k2 p1 p2 k3 = {' '.join(f'{d:g}' for d in dist)} out of range (|k| <= 10, |p| <= 1)"
+    names = LENS_MODELS[model]
+    dist = (list(values[4:]) + [0.0] * len(names))[: len(names)]
+    if any(abs(d) > (1 if name.startswith("p") else 10) for name, d in zip(names, dist)):
+        return f"{model} distortion {' '.join(names)} = {' '.join(f'{d:g}' for d in dist)} out of range (|k| <= 10, |p| <= 1)"
     return None

@@ -20,7 +20,7 @@ from eas_vo.datasets.recording import StreamConfig, calibration_problem, check_i
 from eas_vo.errors import DataError, DataWarnings
 from eas_vo.eventfile import Validator, cache_key, file_identity, load_cached
 from eas_vo.plugins import Dataset
-from eas_vo.types import CameraModel, ImuSeries, empty_events
+from eas_vo.types import LENS_MODELS, CameraModel, ImuSeries, empty_events
 
 EVENT_MSG = """
 uint16 x
@@ -37,6 +37,11 @@ dvs_msgs/Event[] events
 #: What rosbags' reader raises on damaged bytes besides its ReaderError: failed asserts, unknown
 #: connection ids, undecodable header text, short reads of its own parsing, and what the chunk
 #: decompressors raise (bz2: OSError, EOFError, ValueError; lz4: RuntimeError).
+#: sensor_msgs/CameraInfo's distortion_model (sensor_msgs/distortion_models.h) -> lens model;
+#: an empty one is read as plumb_bob, the model of cameras calibrated by ROS's own tools.
+ROS_DISTORTION_MODELS = {"plumb_bob": "radtan", "": "radtan", "equidistant": "equidistant"}
+ROS_DISTORTION_NAMES = {"radtan": "plumb_bob", "equidistant": "equidistant"}
+
 DAMAGED_BAG_ERRORS = (AssertionError, KeyError, IndexError, ValueError, struct.error, OSError, EOFError, RuntimeError)
 #: Serialised dvs_msgs/Event: x, y, ts.sec, ts.nsec, polarity (13 bytes, packed).
 _EVENT_WIRE = np.dtype([("x", "<u2"), ("y", "<u2"), ("sec", "<u4"), ("nsec", "<u4"), ("p", "u1")])
@@ -174,14 +179,23 @@ class RosbagDataset(Dataset):
     def _read_camera(self) -> CameraModel:
         c = self.config
         for index, msg in self._messages(c.camera_info_topic, "sensor_msgs/msg/CameraInfo"):
+            where = f"{self.path}:{c.camera_info_topic}"
+            lens = ROS_DISTORTION_MODELS.get(msg.distortion_model)
+            if lens is None:
+                raise DataError(where, f"distortion_model {msg.distortion_model!r} is not one eas-vo reads "
+                                       f"({', '.join(repr(m) for m in ROS_DISTORTION_MODELS if m)})", index)
             K = np.asarray(msg.K, float)
-            dist = list(np.asarray(msg.D, float)[:5])
+            dist = list(np.asarray(msg.D, float)[: len(LENS_MODELS[lens])])
             if len(K) != 9 or not np.isfinite(K).all() or not np.isfinite(dist).all():
-                raise DataError(f"{self.path}:{c.camera_info_topic}", "invalid intrinsics K or distortion D", index)
+                raise DataError(where, "invalid intrinsics K or distortion D", index)
+            if lens == "equidistant" and len(dist) != 4:
+                raise DataError(where, f"the equidistant distortion_model takes 4 coefficients D, found {len(dist)}", index)
             values = [K[0], K[4], K[2], K[5], *dist]
-            problem = calibration_problem(values, int(msg.width), int(msg.height))
+            problem = calibration_problem(values, int(msg.width), int(msg.height), lens)
             if problem:
-                raise DataError(f"{self.path}:{c.camera_info_topic}", problem, index)
+                raise DataError(where, problem, index)
+            if lens == "equidistant":
+                return CameraModel(int(msg.width), int(msg.height), K.reshape(3, 3), np.array(dist), lens)
             return CameraModel.from_calib(values, int(msg.width), int(msg.height))
         raise DataError(self.path, f"no {c.camera_info_topic} message: the camera intrinsics are unknown")
 
@@ -293,7 +307,7 @@ def write_bag(dataset: Dataset, path: str | Path, config: BagConfig | None = Non
     t0 = float(dataset.frame_times()[0]) if len(dataset.frame_times()) else 0.0
     K = cam.K
     info = T["sensor_msgs/msg/CameraInfo"](
-        header=header(t0), height=cam.height, width=cam.width, distortion_model="plumb_bob",
+        header=header(t0), height=cam.height, width=cam.width, distortion_model=ROS_DISTORTION_NAMES[cam.model],
         D=np.asarray(cam.dist, float), K=np.asarray(K, float).ravel(), R=np.eye(3).ravel(),
         P=np.column_stack([K, np.zeros(3)]).ravel().astype(float), binning_x=0, binning_y=0,
         roi=T["sensor_msgs/msg/RegionOfInterest"](x_offset=0, y_offset=0, height=0, width=0, do_rectify=False),
