@@ -90,7 +90,7 @@ class CameraModel:
         pixel coordinates (N, 2) [px]. Rays need z > 0 for `radtan`; `equidistant` maps every
         direction but the backward axis (it distorts the angle to the optical axis, not its tangent)."""
         p = np.asarray(points, dtype=np.float64)
-        p = p.reshape(-1, p.shape[-1]) if p.ndim else p
+        p = p.reshape(-1, p.shape[-1])
         x, y = p[:, 0], p[:, 1]
         z = p[:, 2] if p.shape[1] == 3 else np.ones(len(p))
         if self.model == "equidistant":
