@@ -41,7 +41,7 @@ def camera_problem(values, width: int, height: int, model: str = "radtan") -> st
                f"({0.1 * side:g} to {100 * side:g} px)"
     if not (0 <= cx <= width and 0 <= cy <= height):
         return f"principal point cx = {cx:g}, cy = {cy:g} px lies off the {width}x{height} sensor"
-    dist = (list(values[4:]) + [0.0] * LENS_MODELS[model])[: LENS_MODELS[model]]
+    dist = (list(values[4:]) + [0.0] * len(LENS_MODELS[model]))[: len(LENS_MODELS[model])]
     if model == "equidistant":
         if max(map(abs, dist)) > 10:
             return f"distortion k1 k2 k3 k4 = {' '.join(f'{d:g}' for d in dist)} out of range (|k| <= 10)"
@@ -63,7 +63,7 @@ def camera_model(where: str, width: int, height: int, K, dist, model: str = "rad
         raise DataError(where, f"{at}sensor size {width}x{height} px is not a camera's")
     if not (np.isfinite(K).all() and np.isfinite(dist).all()):
         raise DataError(where, f"{at}intrinsics and distortion must be finite (found NaN or infinity)")
-    n = LENS_MODELS[model]
+    n = len(LENS_MODELS[model])
     if model == "equidistant" and len(dist) != n:
         raise DataError(where, f"{at}the equidistant lens model takes 4 distortion coefficients (k1 k2 k3 k4), found {len(dist)}")
     if model == "radtan":
@@ -205,16 +205,20 @@ YAML_LENS_MODELS = {"radtan": "radtan", "plumb_bob": "radtan", "equidistant": "e
 
 
 def _load_yaml(path: str | Path) -> dict:
+    return _parse_yaml(_read_bytes(path), str(path))
+
+
+def _parse_yaml(data: bytes, where: str) -> dict:
     import yaml
 
     try:
-        content = yaml.safe_load(_read_bytes(path))
+        content = yaml.safe_load(data)
     except yaml.YAMLError as exc:
         mark = getattr(exc, "problem_mark", None)
-        raise DataError(str(path), f"not valid YAML ({getattr(exc, 'problem', None) or exc})",
+        raise DataError(where, f"not valid YAML ({getattr(exc, 'problem', None) or exc})",
                         None if mark is None else mark.line + 1) from None
     if not isinstance(content, dict):
-        raise DataError(str(path), "not a YAML mapping of calibration keys")
+        raise DataError(where, "not a YAML mapping of calibration keys")
     return content
 
 
@@ -237,8 +241,12 @@ def _lens(where: str, table: dict, key: str) -> str:
 
 def read_kalibr_camchain(path: str | Path, camera: str = "cam0") -> CameraModel:
     """Camera `camera` (cam0, cam1, ...) of a kalibr camchain YAML (pinhole cameras only)."""
-    where = str(path)
-    content = _load_yaml(path)
+    return parse_kalibr_camchain(_read_bytes(path), str(path), camera)
+
+
+def parse_kalibr_camchain(data: bytes, where: str, camera: str = "cam0") -> CameraModel:
+    """Camera `camera` of the kalibr camchain YAML `data` (read from `where`, for messages)."""
+    content = _parse_yaml(data, where)
     cam = content.get(camera)
     if not isinstance(cam, dict):
         found = ", ".join(k for k, v in content.items() if isinstance(v, dict) and "intrinsics" in v)

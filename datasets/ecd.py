@@ -6,6 +6,8 @@ as an extracted folder or as the dataset's `.zip`, read in place.
     groundtruth.txt  t px py pz qx qy qz qw   (camera-to-world)
     imu.txt          t ax ay az gx gy gz
     calib.txt        fx fy cx cy k1 k2 p1 p2 k3
+    camchain.yaml    instead of calib.txt, for a lens calib.txt cannot hold (fisheye): a kalibr
+                     camchain, its cam0 (docs/camera_models.md)
 
 Without `images.txt` the sequence is an event-only stream, sampled at a fixed
 rate or every N events.
@@ -23,7 +25,7 @@ import cv2
 import numpy as np
 
 from eas_vo.datasets import ecd_catalogue
-from eas_vo.datasets.calibration import parse_ecd_calib
+from eas_vo.datasets.calibration import parse_ecd_calib, parse_kalibr_camchain
 from eas_vo.datasets.recording import StreamConfig, event_sample_times, ground_truth_table, timed_table
 from eas_vo.datasets.sources import MARKERS, open_source
 from eas_vo.errors import DataError, DataWarnings
@@ -33,6 +35,10 @@ from eas_vo.plugins import Dataset
 from eas_vo.types import CameraModel, ImuSeries, PoseSeries, empty_events
 from eas_vo.validation import check_range
 
+
+#: The calibration of a fisheye sequence in this layout: calib.txt has only the radial-tangential
+#: model, so (as fisheye datasets in this layout ship, e.g. UZH-FPV's DAVIS) it is kalibr's camchain.
+CAMCHAIN = "camchain.yaml"
 
 #: The largest sensor side [px] a dataset may have (the largest event sensors are a few thousand).
 MAX_SENSOR_PX = 16384
@@ -245,8 +251,19 @@ class EcdFolderDataset(Dataset):
     def _read_calib(self, width: int, height: int) -> CameraModel:
         where = self.source.label("calib.txt")
         if not self.source.exists("calib.txt"):
-            raise DataError(where, "file not found: calib.txt holds the intrinsics 'fx fy cx cy k1 k2 p1 p2 k3'")
+            if self.source.exists(CAMCHAIN):
+                return self._read_camchain(width, height)
+            raise DataError(where, f"file not found: calib.txt holds the intrinsics 'fx fy cx cy k1 k2 p1 p2 k3' "
+                                   f"(or {CAMCHAIN}, a kalibr camchain, those of a fisheye)")
         return parse_ecd_calib(self.source.read_bytes("calib.txt"), where, width, height)
+
+    def _read_camchain(self, width: int, height: int) -> CameraModel:
+        """cam0 of the folder's kalibr camchain (calibration.parse_kalibr_camchain), for the frames' size."""
+        where = self.source.label(CAMCHAIN)
+        camera = parse_kalibr_camchain(self.source.read_bytes(CAMCHAIN), where)
+        if (camera.width, camera.height) != (width, height):
+            raise DataError(where, f"cam0.resolution {camera.width}x{camera.height} is not the frames' {width}x{height}")
+        return camera
 
     def _read_ground_truth(self) -> PoseSeries | None:
         if not self.source.exists("groundtruth.txt"):
@@ -269,7 +286,8 @@ def write_ecd_folder(
     ground_truth: PoseSeries | None = None,
     imu: ImuSeries | None = None,
 ) -> None:
-    """Write a sequence in the Event Camera Dataset text layout (each file atomically).
+    """Write a sequence in the Event Camera Dataset text layout (each file atomically); the
+    calibration as calib.txt, or for a fisheye as CAMCHAIN.
 
     `frames`: the uint8 frame at each of `frame_times` [s], taken one at a time (a generator
     keeps one in memory); None for an event-only stream (no images/ nor images.txt)."""
@@ -281,7 +299,10 @@ def write_ecd_folder(
         with atomic_path(root / name) as tmp:
             tmp.write_bytes(cv2.imencode(".png", frame)[1].tobytes())
         lines.append(f"{t:.9f} {name}")
-    write_text_atomic(root / "calib.txt", " ".join(f"{v:.12g}" for v in camera.calib_values()) + "\n")
+    if camera.model == "radtan":
+        write_text_atomic(root / "calib.txt", " ".join(f"{v:.12g}" for v in camera.calib_values()) + "\n")
+    else:
+        write_text_atomic(root / CAMCHAIN, camchain_yaml(camera))
     if ground_truth is not None:
         table = np.column_stack([ground_truth.t, ground_truth.p_w_c, ground_truth.q_w_c])
         write_text_atomic(root / "groundtruth.txt", _format_rows(table))
@@ -290,6 +311,20 @@ def write_ecd_folder(
     write_events_text(root / "events.txt", events, camera.width, camera.height)
     if frames is not None:  # images.txt last: a folder is complete only once its frame list exists.
         write_text_atomic(root / "images.txt", "\n".join(lines) + "\n")
+
+
+def camchain_yaml(camera: CameraModel) -> str:
+    """An equidistant `camera` as cam0 of a kalibr camchain (kalibr's radtan has no k3: those
+    go into calib.txt)."""
+    if camera.model != "equidistant":
+        raise ValueError(f"{camera.model} cameras go into calib.txt")
+    K = camera.K
+    return (f"# written by eas-vo: the camera of this sequence, in kalibr's camchain format\n"
+            f"cam0:\n  camera_model: pinhole\n"
+            f"  intrinsics: [{', '.join(repr(float(v)) for v in (K[0, 0], K[1, 1], K[0, 2], K[1, 2]))}]\n"
+            f"  distortion_model: {camera.model}\n"
+            f"  distortion_coeffs: [{', '.join(repr(float(v)) for v in camera.dist)}]\n"
+            f"  resolution: [{camera.width}, {camera.height}]\n")
 
 
 def _format_rows(table: np.ndarray) -> str:

@@ -35,6 +35,8 @@ uint32 height
 uint32 width
 dvs_msgs/Event[] events
 """
+#: The sensor_msgs/CameraInfo distortion_model a lens model is written as.
+ROS_DISTORTION_NAMES = {"radtan": "plumb_bob", "equidistant": "equidistant"}
 #: What rosbags' reader raises on damaged bytes besides its ReaderError: failed asserts, unknown
 #: connection ids, undecodable header text, short reads of its own parsing, and what the chunk
 #: decompressors raise (bz2: OSError, EOFError, ValueError; lz4: RuntimeError).
@@ -287,7 +289,7 @@ def write_bag(dataset: Dataset, path: str | Path, config: BagConfig | None = Non
     t0 = float(dataset.frame_times()[0]) if len(dataset.frame_times()) else 0.0
     K = cam.K
     info = T["sensor_msgs/msg/CameraInfo"](
-        header=header(t0), height=cam.height, width=cam.width, distortion_model="plumb_bob",
+        header=header(t0), height=cam.height, width=cam.width, distortion_model=ROS_DISTORTION_NAMES[cam.model],
         D=np.asarray(cam.dist, float), K=np.asarray(K, float).ravel(), R=np.eye(3).ravel(),
         P=np.column_stack([K, np.zeros(3)]).ravel().astype(float), binning_x=0, binning_y=0,
         roi=T["sensor_msgs/msg/RegionOfInterest"](x_offset=0, y_offset=0, height=0, width=0, do_rectify=False),

@@ -4,18 +4,22 @@ from __future__ import annotations
 
 import dataclasses
 import hashlib
+import math
 import os
 import shutil
 import sys
 from dataclasses import dataclass
 from pathlib import Path
 
-from eas_vo.datasets.ecd import EcdFolderDataset
+from eas_vo.datasets.ecd import MAX_SENSOR_PX, EcdFolderDataset
+from eas_vo.datasets.calibration import camera_problem
 from eas_vo.datasets.simulator import SimConfig, simulate
+from eas_vo.datasets.simulator.generate import SENSORS, SimCamera
 from eas_vo.datasets.simulator.sensor import DvsModel
-from eas_vo.errors import EasVoError
+from eas_vo.errors import ConfigError, EasVoError
 from eas_vo.io import cache_folder
-from eas_vo.validation import check_range
+from eas_vo.types import LENS_MODELS
+from eas_vo.validation import check_choice, check_range
 
 #: Named sequences. `default` is the embedded sequence `eas-vo run` uses.
 PRESETS = {
@@ -26,21 +30,61 @@ PRESETS = {
 
 @dataclass(frozen=True)
 class SyntheticConfig(DvsModel):
-    """The scene's light, the camera's speed and the DVS pixel (DvsModel's fields, same units
-    and defaults).
+    """The scene's light, the camera's speed, the camera and the DVS pixel (DvsModel's fields,
+    same units and defaults).
 
     Attributes:
         illumination: scale of the scene's light (1.0: the default dim room, 0.1: ten times darker).
         speed: scale of the motion's speed (1.0: hand-held, 44 deg/s mean; 4.0: 177 deg/s, more
             than the real excerpt's 147 over its 30 s); the same path, travelled faster.
+        sensor: the camera's preset (SENSORS): `davis240` (240x180, radial-tangential lens) or
+            `davis346` (346x260, MVSEC's calibration: an equidistant lens).
+        width, height: another sensor size [px] (0: the preset's), with the preset's diagonal
+            field of view unless `focal_px` is given.
+        focal_px: the focal length [px] (0: the preset's, scaled to the size).
+        lens: `radtan` or `equidistant` ("": the preset's); dist: its coefficients in that model's
+            order (empty: the preset's for its own lens, none for the other).
     """
 
     illumination: float = 1.0
     speed: float = 1.0
+    sensor: str = "davis240"
+    width: int = 0
+    height: int = 0
+    focal_px: float = 0.0
+    lens: str = ""
+    dist: tuple = ()
+
+    def camera(self) -> SimCamera:
+        """The simulated camera these values give."""
+        preset = SENSORS[self.sensor]
+        cam = preset.resized(self.width or preset.width, self.height or preset.height)
+        if self.focal_px:
+            cam = dataclasses.replace(cam, fx=self.focal_px, fy=self.focal_px)
+        lens = self.lens or cam.lens
+        if self.dist:
+            dist = tuple(float(v) for v in self.dist)
+        else:
+            dist = cam.dist if lens == cam.lens else (0.0,) * len(LENS_MODELS[lens])
+        return dataclasses.replace(cam, lens=lens, dist=dist)
 
     def validate(self) -> None:
         check_range(self, "illumination", 0.0, 1e6, lo_open=True)
         check_range(self, "speed", 0.0, 20.0, lo_open=True)
+        check_choice(self, "sensor", SENSORS)
+        check_range(self, "width", 0, MAX_SENSOR_PX)
+        check_range(self, "height", 0, MAX_SENSOR_PX)
+        check_range(self, "focal_px", 0.0, 100.0 * MAX_SENSOR_PX)
+        check_choice(self, "lens", ("", *LENS_MODELS))
+        lens = self.lens or SENSORS[self.sensor].lens
+        names = LENS_MODELS[lens]
+        if self.dist and (len(self.dist) != len(names) or not all(isinstance(v, (int, float)) and not isinstance(v, bool)
+                                                                   and math.isfinite(v) for v in self.dist)):
+            raise ConfigError(f"dist = {list(self.dist)!r}: the {lens} lens takes {len(names)} finite numbers ({' '.join(names)})")
+        cam = self.camera()
+        problem = camera_problem([cam.fx, cam.fy, cam.cx, cam.cy, *cam.dist], cam.width, cam.height, cam.lens)
+        if problem:
+            raise ConfigError(f"{'dist' if 'distortion' in problem else 'focal_px'}: the camera is impossible: {problem}")
         check_range(self, "contrast_threshold", 0.01, 5.0)
         check_range(self, "threshold_sigma", 0.0, 1.0)
         check_range(self, "refractory_s", 0.0, 1.0)
@@ -55,9 +99,9 @@ class SyntheticConfig(DvsModel):
         check_range(self, "hot_pixel_rate_hz", 0.0, 1e6)
 
     def applied_to(self, preset: SimConfig) -> SimConfig:
-        """The preset seen under this light by this pixel, at this speed."""
+        """The preset seen by this camera and pixel under this light, at this speed."""
         dvs = DvsModel(**{f.name: getattr(self, f.name) for f in dataclasses.fields(DvsModel)})
-        return dataclasses.replace(preset, illumination=self.illumination, speed=self.speed, dvs=dvs)
+        return dataclasses.replace(preset, illumination=self.illumination, speed=self.speed, dvs=dvs, camera=self.camera())
 
 
 def sequence_folder(name: str, config: SyntheticConfig | None = None, progress: bool = True) -> Path:
@@ -82,6 +126,12 @@ def sequence_folder(name: str, config: SyntheticConfig | None = None, progress: 
     return folder
 
 
+def _label_value(value) -> str:
+    if isinstance(value, tuple):
+        return "[" + ",".join(f"{v:g}" for v in value) + "]"
+    return value if isinstance(value, str) else f"{value:g}"
+
+
 class SyntheticDataset(EcdFolderDataset):
     """A simulated sequence (textured HDR room, hand-held motion), read like an ECD folder."""
 
@@ -103,4 +153,4 @@ class SyntheticDataset(EcdFolderDataset):
         config = config or SyntheticConfig()
         super().__init__(sequence_folder(name or "default", config, progress=sys.stderr.isatty()))
         changed = {f.name: getattr(config, f.name) for f in dataclasses.fields(config) if getattr(config, f.name) != f.default}
-        self.label = f"synthetic:{name or 'default'}" + "".join(f" {k}={v:g}" for k, v in changed.items())
+        self.label = f"synthetic:{name or 'default'}" + "".join(f" {k}={_label_value(v)}" for k, v in changed.items())

@@ -733,8 +733,10 @@ def _parse_simulate(sub) -> None:
     sim = sub.add_parser(
         "simulate",
         help="write a synthetic dim-scene DAVIS sequence (ECD layout)",
-        description="Simulate a textured HDR room seen by a hand-held DAVIS240: APS frames, events, "
-        "ground truth (200 Hz), IMU (200 Hz), calib.txt, in the Event Camera Dataset text layout.",
+        description="Simulate a textured HDR room seen by a hand-held DAVIS240 (or another camera: "
+        "--set dataset.sensor=davis346, dataset.width=W dataset.height=H, dataset.lens=equidistant "
+        "dataset.dist=[k1,k2,k3,k4]): APS frames, events, ground truth (200 Hz), IMU (200 Hz) and the "
+        "calibration (calib.txt; camchain.yaml, kalibr's, for a fisheye) in the Event Camera Dataset text layout.",
     )
     _add_output_options(sim, required=True)
     sim.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
@@ -745,7 +747,7 @@ def _parse_simulate(sub) -> None:
                      help="scale of the camera's speed (default 1.0, hand-held: 44 deg/s mean; 4 gives 177 deg/s, "
                      "more than the real shapes_rotation's 147): the same path, travelled X times as fast")
     sim.add_argument("--set", dest="assignments", action="append", default=[], metavar="dataset.KEY=VALUE",
-                     help="a DVS pixel value, as for run (see `eas-vo list`: the synthetic dataset's keys)")
+                     help="a camera or DVS pixel value, as for run (see `eas-vo list`: the synthetic dataset's keys)")
     sim.add_argument("--stats", action="store_true",
                      help="print what the simulator knows of its events: rate, noise fraction, noise rate "
                      "per pixel and median latency in dark and bright regions")
@@ -772,8 +774,9 @@ def cmd_simulate(args) -> int:
     check_output_folder(args.out, replace=args.overwrite)
     with output_folder(args.out, replace=args.overwrite, keep_partial=False) as staging:  # whole, or not at all
         stats = simulate(config, staging, progress=sys.stderr.isatty())
+    cam = config.camera
     print(f"wrote a {config.duration_s:g} s synthetic sequence (seed {config.seed}, illumination {config.illumination:g}, "
-          f"speed {config.speed:g}) to {args.out}")
+          f"speed {config.speed:g}, {cam.width}x{cam.height} {cam.lens}) to {args.out}")
     if args.stats:
         print("\n".join("  " + line for line in stats.lines()))
     return 0

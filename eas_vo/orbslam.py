@@ -18,7 +18,7 @@ import numpy as np
 
 from eas_vo.errors import DataError, EasVoError
 from eas_vo.io import data_line, figure_text, json_text, markdown_cell, output_folder, parse_table, write_text_atomic
-from eas_vo.types import CameraModel, PoseSeries
+from eas_vo.types import LENS_MODELS, CameraModel, PoseSeries
 
 FORMATS = ("tum", "euroc")
 
@@ -28,18 +28,26 @@ VIEWER = {"KeyFrameSize": 0.05, "KeyFrameLineWidth": 1, "GraphLineWidth": 0.9, "
           "CameraLineWidth": 3, "ViewpointX": 0, "ViewpointY": -0.7, "ViewpointZ": -1.8, "ViewpointF": 500}
 
 
+#: ORB-SLAM3's name (`Camera.type`) for each lens model; ORB-SLAM2 ignores the key (its one model
+#: is the pinhole one).
+ORBSLAM_CAMERA_TYPES = {"radtan": "PinHole", "equidistant": "KannalaBrandt8"}
+
+
 def settings_yaml(camera: CameraModel, fps: float) -> str:
-    """ORB-SLAM2 monocular settings: the calibration, the frame rate, grayscale images."""
-    k1, k2, p1, p2, k3 = (float(v) for v in camera.dist)
+    """ORB-SLAM2 / ORB-SLAM3 monocular settings (ORB-SLAM3's legacy layout, which ORB-SLAM2
+    reads too): the calibration with its lens model, the frame rate, grayscale images. A
+    fisheye (`equidistant`) camera is ORB-SLAM3's KannalaBrandt8 with Camera.k1..k4;
+    ORB-SLAM2 has no fisheye model."""
     values = {
         "Camera.fx": camera.K[0, 0], "Camera.fy": camera.K[1, 1], "Camera.cx": camera.K[0, 2], "Camera.cy": camera.K[1, 2],
-        "Camera.k1": k1, "Camera.k2": k2, "Camera.p1": p1, "Camera.p2": p2, "Camera.k3": k3,
+        **{f"Camera.{name}": float(v) for name, v in zip(LENS_MODELS[camera.model], camera.dist)},
         "Camera.width": camera.width, "Camera.height": camera.height, "Camera.fps": fps,
         "Camera.RGB": 0,  # the images are grayscale; ORB-SLAM2 reads the flag, not the channel order
         **{f"ORBextractor.{k}": v for k, v in ORB_EXTRACTOR.items()},
         **{f"Viewer.{k}": v for k, v in VIEWER.items()},
     }
-    lines = ["%YAML:1.0", "# written by eas-vo export: monocular ORB-SLAM2 settings for this sequence"]
+    lines = ["%YAML:1.0", "# written by eas-vo export: monocular ORB-SLAM2 / ORB-SLAM3 settings for this sequence",
+             f'Camera.type: "{ORBSLAM_CAMERA_TYPES[camera.model]}"']
     lines += [f"{key}: {_yaml_number(value)}" for key, value in values.items()]
     return "\n".join(lines) + "\n"
 

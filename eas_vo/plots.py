@@ -27,6 +27,8 @@ def _figure(**kwargs):
 
 #: How a frame's status is drawn in the status row (ok and first: not at all), bottom to top.
 STATUS_COLOURS = {"weak": "tab:orange", "lost": "tab:red"}
+#: The widest a gallery shows an image [figure px]; the margin [px] around each for its labels.
+GALLERY_MAX_PX, GALLERY_MARGIN_PX = 480, 24
 
 
 def plot_rotation(path: str | Path, result, title: str = "") -> None:
@@ -108,9 +110,14 @@ def _draw_euler(column, t: np.ndarray, R_est: np.ndarray, R_gt: np.ndarray | Non
 
 
 def plot_gallery(path: str | Path, names: list[str], images: dict, frame_indices: list[int], title: str = "") -> None:
-    """A grid: one row per frame, one column per frontend (the paper's Fig. 1)."""
+    """A grid: one row per frame, one column per frontend (the paper's Fig. 1); each image at
+    one figure pixel per sensor pixel, or shrunk (antialiased) to GALLERY_MAX_PX wide."""
     rows, cols = len(frame_indices), len(names)
-    fig = _figure(figsize=(2.4 * cols, 1.9 * rows + 0.4), layout="constrained")
+    height, width = next((im.shape for im in images.values() if im is not None), (3, 4))
+    shown_px = min(width, GALLERY_MAX_PX)
+    interpolation = "nearest" if width <= GALLERY_MAX_PX else "antialiased"
+    cell_w, cell_h = (shown_px + GALLERY_MARGIN_PX) / 100, (shown_px * height / width + GALLERY_MARGIN_PX) / 100  # [in] at 100 dpi
+    fig = _figure(figsize=(cell_w * cols, cell_h * rows + 0.4), layout="constrained")
     axes = fig.subplots(rows, cols, squeeze=False)
     for r, k in enumerate(frame_indices):
         for c, name in enumerate(names):
@@ -119,7 +126,7 @@ def plot_gallery(path: str | Path, names: list[str], images: dict, frame_indices
             if image is None:
                 ax.text(0.5, 0.5, "needs frames", ha="center", va="center", fontsize="small")
             else:
-                ax.imshow(image, cmap="gray", vmin=0, vmax=255, interpolation="nearest")
+                ax.imshow(image, cmap="gray", vmin=0, vmax=255, interpolation=interpolation)
             ax.set_xticks([])
             ax.set_yticks([])
             if r == 0:

@@ -182,9 +182,6 @@ def convert(config: ResolvedConfig, out: str | Path, progress: bool = False, rep
 
     rc = config.run
     dataset = registry.open_dataset(rc.dataset, config.dataset)
-    if dataset.camera.model != "radtan":
-        raise EasVoError(f"{dataset.label}: its {dataset.camera.model} lens model cannot be written as an Event Camera "
-                         "Dataset calib.txt, which holds radial-tangential coefficients (fx fy cx cy k1 k2 p1 p2 k3)")
     window = dataset.window(rc.start_s, rc.duration_s)
     if len(window) == 0:
         raise EasVoError(f"{dataset.label}: the window start={rc.start_s} s, duration={rc.duration_s} s holds no sample")

@@ -43,20 +43,22 @@ def search_times(events: np.ndarray, times) -> np.ndarray:
         hi = np.where(active & ~below, mid, hi)
 
 
-#: Lens models and their distortion coefficients: `radtan`, OpenCV's radial-tangential
-#: (k1, k2, p1, p2, k3: the ECD calib.txt order) and `equidistant`, the Kannala-Brandt fisheye
-#: model of OpenCV's cv2.fisheye and kalibr (k1, k2, k3, k4).
-LENS_MODELS = {"radtan": 5, "equidistant": 4}
+#: Lens models and the names of their distortion coefficients, in order: `radtan`, OpenCV's
+#: radial-tangential (the ECD calib.txt order, ROS's plumb_bob) and `equidistant`, the
+#: Kannala-Brandt fisheye model of OpenCV's cv2.fisheye, kalibr and ROS (ORB-SLAM3's
+#: KannalaBrandt8). docs/camera_models.md has their equations.
+LENS_MODELS = {"radtan": ("k1", "k2", "p1", "p2", "k3"), "equidistant": ("k1", "k2", "k3", "k4")}
 
 
 @dataclass(frozen=True)
 class CameraModel:
-    """Pinhole camera with a lens model (LENS_MODELS).
+    """Pinhole camera with a lens model (LENS_MODELS): it alone projects, undistorts and makes
+    undistortion maps, so a new lens model is a change here only.
 
     Attributes:
         width, height: sensor size [px].
         K: 3x3 intrinsic matrix [px].
-        dist: distortion coefficients in the order of `model`.
+        dist: distortion coefficients in the order of `model` (LENS_MODELS).
         model: `radtan` (default) or `equidistant`.
     """
 
@@ -69,8 +71,8 @@ class CameraModel:
     def __post_init__(self):
         if self.model not in LENS_MODELS:
             raise ValueError(f"unknown lens model {self.model!r}: one of {', '.join(LENS_MODELS)}")
-        if len(self.dist) != LENS_MODELS[self.model]:
-            raise ValueError(f"the {self.model} lens model takes {LENS_MODELS[self.model]} distortion coefficients, not {len(self.dist)}")
+        if len(self.dist) != len(LENS_MODELS[self.model]):
+            raise ValueError(f"the {self.model} lens model takes {len(LENS_MODELS[self.model])} distortion coefficients, not {len(self.dist)}")
 
     @classmethod
     def from_calib(cls, values, width: int = 240, height: int = 180) -> "CameraModel":
@@ -83,8 +85,35 @@ class CameraModel:
     def focal_px(self) -> float:
         return float(0.5 * (self.K[0, 0] + self.K[1, 1]))
 
+    def project(self, points: np.ndarray) -> np.ndarray:
+        """Normalised image coordinates (N, 2) or rays in the camera frame (N, 3) -> distorted
+        pixel coordinates (N, 2) [px]. Rays need z > 0 for `radtan`; `equidistant` maps every
+        direction but the backward axis (it distorts the angle to the optical axis, not its tangent)."""
+        p = np.asarray(points, dtype=np.float64)
+        p = p.reshape(-1, p.shape[-1])
+        x, y = p[:, 0], p[:, 1]
+        z = p[:, 2] if p.shape[1] == 3 else np.ones(len(p))
+        if self.model == "equidistant":
+            k1, k2, k3, k4 = self.dist
+            r = np.hypot(x, y)
+            theta = np.arctan2(r, z)
+            t2 = theta * theta
+            theta_d = theta * (1.0 + t2 * (k1 + t2 * (k2 + t2 * (k3 + t2 * k4))))
+            # theta_d / r -> 1 / z on the optical axis
+            scale = np.divide(theta_d, r, out=1.0 / np.where(z > 0, z, 1.0), where=r > 0)
+            xd, yd = x * scale, y * scale
+        else:
+            k1, k2, p1, p2, k3 = self.dist
+            x, y = x / z, y / z
+            r2 = x * x + y * y
+            radial = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
+            xd = x * radial + 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x)
+            yd = y * radial + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y
+        K = self.K
+        return np.column_stack([K[0, 0] * xd + K[0, 1] * yd + K[0, 2], K[1, 1] * yd + K[1, 2]])
+
     def undistort(self, pts_px: np.ndarray) -> np.ndarray:
-        """Distorted pixel coordinates (N, 2) -> normalised image coordinates (N, 2)."""
+        """Distorted pixel coordinates (N, 2) [px] -> normalised image coordinates (N, 2)."""
         pts = np.ascontiguousarray(pts_px, dtype=np.float64).reshape(-1, 1, 2)
         if len(pts) == 0:
             return np.empty((0, 2))
@@ -92,7 +121,18 @@ class CameraModel:
             return cv2.fisheye.undistortPoints(pts, self.K, self.dist).reshape(-1, 2)
         return cv2.undistortPoints(pts, self.K, self.dist).reshape(-1, 2)
 
+    def undistort_maps(self, K_new: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """cv2.remap maps (x, y), each (height, width) float32 [px]: for every pixel of the
+        undistorted pinhole view with intrinsics K_new (default K), where it lies in this
+        camera's image."""
+        K_new = self.K if K_new is None else np.asarray(K_new, dtype=np.float64)
+        u, v = np.meshgrid(np.arange(self.width, dtype=np.float64), np.arange(self.height, dtype=np.float64))
+        rays = np.stack([u.ravel(), v.ravel(), np.ones(u.size)], 1) @ np.linalg.inv(K_new).T
+        px = self.project(rays).astype(np.float32)
+        return px[:, 0].reshape(u.shape), px[:, 1].reshape(u.shape)
+
     def calib_values(self) -> list[float]:
+        """`fx fy cx cy` and the distortion coefficients in the order of `model`."""
         K = self.K
         return [K[0, 0], K[1, 1], K[0, 2], K[1, 2], *self.dist]
 

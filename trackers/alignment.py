@@ -55,8 +55,7 @@ class PhotometricAlignment:
     """Scores and finds rotations between two uint8 images of `camera` by their intensities."""
 
     def __init__(self, camera: CameraModel):
-        size = (camera.width, camera.height)
-        self._maps = cv2.initUndistortRectifyMap(camera.K, camera.dist, None, camera.K, size, cv2.CV_32FC1)
+        self._maps = camera.undistort_maps()
         seen = self._undistort(np.full((camera.height, camera.width), 255, np.uint8)) == 255
         self._levels = {f: _Level(camera, seen, f) for f in sorted({SCORE_FOCAL_PX, *ALIGN_FOCAL_PX})}
         self._grid = np.array([cv2.Rodrigues(np.radians([tilt, pan, roll]))[0]

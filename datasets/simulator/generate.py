@@ -20,6 +20,50 @@ SIMULATOR_VERSION = 3  # bump when the output for a given config changes (invali
 
 
 @dataclass(frozen=True)
+class SimCamera:
+    """The simulated camera: sensor size [px], pinhole intrinsics [px] and its lens, a model of
+    LENS_MODELS with its coefficients (in that model's order). The default is the DAVIS240
+    (240x180) with the radial-tangential lens every earlier sequence had."""
+
+    width: int = 240
+    height: int = 180
+    fx: float = 200.0
+    fy: float = 200.0
+    cx: float = 121.5
+    cy: float = 89.0
+    lens: str = "radtan"
+    dist: tuple = (-0.25, 0.08, 0.0002, -0.0003, 0.0)
+
+    def model(self) -> CameraModel:
+        K = np.array([[self.fx, 0.0, self.cx], [0.0, self.fy, self.cy], [0.0, 0.0, 1.0]])
+        return CameraModel(self.width, self.height, K, np.array(self.dist, dtype=float), self.lens)
+
+    def resized(self, width: int, height: int) -> "SimCamera":
+        """This camera with a width x height sensor [px]: the same diagonal field of view (focal
+        lengths scaled with the diagonal), the principal point at the same relative place, the
+        same lens (its coefficients act on normalised coordinates or angles, not pixels)."""
+        if (width, height) == (self.width, self.height):
+            return self
+        scale = math.hypot(width, height) / math.hypot(self.width, self.height)
+        return dataclasses.replace(self, width=width, height=height, fx=self.fx * scale, fy=self.fy * scale,
+                                   cx=(self.cx + 0.5) * width / self.width - 0.5, cy=(self.cy + 0.5) * height / self.height - 0.5)
+
+
+#: Sensors the simulator has a preset for: size and a typical calibration.
+#: davis240: the simulator's DAVIS240 (240x180), near the Event Camera Dataset's DAVIS240C
+#: calibration (fx 199 px, k1 -0.37).
+#: davis346: the DAVIS346 (346x260, 18.5 um pixels: iniVation's datasheet) as calibrated in MVSEC
+#: (Zhu et al., RA-L 2018), the left camera of its indoor_flying kalibr camchain: pinhole with an
+#: equidistant lens, 118 deg across the diagonal (the davis240: 82).
+SENSORS = {
+    "davis240": SimCamera(),
+    "davis346": SimCamera(346, 260, 226.38018519795807, 226.15002947047415, 173.6470807871759, 133.73271487507847,
+                          "equidistant", (-0.048031442223833355, 0.011330957517194437, -0.055378166304281135, 0.021500973881459395)),
+}
+DAVIS240_CAMERA = SENSORS["davis240"].model()
+
+
+@dataclass(frozen=True)
 class SimConfig:
     """A synthetic sequence.
 
@@ -49,6 +93,7 @@ class SimConfig:
     aps: ApsModel = field(default_factory=ApsModel)
     dvs: DvsModel = field(default_factory=DvsModel)
     imu: ImuModel = field(default_factory=ImuModel)
+    camera: SimCamera = field(default_factory=SimCamera)
 
     def validate(self) -> None:
         check_range(self, "duration_s", 0.2, 3600.0)
@@ -59,22 +104,18 @@ class SimConfig:
 
     def fingerprint(self) -> str:
         """The simulator version and every value, float fields as floats (speed=4 and 4.0 are
-        one sequence)."""
-        return repr((SIMULATOR_VERSION, _as_typed_dict(self)))
+        one sequence); the default camera left out, so that sequences simulated before the
+        camera could change keep their key (their output is the same)."""
+        values = _as_typed_dict(self)
+        if self.camera == SimCamera():
+            del values["camera"]
+        return repr((SIMULATOR_VERSION, values))
 
 
 def _as_typed_dict(config) -> dict:
     """dataclasses.asdict, with the values of fields annotated `float` converted to float."""
     return {f.name: _as_typed_dict(v) if dataclasses.is_dataclass(v) else float(v) if f.type == "float" else v
             for f in dataclasses.fields(config) for v in [getattr(config, f.name)]}
-
-
-DAVIS240_CAMERA = CameraModel(
-    width=240,
-    height=180,
-    K=np.array([[200.0, 0.0, 121.5], [0.0, 200.0, 89.0], [0.0, 0.0, 1.0]]),
-    dist=np.array([-0.25, 0.08, 0.0002, -0.0003, 0.0]),
-)
 
 
 def camera_rays(camera: CameraModel) -> np.ndarray:
@@ -129,7 +170,7 @@ def simulate(config: SimConfig, out_dir: str | Path, progress: bool = False) -> 
 
     seeds = np.random.SeedSequence(config.seed).spawn(5)
     scene_rng, motion_rng, dvs_rng, aps_rng, imu_rng = (np.random.default_rng(s) for s in seeds)
-    camera = DAVIS240_CAMERA
+    camera = config.camera.model()
     shape = (camera.height, camera.width)
     scene = Scene(scene_rng)
     motion = HandHeldMotion(motion_rng, config.duration_s, config.speed_growth, config.speed)

@@ -7,9 +7,9 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from eas_vo.datasets.ecd import EcdFolderDataset
+from eas_vo.datasets.ecd import CAMCHAIN, EcdFolderDataset, camchain_yaml, write_ecd_folder
 from eas_vo.errors import DataError
-from eas_vo.types import EVENT_DTYPE
+from eas_vo.types import EVENT_DTYPE, CameraModel
 from helpers import SHAPES_ROTATION, hostile_number, hostile_settings, numeric_rows, require
 
 
@@ -135,6 +135,47 @@ def test_bad_calibration(sequence_copy):
     (sequence_copy / "calib.txt").write_text("200 200 120\n")
     with pytest.raises(DataError, match="calib.txt:1: expected 4, 8 or 9"):
         EcdFolderDataset(sequence_copy)
+
+
+#: A fisheye for the simulated sequences' 240x180 frames.
+FISHEYE_240 = CameraModel(240, 180, np.array([[150.5, 0.0, 120.25], [0.0, 150.75, 89.5], [0.0, 0.0, 1.0]]),
+                          np.array([-0.048, 0.0113, -0.0554, 0.0215]), "equidistant")
+
+
+def test_a_fisheye_sequence_carries_its_camera_as_a_kalibr_camchain(sequence_copy):
+    (sequence_copy / "calib.txt").unlink()
+    (sequence_copy / CAMCHAIN).write_text(camchain_yaml(FISHEYE_240))
+    camera = EcdFolderDataset(sequence_copy).camera
+    assert camera.model == "equidistant" and (camera.width, camera.height) == (240, 180)
+    np.testing.assert_array_equal(camera.K, FISHEYE_240.K)
+    np.testing.assert_array_equal(camera.dist, FISHEYE_240.dist)
+
+
+def test_the_ecd_calib_txt_takes_no_fisheye(tmp_path):
+    with pytest.raises(ValueError, match="radtan cameras go into calib.txt"):
+        camchain_yaml(CameraModel.from_calib([200, 200, 120, 90]))
+    write_ecd_folder(tmp_path, FISHEYE_240, np.array([0.0]), [np.zeros((180, 240), np.uint8)], np.zeros(0, EVENT_DTYPE))
+    assert not (tmp_path / "calib.txt").exists() and EcdFolderDataset(tmp_path).camera.model == "equidistant"
+
+
+@pytest.mark.parametrize("edit, says", [
+    (lambda t: t.replace("equidistant", "omni"), r"cam0: camera_model 'pinhole' with distortion_model 'omni': eas-vo reads pinhole with radtan or equidistant"),
+    (lambda t: t.replace("pinhole", "ds"), r"cam0: camera_model 'ds'"),
+    (lambda t: t.replace("  resolution: [240, 180]\n", ""), r"no cam0.resolution: a kalibr camchain's cam0 holds camera_model, intrinsics"),
+    (lambda t: t.replace("[240, 180]", "[346, 260]"), r"cam0.resolution 346x260 is not the frames' 240x180"),
+    (lambda t: t.replace("-0.048, ", ""), r"cam0.distortion_coeffs must be 4 finite numbers"),
+    (lambda t: t.replace("-0.048", ".nan"), r"cam0.distortion_coeffs must be 4 finite numbers"),
+    (lambda t: t.replace("-0.048", "-48.0"), r"cam0: equidistant distortion k1 k2 k3 k4 = -48 .* out of range"),
+    (lambda t: t.replace("150.5", "1.5"), r"cam0: focal lengths fx = 1.5"),
+    (lambda t: t.replace("cam0:", "cam1:"), r"no cam0: a kalibr"),
+    (lambda t: t + "  [: oops", r"not YAML"),
+])
+def test_a_bad_camchain_is_one_line_naming_the_file_and_key(sequence_copy, edit, says):
+    (sequence_copy / "calib.txt").unlink()
+    (sequence_copy / CAMCHAIN).write_text(edit(camchain_yaml(FISHEYE_240)))
+    with pytest.raises(DataError, match=f"camchain.yaml: {says}") as raised:
+        EcdFolderDataset(sequence_copy)
+    assert "\n" not in str(raised.value)
 
 
 @hostile_settings()

@@ -128,3 +128,39 @@ def test_truncated_or_damaged_bag_is_named_or_read_whole(bag_path, sequence, tmp
     assert len(events) <= len(sequence.events()) and len(dataset.frame_times()) <= len(sequence.frame_times())
     if not flip % 2:
         assert events.tobytes() == np.asarray(sequence.events()[: len(events)]).tobytes()
+
+
+def test_a_fisheye_camera_info_is_read_back_as_written(short_sequence, tmp_path):
+    from eas_vo.datasets.ecd import CAMCHAIN, camchain_yaml
+    from eas_vo.types import CameraModel
+    import shutil
+
+    fisheye = CameraModel(240, 180, np.array([[150.5, 0.0, 120.25], [0.0, 150.75, 89.5], [0.0, 0.0, 1.0]]),
+                          np.array([-0.048, 0.0113, -0.0554, 0.0215]), "equidistant")
+    folder = tmp_path / "seq"
+    shutil.copytree(short_sequence, folder, ignore=shutil.ignore_patterns("calib.txt"))
+    (folder / CAMCHAIN).write_text(camchain_yaml(fisheye))
+    write_bag(open_dataset(str(folder)), tmp_path / "fisheye.bag")
+    camera = RosbagDataset(tmp_path / "fisheye.bag").camera
+    assert camera.model == "equidistant"
+    np.testing.assert_array_equal(camera.K, fisheye.K)
+    np.testing.assert_array_equal(camera.dist, fisheye.dist)
+
+
+def test_a_distortion_model_eas_vo_does_not_read_is_refused(bag_path, tmp_path):
+    from rosbags.rosbag1 import Reader, Writer
+
+    from eas_vo.datasets.rosbag import typestore
+
+    damaged = tmp_path / "rational.bag"
+    store = typestore()
+    with Reader(bag_path) as reader, Writer(damaged) as writer:
+        connections = {c.id: writer.add_connection(c.topic, c.msgtype, typestore=store) for c in reader.connections}
+        for connection, timestamp, raw in reader.messages():
+            if connection.msgtype == "sensor_msgs/msg/CameraInfo":
+                msg = store.deserialize_ros1(raw, connection.msgtype)
+                msg.distortion_model = "rational_polynomial"
+                raw = store.serialize_ros1(msg, connection.msgtype)
+            writer.write(connections[connection.id], timestamp, raw)
+    with pytest.raises(DataError, match=r"rational.bag:/dvs/camera_info:0: distortion_model 'rational_polynomial' is not one eas-vo reads"):
+        RosbagDataset(damaged)

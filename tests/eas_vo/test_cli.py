@@ -152,13 +152,14 @@ def test_simulate_command(tmp_path, capsys):
         out = tmp_path / speed
         assert main(["simulate", "--out", str(out), "--seed", "2", "--duration", "0.4", "--speed", speed]) == 0
         assert (out / "images.txt").exists()
-        assert f"wrote a 0.4 s synthetic sequence (seed 2, illumination 1, speed {speed})" in capsys.readouterr().out
+        assert f"wrote a 0.4 s synthetic sequence (seed 2, illumination 1, speed {speed}, 240x180 radtan)" in capsys.readouterr().out
         q = Rotation.from_quat(np.loadtxt(out / "groundtruth.txt")[:2, 4:8])
         turned[speed] = (q[0].inv() * q[1]).magnitude()
     assert turned["3"] / turned["1"] == pytest.approx(3.0, rel=0.02), turned
     assert main(["simulate", "--out", str(tmp_path / "set"), "--duration", "0.3", "--set", "dataset.speed=2",
-                 "--set", "dataset.illumination=0.5"]) == 0
-    assert "(seed 0, illumination 0.5, speed 2)" in capsys.readouterr().out
+                 "--set", "dataset.illumination=0.5", "--set", "dataset.sensor=davis346"]) == 0
+    assert "(seed 0, illumination 0.5, speed 2, 346x260 equidistant)" in capsys.readouterr().out
+    assert (tmp_path / "set" / "camchain.yaml").exists() and not (tmp_path / "set" / "calib.txt").exists()
     line = user_error(["simulate", "--out", str(tmp_path / "both"), "--speed", "2", "--set", "dataset.speed=3"], capsys)
     assert line == "eas-vo: error: --speed and --set dataset.speed both given: give one"
 

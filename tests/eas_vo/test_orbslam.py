@@ -261,3 +261,21 @@ def test_a_huge_error_is_printed_readably(short_sequence, tmp_path, capsys):
         assert re.search(r"\d{10}", text) is None, text
         shown = [float(v) for v in re.findall(r"\d\.\d+e\+\d+", text)]
         assert shown and shown[0] == pytest.approx(mean, rel=10.0**-digits), text
+
+
+@pytest.mark.parametrize("model, dist, camera_type", [
+    ("radtan", [-0.3, 0.1, 0.001, -0.002, 0.01], "PinHole"),
+    ("equidistant", [-0.048, 0.0113, -0.0554, 0.0215], "KannalaBrandt8"),
+])
+def test_settings_yaml_names_the_lens_as_orbslam3_reads_it(tmp_path, model, dist, camera_type):
+    from eas_vo.orbslam import settings_yaml
+    from eas_vo.types import LENS_MODELS, CameraModel
+
+    K = np.array([[226.4, 0.0, 173.6], [0.0, 226.2, 133.7], [0.0, 0.0, 1.0]])
+    (tmp_path / "settings.yaml").write_text(settings_yaml(CameraModel(346, 260, K, np.array(dist), model), 20.0))
+    fs = cv2.FileStorage(str(tmp_path / "settings.yaml"), cv2.FILE_STORAGE_READ)
+    assert fs.getNode("Camera.type").string() == camera_type  # ORB-SLAM3's Tracking::ParseCamParamFile switches on it
+    names = LENS_MODELS[model]
+    assert [fs.getNode(f"Camera.{k}").real() for k in names] == dist
+    assert all(fs.getNode(f"Camera.{k}").empty() for k in {"p1", "p2", "k3", "k4"} - set(names))
+    assert (fs.getNode("Camera.width").real(), fs.getNode("Camera.height").real()) == (346, 260)

@@ -141,3 +141,19 @@ def test_the_rotation_plot_title_gives_the_ground_truth_time_offset_it_was_measu
         result = SimpleNamespace(t=t, R_w_c=R_w_c, errors=rotation_errors(t, R_w_c, gt), records=records, edges=[], metrics=metrics)
         title = plots.rotation_figure(result, "eas + klt + chain (paper): a sequence").get_suptitle()
         assert title == f"eas + klt + chain (paper): a sequence\naverage APE 0.0000 rad, average NC 5.0, {words}"
+
+
+def test_a_gallery_shows_each_sensor_pixel_up_to_its_widest(tmp_path):
+    """At 100 dpi, a 346x260 image gets at least 346 figure pixels a column, not the DAVIS240's
+    240; a 1280x720 one is shrunk to GALLERY_MAX_PX."""
+    import cv2
+
+    names = ["a", "b"]
+    for height, width in ((180, 240), (260, 346), (720, 1280)):
+        images = {(k, n): np.full((height, width), 100 * k, np.uint8) for k in (0, 1) for n in names}
+        path = tmp_path / f"{width}.png"
+        plots.plot_gallery(path, names, images, [0, 1])
+        fig_h, fig_w = cv2.imread(str(path)).shape[:2]
+        shown = min(width, plots.GALLERY_MAX_PX)
+        assert len(names) * shown <= fig_w <= len(names) * (shown + plots.GALLERY_MARGIN_PX), (width, fig_w)
+        assert 2 * shown * height / width <= fig_h, (height, fig_h)

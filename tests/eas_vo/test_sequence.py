@@ -138,16 +138,23 @@ def test_convert_writes_nothing_when_a_frame_cannot_be_read(tmp_path):
     assert sorted(os.listdir(tmp_path)) == ["seq"]  # neither the folder nor a staging one or a lock
 
 
-def test_convert_refuses_a_lens_model_calib_txt_cannot_hold(tmp_path, monkeypatch):
+def test_convert_writes_a_fisheye_as_a_kalibr_camchain(tmp_path, monkeypatch):
+    """calib.txt holds only radial-tangential coefficients: an equidistant lens goes into the
+    folder's camchain.yaml, and the converted folder reads back the same camera."""
     from eas_vo import registry
 
     source = known_sequence(tmp_path / "seq")
     fisheye = opened(source)
-    fisheye.camera = CameraModel(fisheye.camera.width, fisheye.camera.height, fisheye.camera.K, np.zeros(4), "equidistant")
+    dist = np.array([-0.048, 0.0113, -0.0554, 0.0215])
+    fisheye.camera = CameraModel(fisheye.camera.width, fisheye.camera.height, fisheye.camera.K, dist, "equidistant")
     monkeypatch.setattr(registry, "open_dataset", lambda spec, config=None: fisheye)
-    with pytest.raises(EasVoError, match="equidistant lens model cannot be written"):
-        convert(config_for(source), tmp_path / "out")
-    assert not (tmp_path / "out").exists()
+    convert(config_for(source), tmp_path / "out")
+    assert not (tmp_path / "out" / "calib.txt").exists()
+    monkeypatch.undo()
+    back = opened(tmp_path / "out").camera
+    assert back.model == "equidistant"
+    np.testing.assert_array_equal(back.dist, dist)
+    np.testing.assert_array_equal(back.K, fisheye.camera.K)
 
 
 

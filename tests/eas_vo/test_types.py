@@ -1,8 +1,11 @@
-"""Core types: window lookups in an event stream, the gyro's rates between two times."""
+"""Core types: window lookups in an event stream, the gyro's rates between two times, the
+camera model's lenses against OpenCV."""
 
+import cv2
 import numpy as np
 import pytest
 
+from eas_vo.types import CameraModel
 from helpers import random_events
 
 
@@ -46,3 +49,65 @@ def test_the_integral_since_start_agrees_with_rates_between():
     for t0, t1 in [(t[10], t[20]), (t[10] + 0.001, t[20] - 0.002), (t[0] - 0.02, t[3] + 0.001), (t[-3] - 0.001, t[-1] + 0.03)]:
         rates, dt = imu.rates_between(t0, t1)
         np.testing.assert_allclose(turned(t1) - turned(t0), (rates * dt[:, None]).sum(axis=0), atol=1e-12)
+
+
+# MVSEC's left DAVIS346 (indoor_flying kalibr camchain): pinhole with an equidistant lens, 118 deg
+# across the diagonal, so the sensor's corners are 60 deg off the axis.
+MVSEC_LEFT = CameraModel(346, 260, np.array([[226.38018519795807, 0.0, 173.6470807871759], [0.0, 226.15002947047415, 133.73271487507847],
+                                              [0.0, 0.0, 1.0]]),
+                         np.array([-0.048031442223833355, 0.011330957517194437, -0.055378166304281135, 0.021500973881459395]),
+                         "equidistant")
+# The Event Camera Dataset's DAVIS240C (shapes_rotation calib.txt): strong barrel distortion.
+ECD_DAVIS240 = CameraModel.from_calib([199.092366542, 198.82882047, 132.192071378, 110.712660011,
+                                       -0.368436311798, 0.150947243557, -0.000296130534385, -0.000759431726241, 0.0])
+
+
+def _sensor_pixels(camera: CameraModel) -> np.ndarray:
+    u, v = np.meshgrid(np.arange(camera.width, dtype=float), np.arange(camera.height, dtype=float))
+    return np.stack([u.ravel(), v.ravel()], 1)
+
+
+def test_equidistant_puts_a_ray_at_its_distorted_angle_from_the_axis():
+    cam = MVSEC_LEFT
+    theta = np.radians([0.0, 10.0, 30.0, 60.0, 100.0])  # 100 deg: behind the image plane, still mapped
+    k1, k2, k3, k4 = cam.dist
+    theta_d = theta * (1 + k1 * theta**2 + k2 * theta**4 + k3 * theta**6 + k4 * theta**8)
+    rays = np.column_stack([np.sin(theta), np.zeros_like(theta), np.cos(theta)])  # in the x-z plane
+    np.testing.assert_allclose(cam.project(rays), np.column_stack([cam.K[0, 2] + cam.K[0, 0] * theta_d, np.full(5, cam.K[1, 2])]),
+                               rtol=0, atol=1e-9)
+
+
+def test_equidistant_equals_cv2_fisheye_over_the_whole_sensor():
+    cam, px = MVSEC_LEFT, _sensor_pixels(MVSEC_LEFT)
+    normalised = cam.undistort(px)
+    reference = cv2.fisheye.undistortPoints(px.reshape(-1, 1, 2), cam.K, cam.dist).reshape(-1, 2)
+    np.testing.assert_allclose(cam.focal_px * normalised, cam.focal_px * reference, rtol=0, atol=1e-6)
+    rays = np.column_stack([normalised, np.ones(len(px))])
+    projected = cv2.fisheye.projectPoints(rays.reshape(-1, 1, 3), np.zeros(3), np.zeros(3), cam.K, cam.dist)[0].reshape(-1, 2)
+    np.testing.assert_allclose(cam.project(normalised), projected, rtol=0, atol=1e-6)
+    np.testing.assert_allclose(cam.project(normalised), px, rtol=0, atol=1e-6)  # the round trip
+    np.testing.assert_allclose(cam.project(rays * np.linspace(0.1, 10, len(px))[:, None]), px, rtol=0, atol=1e-6)  # any ray length
+
+
+def test_radtan_equals_cv2_project_points_and_undistort_points_over_the_whole_sensor():
+    cam, px = ECD_DAVIS240, _sensor_pixels(ECD_DAVIS240)
+    normalised = cam.undistort(px)
+    np.testing.assert_array_equal(normalised, cv2.undistortPoints(px.reshape(-1, 1, 2), cam.K, cam.dist).reshape(-1, 2))
+    projected = cv2.projectPoints(np.column_stack([normalised, np.ones(len(px))]), np.zeros(3), np.zeros(3), cam.K, cam.dist)[0]
+    np.testing.assert_allclose(cam.project(normalised), projected.reshape(-1, 2), rtol=0, atol=1e-6)
+    # cv2.undistortPoints iterates 5 times: at this lens' corners it stops short by a few
+    # hundredths of a pixel (which is why the equidistant round trip above is the stricter test).
+    assert np.abs(cam.project(normalised) - px).max() < 0.05
+
+
+@pytest.mark.parametrize("camera", [MVSEC_LEFT, ECD_DAVIS240], ids=["equidistant", "radtan"])
+def test_undistortion_maps_equal_opencvs(camera):
+    K_new = camera.K @ np.diag([0.7, 0.7, 1.0])  # a wider pinhole view than K
+    size = (camera.width, camera.height)
+    if camera.model == "equidistant":
+        expected = cv2.fisheye.initUndistortRectifyMap(camera.K, camera.dist, np.eye(3), K_new, size, cv2.CV_32FC1)
+    else:
+        expected = cv2.initUndistortRectifyMap(camera.K, camera.dist, None, K_new, size, cv2.CV_32FC1)
+    for ours, theirs in zip(camera.undistort_maps(K_new), expected):
+        assert ours.shape == (camera.height, camera.width) and ours.dtype == np.float32
+        np.testing.assert_allclose(ours, theirs, rtol=0, atol=1e-3)

@@ -1,10 +1,12 @@
-"""The simulated sequence as written: determinism, event times, ground truth and IMU."""
+"""The simulated sequence as written: determinism, event times, ground truth and IMU, any
+sensor size and lens."""
 
 import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 from eas_vo.datasets.ecd import EcdFolderDataset
 from eas_vo.datasets.simulator import SimConfig, simulate
+from eas_vo.datasets.simulator.generate import SENSORS, camera_rays
 from eas_vo.datasets.simulator.sensor import DvsModel, EventSimulator
 
 
@@ -23,8 +25,11 @@ def test_a_sequence_is_cached_under_its_values_not_their_python_types():
 
     assert SimConfig(speed=4).fingerprint() == SimConfig(speed=4.0).fingerprint() != SimConfig(speed=4.5).fingerprint()
     assert SimConfig(seed=3).fingerprint() != SimConfig(seed=4).fingerprint()
-    # the default's key is what it was before types were normalised: its cached folder stays valid
-    assert SimConfig().fingerprint() == repr((SIMULATOR_VERSION, dataclasses.asdict(SimConfig())))
+    # the default's key is what it was before types were normalised and the camera could change:
+    # its cached folder stays valid
+    before = {key: value for key, value in dataclasses.asdict(SimConfig()).items() if key != "camera"}
+    assert SimConfig().fingerprint() == repr((SIMULATOR_VERSION, before))
+    assert SimConfig(camera=SENSORS["davis346"]).fingerprint() != SimConfig().fingerprint()
 
 
 def test_event_times_are_float64_and_sorted_late_in_a_long_sequence():
@@ -49,3 +54,23 @@ def test_ground_truth_and_imu_agree(short_sequence):
     assert error.std(0).max() < 0.1  # the white noise (0.003 rad/s/sqrt(Hz) at 200 Hz: 0.04)
     assert np.linalg.norm(imu.acc, axis=1).mean() == pytest.approx(9.81, abs=0.3)
 
+
+
+def test_a_davis346_fisheye_sequence_is_written_at_its_size_with_its_lens(tmp_path):
+    camera = SENSORS["davis346"]
+    simulate(SimConfig(duration_s=0.3, seed=2, camera=camera), tmp_path / "fisheye")
+    dataset = EcdFolderDataset(tmp_path / "fisheye")
+    assert (dataset.camera.model, dataset.camera.width, dataset.camera.height) == ("equidistant", 346, 260)
+    np.testing.assert_array_equal(dataset.camera.K, camera.model().K)
+    np.testing.assert_array_equal(dataset.camera.dist, camera.dist)
+    assert dataset.load_frame(0).shape == (260, 346)
+    events = dataset.events()
+    assert events["x"].max() == 345 and events["y"].max() == 259  # events over the whole sensor
+
+
+def test_the_rendered_rays_are_those_of_the_lens():
+    """Each pixel's ray lands back on it: the scene is seen through the camera's own lens."""
+    for name, atol_px in (("davis346", 1e-3), ("davis240", 0.01)):  # radtan: cv2.undistortPoints' 5 steps
+        camera = SENSORS[name].model()
+        u, v = np.meshgrid(np.arange(camera.width), np.arange(camera.height))
+        np.testing.assert_allclose(camera.project(camera_rays(camera)), np.stack([u.ravel(), v.ravel()], 1), rtol=0, atol=atol_px)
