@@ -162,5 +162,5 @@ def test_a_distortion_model_eas_vo_does_not_read_is_refused(bag_path, tmp_path):
                 msg.distortion_model = "rational_polynomial"
                 raw = store.serialize_ros1(msg, connection.msgtype)
             writer.write(connections[connection.id], timestamp, raw)
-    with pytest.raises(DataError, match=r"rational.bag:/dvs/camera_info:0: distortion_model 'rational_polynomial' is not one eas-vo reads"):
+    with pytest.raises(DataError, match=r"rational.bag:/dvs/camera_info:0: distortion_model: 'rational_polynomial' is not read"):
         RosbagDataset(damaged)

@@ -41,7 +41,7 @@ def test_the_davis346_preset_and_a_lens_of_ones_own():
     ({"dist": [0.1, 0.0, 0.0, 0.0]}, r"the radtan lens takes 5 finite numbers \(k1 k2 p1 p2 k3\)"),
     ({"dist": [0.1, 0.0, 0.0, 0.0, "x"]}, "the radtan lens takes 5 finite numbers"),
     ({"width": 346, "height": 260, "focal_px": 1.0}, "dataset.focal_px: the camera is impossible: focal lengths fx = 1, fy = 1 px"),
-    ({"dist": [0.1, 0.0, 3.0, 0.0, 0.0]}, "dataset.dist: the camera is impossible: radtan distortion"),
+    ({"dist": [0.1, 0.0, 3.0, 0.0, 0.0]}, "dataset.dist: the camera is impossible: distortion k1 k2 p1 p2 k3"),
     ({"width": -1}, "dataset.width = -1 is out of range"),
 ])
 def test_an_impossible_camera_is_one_line_naming_the_key(values, says):
