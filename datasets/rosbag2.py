@@ -10,7 +10,8 @@ Events (configurable topic), in any of:
   with numpy;
 - `event_camera_msgs/msg/EventPacket` (ros-event-camera drivers: libcaer_driver,
   metavision_driver) and its former name `event_array_msgs/msg/EventArray`: the `mono`
-  encoding is decoded; `evt3`, `libcaer`, `libcaer_cmp` and `trigger` are refused by name.
+  encoding is decoded (event time: header stamp + each event's offset, ROS time);
+  `evt3`, `libcaer`, `libcaer_cmp` and `trigger` are refused by name.
 """
 
 from __future__ import annotations
@@ -168,22 +169,22 @@ def encode_dvs_array(t_header: float, width: int, height: int, events: np.ndarra
     return b"\x00\x01\x00\x00" + bytes(body)
 
 
-def decode_mono(time_base_ns: int, packed: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+def decode_mono(base_ns: int, packed: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """event_camera_codecs' `mono` encoding -> (t [ns], x, y, p) columns.
 
-    Each event is one little-endian uint64: bits 0-31 the time [ns] after `time_base`, 32-47 x,
-    48-62 y, 63 the polarity (1 = ON).
+    Each event is one little-endian uint64: bits 0-31 its time dt [ns] after the packet's start,
+    32-47 x, 48-62 y, 63 the polarity (1 = ON); t = base_ns + dt.
     """
     if len(packed) % 8:
         raise ValueError(f"{len(packed)} bytes of mono events, not a multiple of 8")
     words = np.frombuffer(np.ascontiguousarray(packed, np.uint8), "<u8")
-    t_ns = np.int64(time_base_ns) + (words & 0xFFFFFFFF).astype(np.int64)
+    t_ns = np.int64(base_ns) + (words & 0xFFFFFFFF).astype(np.int64)
     return t_ns, (words >> 32) & 0xFFFF, (words >> 48) & 0x7FFF, words >> 63
 
 
-def encode_mono(time_base_ns: int, events: np.ndarray) -> np.ndarray:
-    """Events (EVENT_DTYPE, at or after time_base_ns, within 4.29 s of it) -> `mono` bytes."""
-    dt = np.round(events["t"] * 1e9).astype(np.int64) - time_base_ns
+def encode_mono(base_ns: int, events: np.ndarray) -> np.ndarray:
+    """Events (EVENT_DTYPE, at or after base_ns, within 4.29 s of it) -> `mono` bytes."""
+    dt = np.round(events["t"] * 1e9).astype(np.int64) - base_ns
     if len(dt) and not (0 <= dt.min() and dt.max() < 2**32):
         raise ValueError("mono packets span at most 4.29 s after their time base")
     words = (dt.astype(np.uint64) | events["x"].astype(np.uint64) << np.uint64(32)
@@ -254,7 +255,10 @@ class Rosbag2Dataset(BagDataset):
             raise RefusedEncoding(f"unknown event encoding {msg.encoding!r} (eas-vo reads 'mono')")
         if msg.is_bigendian:
             raise RefusedEncoding("big-endian mono events are not read")
-        t_ns, x, y, p = decode_mono(msg.time_base, msg.events)
+        # ROS time, the clock of the bag's other topics: the header stamp + dt (time_base + dt
+        # would be the camera's own clock; event_camera_msgs documents both).
+        stamp = msg.header.stamp
+        t_ns, x, y, p = decode_mono(int(stamp.sec) * 1_000_000_000 + int(stamp.nanosec), msg.events)
         return ns_seconds(t_ns), x, y, p
 
     def _identity(self) -> tuple:

@@ -283,6 +283,32 @@ def test_damaged_event_message_named_and_dropped_when_lenient(small_bags, excerp
     assert lenient.data_warnings() == [f"{tmp_path / 'bag'}:/dvs/events: 1 dropped: undecodable event message (first at message 3)"]
 
 
+def test_mono_events_are_on_the_header_clock(small_bags, excerpt, tmp_path):
+    """A packet's events are at its header stamp + dt (ROS time, the other topics' clock), not at
+    time_base + dt (the camera's clock, here 1000 s off)."""
+    from eas_vo.types import EVENT_DTYPE
+
+    store = event_typestore()
+    T = store.types
+
+    def as_mono(topic, msgtype, index, raw):
+        if topic != "/dvs/events":
+            return msgtype, raw
+        wire = decode_dvs_array(raw)
+        events = np.empty(len(wire), EVENT_DTYPE)
+        events["t"] = (wire["sec"].astype(np.int64) * 10**9 + wire["nsec"]) / 1e9
+        events["x"], events["y"], events["p"] = wire["x"], wire["y"], wire["p"]
+        first_ns = int(wire["sec"][0]) * 10**9 + int(wire["nsec"][0])
+        header = T["std_msgs/msg/Header"](stamp=T["builtin_interfaces/msg/Time"](sec=first_ns // 10**9, nanosec=first_ns % 10**9),
+                                          frame_id="")
+        msg = T[PACKET_TYPES[1]](header=header, height=180, width=240, seq=index, time_base=first_ns + 10**12, encoding="mono",
+                                 is_bigendian=False, events=encode_mono(first_ns, events))
+        return PACKET_TYPES[1], bytes(store.serialize_cdr(msg, PACKET_TYPES[1]))
+
+    _rewrite(small_bags["sqlite3"], tmp_path / "bag", as_mono)
+    assert Rosbag2Dataset(tmp_path / "bag").events().tobytes() == excerpt.events().tobytes()
+
+
 @pytest.mark.parametrize("encoding", ["evt3", "trigger", "libcaer_cmp", "my_codec"])
 def test_packed_encodings_other_than_mono_are_refused_by_name(small_bags, tmp_path, encoding):
     store = event_typestore()
