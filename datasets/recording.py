@@ -1,4 +1,4 @@
-"""What the recording readers (`ecd`, `rosbag`) share: their reading options, checks of
+"""What the recording readers (`ecd`, the bag readers) share: their reading options, checks of
 timed tables, and the sampling of event-only streams. Not a plugin."""
 
 from __future__ import annotations

@@ -106,8 +106,31 @@ def bag_typestore(path: Path, connections):
         except (TypesysError, ValueError, IndexError) as exc:
             raise DataError(path, f"cannot read the bag's definition of {conn.msgtype} ({exc})") from None
     fallback = event_typestore()
-    store.register({name: fields for name, fields in fallback.fielddefs.items() if name not in store.fielddefs})
+    needed = {}
+
+    def add(name):  # a type the bag does not define, and the types it nests
+        if name in store.fielddefs or name in needed or name not in fallback.fielddefs:
+            return
+        needed[name] = fallback.fielddefs[name]
+        for _, desc in fallback.fielddefs[name][1]:
+            for nested in _nested_names(desc):
+                add(nested)
+
+    for conn in connections:
+        add(conn.msgtype)
+    if needed:
+        store.register(needed)
     return store
+
+
+def _nested_names(desc) -> list[str]:
+    """The message type names a field description refers to."""
+    from rosbags.interfaces import Nodetype
+
+    kind, rest = desc
+    if kind == Nodetype.NAME:
+        return [rest]
+    return _nested_names(rest[0]) if kind in (Nodetype.ARRAY, Nodetype.SEQUENCE) else []
 
 
 def _definition(store, msgtype: str) -> list:
