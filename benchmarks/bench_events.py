@@ -4,9 +4,13 @@ Prints, each stage in its own process (so peak memory is its own):
   - first parse (text -> binary cache) events/s and MB/s, beside pandas.read_csv (C engine)
     on the same file;
   - cached load: map the cache and read every event, events/s;
-  - a 1 s window of the cached stream through the pipeline's sample views: bytes touched.
+  - a 1 s window of the cached stream through the pipeline's sample views: bytes touched;
+  - ROS 2 bags (sqlite3 and mcap, dvs_msgs/msg/EventArray of 5000 events) holding the first
+    --bag-events of the same stream: the rosbag2 reader's first read (decode, validate, cache)
+    and cached read, events/s, beside rosbags' plain iteration over the same file (raw bytes
+    only, and deserialised to messages).
 
-    python benchmarks/bench_events.py [--events 20000000]
+    python benchmarks/bench_events.py [--events 20000000] [--bag-events 2000000]
 """
 
 from __future__ import annotations
@@ -55,6 +59,80 @@ def make_file(n_events: int) -> Path:
         duration *= 1.2 * n_events / len(events)
     write_events_text(path, np.asarray(events[:n_events]), 240, 180)
     return path
+
+
+def make_bag(text: Path, n_events: int, storage: str) -> Path:
+    """The first n_events of `text` as a rosbag2 folder (camera info and events only)."""
+    import shutil
+
+    from eas_vo.datasets.rosbag2 import write_bag2
+    from eas_vo.eventfile import file_identity, load_event_text
+    from eas_vo.io import cache_folder
+    from eas_vo.plugins import Dataset
+    from eas_vo.types import CameraModel
+
+    folder = cache_folder("bench", BENCH_ABOUT) / f"ros2_{storage}_{n_events}"
+    if (folder / "metadata.yaml").exists():
+        return folder
+
+    class Stream(Dataset):
+        def __init__(self):
+            self.camera = CameraModel.from_calib([200.0, 200.0, 120.0, 90.0], 240, 180)
+            self._events = load_event_text(lambda: open(text, "rb"), file_identity(text), str(text), 240, 180)[:n_events]
+
+        def frame_times(self):
+            return np.empty(0)
+
+        def load_frame(self, k):
+            return None
+
+        def events(self):
+            return self._events
+
+    shutil.rmtree(folder, ignore_errors=True)
+    write_bag2(Stream(), folder, storage)
+    return folder
+
+
+def ros2_stage(name: str, bag: Path, repeat: int) -> dict:
+    """`ros2_first`, `ros2_cached`, `rosbags_raw` or `rosbags_messages` on a rosbag2 folder."""
+    import os
+
+    from eas_vo.datasets.rosbag2 import Rosbag2Dataset, event_typestore
+
+    out = {"stage": name, "size_mb": sum(f.stat().st_size for f in bag.iterdir()) / 1e6}
+
+    def read_all():  # open, then read every byte of every record once
+        events = Rosbag2Dataset(bag).events()
+        return float(events.view(np.uint8).sum(dtype=np.uint64)), len(events)
+
+    if name == "ros2_first":
+        def first():
+            with tempfile.TemporaryDirectory() as cache:
+                os.environ["EAS_VO_CACHE_DIR"] = cache
+                return read_all()
+
+        read_all()  # (numba's kernels loaded once, as for the text stages)
+        out["seconds"], (_, out["events"]) = timed(first, repeat)
+    elif name == "ros2_cached":
+        read_all()
+        out["seconds"], (_, out["events"]) = timed(read_all, repeat)
+    else:
+        from rosbags.rosbag2 import Reader
+
+        store = event_typestore()
+
+        def iterate():
+            n = 0
+            with Reader(bag) as reader:
+                events = [c for c in reader.connections if c.topic == "/dvs/events"]
+                for conn, _, raw in reader.messages(connections=events):
+                    n += len(store.deserialize_cdr(raw, conn.msgtype).events) if name == "rosbags_messages" else len(raw)
+            return n
+
+        out["seconds"], n = timed(iterate, repeat)
+        out["events"] = n if name == "rosbags_messages" else Rosbag2Dataset(bag).events().shape[0]
+    return out
 
 
 def timed(fn, repeat: int) -> tuple[float, object]:
@@ -135,15 +213,21 @@ def stage(name: str, path: Path, repeat: int) -> dict:
     return out
 
 
+ROS2_STAGES = {"ros2_first": "eas-vo first read (validated, cached)", "ros2_cached": "eas-vo cached read (open + map)",
+               "rosbags_raw": "rosbags iteration, raw bytes", "rosbags_messages": "rosbags iteration, deserialised"}
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--events", type=int, default=20_000_000)
+    parser.add_argument("--bag-events", type=int, default=2_000_000, help="events in the ROS 2 bags")
     parser.add_argument("--repeat", type=int, default=3, help="runs per stage; the best is reported")
     parser.add_argument("--stage", help=argparse.SUPPRESS)
     parser.add_argument("--path", help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.stage:
-        print(json.dumps(stage(args.stage, Path(args.path), args.repeat)))
+        run = ros2_stage if args.stage in ROS2_STAGES else stage
+        print(json.dumps(run(args.stage, Path(args.path), args.repeat)))
         return
     path = make_file(args.events)
     results = {}
@@ -168,6 +252,18 @@ def main() -> None:
     r = results["window"]
     print(f"  1 s window of the cached stream: {r['events']:,} events in {r['seconds'] * 1e3:.1f} ms, "
           f"RSS growth {r['rss_growth_mb']:.0f} MB = {r['rss_growth_mb'] * 1e6 / max(r['events'], 1):.1f} B/event in the window")
+    for storage in ("sqlite3", "mcap"):
+        bag = make_bag(path, args.bag_events, storage)
+        rows = {}
+        for name in ROS2_STAGES:
+            out = subprocess.run([sys.executable, __file__, "--stage", name, "--path", str(bag), "--repeat", str(args.repeat)],
+                                 capture_output=True, text=True, check=True)
+            rows[name] = json.loads(out.stdout.strip().splitlines()[-1])
+        print(f"ROS 2 bag, {storage}: {rows['ros2_first']['events']:,} events (dvs_msgs/msg/EventArray), "
+              f"{rows['ros2_first']['size_mb']:.0f} MB")
+        for name, label in ROS2_STAGES.items():
+            r = rows[name]
+            print(f"  {label:40s} {r['events'] / r['seconds'] / 1e6:7.2f} M events/s")
 
 
 if __name__ == "__main__":
