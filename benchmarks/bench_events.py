@@ -10,9 +10,13 @@ Prints, each stage in its own process (so peak memory is its own):
     batch reading of the file;
   - the same events as an MVSEC HDF5 file (davis/left/events, x y t p float64 rows): the
     `mvsec` reader's first read (validated, into the cache) and cached read, beside h5py
-    reading the whole array into memory.
+    reading the whole array into memory;
+  - ROS 2 bags (sqlite3 and mcap, dvs_msgs/msg/EventArray of 5000 events) holding the first
+    --bag-events of the same stream: the rosbag2 reader's first read (decode, validate, cache)
+    and cached read, events/s, beside rosbags' plain iteration over the same file (raw bytes
+    only, and deserialised to messages).
 
-    python benchmarks/bench_events.py [--events 20000000] [--only text|aedat4|mvsec]
+    python benchmarks/bench_events.py [--events 20000000] [--bag-events 2000000] [--only text|aedat4|mvsec|ros2_sqlite3|ros2_mcap]
 """
 
 from __future__ import annotations
@@ -165,8 +169,6 @@ def load_text(path: Path) -> np.ndarray:
 def mvsec_stage(name: str, path: Path, repeat: int, out: dict) -> None:
     """h5py reading the whole event array (`mvsec_h5py`), the mvsec reader's first read into a
     fresh cache (`mvsec_first`) and its cached read (`mvsec_cached`)."""
-    import os
-
     import h5py
 
     from eas_vo.datasets.mvsec import MvsecConfig, MvsecDataset
@@ -193,6 +195,78 @@ def mvsec_stage(name: str, path: Path, repeat: int, out: dict) -> None:
             return len(events)
 
     out["seconds"], out["events"] = timed(read, repeat)
+
+
+def make_bag(text: Path, n_events: int, storage: str) -> Path:
+    """The first n_events of `text` as a rosbag2 folder (camera info and events only)."""
+    import shutil
+
+    from eas_vo.datasets.rosbag2 import write_bag2
+    from eas_vo.eventfile import file_identity, load_event_text
+    from eas_vo.io import cache_folder
+    from eas_vo.plugins import Dataset
+    from eas_vo.types import CameraModel
+
+    folder = cache_folder("bench", BENCH_ABOUT) / f"ros2_{storage}_{n_events}"
+    if (folder / "metadata.yaml").exists():
+        return folder
+
+    class Stream(Dataset):
+        def __init__(self):
+            self.camera = CameraModel.from_calib([200.0, 200.0, 120.0, 90.0], 240, 180)
+            self._events = load_event_text(lambda: open(text, "rb"), file_identity(text), str(text), 240, 180)[:n_events]
+
+        def frame_times(self):
+            return np.empty(0)
+
+        def load_frame(self, k):
+            return None
+
+        def events(self):
+            return self._events
+
+    shutil.rmtree(folder, ignore_errors=True)
+    write_bag2(Stream(), folder, storage)
+    return folder
+
+
+def ros2_stage(name: str, bag: Path, repeat: int) -> dict:
+    """`ros2_first`, `ros2_cached`, `rosbags_raw` or `rosbags_messages` on a rosbag2 folder."""
+    from eas_vo.datasets.rosbag2 import Rosbag2Dataset, event_typestore
+
+    out = {"stage": name, "size_mb": sum(f.stat().st_size for f in bag.iterdir()) / 1e6}
+
+    def read_all():  # open, then read every byte of every record once
+        events = Rosbag2Dataset(bag).events()
+        return float(events.view(np.uint8).sum(dtype=np.uint64)), len(events)
+
+    if name == "ros2_first":
+        def first():
+            with tempfile.TemporaryDirectory() as cache:
+                os.environ["EAS_VO_CACHE_DIR"] = cache
+                return read_all()
+
+        read_all()  # (numba's kernels loaded once, as for the text stages)
+        out["seconds"], (_, out["events"]) = timed(first, repeat)
+    elif name == "ros2_cached":
+        read_all()
+        out["seconds"], (_, out["events"]) = timed(read_all, repeat)
+    else:
+        from rosbags.rosbag2 import Reader
+
+        store = event_typestore()
+
+        def iterate():
+            n = 0
+            with Reader(bag) as reader:
+                events = [c for c in reader.connections if c.topic == "/dvs/events"]
+                for conn, _, raw in reader.messages(connections=events):
+                    n += len(store.deserialize_cdr(raw, conn.msgtype).events) if name == "rosbags_messages" else len(raw)
+            return n
+
+        out["seconds"], n = timed(iterate, repeat)
+        out["events"] = n if name == "rosbags_messages" else Rosbag2Dataset(bag).events().shape[0]
+    return out
 
 
 def timed(fn, repeat: int) -> tuple[float, object]:
@@ -279,34 +353,41 @@ def stage(name: str, path: Path, repeat: int) -> dict:
 
 #: Each format: how its file is made from the events.txt, its stages (the library's own reader
 #: first) and their labels.
+ROS2_STAGES = ["rosbags_raw", "rosbags_messages", "ros2_first", "ros2_cached"]
+ROS2_LABELS = ["rosbags iteration, raw bytes", "rosbags iteration, deserialised", "eas-vo rosbag2 first read (validated + cache write)",
+               "eas-vo rosbag2 cached read (open + map)"]
 FORMATS = {
-    "text": (lambda path: path, ["pandas", "parse", "parse_to_cache", "cached", "window"], []),
-    "aedat4": (make_aedat4, ["aedat4_dv", "aedat4_first", "aedat4_cached"],
+    "text": (lambda path, args: path, ["pandas", "parse", "parse_to_cache", "cached", "window"], []),
+    "aedat4": (lambda path, args: make_aedat4(path), ["aedat4_dv", "aedat4_first", "aedat4_cached"],
                ["dv-processing batch reading", "eas-vo aedat4 first read (validated + cache write)",
                 "eas-vo aedat4 cached read (map + read all)"]),
-    "mvsec": (make_mvsec_file, ["mvsec_h5py", "mvsec_first", "mvsec_cached"],
+    "mvsec": (lambda path, args: make_mvsec_file(path), ["mvsec_h5py", "mvsec_first", "mvsec_cached"],
               ["h5py, whole array (unchecked)", "eas-vo mvsec first read (validated + cache write)",
                "eas-vo mvsec cached read (map + read all)"]),
+    "ros2_sqlite3": (lambda path, args: make_bag(path, args.bag_events, "sqlite3"), ROS2_STAGES, ROS2_LABELS),
+    "ros2_mcap": (lambda path, args: make_bag(path, args.bag_events, "mcap"), ROS2_STAGES, ROS2_LABELS),
 }
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--events", type=int, default=20_000_000)
+    parser.add_argument("--bag-events", type=int, default=2_000_000, help="events in the ROS 2 bags")
     parser.add_argument("--repeat", type=int, default=3, help="runs per stage; the best is reported")
     parser.add_argument("--only", choices=list(FORMATS), help="run only this format's rows")
     parser.add_argument("--stage", help=argparse.SUPPRESS)
     parser.add_argument("--path", help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.stage:
-        print(json.dumps(stage(args.stage, Path(args.path), args.repeat)))
+        run = ros2_stage if args.stage in ROS2_STAGES else stage
+        print(json.dumps(run(args.stage, Path(args.path), args.repeat)))
         return
     path = make_file(args.events)
     results = {}
     for fmt, (make, stages, _) in FORMATS.items():
         if args.only not in (None, fmt):
             continue
-        source = make(path)
+        source = make(path, args)
         for name in stages:
             out = subprocess.run([sys.executable, __file__, "--stage", name, "--path", str(source), "--repeat", str(args.repeat)],
                                  capture_output=True, text=True, check=True)
@@ -318,11 +399,11 @@ def main() -> None:
 
 
 def print_format_rows(source: Path, results: dict, stages: list, labels: list, repeat: int) -> None:
-    r = results[stages[0]]
+    r = results[stages[-1]]
     print(f"{source.name}: {r['events']:,} events, {r['size_mb']:.0f} MB")
     for name, label in zip(stages, labels):
         r = results[name]
-        print(f"  {label:52s} {r['events'] / r['seconds'] / 1e6:7.1f} M events/s  peak RSS {r['peak_rss_mb']:7.0f} MB")
+        print(f"  {label:52s} {r['events'] / r['seconds'] / 1e6:7.1f} M events/s")
     print(f"  (best of {repeat} each)")
 
 

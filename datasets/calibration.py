@@ -52,8 +52,8 @@ def camera_problem(values, width: int, height: int, model: str = "radtan") -> st
 
 def camera_model(where: str, width: int, height: int, K, dist, model: str = "radtan", key: str = "") -> CameraModel:
     """A checked CameraModel from a 3x3 intrinsic matrix [px] and distortion coefficients in
-    `model`'s order: radtan takes 0, 4 or 5 (k1 k2 p1 p2 [k3]; more only if the extra rational
-    terms are zero), equidistant exactly 4. `key` names where they came from in the file."""
+    `model`'s order: radtan takes up to 5 (k1 k2 p1 p2 k3, those left out zero; more only if the
+    extra rational terms are zero), equidistant exactly 4. `key` names where they came from in the file."""
     at = f"{key}: " if key else ""
     K, dist = np.asarray(K, float).ravel(), np.asarray(dist, float).ravel()
     if len(K) != 9:
@@ -67,7 +67,7 @@ def camera_model(where: str, width: int, height: int, K, dist, model: str = "rad
     if model == "equidistant" and len(dist) != n:
         raise DataError(where, f"{at}the equidistant lens model takes 4 distortion coefficients (k1 k2 k3 k4), found {len(dist)}")
     if model == "radtan":
-        if len(dist) not in (0, 4, 5) and not (len(dist) > 5 and not dist[5:].any()):
+        if len(dist) > 5 and dist[5:].any():
             raise DataError(where, f"{at}{len(dist)} radial-tangential distortion coefficients: k1 k2 p1 p2 [k3] are read "
                                    "(the rational and thin-prism terms of OpenCV's longer forms are not supported)")
         dist = np.concatenate([dist, np.zeros(n)])[:n]
@@ -201,7 +201,8 @@ def _dv_lens_model(where: str, root) -> str:
 
 
 #: kalibr's and ROS's distortion model names -> lens models.
-YAML_LENS_MODELS = {"radtan": "radtan", "plumb_bob": "radtan", "equidistant": "equidistant", "none": "radtan"}
+YAML_LENS_MODELS = {"radtan": "radtan", "plumb_bob": "radtan", "rational_polynomial": "radtan", "equidistant": "equidistant",
+                    "none": "radtan"}
 
 
 def _load_yaml(path: str | Path) -> dict:
@@ -288,8 +289,8 @@ def read_camera_info_yaml(path: str | Path) -> CameraModel:
 
 def camera_from_camera_info(where: str, width: int, height: int, K, D, distortion_model, key: str = "K/D") -> CameraModel:
     """sensor_msgs/CameraInfo fields (a message or its YAML) -> CameraModel: K row-major [px], D in
-    the order of `distortion_model` (plumb_bob or equidistant; an empty name, as old drivers
-    leave it, is plumb_bob)."""
+    the order of `distortion_model` (plumb_bob, rational_polynomial with k4..k6 zero, or
+    equidistant; an empty name, as old drivers leave it, is plumb_bob)."""
     if distortion_model == "":
         distortion_model = "plumb_bob"
     model = _lens(where, {"distortion_model": distortion_model}, "distortion_model")

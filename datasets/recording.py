@@ -1,5 +1,6 @@
-"""What the recording readers (`ecd`, `rosbag`, `aedat4`) share: their reading options, checks
-of timed tables, TUM ground-truth files, and the sampling of event-only streams. Not a plugin."""
+"""What the recording readers (`ecd`, the bag readers, `aedat4`, `mvsec`) share: their reading
+options, checks of timed tables, TUM ground-truth files, and the sampling of event-only streams.
+Not a plugin."""
 
 from __future__ import annotations
 

@@ -54,11 +54,11 @@ def test_bag_event_message_damage_names_topic_and_index(bag_path, sequence, tmp_
                     raw = raw[:-7]  # a truncated event array
                 n_events += 1
             writer.write(conns[conn.id], t, raw)
-    with pytest.raises(DataError, match=r"damaged.bag:/dvs/events:3: cannot decode event array"):
+    with pytest.raises(DataError, match=r"damaged.bag:/dvs/events:3: cannot decode event message"):
         RosbagDataset(dst).events()
     lenient = RosbagDataset(dst, BagConfig(lenient=True))
     assert len(lenient.events()) == len(sequence.events()) - 5000
-    assert "1 dropped: undecodable event array (first at message 3)" in lenient.warnings.lines()[0]
+    assert "1 dropped: undecodable event message (first at message 3)" in lenient.warnings.lines()[0]
 
 
 

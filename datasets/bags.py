@@ -1,0 +1,305 @@
+"""What the ROS 1 (`rosbag`) and ROS 2 (`rosbag2`) readers share: their topics, the checks and
+conversions of each message type, the cached event stream, and the messages their writers
+build. Not a plugin.
+
+A format reader subclasses BagDataset and says how to open its bag, iterate its raw messages,
+deserialise one, and decode an event message into columns; everything else is here, so both
+formats give the same recording the same arrays and the same errors.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Callable, ClassVar, Iterator
+
+import cv2
+import numpy as np
+
+from eas_vo.datasets.calibration import camera_from_camera_info
+from eas_vo.datasets.recording import StreamConfig, check_increasing, event_sample_times, pose_series
+from eas_vo.errors import DataError, DataWarnings
+from eas_vo.eventfile import Validator, cache_key, load_cached
+from eas_vo.plugins import Dataset
+from eas_vo.types import CameraModel, ImuSeries, empty_events
+
+@dataclass(frozen=True)
+class BagConfig(StreamConfig):
+    """StreamConfig plus the topic names (the sensor size comes from camera_info)."""
+
+    events_topic: str = "/dvs/events"
+    image_topic: str = "/dvs/image_raw"
+    imu_topic: str = "/dvs/imu"
+    pose_topic: str = "/optitrack/davis"
+    camera_info_topic: str = "/dvs/camera_info"
+
+
+class RefusedEncoding(Exception):
+    """An event message this reader does not decode (not damage: never dropped under --lenient)."""
+
+
+def ns_seconds(ns) -> np.ndarray:
+    """Integer nanoseconds -> float64 seconds (the nearest double to the decimal `s.nnnnnnnnn`
+    while the count stays below 2**53 ns, about 104 days)."""
+    return np.asarray(ns, np.int64) / 1e9
+
+
+def stamp_seconds(sec, nsec) -> np.ndarray:
+    """ROS time (sec, nanosec) -> float64 seconds."""
+    return ns_seconds(np.asarray(sec, np.int64) * 1_000_000_000 + np.asarray(nsec, np.int64))
+
+
+def image_gray(where: str, index: int, msg) -> np.ndarray:
+    """A sensor_msgs/Image (mono8, 8UC1, bgr8 or rgb8) -> grayscale uint8 (height, width)."""
+    image = np.frombuffer(msg.data, np.uint8)
+    channels = {"mono8": 1, "8UC1": 1, "bgr8": 3, "rgb8": 3}.get(msg.encoding)
+    if channels is None or len(image) != msg.height * msg.step or msg.step < msg.width * channels:
+        raise DataError(where, f"unsupported or inconsistent image ({msg.encoding}, {msg.width}x{msg.height})", index)
+    image = image.reshape(msg.height, msg.step)[:, : msg.width * channels].reshape(msg.height, msg.width, channels)
+    if channels == 3:
+        return cv2.cvtColor(image, cv2.COLOR_RGB2GRAY if msg.encoding == "rgb8" else cv2.COLOR_BGR2GRAY)
+    return np.ascontiguousarray(image[..., 0])
+
+
+def header_seconds(msg) -> float:
+    return float(stamp_seconds(msg.header.stamp.sec, msg.header.stamp.nanosec))
+
+
+class BagDataset(Dataset):
+    """A bag recorded by an event-camera driver: frames, events, IMU, motion capture, camera info.
+
+    Subclasses set `cache_tag`, `event_types`, `camera_fields` and implement `_open`,
+    `_records`, `_deserialize`, `_decode_events` and `_identity`.
+    """
+
+    Config = BagConfig
+    #: The format's part of the event cache key.
+    cache_tag: ClassVar[str]
+    #: The event message types the format decodes.
+    event_types: ClassVar[tuple[str, ...]]
+    #: CameraInfo's names of K and D in this ROS version.
+    camera_fields: ClassVar[tuple[str, str]]
+
+    def __init__(self, location: str | Path, config: BagConfig | None = None):
+        self.config = c = config or BagConfig()
+        self.path = Path(location)
+        self.label = str(self.path)
+        self.warnings = DataWarnings()
+        self.reader = self._open()
+        self.topics = {conn.topic for conn in self.reader.connections}
+        self._times, self._frames = self._read_images()
+        if not self._frames:
+            self.no_frames_reason = f"{self.path} has no {c.image_topic} messages (an event-only stream)"
+        self.camera = self._read_camera()
+        self.ground_truth = self._read_poses()
+        self.imu = self._read_imu()
+        self._events = None
+
+    # -- what a format provides ----------------------------------------------------------
+
+    def _open(self):
+        """The opened rosbags reader; DataError when the bag is missing or unreadable."""
+        raise NotImplementedError
+
+    def _records(self, topic: str, connections: list) -> Iterator[tuple[object, bytes]]:
+        """(connection, raw bytes) of each message of `connections`, in time order; damaged bag
+        bytes raise DataError naming the topic and the message's index in it."""
+        raise NotImplementedError
+
+    def _deserialize(self, raw: bytes, msgtype: str):
+        raise NotImplementedError
+
+    def _decode_events(self, raw: bytes, msgtype: str) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """An event message -> (t [s], x, y, p) columns; ValueError for damaged bytes,
+        RefusedEncoding for what the reader does not decode."""
+        raise NotImplementedError
+
+    def _identity(self) -> tuple:
+        """What identifies the bag's content for the event cache (file_identity of its files)."""
+        raise NotImplementedError
+
+    # -- shared reading ------------------------------------------------------------------
+
+    def _messages(self, topic: str, msgtypes: tuple[str, ...], deserialize: bool = True):
+        """(index, msgtype, message or raw bytes) of a topic; a wrong type, or a message that
+        fails to decode, names the topic and the index."""
+        connections = [conn for conn in self.reader.connections if conn.topic == topic]
+        if not connections:
+            return  # (an empty selection would mean every topic to rosbags)
+        for conn in connections:
+            if conn.msgtype not in msgtypes:
+                raise DataError(self.path, f"topic {topic} carries {conn.msgtype}, expected {' or '.join(msgtypes)}")
+        for index, (conn, raw) in enumerate(self._records(topic, connections)):
+            if not deserialize:
+                yield index, conn.msgtype, raw
+                continue
+            try:
+                yield index, conn.msgtype, self._deserialize(raw, conn.msgtype)
+            except Exception as exc:  # rosbags raises assorted errors on damaged data
+                raise DataError(f"{self.path}:{topic}", f"cannot decode message ({exc})", index) from None
+
+    def _read_images(self):
+        times, frames = [], []
+        where = f"{self.path}:{self.config.image_topic}"
+        for index, _, msg in self._messages(self.config.image_topic, ("sensor_msgs/msg/Image",)):
+            image = image_gray(where, index, msg)
+            t = header_seconds(msg)
+            if times and t < times[-1]:
+                if not self.config.lenient:
+                    raise DataError(where, f"timestamp {t:.9f} goes back (previous {times[-1]:.9f})", index)
+                self.warnings.add(where, "timestamp going back", f"message {index}")
+                continue
+            times.append(t)
+            frames.append(image)
+        return (np.array(times) if frames else None), frames
+
+    def _read_camera(self) -> CameraModel:
+        topic = self.config.camera_info_topic
+        K_name, D_name = self.camera_fields
+        for index, _, msg in self._messages(topic, ("sensor_msgs/msg/CameraInfo",)):
+            return camera_from_camera_info(f"{self.path}:{topic}:{index}", int(msg.width), int(msg.height),
+                                           getattr(msg, K_name), getattr(msg, D_name), msg.distortion_model, f"{K_name}/{D_name}")
+        raise DataError(self.path, f"no {topic} message: the camera intrinsics are unknown")
+
+    def _read_poses(self):
+        topic = self.config.pose_topic
+        rows = [
+            (header_seconds(m), m.pose.position.x, m.pose.position.y, m.pose.position.z,
+             m.pose.orientation.x, m.pose.orientation.y, m.pose.orientation.z, m.pose.orientation.w)
+            for _, _, m in self._messages(topic, ("geometry_msgs/msg/PoseStamped",))
+        ]
+        if not rows:
+            return None
+        check_increasing(f"{self.path}:{topic}", np.array(rows)[:, 0], _message_index)
+        return pose_series(f"{self.path}:{topic}", np.array(rows), _message_index)
+
+    def _read_imu(self):
+        topic = self.config.imu_topic
+        rows = [
+            (header_seconds(m), m.linear_acceleration.x, m.linear_acceleration.y, m.linear_acceleration.z,
+             m.angular_velocity.x, m.angular_velocity.y, m.angular_velocity.z)
+            for _, _, m in self._messages(topic, ("sensor_msgs/msg/Imu",))
+        ]
+        if not rows:
+            return None
+        table = np.array(rows)
+        check_increasing(f"{self.path}:{topic}", table[:, 0], _message_index)
+        return ImuSeries(table[:, 0], table[:, 1:4], table[:, 4:7])
+
+    # -- plugin contract -----------------------------------------------------------------
+
+    def data_warnings(self) -> list[str]:
+        return self.warnings.lines()
+
+    def frame_times(self) -> np.ndarray:
+        if self._times is None:
+            c = self.config
+            self._times = event_sample_times(self.events()["t"], c.sample_rate_hz, c.sample_every_events)
+        return self._times
+
+    def load_frame(self, k: int):
+        return self._frames[k] if self._frames else None
+
+    def events(self) -> np.ndarray:
+        if self._events is None:
+            self._events = self._load_events()
+        return self._events
+
+    def _load_events(self) -> np.ndarray:
+        c = self.config
+        topic = c.events_topic
+        if topic not in self.topics:
+            return empty_events()
+        where = f"{self.path}:{topic}"
+
+        def fill(out, warnings):
+            validate = Validator(where, self.camera.width, self.camera.height, c.time_tolerance_s, c.lenient, warnings, "message")
+            total = 0
+            for index, msgtype, raw in self._messages(topic, self.event_types, deserialize=False):
+                try:
+                    columns = self._decode_events(raw, msgtype)
+                except RefusedEncoding as exc:
+                    raise DataError(where, str(exc), index) from None
+                except (ValueError, IndexError) as exc:
+                    if not c.lenient:
+                        raise DataError(where, f"cannot decode event message ({exc})", index) from None
+                    warnings.add(where, "undecodable event message", f"message {index}")
+                    continue
+                t, x, y, p = columns
+                events = validate(t, x.astype(np.int64), y.astype(np.int64), p.astype(np.int64), lambda row: index)
+                out.write(events.tobytes())
+                total += len(events)
+            return total
+
+        key = cache_key(self.cache_tag, *self._identity(), topic, self.camera.width, self.camera.height, c.time_tolerance_s)
+        return load_cached(key, c.lenient, self.warnings, fill, where)
+
+
+def _message_index(row: int) -> int:
+    """Rows of a topic's table are named by their message index (from 0, as rosbags counts)."""
+    return row
+
+
+# -- writing: the messages of a recording, for either ROS version ----------------------------
+
+
+def recording_messages(dataset: Dataset, config: BagConfig, store, ros1: bool,
+                       event_messages: Callable[[np.ndarray], Iterator[tuple[float, str, object]]]):
+    """(t [s], topic, msgtype, message or bytes) of a dataset's camera info, frames, events, IMU
+    and ground truth, built with rosbags' `store` types (ROS 1 or ROS 2 field names), in time
+    order. `event_messages(events)` yields the event messages (t, msgtype, bytes)."""
+    c = config
+    T = store.types
+    cam = dataset.camera
+
+    def header(t: float):
+        sec, nsec = divmod(int(round(t * 1e9)), 1_000_000_000)
+        stamp = T["builtin_interfaces/msg/Time"](sec=sec, nanosec=nsec)
+        return T["std_msgs/msg/Header"](**({"seq": 0} if ros1 else {}), stamp=stamp, frame_id="davis")
+
+    def vec(x, y, z):
+        return T["geometry_msgs/msg/Vector3"](x=float(x), y=float(y), z=float(z))
+
+    messages = []
+    t0 = float(dataset.frame_times()[0]) if len(dataset.frame_times()) else 0.0
+    K = np.asarray(cam.K, float)
+    matrices = {"D": np.asarray(cam.dist, float), "K": K.ravel(), "R": np.eye(3).ravel(),
+                "P": np.column_stack([K, np.zeros(3)]).ravel()}
+    info = T["sensor_msgs/msg/CameraInfo"](
+        header=header(t0), height=cam.height, width=cam.width,
+        distortion_model="equidistant" if cam.model == "equidistant" else "plumb_bob",
+        **{(name if ros1 else name.lower()): value for name, value in matrices.items()}, binning_x=0, binning_y=0,
+        roi=T["sensor_msgs/msg/RegionOfInterest"](x_offset=0, y_offset=0, height=0, width=0, do_rectify=False),
+    )
+    messages.append((t0, c.camera_info_topic, "sensor_msgs/msg/CameraInfo", info))
+    for k, t in enumerate(dataset.frame_times()):
+        frame = dataset.load_frame(k)
+        if frame is None:
+            break
+        msg = T["sensor_msgs/msg/Image"](header=header(t), height=frame.shape[0], width=frame.shape[1], encoding="mono8",
+                                         is_bigendian=0, step=frame.shape[1], data=np.ascontiguousarray(frame).ravel())
+        messages.append((t, c.image_topic, "sensor_msgs/msg/Image", msg))
+    messages.extend((t, c.events_topic, msgtype, raw) for t, msgtype, raw in event_messages(dataset.events()))
+    if dataset.imu is not None:
+        zero_cov = np.zeros(9)
+        for t, acc, gyro in zip(dataset.imu.t, dataset.imu.acc, dataset.imu.gyro):
+            msg = T["sensor_msgs/msg/Imu"](
+                header=header(t), orientation=T["geometry_msgs/msg/Quaternion"](x=0.0, y=0.0, z=0.0, w=1.0),
+                orientation_covariance=zero_cov, angular_velocity=vec(*gyro), angular_velocity_covariance=zero_cov,
+                linear_acceleration=vec(*acc), linear_acceleration_covariance=zero_cov,
+            )
+            messages.append((t, c.imu_topic, "sensor_msgs/msg/Imu", msg))
+    gt = dataset.ground_truth
+    if gt is not None:
+        for t, p, q in zip(gt.t, gt.p_w_c, gt.q_w_c):
+            pose = T["geometry_msgs/msg/Pose"](
+                position=T["geometry_msgs/msg/Point"](x=float(p[0]), y=float(p[1]), z=float(p[2])),
+                orientation=T["geometry_msgs/msg/Quaternion"](x=float(q[0]), y=float(q[1]), z=float(q[2]), w=float(q[3])),
+            )
+            messages.append((t, c.pose_topic, "geometry_msgs/msg/PoseStamped", T["geometry_msgs/msg/PoseStamped"](header=header(t), pose=pose)))
+    return sorted(messages, key=lambda m: m[0])
+
+
+def bag_time_ns(t: float) -> int:
+    """A message's bag time [ns] for a stamp t [s] (bags hold no negative times)."""
+    return int(round(max(t, 0.0) * 1e9))

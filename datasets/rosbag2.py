@@ -1,0 +1,353 @@
+"""ROS 2 bags (rosbag2 folders, `.db3` sqlite3 and `.mcap` files), read with `rosbags`: no
+ROS install needed.
+
+The topics and the checks are the ROS 1 reader's (datasets/bags.py). Message definitions come
+from the bag itself (rosbag2's sqlite3 `message_definitions` table, mcap schemas); for bags
+written before rosbag2 stored them, from ROS 2 Humble's types and the event types below.
+
+Events (configurable topic), in any of:
+- `dvs_msgs/msg/EventArray` (the rpg DVS driver's ROS 2 port): decoded from its CDR bytes
+  with numpy;
+- `event_camera_msgs/msg/EventPacket` (ros-event-camera drivers: libcaer_driver,
+  metavision_driver) and its former name `event_array_msgs/msg/EventArray`: the `mono`
+  encoding is decoded (event time: header stamp + each event's offset, ROS time);
+  `evt3`, `libcaer`, `libcaer_cmp` and `trigger` are refused by name.
+"""
+
+from __future__ import annotations
+
+import sqlite3
+import struct
+from pathlib import Path
+
+import numpy as np
+
+from eas_vo.datasets.bags import BagConfig, BagDataset, RefusedEncoding, bag_time_ns, ns_seconds, recording_messages, stamp_seconds
+from eas_vo.errors import DataError
+from eas_vo.eventfile import file_identity
+from eas_vo.plugins import Dataset
+
+DVS_EVENT_MSG = """
+uint16 x
+uint16 y
+builtin_interfaces/Time ts
+bool polarity
+"""
+DVS_EVENT_ARRAY_MSG = """
+std_msgs/Header header
+uint32 height
+uint32 width
+dvs_msgs/Event[] events
+"""
+#: event_camera_msgs/msg/EventPacket, and event_array_msgs/msg/EventArray before its renaming.
+EVENT_PACKET_MSG = """
+std_msgs/Header header
+uint32 height
+uint32 width
+uint64 seq
+uint64 time_base
+string encoding
+bool is_bigendian
+uint8[] events
+"""
+DVS_ARRAY = "dvs_msgs/msg/EventArray"
+PACKET_TYPES = ("event_camera_msgs/msg/EventPacket", "event_array_msgs/msg/EventArray")
+#: Packed encodings of an EventPacket that carry no camera events, or that are not decoded here.
+REFUSED_ENCODINGS = {
+    "trigger": "holds external trigger events, not camera events",
+    "evt3": "(Prophesee EVT 3.0) is not decoded",
+    "libcaer": "is not decoded",
+    "libcaer_cmp": "is not decoded",
+}
+SQLITE_MAGIC = b"SQLite format 3\x00"
+MCAP_MAGIC = b"\x89MCAP0\r\n"
+#: What rosbags' rosbag2 readers raise on damaged bytes besides ReaderError: sqlite's errors,
+#: short reads and failed asserts of the mcap parser, and the chunk decompressors' errors.
+DAMAGED_BAG_ERRORS = (sqlite3.Error, AssertionError, KeyError, IndexError, ValueError, struct.error, OSError, EOFError,
+                      RuntimeError, UnicodeDecodeError)
+#: dvs_msgs/msg/Event in CDR: the first element starts 4-aligned (x, y, sec, nsec, polarity:
+#: 13 bytes + 1 of padding); every later one starts at 2 mod 4 and pads its time to 4: 16 bytes.
+_FIRST_EVENT = np.dtype({"names": ["x", "y", "sec", "nsec", "p"], "formats": ["<u2", "<u2", "<i4", "<u4", "u1"],
+                         "offsets": [0, 2, 4, 8, 12], "itemsize": 13})
+_LATER_EVENT = np.dtype({"names": ["x", "y", "sec", "nsec", "p"], "formats": ["<u2", "<u2", "<i4", "<u4", "u1"],
+                         "offsets": [0, 2, 6, 10, 14], "itemsize": 15})
+
+
+def event_typestore():
+    """A typestore of ROS 2 Humble's messages plus the event types above."""
+    from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+
+    store = get_typestore(Stores.ROS2_HUMBLE)
+    store.register(get_types_from_msg(DVS_EVENT_MSG, "dvs_msgs/msg/Event"))
+    store.register(get_types_from_msg(DVS_EVENT_ARRAY_MSG, DVS_ARRAY))
+    for msgtype in PACKET_TYPES:
+        store.register(get_types_from_msg(EVENT_PACKET_MSG, msgtype))
+    return store
+
+
+def bag_typestore(path: Path, connections):
+    """The types of a bag's connections: its own definitions, then (for bags that store none)
+    event_typestore()'s. A definition that cannot be parsed raises DataError naming the type."""
+    from rosbags.interfaces import MessageDefinitionFormat
+    from rosbags.typesys import Stores, TypesysError, get_types_from_idl, get_types_from_msg, get_typestore
+
+    store = get_typestore(Stores.EMPTY)
+    for conn in connections:
+        fmt, text = conn.msgdef.format, conn.msgdef.data
+        if fmt == MessageDefinitionFormat.NONE or conn.msgtype in store.fielddefs:
+            continue
+        try:
+            if fmt == MessageDefinitionFormat.MSG:
+                store.register(get_types_from_msg(text, conn.msgtype))
+            else:
+                separator = "=" * 80 + "\n"
+                for block in text.split(separator)[1:] if text.startswith(separator + "IDL: ") else [text]:
+                    store.register(get_types_from_idl(block.split("\n", 1)[1] if text.startswith(separator) else block))
+        except (TypesysError, ValueError, IndexError) as exc:
+            raise DataError(path, f"cannot read the bag's definition of {conn.msgtype} ({exc})") from None
+    fallback = event_typestore()
+    needed = {}
+
+    def add(name):  # a type the bag does not define, and the types it nests
+        if name in store.fielddefs or name in needed or name not in fallback.fielddefs:
+            return
+        needed[name] = fallback.fielddefs[name]
+        for _, desc in fallback.fielddefs[name][1]:
+            for nested in _nested_names(desc):
+                add(nested)
+
+    for conn in connections:
+        add(conn.msgtype)
+    if needed:
+        store.register(needed)
+    return store
+
+
+def _nested_names(desc) -> list[str]:
+    """The message type names a field description refers to."""
+    from rosbags.interfaces import Nodetype
+
+    kind, rest = desc
+    if kind == Nodetype.NAME:
+        return [rest]
+    return _nested_names(rest[0]) if kind in (Nodetype.ARRAY, Nodetype.SEQUENCE) else []
+
+
+def _definition(store, msgtype: str) -> list:
+    """A type's fields with the nested types' fields spelled out (to compare definitions)."""
+    from rosbags.interfaces import Nodetype
+
+    def expand(desc):
+        kind, rest = desc
+        if kind == Nodetype.NAME:
+            return _definition(store, rest)
+        if kind in (Nodetype.ARRAY, Nodetype.SEQUENCE):
+            return [kind, expand(rest[0]), rest[1]]
+        return [kind, rest]
+
+    return [(name.lower(), expand(desc)) for name, desc in store.fielddefs[msgtype][1]]
+
+
+def decode_dvs_array(raw: bytes) -> np.ndarray:
+    """CDR dvs_msgs/msg/EventArray -> records (x, y, sec, nsec, p) of its events."""
+    if len(raw) < 4 or raw[:2] != b"\x00\x01":
+        if raw[:2] == b"\x00\x00":
+            raise RefusedEncoding("big-endian CDR is not read")
+        raise ValueError("not a little-endian CDR message")
+    body = memoryview(raw)[4:]
+    frame_id_len = int(np.frombuffer(body, "<u4", 1, 8)[0]) if len(body) >= 12 else len(body)
+    o = -(-(12 + frame_id_len) // 4) * 4
+    if len(body) < o + 12:
+        raise ValueError(f"{len(raw)} bytes end within the message's header")
+    count = int(np.frombuffer(body, "<u4", 1, o + 8)[0])
+    start = o + 12
+    need = start + (16 * count - 3 if count else 0)
+    if not need <= len(body) <= need + 3:  # (a writer may pad the message to a multiple of 4)
+        raise ValueError(f"{count} events announced, {len(body) - start} bytes of event data")
+    out = np.empty(count, _FIRST_EVENT)
+    if count:
+        out[:1] = np.frombuffer(body, _FIRST_EVENT, 1, start)
+    if count > 1:
+        out[1:] = np.ndarray((count - 1,), _LATER_EVENT, body, start + 14, (16,))
+    return out
+
+
+def encode_dvs_array(t_header: float, width: int, height: int, events: np.ndarray) -> bytes:
+    """CDR dvs_msgs/msg/EventArray bytes (frame_id "davis"), built with numpy; the inverse of
+    decode_dvs_array, byte for byte what rosbags' serialize_cdr writes."""
+    sec, nsec = divmod(int(round(t_header * 1e9)), 1_000_000_000)
+    ns = np.round(events["t"] * 1e9).astype(np.int64)
+    secs, nsecs = np.divmod(ns, 1_000_000_000)
+    frame_id = b"davis\x00"
+    head = struct.pack("<iiI", sec, nsec, len(frame_id)) + frame_id
+    head += bytes(-len(head) % 4) + struct.pack("<III", height, width, len(events))
+    body = bytearray(len(head) + (16 * len(events) - 3 if len(events) else 0))
+    body[: len(head)] = head
+    for part, dtype, offset in ((slice(0, 1), _FIRST_EVENT, 0), (slice(1, None), _LATER_EVENT, 14)):
+        n = len(events[part])
+        if n:
+            rec = np.ndarray((n,), dtype, body, len(head) + offset, (16,))
+            rec["x"], rec["y"], rec["sec"], rec["nsec"], rec["p"] = (
+                events["x"][part], events["y"][part], secs[part], nsecs[part], events["p"][part] > 0)
+    return b"\x00\x01\x00\x00" + bytes(body)
+
+
+def decode_mono(base_ns: int, packed: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """event_camera_codecs' `mono` encoding -> (t [ns], x, y, p) columns.
+
+    Each event is one little-endian uint64: bits 0-31 its time dt [ns] after the packet's start,
+    32-47 x, 48-62 y, 63 the polarity (1 = ON); t = base_ns + dt.
+    """
+    if len(packed) % 8:
+        raise ValueError(f"{len(packed)} bytes of mono events, not a multiple of 8")
+    words = np.frombuffer(np.ascontiguousarray(packed, np.uint8), "<u8")
+    t_ns = np.int64(base_ns) + (words & 0xFFFFFFFF).astype(np.int64)
+    return t_ns, (words >> 32) & 0xFFFF, (words >> 48) & 0x7FFF, words >> 63
+
+
+def encode_mono(base_ns: int, events: np.ndarray) -> np.ndarray:
+    """Events (EVENT_DTYPE, at or after base_ns, within 4.29 s of it) -> `mono` bytes."""
+    dt = np.round(events["t"] * 1e9).astype(np.int64) - base_ns
+    if len(dt) and not (0 <= dt.min() and dt.max() < 2**32):
+        raise ValueError("mono packets span at most 4.29 s after their time base")
+    words = (dt.astype(np.uint64) | events["x"].astype(np.uint64) << np.uint64(32)
+             | events["y"].astype(np.uint64) << np.uint64(48) | (events["p"] > 0).astype(np.uint64) << np.uint64(63))
+    return words.astype("<u8").view(np.uint8)
+
+
+class Rosbag2Dataset(BagDataset):
+    """A ROS 2 bag (a rosbag2 folder, or one `.db3` / `.mcap` file of it) of an event camera."""
+
+    name = "rosbag2"
+    description = "ROS 2 bag (folder, .db3 or .mcap): dvs_msgs/event_camera_msgs events, sensor_msgs, mocap poses"
+    cache_tag = "rosbag2"
+    event_types = (DVS_ARRAY, *PACKET_TYPES)
+    camera_fields = ("k", "d")
+
+    def _open(self):
+        from rosbags.rosbag2 import Reader, ReaderError
+
+        path = self.path
+        if not path.exists():
+            raise DataError(path, "ROS 2 bag not found")
+        if path.is_dir() and not (path / "metadata.yaml").is_file():
+            raise DataError(path, "a folder without metadata.yaml is not a rosbag2 bag")
+        if path.is_file() and _storage_of(path) is None:
+            raise DataError(path, "not a ROS 2 bag file (neither sqlite3 nor mcap)")
+        try:
+            reader = Reader(path)
+            reader.open()
+        except (ReaderError, *DAMAGED_BAG_ERRORS) as exc:
+            raise DataError(path, f"not a readable ROS 2 bag ({_said(exc)})") from None
+        self.store = bag_typestore(path, reader.connections)
+        reference = event_typestore()
+        for conn in reader.connections:
+            if conn.msgtype in self.event_types and _definition(self.store, conn.msgtype) != _definition(reference, conn.msgtype):
+                raise DataError(path, f"topic {conn.topic}: the bag defines {conn.msgtype} unlike its driver")
+        return reader
+
+    def _records(self, topic: str, connections: list):
+        from rosbags.rosbag2 import ReaderError
+
+        records = self.reader.messages(connections=connections)
+        index = 0
+        while True:
+            try:
+                conn, _, raw = next(records)
+            except StopIteration:
+                return
+            except (ReaderError, *DAMAGED_BAG_ERRORS) as exc:
+                raise DataError(f"{self.path}:{topic}", f"damaged bag data, message unreadable ({_said(exc)})", index) from None
+            yield conn, raw
+            index += 1
+
+    def _deserialize(self, raw: bytes, msgtype: str):
+        return self.store.deserialize_cdr(raw, msgtype)
+
+    def _decode_events(self, raw: bytes, msgtype: str):
+        if msgtype == DVS_ARRAY:
+            wire = decode_dvs_array(raw)
+            return stamp_seconds(wire["sec"], wire["nsec"]), wire["x"], wire["y"], wire["p"]
+        try:
+            msg = self.store.deserialize_cdr(raw, msgtype)
+        except Exception as exc:  # rosbags raises assorted errors on damaged data
+            raise ValueError(str(exc) or type(exc).__name__) from None
+        if msg.encoding in REFUSED_ENCODINGS:
+            raise RefusedEncoding(f"event encoding {msg.encoding!r} {REFUSED_ENCODINGS[msg.encoding]} (eas-vo reads 'mono')")
+        if msg.encoding != "mono":
+            raise RefusedEncoding(f"unknown event encoding {msg.encoding!r} (eas-vo reads 'mono')")
+        if msg.is_bigendian:
+            raise RefusedEncoding("big-endian mono events are not read")
+        # ROS time, the clock of the bag's other topics: the header stamp + dt (time_base + dt
+        # would be the camera's own clock; event_camera_msgs documents both).
+        stamp = msg.header.stamp
+        t_ns, x, y, p = decode_mono(int(stamp.sec) * 1_000_000_000 + int(stamp.nanosec), msg.events)
+        return ns_seconds(t_ns), x, y, p
+
+    def _identity(self) -> tuple:
+        if self.path.is_file():
+            return file_identity(self.path)
+        files = [self.path / "metadata.yaml", *sorted(p for p in self.path.iterdir() if p.suffix in (".db3", ".mcap", ".zstd"))]
+        return tuple(part for f in files for part in (f.name, *file_identity(f)))
+
+    @classmethod
+    def can_open(cls, location: str) -> bool:
+        """A folder holding metadata.yaml, or a `.db3` / `.mcap` file that starts as one (its magic)."""
+        path = Path(location)
+        try:
+            if path.is_dir():
+                return (path / "metadata.yaml").is_file()
+            return path.suffix.lower() in (".db3", ".mcap") and _storage_of(path) is not None
+        except OSError:
+            return False
+
+
+def _storage_of(path: Path) -> str | None:
+    """`sqlite3` or `mcap` from a file's first bytes, or None."""
+    with open(path, "rb") as fh:
+        head = fh.read(len(SQLITE_MAGIC))
+    if head == SQLITE_MAGIC:
+        return "sqlite3"
+    return "mcap" if head.startswith(MCAP_MAGIC) else None
+
+
+def _said(exc: Exception) -> str:
+    """What the reader said of damaged bytes, on one line (its failed asserts say nothing)."""
+    return " ".join(str(exc).split()) or type(exc).__name__
+
+
+def write_bag2(dataset: Dataset, path: str | Path, storage: str = "sqlite3", config: BagConfig | None = None,
+               encoding: str = "dvs", events_per_message: int = 5000) -> None:
+    """Write a dataset as a rosbag2 folder `path` with rosbags' Writer (storage `sqlite3` or
+    `mcap`); events as dvs_msgs/msg/EventArray (`encoding="dvs"`) or as `mono`
+    event_camera_msgs/msg/EventPacket (`encoding="mono"`)."""
+    from rosbags.rosbag2 import StoragePlugin, Writer
+
+    c = config or BagConfig()
+    store = event_typestore()
+    cam = dataset.camera
+    packet_type = PACKET_TYPES[0]
+
+    def event_messages(events):
+        for start in range(0, len(events), events_per_message):
+            chunk = events[start : start + events_per_message]
+            t = float(chunk["t"][-1])
+            if encoding == "dvs":
+                yield t, DVS_ARRAY, encode_dvs_array(t, cam.width, cam.height, chunk)
+                continue
+            time_base = int(round(float(chunk["t"][0]) * 1e9))
+            sec, nsec = divmod(time_base, 1_000_000_000)
+            header = store.types["std_msgs/msg/Header"](stamp=store.types["builtin_interfaces/msg/Time"](sec=sec, nanosec=nsec),
+                                                        frame_id="davis")
+            msg = store.types[packet_type](header=header, height=cam.height, width=cam.width, seq=start // events_per_message,
+                                           time_base=time_base, encoding="mono", is_bigendian=False, events=encode_mono(time_base, chunk))
+            yield t, packet_type, bytes(store.serialize_cdr(msg, packet_type))
+
+    plugin = {"sqlite3": StoragePlugin.SQLITE3, "mcap": StoragePlugin.MCAP}[storage]
+    with Writer(Path(path), version=9, storage_plugin=plugin) as writer:
+        connections = {}
+        for t, topic, msgtype, msg in recording_messages(dataset, c, store, False, event_messages):
+            if topic not in connections:
+                connections[topic] = writer.add_connection(topic, msgtype, typestore=store)
+            raw = msg if isinstance(msg, bytes) else store.serialize_cdr(msg, msgtype)
+            writer.write(connections[topic], bag_time_ns(t), raw)
