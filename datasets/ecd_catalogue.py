@@ -6,7 +6,8 @@ final name is always whole; one already there and verified is not fetched again.
 
 Environment:
     EAS_VO_DATA_DIR       where sequences are kept (default: $EAS_VO_CACHE_DIR/data, i.e. the cache)
-    EAS_VO_DATA_URL       base URL of the zips (a mirror, a local server)
+    EAS_VO_DATA_URL       base URL of the zips (a mirror, a local server), or a local folder
+                          of them (a path or a file:// URL: an offline mirror)
     EAS_VO_DATA_REGISTRY  a file of `name md5` lines that replaces the built-in registry
 """
 
@@ -17,10 +18,10 @@ import re
 import sys
 from importlib import resources
 from pathlib import Path
-from urllib.parse import urlsplit
+from urllib.parse import unquote, urlsplit
 
 from eas_vo.errors import DataError, EasVoError
-from eas_vo.io import cache_folder, current_umask
+from eas_vo.io import atomic_path, cache_folder, current_umask
 
 BASE_URL = "https://rpg.ifi.uzh.ch/datasets/davis/"
 _MD5 = re.compile(r"[0-9a-fA-F]{32}")
@@ -87,8 +88,12 @@ def fetch(name: str, folder: str | Path | None = None, progress: bool = False) -
     if target.is_file() and pooch.file_hash(str(target), alg="md5") == md5s[name]:
         return target
     url = os.environ.get("EAS_VO_DATA_URL", BASE_URL).rstrip("/") + "/"
+    mirror = _local_mirror(url)
+    if mirror is not None:
+        return _copy_verified(mirror / target.name, target, md5s[name])
     if urlsplit(url).scheme not in ("http", "https", "ftp"):
-        raise EasVoError(f"EAS_VO_DATA_URL={url!r}: expected an http://, https:// or ftp:// address")
+        raise EasVoError(f"EAS_VO_DATA_URL={url!r}: expected an http://, https:// or ftp:// address, "
+                         "or a local folder (a path or a file:// URL)")
     print(f"eas-vo: fetching {name}.zip ({_size_text(url + target.name)}) from {url} into {target.parent}",
           file=sys.stderr)
     pooch.get_logger().setLevel(logging.WARNING)  # our notice above replaces its own
@@ -102,6 +107,39 @@ def fetch(name: str, folder: str | Path | None = None, progress: bool = False) -
                              f"(tried 3 times; nothing was kept)") from None
         raise EasVoError(f"{url}{target.name}: download failed, nothing was kept ({type(exc).__name__}: {detail})") from None
     os.chmod(target, 0o666 & ~current_umask())  # pooch's temporary file was private
+    return target
+
+
+def _local_mirror(url: str) -> Path | None:
+    """The folder `url` names when it is a local one (a file:// URL, or a path without a
+    scheme that exists as a folder), else None."""
+    parts = urlsplit(url)
+    if parts.scheme == "file":
+        folder = Path(unquote(parts.path))
+    elif parts.scheme == "" or (len(parts.scheme) == 1 and os.name == "nt"):  # a path (C:\ on Windows)
+        folder = Path(url)
+    else:
+        return None
+    if not folder.is_dir():
+        raise EasVoError(f"EAS_VO_DATA_URL={url!r}: no such folder (a local mirror of the zips)")
+    return folder
+
+
+def _copy_verified(source: Path, target: Path, md5: str) -> Path:
+    """Copy `source` to `target` through a temporary file moved into place only once its MD5 is `md5`."""
+    import shutil
+
+    import pooch
+
+    if not source.is_file():
+        raise EasVoError(f"{source}: not in the local mirror (EAS_VO_DATA_URL), nothing was copied")
+    print(f"eas-vo: copying {source.name} ({source.stat().st_size / 1e6:.1f} MB) from {source.parent} into {target.parent}",
+          file=sys.stderr)
+    with atomic_path(target) as tmp:
+        shutil.copyfile(source, tmp)
+        found = pooch.file_hash(str(tmp), alg="md5")
+        if found != md5:
+            raise EasVoError(f"{source}: does not match its MD5 {md5} (found {found}); nothing was kept")
     return target
 
 

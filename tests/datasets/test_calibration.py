@@ -190,7 +190,7 @@ def test_dv_xml_with_two_cameras_needs_a_choice(tmp_path):
     ("kalibr", lambda t: t.replace("resolution: [346, 260]", "resolution: [346]"), r"cam0.resolution: expected a list of 2"),
     ("kalibr", lambda t: t.replace("cam0:", "cam0: [").replace("rostopic", "]"), r"not valid YAML"),
     ("camera_info", lambda t: t.replace("image_height: 260\n", ""), r"image_height: expected an integer, found missing"),
-    ("camera_info", lambda t: t.replace("plumb_bob", "rational_polynomial"), r"'rational_polynomial' is not read"),
+    ("camera_info", lambda t: t.replace("plumb_bob", "fov"), r"'fov' is not read"),
     ("camera_info", lambda t: t.replace("data: [259.351, 0,", "data: [0.001, 0,"), r"focal lengths fx = 0.001"),
     ("camera_info", lambda t: t.replace("-0.0311]", "-0.0311, 0.5, 0, 0]"), r"8 radial-tangential distortion coefficients"),
     ("dv_xml", lambda t: t.replace("<image_width>346</image_width>", ""), r"DAVIS346_00000499/image_width: missing"),

@@ -167,3 +167,29 @@ def test_a_fetched_file_gets_the_users_umask(site):
     finally:
         os.umask(old)
     assert stat.S_IMODE(path.stat().st_mode) == 0o644
+
+
+@pytest.mark.parametrize("as_url", [False, True], ids=["folder", "file-url"])
+def test_a_local_mirror_is_copied_verified(site, data_server, tmp_path, monkeypatch, as_url):
+    """EAS_VO_DATA_URL as a folder of the zips (a path or file://): copied, MD5-checked, kept
+    once; a zip that does not match says so in its own line; one the mirror lacks too."""
+    data, md5s, _, hits = site
+    import shutil
+
+    mirror = tmp_path / "mirror dir"  # a copy of what the server publishes, its name needing quoting as a URL
+    shutil.copytree(data_server[0], mirror)
+    monkeypatch.setenv("EAS_VO_DATA_URL", mirror.as_uri() if as_url else str(mirror))
+    path = ecd_catalogue.fetch("seq_a")
+    assert path == data / "seq_a.zip" and path.read_bytes() == (mirror / "seq_a.zip").read_bytes()
+    assert hits["seq_a.zip"] == 0 and _leftovers(data) == ["seq_a.zip"]
+    path.unlink()
+    (mirror / "seq_a.zip").write_bytes(b"not the zip")
+    with pytest.raises(EasVoError, match=r"seq_a.zip: does not match its MD5 [0-9a-f]{32} \(found [0-9a-f]{32}\); nothing was kept"):
+        ecd_catalogue.fetch("seq_a")
+    assert _leftovers(data) == []
+    (mirror / "seq_a.zip").unlink()
+    with pytest.raises(EasVoError, match="seq_a.zip: not in the local mirror"):
+        ecd_catalogue.fetch("seq_a")
+    monkeypatch.setenv("EAS_VO_DATA_URL", str(tmp_path / "nowhere"))
+    with pytest.raises(EasVoError, match="no such folder"):
+        ecd_catalogue.fetch("seq_a")
