@@ -152,15 +152,15 @@ def test_a_distortion_model_eas_vo_does_not_read_is_refused(bag_path, tmp_path):
 
     from eas_vo.datasets.rosbag import typestore
 
-    damaged = tmp_path / "rational.bag"
+    damaged = tmp_path / "fov.bag"
     store = typestore()
     with Reader(bag_path) as reader, Writer(damaged) as writer:
         connections = {c.id: writer.add_connection(c.topic, c.msgtype, typestore=store) for c in reader.connections}
         for connection, timestamp, raw in reader.messages():
             if connection.msgtype == "sensor_msgs/msg/CameraInfo":
                 msg = store.deserialize_ros1(raw, connection.msgtype)
-                msg.distortion_model = "rational_polynomial"
+                msg.distortion_model = "fov"
                 raw = store.serialize_ros1(msg, connection.msgtype)
             writer.write(connections[connection.id], timestamp, raw)
-    with pytest.raises(DataError, match=r"rational.bag:/dvs/camera_info:0: distortion_model: 'rational_polynomial' is not read"):
+    with pytest.raises(DataError, match=r"fov.bag:/dvs/camera_info:0: distortion_model: 'fov' is not read"):
         RosbagDataset(damaged)

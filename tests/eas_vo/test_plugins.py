@@ -85,7 +85,7 @@ def test_the_readme_example_plugins_run_through_the_cli(short_sequence, tmp_path
     assert len(frames) == 1 + len(np.load(recording)["frame_times"]) and ",ok," in frames[2]
 
     bad = run_eas_vo("run", "--dataset", str(recording), "--frontend", "sobel", "--set", "frontend.nope=1", env=env)
-    assert bad.returncode == 2 and bad.stderr.strip() == "eas-vo: error: unknown key frontend.nope; allowed keys: blur_px"
+    assert bad.returncode == 2 and bad.stderr.strip() == "eas-vo: error: unknown key frontend.sobel.nope; allowed keys: blur_px"
 
 
 @pytest.fixture(scope="module")
