@@ -22,10 +22,9 @@ import cv2
 import numpy as np
 
 from eas_vo.datasets.calibration import read_calibration
-from eas_vo.datasets.recording import StreamConfig, check_increasing, event_sample_times, read_tum_ground_truth
+from eas_vo.datasets.recording import RecordingReader, StreamConfig, check_increasing, read_tum_ground_truth
 from eas_vo.errors import DataError, DataWarnings
 from eas_vo.eventfile import Validator, cache_key, file_identity, load_cached
-from eas_vo.plugins import Dataset
 from eas_vo.types import ImuSeries, empty_events
 from eas_vo.validation import check_range
 
@@ -82,7 +81,7 @@ def is_aedat4(path: Path) -> bool:
         return False
 
 
-class Aedat4Dataset(Dataset):
+class Aedat4Dataset(RecordingReader):
     """An AEDAT4 recording of a DAVIS (or any DV camera): events, frames, IMU."""
 
     name = "aedat4"
@@ -267,12 +266,3 @@ class Aedat4Dataset(Dataset):
         """A path ending in `.aedat4` whose first bytes are the AEDAT 4.0 magic."""
         path = Path(location)
         return path.suffix.lower() == ".aedat4" and is_aedat4(path)
-
-    def data_warnings(self) -> list[str]:
-        return self.warnings.lines()
-
-    def frame_times(self) -> np.ndarray:
-        if self._times is None:
-            c = self.config
-            self._times = event_sample_times(self.events()["t"], c.sample_rate_hz, c.sample_every_events)
-        return self._times

@@ -17,7 +17,7 @@ import cv2
 import numpy as np
 
 from eas_vo.datasets.calibration import camera_from_camera_info
-from eas_vo.datasets.recording import StreamConfig, check_increasing, event_sample_times, pose_series
+from eas_vo.datasets.recording import RecordingReader, StreamConfig, check_increasing, pose_series
 from eas_vo.errors import DataError, DataWarnings
 from eas_vo.eventfile import Validator, cache_key, load_cached
 from eas_vo.plugins import Dataset
@@ -65,7 +65,7 @@ def header_seconds(msg) -> float:
     return float(stamp_seconds(msg.header.stamp.sec, msg.header.stamp.nanosec))
 
 
-class BagDataset(Dataset):
+class BagDataset(RecordingReader):
     """A bag recorded by an event-camera driver: frames, events, IMU, motion capture, camera info.
 
     Subclasses set `cache_tag`, `event_types`, `camera_fields` and implement `_open`,
@@ -187,15 +187,6 @@ class BagDataset(Dataset):
         return ImuSeries(table[:, 0], table[:, 1:4], table[:, 4:7])
 
     # -- plugin contract -----------------------------------------------------------------
-
-    def data_warnings(self) -> list[str]:
-        return self.warnings.lines()
-
-    def frame_times(self) -> np.ndarray:
-        if self._times is None:
-            c = self.config
-            self._times = event_sample_times(self.events()["t"], c.sample_rate_hz, c.sample_every_events)
-        return self._times
 
     def load_frame(self, k: int):
         return self._frames[k] if self._frames else None

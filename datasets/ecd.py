@@ -26,12 +26,11 @@ import numpy as np
 
 from eas_vo.datasets import ecd_catalogue
 from eas_vo.datasets.calibration import parse_ecd_calib, parse_kalibr_camchain
-from eas_vo.datasets.recording import StreamConfig, event_sample_times, ground_truth_table, timed_table
+from eas_vo.datasets.recording import RecordingReader, StreamConfig, ground_truth_table, timed_table
 from eas_vo.datasets.sources import MARKERS, open_source
 from eas_vo.errors import DataError, DataWarnings
 from eas_vo.eventfile import load_event_text, write_events_text
 from eas_vo.io import atomic_path, silenced_stderr, write_text_atomic
-from eas_vo.plugins import Dataset
 from eas_vo.types import CameraModel, ImuSeries, PoseSeries, empty_events
 from eas_vo.validation import check_range
 
@@ -71,7 +70,7 @@ def _leaves_folder(name: str) -> bool:
     return False
 
 
-class EcdFolderDataset(Dataset):
+class EcdFolderDataset(RecordingReader):
     """An Event Camera Dataset sequence: an extracted folder or its `.zip`."""
 
     name = "ecd"
@@ -110,15 +109,6 @@ class EcdFolderDataset(Dataset):
     @classmethod
     def fetch(cls, name: str, folder: str | None = None, progress: bool = False) -> Path:
         return ecd_catalogue.fetch(name, folder, progress)
-
-    def data_warnings(self) -> list[str]:
-        return self.warnings.lines()
-
-    def frame_times(self) -> np.ndarray:
-        if self._times is None:  # event-only: samples from the events
-            c = self.config
-            self._times = event_sample_times(self.events()["t"], c.sample_rate_hz, c.sample_every_events)
-        return self._times
 
     def load_frame(self, k: int) -> np.ndarray | None:
         if not self._frame_names:

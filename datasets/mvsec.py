@@ -26,11 +26,10 @@ from pathlib import Path
 import numpy as np
 
 from eas_vo.datasets.calibration import read_calibration
-from eas_vo.datasets.recording import StreamConfig, check_increasing, event_sample_times
+from eas_vo.datasets.recording import RecordingReader, StreamConfig, check_increasing
 from eas_vo.errors import DataError, DataWarnings
 from eas_vo.eventfile import Validator, cache_key, file_identity, load_cached, pack_rows
 from eas_vo.geometry.rotations import quats_from_matrices
-from eas_vo.plugins import Dataset
 from eas_vo.types import CameraModel, ImuSeries, PoseSeries, empty_events
 from eas_vo.validation import check_choice, check_range
 
@@ -100,7 +99,7 @@ def _has_signature(path: Path) -> bool:
     return False
 
 
-class MvsecDataset(Dataset):
+class MvsecDataset(RecordingReader):
     """An MVSEC `NAME_data.hdf5` (events, frames, IMU of one DAVIS) with its `NAME_gt.hdf5` poses."""
 
     name = "mvsec"
@@ -147,15 +146,6 @@ class MvsecDataset(Dataset):
                 return isinstance(f.get("davis"), h5py.Group)
         except H5_ERRORS:
             return False
-
-    def data_warnings(self) -> list[str]:
-        return self.warnings.lines()
-
-    def frame_times(self) -> np.ndarray:
-        if self._times is None:  # event-only: samples from the events
-            c = self.config
-            self._times = event_sample_times(self.events()["t"], c.sample_rate_hz, c.sample_every_events)
-        return self._times
 
     def load_frame(self, k: int) -> np.ndarray | None:
         if not self._frame_rows:

@@ -11,8 +11,9 @@ from pathlib import Path
 
 import numpy as np
 
-from eas_vo.errors import DataError
+from eas_vo.errors import DataError, DataWarnings
 from eas_vo.io import data_line, parse_table
+from eas_vo.plugins import Dataset
 from eas_vo.types import PoseSeries
 from eas_vo.validation import check_range
 
@@ -111,3 +112,21 @@ def read_tum_ground_truth(path: str | Path, time_offset_s: float = 0.0) -> PoseS
     except OSError as exc:
         raise DataError(str(path), f"cannot read the ground truth: {exc.strerror or exc}") from None
     return ground_truth_table(data, str(path), time_offset_s)
+
+
+class RecordingReader(Dataset):
+    """What the recording readers' plugins share: `data_warnings` from their `warnings`
+    (DataWarnings) and, for an event-only stream (`_times` None), frame times sampled from the
+    events at the config's `sample_rate_hz` or every `sample_every_events`."""
+
+    warnings: DataWarnings
+    _times: np.ndarray | None
+
+    def data_warnings(self) -> list[str]:
+        return self.warnings.lines()
+
+    def frame_times(self) -> np.ndarray:
+        if self._times is None:  # event-only: samples from the events
+            c = self.config
+            self._times = event_sample_times(self.events()["t"], c.sample_rate_hz, c.sample_every_events)
+        return self._times
