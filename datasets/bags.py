@@ -69,7 +69,7 @@ class BagDataset(RecordingReader):
     """A bag recorded by an event-camera driver: frames, events, IMU, motion capture, camera info.
 
     Subclasses set `cache_tag`, `event_types`, `camera_fields` and implement `_open`,
-    `_records`, `_deserialize`, `_decode_events` and `_identity`.
+    `_damage_errors`, `_damage_detail`, `_deserialize`, `_decode_events` and `_identity`.
     """
 
     Config = BagConfig
@@ -103,7 +103,26 @@ class BagDataset(RecordingReader):
 
     def _records(self, topic: str, connections: list) -> Iterator[tuple[object, bytes]]:
         """(connection, raw bytes) of each message of `connections`, in time order; damaged bag
-        bytes raise DataError naming the topic and the message's index in it."""
+        bytes raise DataError naming the topic, the message's index in it and `_damage_detail`."""
+        records = self.reader.messages(connections=connections)
+        index = 0
+        while True:
+            try:
+                conn, _, raw = next(records)
+            except StopIteration:
+                return
+            except self._damage_errors() as exc:
+                raise DataError(f"{self.path}:{topic}", "damaged bag data, message unreadable"
+                                + self._damage_detail(connections, index, exc), index) from None
+            yield conn, raw
+            index += 1
+
+    def _damage_errors(self) -> tuple[type[BaseException], ...]:
+        """What the format's reader raises on damaged bytes."""
+        raise NotImplementedError
+
+    def _damage_detail(self, connections: list, index: int, exc: BaseException) -> str:
+        """What follows "message unreadable" for message `index` of `connections` (e.g. " (what the reader said)")."""
         raise NotImplementedError
 
     def _deserialize(self, raw: bytes, msgtype: str):

@@ -99,25 +99,15 @@ class RosbagDataset(BagDataset):
     def _identity(self) -> tuple:
         return file_identity(self.path)
 
-    def _records(self, topic: str, connections: list):
-        """(connection, raw bytes) of each message of `connections`, in time order; damaged bag
-        bytes name the topic, the message's index in it and its bag time."""
+    def _damage_errors(self) -> tuple[type[BaseException], ...]:
         from rosbags.rosbag1 import ReaderError
 
-        records = self.reader.messages(connections=connections)
-        index = 0
-        while True:
-            try:
-                conn, _, raw = next(records)
-            except StopIteration:
-                return
-            except (ReaderError, *DAMAGED_BAG_ERRORS) as exc:
-                t_ns = sorted(entry.time for c in connections for entry in self.reader.indexes[c.id])[index]
-                raise DataError(f"{self.path}:{topic}", f"damaged bag data, message unreadable at bag time "
-                                                        f"{t_ns / 1e9:.6f} s" + (f" ({_said(exc)})" if _said(exc) else ""),
-                                index) from None
-            yield conn, raw
-            index += 1
+        return (ReaderError, *DAMAGED_BAG_ERRORS)
+
+    def _damage_detail(self, connections: list, index: int, exc: BaseException) -> str:
+        """The message's bag time, and what the reader said."""
+        t_ns = sorted(entry.time for c in connections for entry in self.reader.indexes[c.id])[index]
+        return f" at bag time {t_ns / 1e9:.6f} s" + (f" ({_said(exc)})" if _said(exc) else "")
 
     @classmethod
     def can_open(cls, location: str) -> bool:

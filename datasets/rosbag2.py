@@ -246,20 +246,13 @@ class Rosbag2Dataset(BagDataset):
                 raise DataError(path, f"topic {conn.topic}: the bag defines {conn.msgtype} unlike its driver")
         return reader
 
-    def _records(self, topic: str, connections: list):
+    def _damage_errors(self) -> tuple[type[BaseException], ...]:
         from rosbags.rosbag2 import ReaderError
 
-        records = self.reader.messages(connections=connections)
-        index = 0
-        while True:
-            try:
-                conn, _, raw = next(records)
-            except StopIteration:
-                return
-            except (ReaderError, *DAMAGED_BAG_ERRORS) as exc:
-                raise DataError(f"{self.path}:{topic}", f"damaged bag data, message unreadable ({_said(exc)})", index) from None
-            yield conn, raw
-            index += 1
+        return (ReaderError, *DAMAGED_BAG_ERRORS)
+
+    def _damage_detail(self, connections: list, index: int, exc: BaseException) -> str:
+        return f" ({_said(exc)})"
 
     def _deserialize(self, raw: bytes, msgtype: str):
         return self.store.deserialize_cdr(raw, msgtype)
