@@ -114,12 +114,13 @@ def test_reads_what_the_ecd_folder_holds(h5_path, ecd, ecd_folder):
     assert np.asarray(again.events()).tobytes() == np.asarray(ecd.events()).tobytes()
 
 
-def test_paper_run_gives_the_same_trajectory_from_both(h5_path, ecd_folder, tmp_path):
+@pytest.mark.parametrize("config", ["paper", "best"])
+def test_paper_and_best_runs_give_the_same_trajectory_from_both(h5_path, ecd_folder, tmp_path, config):
     runs = {}
     for name, spec in (("ecd", str(ecd_folder)), ("mvsec", str(h5_path))):
         out = tmp_path / name
         extra = ["--set", f"dataset.calibration={ecd_folder / 'calib.txt'}"] if name == "mvsec" else []
-        assert main(["run", "--dataset", spec, "--config", "paper", "--out", str(out), "--quiet", *extra]) == 0
+        assert main(["run", "--dataset", spec, "--config", config, "--out", str(out), "--quiet", *extra]) == 0
         runs[name] = np.loadtxt(out / "trajectory.tum")
     assert len(runs["ecd"]) > 10
     np.testing.assert_allclose(runs["mvsec"], runs["ecd"], rtol=0, atol=1e-6)

@@ -161,7 +161,8 @@ def test_rosbag2_holds_the_ecd_folder(simulated, tmp_path, storage, encoding):
         assert (ds.camera.width, ds.camera.height) == (ecd.camera.width, ecd.camera.height)
 
 
-def test_paper_run_gives_the_same_trajectory_from_each_storage(simulated, tmp_path):
+@pytest.mark.parametrize("config", ["paper", "best"])
+def test_paper_and_best_runs_give_the_same_trajectory_from_each_storage(simulated, tmp_path, config):
     ecd = open_dataset(str(simulated))
     sqlite_bag, mcap_bag = tmp_path / "sq", tmp_path / "mc"
     write_bag2(ecd, sqlite_bag, "sqlite3")
@@ -169,7 +170,7 @@ def test_paper_run_gives_the_same_trajectory_from_each_storage(simulated, tmp_pa
     trajectories = []
     for n, location in enumerate((simulated, sqlite_bag, storage_file(mcap_bag, "mcap"))):
         out = tmp_path / f"run{n}"
-        result = run_eas_vo("run", "--dataset", str(location), "--config", "paper", "--out", str(out))
+        result = run_eas_vo("run", "--dataset", str(location), "--config", config, "--out", str(out))
         assert result.returncode == 0, result.stderr
         trajectories.append(np.loadtxt(out / "trajectory.tum"))
     assert len(trajectories[0]) == len(ecd.frame_times())
