@@ -253,6 +253,17 @@ def _message_index(row: int) -> int:
 # -- writing: the messages of a recording, for either ROS version ----------------------------
 
 
+def write_messages(writer, messages, store, serialize) -> None:
+    """Write `messages` ((t [s], topic, msgtype, message or its bytes), as recording_messages
+    yields them) with a rosbags writer, one connection per topic; `serialize(msg, msgtype)`
+    turns a message into bytes (ROS 1 or CDR)."""
+    connections = {}
+    for t, topic, msgtype, msg in messages:
+        if topic not in connections:
+            connections[topic] = writer.add_connection(topic, msgtype, typestore=store)
+        writer.write(connections[topic], bag_time_ns(t), msg if isinstance(msg, bytes) else serialize(msg, msgtype))
+
+
 def recording_messages(dataset: Dataset, config: BagConfig, store, ros1: bool,
                        event_messages: Callable[[np.ndarray], Iterator[tuple[float, str, object]]]):
     """(t [s], topic, msgtype, message or bytes) of a dataset's camera info, frames, events, IMU

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from eas_vo.datasets.bags import BagConfig, BagDataset, bag_time_ns, recording_messages, stamp_seconds
+from eas_vo.datasets.bags import BagConfig, BagDataset, recording_messages, stamp_seconds, write_messages
 from eas_vo.errors import DataError
 from eas_vo.eventfile import file_identity
 from eas_vo.plugins import Dataset
@@ -142,9 +142,4 @@ def write_bag(dataset: Dataset, path: str | Path, config: BagConfig | None = Non
 
     Path(path).unlink(missing_ok=True)
     with Writer(Path(path)) as writer:
-        connections = {}
-        for t, topic, msgtype, msg in recording_messages(dataset, c, store, True, event_messages):
-            if topic not in connections:
-                connections[topic] = writer.add_connection(topic, msgtype, typestore=store)
-            raw = msg if isinstance(msg, bytes) else store.serialize_ros1(msg, msgtype)
-            writer.write(connections[topic], bag_time_ns(t), raw)
+        write_messages(writer, recording_messages(dataset, c, store, True, event_messages), store, store.serialize_ros1)

@@ -22,7 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
-from eas_vo.datasets.bags import BagConfig, BagDataset, RefusedEncoding, bag_time_ns, ns_seconds, recording_messages, stamp_seconds
+from eas_vo.datasets.bags import BagConfig, BagDataset, RefusedEncoding, ns_seconds, recording_messages, stamp_seconds, write_messages
 from eas_vo.errors import DataError
 from eas_vo.eventfile import file_identity
 from eas_vo.plugins import Dataset
@@ -338,9 +338,4 @@ def write_bag2(dataset: Dataset, path: str | Path, storage: str = "sqlite3", con
 
     plugin = {"sqlite3": StoragePlugin.SQLITE3, "mcap": StoragePlugin.MCAP}[storage]
     with Writer(Path(path), version=9, storage_plugin=plugin) as writer:
-        connections = {}
-        for t, topic, msgtype, msg in recording_messages(dataset, c, store, False, event_messages):
-            if topic not in connections:
-                connections[topic] = writer.add_connection(topic, msgtype, typestore=store)
-            raw = msg if isinstance(msg, bytes) else store.serialize_cdr(msg, msgtype)
-            writer.write(connections[topic], bag_time_ns(t), raw)
+        write_messages(writer, recording_messages(dataset, c, store, False, event_messages), store, store.serialize_cdr)
