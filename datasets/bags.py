@@ -231,7 +231,7 @@ class BagDataset(RecordingReader):
         def fill(out, warnings):
             validate = Validator(where, self.camera.width, self.camera.height, c.time_tolerance_s, c.lenient, warnings, "message")
 
-            def checked(messages) -> np.ndarray:
+            def checked(messages) -> list[np.ndarray]:
                 """The valid events of (index, msgtype, raw) messages, decoded, in order."""
                 kept = []
                 for index, msgtype, raw in messages:
@@ -245,7 +245,7 @@ class BagDataset(RecordingReader):
                         warnings.add(where, "undecodable event message", f"message {index}")
                         continue
                     kept.append(validate(t, x, y, p, lambda row: index))
-                return np.concatenate(kept) if kept else empty_events()
+                return kept  # (not joined: numpy copies the packed records slowly)
 
             def blocks():  # messages grouped by about BLOCK_BYTES, decoded and checked behind the reading
                 group, size = [], 0

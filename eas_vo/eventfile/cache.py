@@ -135,9 +135,9 @@ def build_cache(path: Path, fill: Callable[[BinaryIO], int], max_events: int = 0
     return _map_records(path, count)
 
 
-def write_behind(out: BinaryIO, blocks: Iterable[Callable[[], np.ndarray]]) -> int:
-    """Write the EVENT_DTYPE records each of `blocks` returns to `out`, in order; returns
-    their count. Block k is checked and written on a worker thread while the caller's
+def write_behind(out: BinaryIO, blocks: Iterable[Callable[[], np.ndarray | list[np.ndarray]]]) -> int:
+    """Write the EVENT_DTYPE records each of `blocks` returns (an array, or a list of arrays
+    written one after the other) to `out`, in order; returns their count. Block k is checked and written on a worker thread while the caller's
     iterator reads block k+1: the readers' libraries hold the GIL, the compiled checks and
     the write release it. One block waits at most (memory: two blocks). An error raised by
     the iterator comes after block k's own, so the earliest bad event is the one named."""
@@ -157,10 +157,11 @@ def write_behind(out: BinaryIO, blocks: Iterable[Callable[[], np.ndarray]]) -> i
     return total
 
 
-def _write_block(out: BinaryIO, block: Callable[[], np.ndarray]) -> int:
-    events = block()
-    out.write(events.data)
-    return len(events)
+def _write_block(out: BinaryIO, block: Callable[[], np.ndarray | list[np.ndarray]]) -> int:
+    parts = block()
+    parts = [parts] if isinstance(parts, np.ndarray) else parts
+    out.writelines(events.data for events in parts)
+    return sum(len(events) for events in parts)
 
 
 def write_cache(path: Path, events: np.ndarray) -> np.ndarray:
