@@ -2,11 +2,15 @@
 
 from __future__ import annotations
 
+import collections
 import dataclasses
+import functools
 import math
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import numba
 import numpy as np
 
 from eas_vo.validation import check_range
@@ -180,15 +184,20 @@ def simulate(config: SimConfig, out_dir: str | Path, progress: bool = False) -> 
         R, p = motion.pose(t)
         return scene.render(R[0], p[0], rays, shape) * np.float32(config.illumination)
 
-    events, stats = _simulate_events(config, camera, motion, render, dvs_rng, progress)
     frame_times = np.arange(config.aps.exposure_s, config.duration_s - config.aps.exposure_s, 1.0 / config.frame_rate_hz)
-    fixed_pattern = config.aps.fixed_pattern(shape, aps_rng)
-    frames = []
     samples = max(1, math.ceil(config.exposure_samples * config.speed))
     offsets = (np.arange(samples) + 0.5) / samples - 0.5
-    for t in frame_times:
-        mean = np.mean([render(t + dt * config.aps.exposure_s) for dt in offsets], axis=0)
-        frames.append(config.aps.expose(mean, fixed_pattern, aps_rng))
+
+    def exposure(t: float) -> np.ndarray:
+        """The radiance averaged over the frame exposure centred on t (motion blur)."""
+        return np.mean([render(t + dt * config.aps.exposure_s) for dt in offsets], axis=0)
+
+    steps = _render_steps(config, camera, motion)
+    rendered = _rendered_ahead([functools.partial(render, t) for t in steps]
+                               + [functools.partial(exposure, t) for t in frame_times])
+    events, stats = _simulate_events(config, camera, steps, rendered, dvs_rng, progress)
+    fixed_pattern = config.aps.fixed_pattern(shape, aps_rng)
+    frames = [config.aps.expose(next(rendered), fixed_pattern, aps_rng) for _ in frame_times]
 
     gt_t = np.arange(0.0, config.duration_s, 1.0 / config.gt_rate_hz)
     R_w_c, p_w_c = motion.pose(gt_t)
@@ -198,30 +207,49 @@ def simulate(config: SimConfig, out_dir: str | Path, progress: bool = False) -> 
     return stats
 
 
-def _simulate_events(config, camera, motion, render, rng, progress) -> tuple[np.ndarray, SimStats]:
-    """Adaptive render steps (largest flow `max_flow_px`), events between consecutive steps."""
+def _render_steps(config, camera, motion) -> list[float]:
+    """The times [s] the scene is rendered at for the events: 0, then adaptive steps (the
+    largest image motion in a step `max_flow_px`, ESIM's rule) up to the duration."""
+    max_ray = math.hypot(camera.width, camera.height) / (2 * camera.focal_px)
+    t, steps = 0.0, [0.0]
+    while t < config.duration_s:
+        omega = float(np.linalg.norm(motion.angular_velocity([t])[0]))
+        flow_rate = camera.focal_px * omega * (1 + max_ray**2) + 1e-6  # px/s at the image corner
+        t = min(t + float(np.clip(config.max_flow_px / flow_rate, 2e-4, 5e-3)), config.duration_s)
+        steps.append(t)
+    return steps
+
+
+def _rendered_ahead(jobs: list, depth: int = 3):
+    """Each job's result (a rendered image), in order, computed on a worker thread up to
+    `depth` jobs ahead: the ray cast (compiled, one thread, without the GIL) runs while the
+    sensor model works on the previous image. The same images as computed in turn."""
+    with ThreadPoolExecutor(1, initializer=numba.set_num_threads, initargs=(1,)) as worker:
+        pending = collections.deque(worker.submit(job) for job in jobs[:depth])
+        for job in jobs[depth:]:
+            yield pending.popleft().result()
+            pending.append(worker.submit(job))
+        while pending:
+            yield pending.popleft().result()
+
+
+def _simulate_events(config, camera, steps, rendered, rng, progress) -> tuple[np.ndarray, SimStats]:
+    """Events between consecutive render steps (`steps` [s], their images from `rendered`)."""
     from tqdm import tqdm
 
     sim = EventSimulator(config.dvs, (camera.height, camera.width), rng)
-    t = 0.0
-    sim.start(render(t))
+    sim.start(next(rendered))
     chunks, truths = [], []
     pixel_s = np.zeros(2)  # dark, bright
     white = config.dvs.white_radiance
-    max_ray = math.hypot(camera.width, camera.height) / (2 * camera.focal_px)
     with tqdm(total=round(config.duration_s, 3), disable=not progress, unit="s", desc="simulating events") as bar:
-        while t < config.duration_s:
-            omega = float(np.linalg.norm(motion.angular_velocity([t])[0]))
-            flow_rate = camera.focal_px * omega * (1 + max_ray**2) + 1e-6  # px/s at the image corner
-            dt = float(np.clip(config.max_flow_px / flow_rate, 2e-4, 5e-3))
-            t1 = min(t + dt, config.duration_s)
-            radiance = render(t1)
+        for t, t1 in zip(steps, steps[1:]):
+            radiance = next(rendered)
             events, truth = sim.step(t, t1, radiance)
             chunks.append(events)
             truths.append(truth)
             pixel_s += (t1 - t) * np.array([np.count_nonzero(radiance < DARK * white), np.count_nonzero(radiance > BRIGHT * white)])
             bar.update(round(t1 - t, 6))
-            t = t1
     events = np.concatenate(chunks) if chunks else np.empty(0, EVENT_DTYPE)
     return events, _stats(config.duration_s, truths, pixel_s, white)
 
