@@ -22,16 +22,16 @@ from eas_vo.types import LENS_MODELS
 from eas_vo.validation import check_choice, check_range
 
 #: Named sequences. `default` is the embedded sequence `eas-vo run` uses. `walk` (and its short
-#: cut `walk_short`) is a hand-held walk through a lit room: the translation five times the
-#: default's (20-25 cm amplitude per axis, the boxes 1.7-3.7 m away), half the speed at a
-#: constant pace (22 deg/s mean), a hundred times the light (original frames about 80 DN mean,
-#: 300-400 ORB features): the parallax and texture monocular SLAM needs to initialise.
-_WALK = {"illumination": 100.0, "translation_scale": 5.0, "speed": 0.5, "speed_growth": 0.0}
+#: first 5 s, `walk_short`) is a hand-held walk through a lit room: the translation ten times the
+#: default's (40-50 cm amplitude per axis, the boxes 1.7-3.7 m away, the back wall 5 m), the
+#: default's rotation at a constant pace, a hundred times the light (original frames about
+#: 80 DN mean, 300-400 ORB features): the parallax and texture monocular SLAM needs.
+_WALK = {"illumination": 100.0, "translation_scale": 10.0, "speed_growth": 0.0}
 PRESETS = {
     "default": SimConfig(duration_s=10.0, seed=0),
     "short": SimConfig(duration_s=3.0, seed=1),
     "walk": SimConfig(duration_s=10.0, seed=2, **_WALK),
-    "walk_short": SimConfig(duration_s=4.0, seed=3, **_WALK),
+    "walk_short": SimConfig(duration_s=5.0, seed=2, **_WALK),
 }
 
 

@@ -716,9 +716,11 @@ def _parse_reproduce(sub) -> None:
         description="table1: fetch hdr_boxes and hdr_poster, run the six sources with --config paper on the first "
         "25 s (time offset estimated) with both backends, and write table1.md (ours beside the paper's, ratios, "
         "orderings), compare's tables and figures, and Fig. 3-style Euler plots. table2: ORB features and matches "
-        "of original and EAS images and, for ORB-SLAM2 keyframe trajectories given with --estimate (run it on "
-        "`eas-vo export` output), their APE after Sim(3) alignment: table2.md beside the paper's. Resumable: "
-        "the same command runs only what is missing.",
+        "of original and EAS images (or --frontends) and the keyframe APE after Sim(3) alignment of monocular SLAM "
+        "on them: with the slam extra, --runs runs of ORB-SLAM3 per cell (eas-vo slam; ORBvoc.txt fetched unless "
+        "--vocabulary), and for ORB-SLAM2 keyframe trajectories given with --estimate (run it on `eas-vo export` "
+        "output), those; table2.md beside the paper's and Fig. 4-style keyframe plots. Resumable: the same command "
+        "runs only what is missing.",
     )
     reproduce.add_argument("table", choices=("table1", "table2"))
     reproduce.add_argument("--out", metavar="DIR", help="output folder (default: reproduce/TABLE)")
@@ -729,6 +731,12 @@ def _parse_reproduce(sub) -> None:
                            "any other fed also its keyframe edges (tracker.klt.keyframe_interval=3, as configs/best.toml)")
     reproduce.add_argument("--estimate", dest="estimates", action="append", default=[], metavar="SEQUENCE:SOURCE=FILE",
                            help="table2: an ORB-SLAM2 KeyFrameTrajectory.txt, e.g. hdr_boxes:eas=KeyFrameTrajectory.txt (repeatable)")
+    reproduce.add_argument("--frontends", default="original,eas", metavar="A,B",
+                           help="table2's sources (default original,eas, the paper's); any frontend, e.g. original,histeq,eas,sits")
+    reproduce.add_argument("--runs", type=_positive_int, default=5,
+                           help="table2 with the slam extra: ORB-SLAM3 runs per cell (default 5; the median is reported)")
+    reproduce.add_argument("--vocabulary", metavar="FILE",
+                           help="table2 with the slam extra: ORB vocabulary (default: $PYORBSLAM3_VOCAB, else ORBvoc.txt, fetched if missing)")
     _add_jobs(reproduce)
     _add_quiet(reproduce, help="no progress bars")
     reproduce.set_defaults(func=cmd_reproduce)
@@ -751,6 +759,8 @@ def cmd_reproduce(args) -> int:
         estimates[key] = path
     if estimates and args.table != "table2":
         raise EasVoError("--estimate belongs to table2 (ORB-SLAM2 trajectories)")
+    if args.vocabulary and args.table != "table2":
+        raise EasVoError("--vocabulary belongs to table2 (ORB-SLAM3 runs)")
     out = check_writable_folder(args.out or f"reproduce/{args.table}")
     _refuse_inputs_inside(out, list(reproduce.SPECS.values()), ("the --config", args.config),
                           ("the data folder", str(data_dir())), *(("the --estimate", path) for path in estimates.values()))
@@ -760,24 +770,31 @@ def cmd_reproduce(args) -> int:
         rows, n_run, markdown = reproduce.table1(out, args.duration, _names("--backends", args.backends), args.config,
                                                  args.jobs, progress)
     else:
-        rows, n_run, markdown = reproduce.table2(out, estimates, args.duration, args.config, args.jobs, progress)
+        rows, n_run, markdown = reproduce.table2(out, estimates, args.duration, args.config, args.jobs, progress,
+                                                 _names("--frontends", args.frontends), args.runs, args.vocabulary)
     return _report_cells(rows, n_run, out / f"{args.table}.md", markdown)
 
 
 # ----------------------------------------------------------------------------- fetch
 
+#: The `eas-vo fetch` name of ORB-SLAM3's published vocabulary (ORBvoc.txt).
+ORB_VOCABULARY = "orb-vocabulary"
+
+
 def _parse_fetch(sub) -> None:
     fetch = sub.add_parser(
         "fetch",
-        help="download Event Camera Dataset sequences (verified against their published MD5)",
+        help="download Event Camera Dataset sequences (verified against their published MD5) or ORB-SLAM3's vocabulary",
         description="Download recordings by name (e.g. hdr_boxes hdr_poster; `eas-vo list` shows the catalogue) "
         "as the dataset publishes them, check each against its MD5, and skip those already there and whole. "
         "A download goes to a temporary file moved into place only once verified; an interrupted one is "
-        "restarted by the same command. --dataset ecd:NAME then opens it (and fetches it if missing).",
+        "restarted by the same command. --dataset ecd:NAME then opens it (and fetches it if missing). "
+        "`orb-vocabulary` downloads ORB-SLAM3's ORBvoc.txt (checked against the SHA-1 of its archive) for eas-vo slam.",
         epilog="environment: EAS_VO_DATA_DIR (default folder), EAS_VO_DATA_URL (a mirror), "
-        "EAS_VO_DATA_REGISTRY (a file of 'name md5' lines replacing the built-in registry)",
+        "EAS_VO_DATA_REGISTRY (a file of 'name md5' lines replacing the built-in registry), "
+        "EAS_VO_ORB_VOCABULARY_URL (a mirror of ORBvoc.txt.tar.gz)",
     )
-    fetch.add_argument("names", nargs="+", metavar="NAME", help="a sequence name, or PLUGIN:NAME")
+    fetch.add_argument("names", nargs="+", metavar="NAME", help="a sequence name, PLUGIN:NAME, or orb-vocabulary")
     fetch.add_argument("--dir", metavar="DIR", help="where to keep them (default: $EAS_VO_DATA_DIR, else the cache's data/)")
     fetch.set_defaults(func=cmd_fetch)
 
@@ -785,7 +802,11 @@ def _parse_fetch(sub) -> None:
 def cmd_fetch(args) -> int:
     from eas_vo.registry import fetchable
 
-    wanted = [fetchable(spec) for spec in args.names]  # every name checked before any download
+    wanted = [fetchable(spec) for spec in args.names if spec != ORB_VOCABULARY]  # every name checked before any download
+    if ORB_VOCABULARY in args.names:
+        from eas_vo.slam.orbvoc import fetch_orb_vocabulary
+
+        print(f"{ORB_VOCABULARY}: {fetch_orb_vocabulary(args.dir, progress=sys.stderr.isatty())} (verified)")
     for plugin, name in wanted:
         path = plugin.fetch(name, args.dir, progress=sys.stderr.isatty())
         print(f"{name}: {path} (verified)")

@@ -8,6 +8,8 @@ OUT/run_R/ (one per run, R = 1..N):
     keyframes.tum   the keyframe trajectory (ORB-SLAM3's SaveKeyFrameTrajectoryTUM)
     trajectory.tum  every tracked frame after ORB-SLAM3's final optimisation (SaveTrajectoryEuRoC,
                     written as TUM); absent when it never initialised
+    keyframes_aligned.tum, trajectory_aligned.tum   both after the Sim(3) alignment, in the
+                    ground truth's world (when they could be scored)
     metrics.json    status, time to first initialisation, fractions tracked, Sim(3) APE of both
     slam.log        what ORB-SLAM3 printed
 OUT/summary.json, OUT/summary.md: the median and the spread over the runs that tracked, and the
@@ -35,8 +37,6 @@ FRAMES_FIELDS = ("index", "t", "state", "tracked_points", "tx", "ty", "tz", "qx"
 TRACKED = ("ok", "relocalised")
 #: How often [s] the parent looks whether a silent child is still alive.
 POLL_S = 0.5
-#: The file name of the published ORB vocabulary in the data folder (`eas-vo fetch orb-vocabulary`).
-ORB_VOCABULARY = "ORBvoc.txt"
 
 
 class SlamCrashed(EasVoError):
@@ -53,11 +53,12 @@ def find_vocabulary(given: str | None) -> Path:
     """The vocabulary to load: `given`, else $PYORBSLAM3_VOCAB, else ORBvoc.txt in the data
     folder; its first line checked as DBoW2's text header. One line when there is none."""
     from eas_vo.datasets.ecd_catalogue import data_dir
+    from eas_vo.slam.orbvoc import NAME
     from eas_vo.slam.vocabulary import check_header
 
     if given is None:
         given = os.environ.get("PYORBSLAM3_VOCAB") or None
-    path = Path(given).expanduser() if given else data_dir() / ORB_VOCABULARY
+    path = Path(given).expanduser() if given else data_dir() / NAME
     if not path.is_file():
         if given:
             raise DataError(path, "no such vocabulary file")
@@ -222,18 +223,25 @@ def _euroc_to_tum(src: Path, dst: Path) -> None:
     src.unlink()
 
 
-def score(ground_truth, path: Path, max_diff_s: float = 0.01) -> dict:
-    """Sim(3) APE of a TUM trajectory against ground truth ("ape_problem" when it cannot be
-    scored: too few poses, poses on a line)."""
+def score(ground_truth, path: Path, shown_as: Path, max_diff_s: float = 0.01) -> dict:
+    """Sim(3) APE of a TUM trajectory against ground truth, and the trajectory so aligned
+    beside it (NAME_aligned.tum, in the ground truth's world); "ape_problem" when it cannot
+    be scored: too few poses, poses on a line, times out of order (naming the file `shown_as`)."""
     from eas_vo.evaluation import trajectory_ape
+    from eas_vo.geometry.rotations import matrices_from_quats
     from eas_vo.orbslam import read_estimate
+    from eas_vo.pipeline import format_tum
 
     if not path.exists() or not path.stat().st_size:
         return {"ape_problem": "no poses"}
     try:
-        return trajectory_ape(ground_truth, read_estimate(path), "sim3", max_diff_s).summary()
-    except ValueError as exc:
-        return {"ape_problem": str(exc)}
+        estimate = read_estimate(path)
+        ape = trajectory_ape(ground_truth, estimate, "sim3", max_diff_s)
+    except (ValueError, EasVoError) as exc:
+        return {"ape_problem": str(exc).replace(str(path), str(shown_as))}
+    aligned = ape.aligned(estimate.p_w_c, matrices_from_quats(estimate.q_w_c))
+    write_text_atomic(path.with_name(f"{path.stem}_aligned.tum"), format_tum(estimate.t, *aligned))
+    return ape.summary()
 
 
 #: The figures summarised over runs: (key in a run's metrics, its text in summary.md).
@@ -301,6 +309,7 @@ def run_slam(config, out: str | Path, vocabulary: str | None = None, runs: int =
     fps = float((len(t) - 1) / (t[-1] - t[0])) if len(t) > 1 and t[-1] > t[0] else 0.0
     gt = dataset.ground_truth
     results, crashed = [], []
+    final = Path(out).expanduser().resolve()
     with output_folder(out, replace) as staging:
         for r in range(1, runs + 1):
             folder = staging / f"run_{r}"
@@ -310,14 +319,14 @@ def run_slam(config, out: str | Path, vocabulary: str | None = None, runs: int =
             try:
                 metrics = track_sequence(images, t, vocabulary, folder / "settings.yaml", folder, progress, label)
             except SlamCrashed as exc:
-                message = str(exc).replace(str(staging), str(Path(out).expanduser().resolve()))
+                message = str(exc).replace(str(staging), str(final))
                 metrics = {"status": "crashed", "message": message}
                 crashed.append(f"run {r} of {runs}: {message}")
             except KeyboardInterrupt as exc:
                 raise Interrupted.keeping(exc, f"{out} keeps the runs so far (run {r}'s frames.csv up to the interrupt)")
             if gt is not None and metrics["status"] != "crashed":
-                metrics["ape_keyframes"] = score(gt, folder / "keyframes.tum")
-                metrics["ape_frames"] = score(gt, folder / "trajectory.tum")
+                for key, name in (("ape_keyframes", "keyframes.tum"), ("ape_frames", "trajectory.tum")):
+                    metrics[key] = score(gt, folder / name, final / folder.name / name)
             metrics.update(run=r, dataset=dataset.label, frontend=rc.frontend, vocabulary=str(vocabulary))
             write_text_atomic(folder / "metrics.json", json_text(metrics))
             results.append(metrics)

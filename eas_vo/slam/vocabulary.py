@@ -101,7 +101,9 @@ def majority(descriptors: np.ndarray) -> np.ndarray:
 
 def k_majority(descriptors: np.ndarray, k: int, rng: np.random.Generator) -> list[np.ndarray]:
     """Split descriptors (m, 32) into at most k clusters: k-means++ seeding (a seed drawn with
-    probability proportional to its distance from the nearest seed so far, as DBoW2), then
+    probability proportional to its squared distance from the nearest seed so far: Arthur and
+    Vassilvitskii's rule; DBoW2 weights by the distance itself, which seeds two centres in one
+    tight group more often), then
     assignment to the nearest centre and majority centres until no assignment changes.
     Returns the members' row indices of each non-empty cluster; m <= k, or fewer than k
     distinct descriptors, gives one cluster per distinct descriptor."""
@@ -113,8 +115,8 @@ def k_majority(descriptors: np.ndarray, k: int, rng: np.random.Generator) -> lis
     centres = [packed[rng.integers(len(packed))]]
     nearest = hamming(packed, centres[0][None])[:, 0]
     while len(centres) < k:
-        total = nearest.sum()
-        pick = rng.choice(len(packed), p=nearest / total)
+        square = nearest.astype(np.float64) ** 2
+        pick = rng.choice(len(packed), p=square / square.sum())
         centres.append(packed[pick])
         nearest = np.minimum(nearest, hamming(packed, packed[pick][None])[:, 0])
     centres = np.stack(centres)

@@ -9,7 +9,8 @@ to a log file, not to the user's terminal.
 Protocol over a multiprocessing Pipe (parent -> child, then child -> parent):
     (start)                         -> ("ready",) or ("error", text)
     ("frame", image uint8 (H, W), t_s) -> ("tracked", state name, tracked map points, T_w_c (4, 4) or None)
-    ("finish", keyframes.tum, frames.euroc) -> ("done",) once ORB-SLAM3 is shut down and both are saved
+    ("finish", keyframes.tum, frames.euroc or None) -> ("done",) once ORB-SLAM3 is shut down and
+                                    the trajectories are saved (None: the keyframes' only)
 """
 
 from __future__ import annotations
@@ -54,6 +55,7 @@ def serve(conn, vocabulary: str, settings: str, log_path: str) -> None:
             _, keyframes, frames = message
             slam.shutdown()
             slam.save_keyframe_trajectory_tum(keyframes)
-            slam.save_trajectory_euroc(frames)
+            if frames is not None:  # ORB-SLAM3 dereferences its first keyframe: only once initialised
+                slam.save_trajectory_euroc(frames)
             conn.send(("done",))
             return
