@@ -7,7 +7,8 @@ OUT/run_R/ (one per run, R = 1..N):
                     gave when it tracked the frame (camera-to-world, its map's frame, up to scale)
     keyframes.tum   the keyframe trajectory (ORB-SLAM3's SaveKeyFrameTrajectoryTUM)
     trajectory.tum  every tracked frame after ORB-SLAM3's final optimisation (SaveTrajectoryEuRoC,
-                    written as TUM); absent when it never initialised
+                    written as TUM); absent when it never initialised or its map was reset
+                    (a lost track) and holds no keyframe
     keyframes_aligned.tum, trajectory_aligned.tum   both after the Sim(3) alignment, in the
                     ground truth's world (when they could be scored)
     metrics.json    status, time to first initialisation, fractions tracked, Sim(3) APE of both
@@ -189,7 +190,7 @@ def track_sequence(images, times, vocabulary: Path, settings: Path, folder: Path
         slam.finish(folder / "keyframes.tum", folder / "frames.euroc" if initialised else None)
     finally:
         slam.close()
-    if initialised:
+    if (folder / "frames.euroc").exists():
         _euroc_to_tum(folder / "frames.euroc", folder / "trajectory.tum")
     return counts(results)
 
@@ -322,8 +323,10 @@ def run_slam(config, out: str | Path, vocabulary: str | None = None, runs: int =
                 message = str(exc).replace(str(staging), str(final))
                 metrics = {"status": "crashed", "message": message}
                 crashed.append(f"run {r} of {runs}: {message}")
-            except KeyboardInterrupt as exc:
-                raise Interrupted.keeping(exc, f"{out} keeps the runs so far (run {r}'s frames.csv up to the interrupt)")
+            except KeyboardInterrupt as exc:  # the folder is kept, marked partial by this run's status
+                write_text_atomic(folder / "metrics.json", json_text({"status": "interrupted", "run": r}))
+                raise Interrupted.keeping(exc, f"{final} keeps the runs so far, run {r} marked interrupted "
+                                               "(its frames.csv up to the interrupt)") from None
             if gt is not None and metrics["status"] != "crashed":
                 for key, name in (("ape_keyframes", "keyframes.tum"), ("ape_frames", "trajectory.tum")):
                     metrics[key] = score(gt, folder / name, final / folder.name / name)

@@ -10,7 +10,8 @@ Protocol over a multiprocessing Pipe (parent -> child, then child -> parent):
     (start)                         -> ("ready",) or ("error", text)
     ("frame", image uint8 (H, W), t_s) -> ("tracked", state name, tracked map points, T_w_c (4, 4) or None)
     ("finish", keyframes.tum, frames.euroc or None) -> ("done",) once ORB-SLAM3 is shut down and
-                                    the trajectories are saved (None: the keyframes' only)
+                                    the trajectories are saved (None, or a map without keyframes:
+                                    the keyframes' only)
 """
 
 from __future__ import annotations
@@ -55,7 +56,11 @@ def serve(conn, vocabulary: str, settings: str, log_path: str) -> None:
             _, keyframes, frames = message
             slam.shutdown()
             slam.save_keyframe_trajectory_tum(keyframes)
-            if frames is not None:  # ORB-SLAM3 dereferences its first keyframe: only once initialised
+            with open(keyframes) as fh:
+                has_keyframes = any(line.strip() for line in fh)
+            # SaveTrajectoryEuRoC dereferences the first keyframe of its map: it crashes before
+            # an initialisation, and after a reset emptied the map (a lost track)
+            if frames is not None and has_keyframes:
                 slam.save_trajectory_euroc(frames)
             conn.send(("done",))
             return
