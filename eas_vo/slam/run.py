@@ -11,7 +11,8 @@ OUT/run_R/ (one per run, R = 1..N):
                     (a lost track) and holds no keyframe
     keyframes_aligned.tum, trajectory_aligned.tum   both after the Sim(3) alignment, in the
                     ground truth's world (when they could be scored)
-    metrics.json    status, time to first initialisation, fractions tracked, Sim(3) APE of both
+    metrics.json    status, time to first initialisation, fractions tracked, Sim(3) APE of both,
+                    and eas-vo's own rotation APE (Eq. 3) of the tracked frames
     slam.log        what ORB-SLAM3 printed
 OUT/summary.json, OUT/summary.md: the median and the spread over the runs that tracked, and the
 ORB features and matches of the images as Table 2 counts them.
@@ -245,9 +246,24 @@ def score(ground_truth, path: Path, shown_as: Path, max_diff_s: float = 0.01) ->
     return ape.summary()
 
 
+def rotation_score(ground_truth, path: Path, time_offset_s: float) -> dict | None:
+    """eas-vo's own rotation APE (Eq. 3: aligned at the first pose, evaluation.rotation_errors)
+    of the rotations of a TUM trajectory (the frames ORB-SLAM3 tracked); None without poses."""
+    from eas_vo.evaluation import rotation_errors
+    from eas_vo.geometry.rotations import matrices_from_quats
+    from eas_vo.io import read_tum
+
+    if not path.exists() or not path.stat().st_size:
+        return None
+    t, _, q = read_tum(path)
+    errors = rotation_errors(t, matrices_from_quats(q), ground_truth, time_offset_s)
+    return {**errors.summary(), "frames": int(len(errors.ape_rad))} if len(errors.ape_rad) else None
+
+
 #: The figures summarised over runs: (key in a run's metrics, its text in summary.md).
 SUMMARISED = (("ape_keyframes.ape_trans_mean_m", "keyframe APE [m]"), ("ape_frames.ape_trans_mean_m", "all-frame APE [m]"),
-              ("ape_keyframes.ape_rot_mean_rad", "keyframe rotation APE [rad]"), ("time_to_init_s", "time to first init [s]"),
+              ("ape_keyframes.ape_rot_mean_rad", "keyframe rotation APE [rad]"),
+              ("rotation_eq3.ape_mean_rad", "tracked frames' rotation APE, Eq. 3 [rad]"), ("time_to_init_s", "time to first init [s]"),
               ("tracked_fraction", "fraction of frames tracked"))
 
 
@@ -330,6 +346,7 @@ def run_slam(config, out: str | Path, vocabulary: str | None = None, runs: int =
             if gt is not None and metrics["status"] != "crashed":
                 for key, name in (("ape_keyframes", "keyframes.tum"), ("ape_frames", "trajectory.tum")):
                     metrics[key] = score(gt, folder / name, final / folder.name / name)
+                metrics["rotation_eq3"] = rotation_score(gt, folder / "trajectory.tum", rc.time_offset_s or 0.0)
             metrics.update(run=r, dataset=dataset.label, frontend=rc.frontend, vocabulary=str(vocabulary))
             write_text_atomic(folder / "metrics.json", json_text(metrics))
             results.append(metrics)

@@ -67,6 +67,7 @@ def test_orbslam3_initialises_early_tracks_and_scores_within_the_scenes_bound(wa
     first = metrics["first_initialised_frame"]
     assert rows[first]["state"] == "ok" and int(rows[first]["tracked_points"]) > 0 and rows[first]["qw"] != ""
     assert (out / "run_1" / "trajectory.tum").stat().st_size > 0
+    assert metrics["rotation_eq3"]["frames"] > 0 and np.isfinite(metrics["rotation_eq3"]["ape_mean_rad"])
     assert summary["orb_keypoints_mean"] > 100 and summary["orb_matches_mean"] > 50
 
 
@@ -155,3 +156,22 @@ def test_the_summary_is_over_the_runs_that_tracked():
     assert summary["statuses"] == {"lost": 1, "ok": 3}
     assert summary["ape_keyframes.ape_trans_mean_m"] == {"median": 0.2, "min": 0.1, "max": 0.3, "n": 3}
     assert summary["ape_frames.ape_trans_mean_m"] is None
+
+
+def test_the_eq3_rotation_ape_of_a_trajectory_in_another_world_frame_is_zero(short_sequence, tmp_path):
+    """ORB-SLAM3's map frame is its first keyframe's camera: Eq. 3 aligns at the first pose, so
+    the ground truth's rotations in any other world frame score 0."""
+    from scipy.spatial.transform import Rotation
+
+    from eas_vo.geometry.rotations import matrices_from_quats
+    from eas_vo.pipeline import format_tum
+    from eas_vo.registry import open_dataset
+
+    gt = open_dataset(str(short_sequence)).ground_truth
+    R_a = Rotation.from_rotvec([0.3, -0.2, 0.5]).as_matrix()
+    rows = np.arange(10, len(gt.t) - 10, 7)
+    path = tmp_path / "trajectory.tum"
+    path.write_text(format_tum(gt.t[rows], 3.0 * gt.p_w_c[rows], R_a @ matrices_from_quats(gt.q_w_c[rows])))
+    got = slam_run.rotation_score(gt, path, 0.0)
+    assert got["frames"] == len(rows) and got["ape_max_rad"] < 1e-6
+    assert slam_run.rotation_score(gt, tmp_path / "absent.tum", 0.0) is None
