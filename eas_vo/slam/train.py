@@ -9,7 +9,7 @@ import cv2
 import numpy as np
 
 from eas_vo.io import atomic_path
-from eas_vo.slam.vocabulary import DESCRIPTOR_BYTES, train
+from eas_vo.slam.vocabulary import DESCRIPTOR_BYTES, check_shape, train
 
 
 def orb_descriptors(image: np.ndarray) -> np.ndarray:
@@ -31,6 +31,7 @@ def train_vocabulary(config, out: str | Path, k: int, levels: int, seed: int = 0
 
     from eas_vo.pipeline import check_image, open_pipeline
 
+    check_shape(k, levels)  # before any image is read
     rc = config.run
     parts = open_pipeline(config)
     window = parts.dataset.window(rc.start_s, rc.duration_s)

@@ -133,13 +133,18 @@ def k_majority(descriptors: np.ndarray, k: int, rng: np.random.Generator) -> lis
     return [np.flatnonzero(assignment == c) for c in range(k) if (assignment == c).any()]
 
 
+def check_shape(k: int, levels: int) -> None:
+    """One line unless DBoW2 loads a tree of k branches and L levels."""
+    if not 2 <= k <= MAX_K or not 1 <= levels <= MAX_LEVELS:
+        raise EasVoError(f"vocabulary k={k}, L={levels}: DBoW2 takes k in 2..{MAX_K} and L in 1..{MAX_LEVELS}")
+
+
 def train(descriptor_sets: list[np.ndarray], k: int = 10, levels: int = 4, seed: int = 0) -> Vocabulary:
     """A vocabulary of k branches and `levels` levels from the ORB descriptors of training
     images (one (m_i, 32) uint8 array per image); word weights log(N / N_w), N images, N_w of
     them holding a descriptor of word w (DBoW2's IDF; 0 for a word no image holds). Seeded:
     the same images and seed give the same vocabulary."""
-    if not 2 <= k <= MAX_K or not 1 <= levels <= MAX_LEVELS:
-        raise EasVoError(f"vocabulary k={k}, L={levels}: DBoW2 takes k in 2..{MAX_K} and L in 1..{MAX_LEVELS}")
+    check_shape(k, levels)
     sets = [np.ascontiguousarray(d, np.uint8).reshape(-1, DESCRIPTOR_BYTES) for d in descriptor_sets]
     everything = np.concatenate(sets) if sets else np.empty((0, DESCRIPTOR_BYTES), np.uint8)
     if len(everything) < k:
