@@ -341,6 +341,19 @@ def table2_markdown(rows: list[dict], slam: dict, duration_s: float | None, fron
                                      ("matches", "orb_matches_mean", "matches", ".0f")):
         lines.append("| " + " | ".join([f"{label} (ours)", *[ours(s, f, key, fmt) for s, f in columns]]) + " |")
         lines.append("| " + " | ".join([f"{label} (paper)", *[paper(s, f, row_key, fmt) for s, f in columns]]) + " |")
+    if with_slam:  # a 6-DoF system beside the 3-DoF one on rotation, on the same images
+        def eq3(seq, source):
+            m = (slam.get((seq, source)) or {}).get("rotation_eq3.ape_mean_rad")
+            return f"{m['median']:.3f}" if m else "-"
+
+        def ours_eq3(seq, source):
+            r = by_key.get((seq, source))
+            return f"{r['ape_mean_rad']:.3f}" if r and r["status"] == "ok" and r["ape_mean_rad"] is not None else "-"
+
+        lines.append("| " + " | ".join(["rotation APE, Eq. 3 [rad] (ORB-SLAM3, tracked frames)",
+                                        *[eq3(s, f) for s, f in columns]]) + " |")
+        lines.append("| " + " | ".join([f"rotation APE, Eq. 3 [rad] (eas-vo {PAPER.label}, every frame)",
+                                        *[ours_eq3(s, f) for s, f in columns]]) + " |")
     system = ("ORB-SLAM3 (monocular, pyorbslam3): the median over its runs that initialised and never lost track "
               "(runs scored / runs), an --estimate's ORB-SLAM2 keyframes as given" if with_slam else "ORB-SLAM2")
     lines += ["", f"APE: {system}; keyframes after Sim(3) Umeyama alignment (evo_ape -as). ORB features and matches: "

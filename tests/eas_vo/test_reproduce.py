@@ -259,6 +259,10 @@ def test_table2_runs_orbslam3_on_each_cell_beside_the_papers(walk_site, walk_voc
             assert cells[k].startswith(f"{m['ape_trans_mean_m']:.3f} (")
     assert report["hdr_boxes:original"]["ape_trans_mean_m"] is not None  # the walk's original frames: it tracks
     assert "ORB-SLAM3 (monocular, pyorbslam3)" in table
+    eq3 = next(line for line in table.splitlines() if line.startswith("| rotation APE, Eq. 3 [rad] (ORB-SLAM3"))
+    median = report["hdr_boxes:original"]["rotation_eq3.ape_mean_rad"]["median"]
+    assert eq3.split("|")[2].strip() == f"{median:.3f}"
+    assert "| rotation APE, Eq. 3 [rad] (eas-vo klt+chain, every frame) |" in table
     assert (out / "fig4_hdr_boxes.png").stat().st_size > 0
     before = (out / "slam" / "hdr_boxes_eas" / "summary.json").stat().st_mtime_ns
     assert main(argv) == 0
