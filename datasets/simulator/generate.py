@@ -79,6 +79,9 @@ class SimConfig:
         speed: the motion's speed scale: 1 is the hand-held default (44 deg/s mean, 90 deg/s p95
             over 10 s), 4 gives 177 / 343-353 (seeds 71, 72; the real excerpt: 147 / 380 over its
             30 s); the same path and scene, travelled faster.
+        translation_scale: the motion's translation scale (1: the hand-held default, 4-5 cm
+            amplitude per axis; 5: a hand-held walk's tens of cm); the same path, its positions
+            scaled, the rotation unchanged.
         exposure_samples: renders averaged over a frame's exposure at speed 1 (motion blur);
             `speed` times as many at other speeds, so each sample moves as far as at speed 1.
         illumination: scale of the scene's light (1.0: the default dim room); the APS and the
@@ -93,6 +96,7 @@ class SimConfig:
     max_flow_px: float = 0.5
     speed_growth: float = 1.5
     speed: float = 1.0
+    translation_scale: float = 1.0
     exposure_samples: int = 8
     aps: ApsModel = field(default_factory=ApsModel)
     dvs: DvsModel = field(default_factory=DvsModel)
@@ -105,14 +109,17 @@ class SimConfig:
         check_range(self, "frame_rate_hz", 1.0, 1000.0)
         check_range(self, "illumination", 0.0, 1e6, lo_open=True)
         check_range(self, "speed", 0.0, 20.0, lo_open=True)
+        check_range(self, "translation_scale", 0.0, 100.0)
 
     def fingerprint(self) -> str:
         """The simulator version and every value, float fields as floats (speed=4 and 4.0 are
-        one sequence); the default camera left out, so that sequences simulated before the
-        camera could change keep their key (their output is the same)."""
+        one sequence); the default camera and translation scale left out, so that sequences
+        simulated before they could change keep their key (their output is the same)."""
         values = _as_typed_dict(self)
         if self.camera == SimCamera():
             del values["camera"]
+        if self.translation_scale == 1.0:
+            del values["translation_scale"]
         return repr((SIMULATOR_VERSION, values))
 
 
@@ -177,7 +184,7 @@ def simulate(config: SimConfig, out_dir: str | Path, progress: bool = False) -> 
     camera = config.camera.model()
     shape = (camera.height, camera.width)
     scene = Scene(scene_rng)
-    motion = HandHeldMotion(motion_rng, config.duration_s, config.speed_growth, config.speed)
+    motion = HandHeldMotion(motion_rng, config.duration_s, config.speed_growth, config.speed, config.translation_scale)
     rays = camera_rays(camera)
 
     def render(t: float) -> np.ndarray:

@@ -25,9 +25,9 @@ def test_a_sequence_is_cached_under_its_values_not_their_python_types():
 
     assert SimConfig(speed=4).fingerprint() == SimConfig(speed=4.0).fingerprint() != SimConfig(speed=4.5).fingerprint()
     assert SimConfig(seed=3).fingerprint() != SimConfig(seed=4).fingerprint()
-    # the default's key is what it was before types were normalised and the camera could change:
-    # its cached folder stays valid
-    before = {key: value for key, value in dataclasses.asdict(SimConfig()).items() if key != "camera"}
+    # the default's key is what it was before types were normalised and the camera and the
+    # translation scale could change: its cached folder stays valid
+    before = {key: value for key, value in dataclasses.asdict(SimConfig()).items() if key not in ("camera", "translation_scale")}
     assert SimConfig().fingerprint() == repr((SIMULATOR_VERSION, before))
     assert SimConfig(camera=SENSORS["davis346"]).fingerprint() != SimConfig().fingerprint()
 
@@ -96,3 +96,11 @@ def test_a_short_sequence_is_what_it_always_was(tmp_path):
         digest.update(np.ascontiguousarray(values).tobytes())
     assert len(ds.events()) == 286_785
     assert digest.hexdigest()[:16] == SHORT_SEQUENCE_SHA256
+
+
+def test_a_translation_scale_of_one_keeps_every_earlier_sequences_cache_key():
+    from eas_vo.datasets.simulator import SimConfig
+
+    assert "translation_scale" not in SimConfig().fingerprint()
+    assert SimConfig(translation_scale=1).fingerprint() == SimConfig().fingerprint()
+    assert SimConfig(translation_scale=2.0).fingerprint() != SimConfig().fingerprint()
