@@ -224,13 +224,19 @@ def test_an_out_that_is_not_reproduces_own_is_refused_before_any_download(paper_
 
 @pytest.fixture
 def walk_site(data_server, tmp_path, monkeypatch):
-    """The translating walk (synthetic:walk_short) served as both hdr_boxes and hdr_poster."""
-    from eas_vo.datasets.synthetic import sequence_folder
+    """Two translating walks served as hdr_boxes (synthetic:walk_short) and hdr_poster (the
+    same preset with another seed: another path through another room)."""
+    import dataclasses
+
+    from eas_vo.datasets.simulator import simulate
+    from eas_vo.datasets.synthetic import PRESETS, sequence_folder
 
     folder, url, _, hits = data_server
     walk = sequence_folder("walk_short", progress=False)
+    other = tmp_path / "walk_seed3"
+    simulate(dataclasses.replace(PRESETS["walk_short"], seed=3), other)
     registry = tmp_path / "registry.txt"
-    publish_sequences(folder, {"hdr_boxes": walk, "hdr_poster": walk}, registry)
+    publish_sequences(folder, {"hdr_boxes": walk, "hdr_poster": other}, registry)
     monkeypatch.setenv("EAS_VO_DATA_URL", url)
     monkeypatch.setenv("EAS_VO_DATA_REGISTRY", str(registry))
     monkeypatch.setenv("EAS_VO_DATA_DIR", str(tmp_path / "data"))
