@@ -269,6 +269,9 @@ def test_table2_runs_orbslam3_on_each_cell_beside_the_papers(walk_site, walk_voc
     median = report["hdr_boxes:original"]["rotation_eq3.ape_mean_rad"]["median"]
     assert eq3.split("|")[2].strip() == f"{median:.3f}"
     assert "| rotation APE, Eq. 3 [rad] (eas-vo klt+chain, every frame) |" in table
+    best_row = next(line for line in table.splitlines() if line.startswith("| rotation APE, Eq. 3 [rad] (eas-vo best.toml"))
+    best_metrics = json.loads(next((out / "best").rglob("metrics.json")).read_text())
+    assert f"{best_metrics['ape_mean_rad']:.3f}" in [cell.strip() for cell in best_row.split("|")[2:]]
     assert (out / "fig4_hdr_boxes.png").stat().st_size > 0
     before = (out / "slam" / "hdr_boxes_eas" / "summary.json").stat().st_mtime_ns
     assert main(argv) == 0
