@@ -14,7 +14,6 @@ Dataset and the `ecd` reader, gives a frame; units: g -> m/s^2 (standard gravity
 
 from __future__ import annotations
 
-import functools
 from dataclasses import dataclass
 from datetime import timedelta
 from pathlib import Path
@@ -25,7 +24,7 @@ import numpy as np
 from eas_vo.datasets.calibration import read_calibration
 from eas_vo.datasets.recording import RecordingReader, StreamConfig, check_increasing, read_tum_ground_truth
 from eas_vo.errors import DataError, DataWarnings
-from eas_vo.eventfile import Validator, cache_key, file_identity, load_cached, write_behind
+from eas_vo.eventfile import Validator, cache_key, file_identity, load_cached
 from eas_vo.types import ImuSeries, empty_events
 from eas_vo.validation import check_range
 
@@ -248,16 +247,17 @@ class Aedat4Dataset(RecordingReader):
         def fill(out, warnings):
             validate = Validator(where, self.camera.width, self.camera.height, c.time_tolerance_s, c.lenient, warnings, "event")
 
-            def blocks():
-                read = 0  # events read from the file before this batch (the index messages name)
-                while (batch := self._dv(r.getNextEventBatch, f"the events after event {read}", "events")) is not None:
-                    raw = batch.numpy()
-                    yield functools.partial(_checked_batch, validate, raw, read)
-                    read += len(raw)
-
+            # Batch by batch in this thread: dv-processing holds the GIL, and a worker thread
+            # checking and writing behind it (eventfile.write_behind) made the first read slower.
             r.resetSequentialRead()
             try:
-                return write_behind(out, blocks())
+                read = kept = 0  # events read from the file before this batch (the index messages name), kept
+                while (batch := self._dv(r.getNextEventBatch, f"the events after event {read}", "events")) is not None:
+                    raw = batch.numpy()
+                    events = _checked_batch(validate, raw, read)
+                    out.write(events.data)
+                    read, kept = read + len(raw), kept + len(events)
+                return kept
             finally:
                 r.resetSequentialRead()
 
