@@ -18,7 +18,8 @@ from pathlib import Path
 
 import numpy as np
 
-from eas_vo.config import parse_set
+from eas_vo import registry
+from eas_vo.config import NO_IMAGES, parse_set
 from eas_vo.errors import EasVoError, Interrupted, sigterm_as_interrupt
 from eas_vo.io import claim_grid_folder, json_text, markdown_cell, output_folder, remove_stale_temporaries, slug, write_text_atomic
 
@@ -90,10 +91,12 @@ def plan(datasets: list[str], frontends: list[str], methods: list[Method], sweep
     parsed = parse_sweeps(sweeps)
     points = [tuple(zip([k for k, _ in parsed], combo)) for combo in itertools.product(*[v for _, v in parsed])]
     names = dataset_names(datasets)
-    return [
-        Cell(d, f, m.tracker, m.backend, point, names[d], m.settings)
+    cells = [
+        Cell(d, f if registry.get("trackers", m.tracker).reads_images else NO_IMAGES, m.tracker, m.backend, point,
+             names[d], m.settings)
         for d, f, m, point in itertools.product(datasets, frontends, dict.fromkeys(methods), points or [()])
     ]
+    return list(dict.fromkeys(cells))  # a tracker that reads no images runs once, with the `none` frontend
 
 
 def dataset_names(datasets: list[str]) -> dict[str, str]:
