@@ -91,12 +91,16 @@ def plan(datasets: list[str], frontends: list[str], methods: list[Method], sweep
     parsed = parse_sweeps(sweeps)
     points = [tuple(zip([k for k, _ in parsed], combo)) for combo in itertools.product(*[v for _, v in parsed])]
     names = dataset_names(datasets)
+    trackers = registry.available("trackers")  # an unknown one is its cells' failure, as any bad setting
+
+    def frontend(f: str, tracker: str) -> str:
+        return NO_IMAGES if tracker in trackers and not trackers[tracker].reads_images else f
+
     cells = [
-        Cell(d, f if registry.get("trackers", m.tracker).reads_images else NO_IMAGES, m.tracker, m.backend, point,
-             names[d], m.settings)
+        Cell(d, frontend(f, m.tracker), m.tracker, m.backend, point, names[d], m.settings)
         for d, f, m, point in itertools.product(datasets, frontends, dict.fromkeys(methods), points or [()])
     ]
-    return list(dict.fromkeys(cells))  # a tracker that reads no images runs once, with the `none` frontend
+    return list(dict.fromkeys(cells))  # a tracker that reads no images runs once, with the `no_image` frontend
 
 
 def dataset_names(datasets: list[str]) -> dict[str, str]:

@@ -22,7 +22,7 @@ from eas_vo.validation import check_range, check_vector
 
 SECTIONS = ("run", "dataset", "frontend", "tracker", "backend")
 #: The frontend a tracker that reads no images runs with (Tracker.reads_images).
-NO_IMAGES = "none"
+NO_IMAGES = "no_image"
 
 
 @dataclass(frozen=True)
@@ -32,7 +32,7 @@ class RunConfig:
     Attributes:
         dataset: `PLUGIN:LOCATION`, or a location one dataset plugin recognises (a folder,
             a `.zip`, a `.bag`); default the embedded `synthetic:default`.
-        frontend, tracker, backend: plugin names (frontend: `none` whatever is given when the
+        frontend, tracker, backend: plugin names (frontend: `no_image` whatever is given when the
             tracker reads no images, Tracker.reads_images).
         start_s, duration_s: processed window, from the sequence's first timestamp [s].
         time_offset_s: ground truth is sampled at `t_frame + time_offset_s` [s].

@@ -27,7 +27,8 @@ from eas_vo.orb import OrbStats
 from eas_vo.plugins import Backend, Dataset, Frontend, Tracker
 from eas_vo.types import FrameRecord, ImuSeries, RelativeRotation
 
-FRAMES_CSV_FIELDS = ("index", "t", "nc", "inliers", "status", "redetected", "inlier_ratio", "residual_px", "reason")
+FRAMES_CSV_FIELDS = ("index", "t", "nc", "inliers", "status", "redetected", "inlier_ratio", "residual_px", "reason",
+                     "events", "contrast_gain")
 
 
 @dataclass
@@ -572,7 +573,8 @@ class _FrameLog:
     def write(self, r: FrameRecord) -> None:
         if self._fh:
             self._writer.writerow([r.index, f"{r.t:.9f}", r.nc, r.inliers, r.status, int(r.redetected),
-                                   f"{r.inlier_ratio:.4f}", f"{r.residual_px:.4f}", r.reason])
+                                   f"{r.inlier_ratio:.4f}", f"{r.residual_px:.4f}", r.reason, r.events,
+                                   f"{r.contrast_gain:.4f}"])
             self._fh.flush()
 
     def __exit__(self, *exc):

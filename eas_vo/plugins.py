@@ -151,7 +151,7 @@ class Frontend:
     #: for the image's lag, not the IMU's clock (no run.imu_time_offset_s is suggested, and
     #: run.imu_time_offset_auto keeps the configured clock).
     shows_the_past: ClassVar[bool] = False
-    #: False for the `none` frontend only: it makes no image, the pipeline never calls it and
+    #: False for the `no_image` frontend only: it makes no image, the pipeline never calls it and
     #: the tracker gets `image=None` (for trackers that read no images: Tracker.reads_images).
     makes_images: ClassVar[bool] = True
 
@@ -185,7 +185,7 @@ class Tracker:
     #: The run warns when there are no events, or when they end before the window's last frames.
     needs_events: ClassVar[bool] = False
     #: False if `process` ignores its image (it works from events alone): the run then uses the
-    #: `none` frontend whatever run.frontend says (no image is made; `image` is None), so an
+    #: `no_image` frontend whatever run.frontend says (no image is made; `image` is None), so an
     #: event-only dataset needs no frontend choice.
     reads_images: ClassVar[bool] = True
 

@@ -272,6 +272,9 @@ class RelativeRotation:
             the rotation model, the Sampson distance for the essential matrix); 0 when unknown.
         loop: a loop closure (frame i is a keyframe seen again) rather than a measurement of
             the motion since a recent frame.
+        estimated_sigma_rad: the estimator's own 1-sigma uncertainty of R_i_j [rad, per axis]
+            (e.g. from the curvature of its objective); 0: it gives none, the backends then
+            derive one from the inliers.
     """
 
     i: int
@@ -281,11 +284,15 @@ class RelativeRotation:
     inlier_ratio: float = 1.0
     residual_rad: float = 0.0
     loop: bool = False
+    estimated_sigma_rad: float = 0.0
 
     @property
     def sigma_rad(self) -> float:
-        """A rough 1-sigma uncertainty of R_i_j [rad] from its quality: the inlier noise over
-        sqrt(inliers), inflated by 1 / inlier_ratio (inf without inliers)."""
+        """A rough 1-sigma uncertainty of R_i_j [rad]: the estimator's own when it gives one,
+        else from its quality: the inlier noise over sqrt(inliers), inflated by 1 / inlier_ratio
+        (inf without inliers)."""
+        if self.estimated_sigma_rad > 0:
+            return self.estimated_sigma_rad
         if self.inliers <= 0:
             return float("inf")
         return self.residual_rad / np.sqrt(self.inliers) / max(self.inlier_ratio, 1e-3)
@@ -308,8 +315,11 @@ class FrameRecord:
             without one): nc, except where klt's descriptor fallback measured the frame (nc: its
             matches; the model: the LK tracks refined from them, unless that refinement was weak).
         residual_px: per-axis noise of that model's inliers [px] (sigma from their median
-            residual; 0 without one).
+            residual; 0 without one); cmax: how far apart the image quadrants' optima lie [px].
         reason: why the frame is `weak` or `lost` ("" otherwise).
+        events: events the tracker read for this frame (0 for a tracker of images).
+        contrast_gain: an event tracker's contrast at its estimate over the contrast at no
+            motion (cmax; 0 when not measured).
     """
 
     index: int
@@ -321,3 +331,5 @@ class FrameRecord:
     inlier_ratio: float = 0.0
     residual_px: float = 0.0
     reason: str = ""
+    events: int = 0
+    contrast_gain: float = 0.0

@@ -140,6 +140,15 @@ def test_plan_is_the_cartesian_product():
     assert smoothed.folder == "a/x_klt_gtsam_keyframe_interval-3" and smoothed.method.label == "klt+gtsam (keyframe_interval=3)"
 
 
+def test_a_tracker_of_events_alone_is_one_cell_per_dataset_with_the_none_frontend():
+    from eas_vo.compare import grid_methods
+
+    cells = plan(["a", "b"], ["original", "eas", "ts"], grid_methods(["klt", "cmax"], ["chain"]), [])
+    assert len(cells) == 2 * 3 + 2
+    assert [c.frontend for c in cells if c.tracker == "cmax"] == ["no_image", "no_image"]
+    assert {c.frontend for c in cells if c.tracker == "klt"} == {"original", "eas", "ts"}
+
+
 def test_compares_default_grid_runs_the_smoothed_method_beside_the_chain(short_sequence, tmp_path):
     """No --backends: klt+chain as the paper and klt+gtsam on klt's keyframe edges (interval 3,
     the cell's resolved config says so), which is not the chain's trajectory."""
