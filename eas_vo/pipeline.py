@@ -19,7 +19,7 @@ from eas_vo import registry
 from eas_vo.config import ResolvedConfig
 from eas_vo.errors import EasVoError, Interrupted
 from eas_vo.evaluation import (OFFSET_SEARCH_S, ImuAgreement, RotationErrors, estimate_time_offset, imu_agreement,
-                               rotation_errors)
+                               motion_errors, rotation_errors)
 from eas_vo.geometry.rotations import geodesic_angle, matrix_to_rotvec, quats_from_matrices, rotvec_to_matrix
 from eas_vo.imu_check import GyroVerdict, check_readings, judge_gyro
 from eas_vo.io import atomic_path, json_text, output_folder, write_text_atomic
@@ -322,6 +322,7 @@ def summarise(config: ResolvedConfig, dataset: Dataset, tracked: Tracked, errors
     }
     if errors is not None:
         metrics.update(errors.summary())
+        metrics.update(motion_errors(tracked.times, errors, tracked.edges))
     metrics["time_offset_s"] = offset
     metrics["time_offset_estimated"] = offset_estimated
     reclocked = imu_offset is not None and imu_offset != config.run.imu_time_offset_s
