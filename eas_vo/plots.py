@@ -71,15 +71,18 @@ def rotation_figure(result, title: str = ""):
     facts = []
     if "ape_mean_rad" in m:
         facts.append(f"average APE {m['ape_mean_rad']:.4f} rad, average NC {m['nc_mean']:.1f}")
-    if m.get("omega_rms_deg_s") is not None:
-        facts.append(f"omega RMS {m['omega_rms_deg_s']:.1f} deg/s")
-    if m.get("rpe_1s_mean_deg") is not None:
-        facts.append(f"RPE 1 s {m['rpe_1s_mean_deg']:.2f} deg")
     if "time_offset_s" in m and errors is not None:
         facts.append(f"ground truth time offset {m['time_offset_s'] * 1e3:+.1f} ms"
                      + (" (estimated)" if m.get("time_offset_estimated") else ""))
     if facts:
         title += "\n" + ", ".join(facts)
+    motion = []
+    if m.get("omega_rms_deg_s") is not None:
+        motion.append(f"angular velocity RMS error {m['omega_rms_deg_s']:.1f} deg/s")
+    if m.get("rpe_1s_mean_deg") is not None:
+        motion.append(f"RPE over 1 s {m['rpe_1s_mean_deg']:.2f} deg")
+    if motion:
+        title += "\n" + ", ".join(motion)
     fig.suptitle(title, fontsize="medium")
     return fig
 

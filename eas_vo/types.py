@@ -265,7 +265,7 @@ class RelativeRotation:
     """A measured rotation between frames i and j (j > i): `R_i_j` maps frame-j vectors into frame i.
 
     Attributes:
-        inliers: correspondences the model explains.
+        inliers: correspondences the model explains (an event tracker: the events it rests on).
         inlier_ratio: inliers / correspondences offered to the estimator.
         residual_rad: robust per-axis noise of the inliers [rad, ~ px / focal length], from the
             median of their residuals (the angle between rotated and observed bearings for
@@ -305,7 +305,8 @@ class FrameRecord:
     Attributes:
         index, t: frame index and time [s].
         nc: correspondences tracked from the previous frame (the paper's NC).
-        inliers: inliers of the frame-to-frame model (0 when no model was estimated).
+        inliers: inliers of the frame-to-frame model (0 when no model was estimated); for an
+            event tracker (cmax), the events its estimate rests on.
         status: `first`; `ok`; `weak` (a rotation was measured but its model is weak: too few
             inliers, a low inlier ratio or a large residual, see `reason`); `lost` (nothing was
             measured, the previous rotation is kept: too few correspondences or no model);

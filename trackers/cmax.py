@@ -71,7 +71,7 @@ class CmaxConfig:
         max_rate_deg_s: the coarse search covers |omega| per axis up to this [deg/s].
     """
 
-    window_events: int = 15000
+    window_events: int = 40000
     window_s: float = 0.0
     sigma_px: float = 1.0
     min_events: int = 1000
@@ -171,8 +171,9 @@ class CmaxTracker(Tracker):
             status, reason = "weak", f"quadrants disagree ({residual:.2f} px)"
         elif not np.isfinite(sigma):
             status, reason, sigma = "weak", "flat objective", FLAT_SIGMA_RAD
-        record = FrameRecord(k, t, 0, 0, status, False, residual_px=residual, reason=reason, events=n, contrast_gain=gain)
-        return record, [RelativeRotation(k - 1, k, R, estimated_sigma_rad=min(sigma, FLAT_SIGMA_RAD))]
+        # inliers: the events the estimate rests on (what makes an edge confident for the gyro's check)
+        record = FrameRecord(k, t, 0, n, status, False, residual_px=residual, reason=reason, events=n, contrast_gain=gain)
+        return record, [RelativeRotation(k - 1, k, R, inliers=n, estimated_sigma_rad=min(sigma, FLAT_SIGMA_RAD))]
 
     def _windows(self, sample: Sample, t_prev: float, t: float):
         """(events, t0, t1) per window: its events and the part [t0, t1] of [t_prev, t] it stands for."""
