@@ -369,7 +369,7 @@ def _events_end_early(config: ResolvedConfig, dataset: Dataset, times: np.ndarra
     if late == 0:
         return []
     return [f"{dataset.label}: the events end at {last:.3f} s, before {late} of the {len(times)} frames: "
-            f"{what} hold no events there"]
+            f"{what.replace('the ', 'their ', 1)} hold no events"]
 
 
 #: Above this angle [deg] the gyro and the tracker disagree on the axes: on correctly mounted

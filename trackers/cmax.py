@@ -59,10 +59,13 @@ class CmaxConfig:
         window_s: window length [s] instead (0: by events): round(interval / window_s) windows.
         sigma_px: the Gaussian smoothing the image of warped events [px of the sensor].
         min_events: a window with fewer events is not measured (the frame is `lost`).
-        lost_focus: a focus (the optimum's contrast over that of warps FOCUS_STEP_PX away) at or
-            below this measures nothing: no structure is brought into focus (noise alone). The
-            contrast gain (the optimum's contrast over that at no motion), which frames.csv
-            reports, is no test: it is near 1 for slow motion, which is well measured.
+        lost_focus, lost_gain: a focus (the optimum's contrast over that of warps FOCUS_STEP_PX
+            away) at or below lost_focus with a contrast gain (over no motion) at or below
+            lost_gain measures nothing: nothing was brought into focus and no blur removed
+            (noise alone: focus 1.000 +- 0.002, gains up to 1.11 where the search found warps
+            that crowd the events together). Neither alone is a test: slow motion, well
+            measured, has gains near 1; fast motion in dim light, gains of 1.2 and a focus of
+            1.005 (the events' latency spread blurs its sharpest image beyond a pixel).
         weak_focus: a focus below this makes the frame `weak`.
         max_residual_px: the frame is `weak` when the image quadrants' own optima lie further
             apart than this [px of displacement over half a window]: one rotation does not
@@ -79,6 +82,7 @@ class CmaxConfig:
     sigma_px: float = 1.0
     min_events: int = 1000
     lost_focus: float = 1.005
+    lost_gain: float = 1.15
     weak_focus: float = 1.01
     max_residual_px: float = 1.5
     init: str = "auto"
@@ -90,6 +94,7 @@ class CmaxConfig:
         check_range(self, "sigma_px", 0.0, 20.0)
         check_range(self, "min_events", 10, 10_000_000)
         check_range(self, "lost_focus", 1.0, 100.0)
+        check_range(self, "lost_gain", 1.0, 100.0)
         check_range(self, "weak_focus", self.lost_focus, 100.0)
         check_range(self, "max_residual_px", 0.0, 1e6, lo_open=True)
         check_choice(self, "init", INITS)
@@ -155,7 +160,7 @@ class CmaxTracker(Tracker):
         if any(w.events < self.config.min_events for w in windows):
             self._omega = None
             return FrameRecord(k, t, 0, 0, "lost", False, reason=f"too few events ({n})", events=n), []
-        if focus <= self.config.lost_focus:
+        if focus <= self.config.lost_focus and gain <= self.config.lost_gain:
             self._omega = None
             return FrameRecord(k, t, 0, 0, "lost", False, reason=f"nothing in focus ({focus:.3f})", events=n,
                                contrast_gain=gain), []
@@ -224,7 +229,8 @@ class CmaxTracker(Tracker):
         if -best.fun <= 1.0 and c.init != "search":  # no better than no motion (slow motion, or a bad start)
             best = _best(cost, [np.zeros(3)], best)
         omega = best.x / scale
-        sigma, focus = _curvature(cost, best.x)
+        sigma = _curvature_sigma(cost, best.x)
+        focus = _focus(lambda p: contrast.value(p / scale), best.x)
         self._omega = omega
         return Window(omega, sigma / scale, float(-best.fun), focus, n, t0, t1, contrast.evaluations,
                       self._quadrant_residual_px(contrast, omega, scale))
@@ -293,21 +299,22 @@ def _best(cost, starts: list[np.ndarray], best=None):
     return best
 
 
-def _curvature(cost, p: np.ndarray, h: float = FOCUS_STEP_PX) -> tuple[float, float]:
+def _curvature_sigma(cost, p: np.ndarray, h: float = 1.0) -> float:
     """At the minimum p [px] of `cost` (minus the contrast over that at no motion): SIGMA_SCALE
     times its RMS curvature radius, sqrt(trace(H^-1) / 3) [px] (inf where it is not a
-    minimum), H by central differences of the gradient (step h px); and the focus, the
-    contrast there over the mean contrast h px away along each axis."""
+    minimum), H by central differences of the gradient (step h px)."""
     H = np.empty((3, 3))
-    around = []
     for i in range(3):
         e = np.zeros(3)
         e[i] = h
-        (f_plus, g_plus), (f_minus, g_minus) = cost(p + e), cost(p - e)
-        H[:, i] = (g_plus - g_minus) / (2 * h)
-        around += [f_plus, f_minus]
-    focus = float(cost(p)[0] / np.mean(around))
+        H[:, i] = (cost(p + e)[1] - cost(p - e)[1]) / (2 * h)
     H = 0.5 * (H + H.T)
     if not np.all(np.isfinite(H)) or np.any(np.linalg.eigvalsh(H) <= 0):
-        return float("inf"), focus
-    return SIGMA_SCALE * float(np.sqrt(np.trace(np.linalg.inv(H)) / 3.0)), focus
+        return float("inf")
+    return SIGMA_SCALE * float(np.sqrt(np.trace(np.linalg.inv(H)) / 3.0))
+
+
+def _focus(contrast, p: np.ndarray, h: float = FOCUS_STEP_PX) -> float:
+    """The contrast at p [px] over the mean contrast of the warps h px away along each axis."""
+    around = [contrast(p + sign * h * e) for e in np.eye(3) for sign in (1.0, -1.0)]
+    return float(contrast(p) / np.mean(around))
