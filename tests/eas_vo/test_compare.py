@@ -213,6 +213,20 @@ def test_markdown_marks_the_best_of_each_column():
     assert "| original | 20 | 0.600 |" in md and "| eas | **60** | **0.200** |" in md
 
 
+def test_the_motion_table_gives_angular_velocity_and_rpe_with_the_best_in_bold():
+    from eas_vo.compare import MOTION_FIGURES
+
+    rows = [{"dataset": "d", "method": m, "frontend": f, "sweep": "", "status": "ok", "nc_mean": 0.0, "ape_mean_rad": 0.1,
+             "omega_rms_deg_s": w, "rpe_1s_mean_deg": r, "same_as": ""}
+            for m, f, w, r in (("klt+chain", "eas", 30.2, 6.5), ("cmax+chain", "no_image", 7.0, 2.68))]
+    rows.append({**rows[0], "frontend": "original", "status": "failed", "error": "boom"})
+    lines = table_markdown(rows, MOTION_FIGURES).splitlines()
+    assert lines[0] == ("| Source type | d klt+chain: omega RMS [deg/s] | d klt+chain: RPE 1 s [deg] "
+                        "| d cmax+chain: omega RMS [deg/s] | d cmax+chain: RPE 1 s [deg] |")
+    assert lines[2:] == ["| eas | **30.2** | **6.50** |  |  |", "| no_image |  |  | **7.0** | **2.68** |",
+                         "| original | failed | boom |  |  |"]
+
+
 def test_markdown_has_one_header_row_and_a_column_pair_per_distinct_method():
     """Two sequences x three methods, the second of which repeats the first on sequence a only:
     one header row naming sequence, method and figure; the repeated method's column dropped
