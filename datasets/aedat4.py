@@ -14,6 +14,7 @@ Dataset and the `ecd` reader, gives a frame; units: g -> m/s^2 (standard gravity
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 from datetime import timedelta
 from pathlib import Path
@@ -24,7 +25,7 @@ import numpy as np
 from eas_vo.datasets.calibration import read_calibration
 from eas_vo.datasets.recording import RecordingReader, StreamConfig, check_increasing, read_tum_ground_truth
 from eas_vo.errors import DataError, DataWarnings
-from eas_vo.eventfile import Validator, cache_key, file_identity, load_cached
+from eas_vo.eventfile import Validator, cache_key, file_identity, load_cached, write_behind
 from eas_vo.types import ImuSeries, empty_events
 from eas_vo.validation import check_range
 
@@ -70,6 +71,12 @@ def _said(exc: Exception) -> str:
             break
         kept.append(line.replace("Error info: ", ""))
     return " ".join(kept) or type(exc).__name__
+
+
+def _checked_batch(validate: Validator, raw: np.ndarray, first: int) -> np.ndarray:
+    """EVENT_DTYPE records of the valid events of a dv-processing batch (`raw`: its numpy()
+    records, timestamps in us), `first` the batch's index in the stream (for messages)."""
+    return validate(raw["timestamp"], raw["x"], raw["y"], raw["polarity"], lambda row: first + row, per_second=1e6)
 
 
 def is_aedat4(path: Path) -> bool:
@@ -240,19 +247,17 @@ class Aedat4Dataset(RecordingReader):
 
         def fill(out, warnings):
             validate = Validator(where, self.camera.width, self.camera.height, c.time_tolerance_s, c.lenient, warnings, "event")
-            read = kept = 0  # events read from the file (the index messages name), events kept
+
+            def blocks():
+                read = 0  # events read from the file before this batch (the index messages name)
+                while (batch := self._dv(r.getNextEventBatch, f"the events after event {read}", "events")) is not None:
+                    raw = batch.numpy()
+                    yield functools.partial(_checked_batch, validate, raw, read)
+                    read += len(raw)
+
             r.resetSequentialRead()
             try:
-                while True:
-                    batch = self._dv(r.getNextEventBatch, f"the events after event {read}", "events")
-                    if batch is None:
-                        return kept
-                    raw = batch.numpy()
-                    first = read
-                    events = validate(raw["timestamp"] / 1e6, raw["x"].astype(np.int64), raw["y"].astype(np.int64),
-                                      raw["polarity"].astype(np.int64), lambda row: first + row)
-                    out.write(events.data)
-                    read, kept = read + len(raw), kept + len(events)
+                return write_behind(out, blocks())
             finally:
                 r.resetSequentialRead()
 

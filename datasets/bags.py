@@ -9,6 +9,7 @@ formats give the same recording the same arrays and the same errors.
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable, ClassVar, Iterator
@@ -19,9 +20,14 @@ import numpy as np
 from eas_vo.datasets.calibration import camera_from_camera_info
 from eas_vo.datasets.recording import RecordingReader, StreamConfig, check_increasing, pose_series
 from eas_vo.errors import DataError, DataWarnings
-from eas_vo.eventfile import Validator, cache_key, load_cached
+from eas_vo.eventfile import Validator, cache_key, load_cached, write_behind
 from eas_vo.plugins import Dataset
 from eas_vo.types import CameraModel, ImuSeries, empty_events
+
+#: Event messages are decoded and checked in groups of about this many bytes (a worker thread
+#: does it while the next group is read).
+BLOCK_BYTES = 8 << 20
+
 
 @dataclass(frozen=True)
 class BagConfig(StreamConfig):
@@ -224,22 +230,35 @@ class BagDataset(RecordingReader):
 
         def fill(out, warnings):
             validate = Validator(where, self.camera.width, self.camera.height, c.time_tolerance_s, c.lenient, warnings, "message")
-            total = 0
-            for index, msgtype, raw in self._messages(topic, self.event_types, deserialize=False):
-                try:
-                    columns = self._decode_events(raw, msgtype)
-                except RefusedEncoding as exc:
-                    raise DataError(where, str(exc), index) from None
-                except (ValueError, IndexError) as exc:
-                    if not c.lenient:
-                        raise DataError(where, f"cannot decode event message ({exc})", index) from None
-                    warnings.add(where, "undecodable event message", f"message {index}")
-                    continue
-                t, x, y, p = columns
-                events = validate(t, x.astype(np.int64), y.astype(np.int64), p.astype(np.int64), lambda row: index)
-                out.write(events.tobytes())
-                total += len(events)
-            return total
+
+            def checked(messages) -> list[np.ndarray]:
+                """The valid events of (index, msgtype, raw) messages, decoded, in order."""
+                kept = []
+                for index, msgtype, raw in messages:
+                    try:
+                        t, x, y, p = self._decode_events(raw, msgtype)
+                    except RefusedEncoding as exc:
+                        raise DataError(where, str(exc), index) from None
+                    except (ValueError, IndexError) as exc:
+                        if not c.lenient:
+                            raise DataError(where, f"cannot decode event message ({exc})", index) from None
+                        warnings.add(where, "undecodable event message", f"message {index}")
+                        continue
+                    kept.append(validate(t, x, y, p, lambda row: index))
+                return kept  # (not joined: numpy copies the packed records slowly)
+
+            def blocks():  # messages grouped by about BLOCK_BYTES, decoded and checked behind the reading
+                group, size = [], 0
+                for message in self._messages(topic, self.event_types, deserialize=False):
+                    group.append(message)
+                    size += len(message[2])
+                    if size >= BLOCK_BYTES:
+                        yield functools.partial(checked, group)
+                        group, size = [], 0
+                if group:
+                    yield functools.partial(checked, group)
+
+            return write_behind(out, blocks())
 
         key = cache_key(self.cache_tag, *self._identity(), topic, self.camera.width, self.camera.height, c.time_tolerance_s)
         return load_cached(key, c.lenient, self.warnings, fill, where)

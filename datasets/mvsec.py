@@ -19,7 +19,7 @@ with libcaer's frame time, the middle of its exposure); events and frames share 
 
 from __future__ import annotations
 
-from concurrent.futures import ThreadPoolExecutor
+import functools
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -28,7 +28,7 @@ import numpy as np
 from eas_vo.datasets.calibration import read_calibration
 from eas_vo.datasets.recording import RecordingReader, StreamConfig, check_increasing
 from eas_vo.errors import DataError, DataWarnings
-from eas_vo.eventfile import Validator, cache_key, file_identity, load_cached, pack_rows
+from eas_vo.eventfile import Validator, cache_key, file_identity, load_cached, pack_rows, write_behind
 from eas_vo.geometry.rotations import quats_from_matrices
 from eas_vo.types import CameraModel, ImuSeries, PoseSeries, empty_events
 from eas_vo.validation import check_choice, check_range
@@ -46,11 +46,6 @@ KALIBR_CAMERA = {"left": "cam0", "right": "cam1"}
 #: What h5py raises on a damaged file or an unreadable dataset (a truncated file, a filter
 #: missing); KeyError and ValueError for a broken object header or link.
 H5_ERRORS = (OSError, KeyError, ValueError, RuntimeError)
-
-
-def _write(out, events: np.ndarray) -> int:
-    out.write(events.data)
-    return len(events)
 
 
 def _said(exc: Exception) -> str:
@@ -326,26 +321,19 @@ class MvsecDataset(RecordingReader):
         block_rows = max(1, BLOCK_ROWS // chunk) * chunk  # whole chunks per read
 
         def fill(out, warnings):
-            """Read block k+1 (h5py, holding the GIL) while a worker packs block k (compiled, without
-            it); blocks are packed in order, and a bad row is named before a later unreadable block."""
             validate = Validator(where, self.camera.width, self.camera.height, c.time_tolerance_s, c.lenient, warnings, "row")
-            buffers = [np.empty((min(block_rows, n), 4), np.float64) for _ in range(2)]
-            total, packing = 0, None
-            with ThreadPoolExecutor(1) as worker:
+            buffers = [np.empty((min(block_rows, n), 4), np.float64) for _ in range(2)]  # read one, pack the other
+
+            def blocks():
                 for k, start in enumerate(range(0, n, block_rows)):
                     rows = buffers[k % 2][: min(block_rows, n - start)]
                     try:
                         dset.read_direct(rows, np.s_[start : start + len(rows)], np.s_[0 : len(rows)])
                     except H5_ERRORS as exc:
-                        if packing is not None:
-                            packing.result()
                         raise DataError(where, f"unreadable from this row on ({_said(exc)})", start) from None
-                    if packing is not None:
-                        total += _write(out, packing.result())
-                    packing = worker.submit(pack_rows, rows, (2, 0, 1, 3), validate, start)
-                if packing is not None:
-                    total += _write(out, packing.result())
-            return total
+                    yield functools.partial(pack_rows, rows, (2, 0, 1, 3), validate, start)
+
+            return write_behind(out, blocks())
 
         key = cache_key("mvsec", *file_identity(self.path), self.group, self.camera.width, self.camera.height,
                         c.time_tolerance_s)

@@ -168,7 +168,9 @@ def decode_dvs_array(raw: bytes) -> np.ndarray:
     if count:
         out[:1] = np.frombuffer(body, _FIRST_EVENT, 1, start)
     if count > 1:
-        out[1:] = np.ndarray((count - 1,), _LATER_EVENT, body, start + 14, (16,))
+        later = np.ndarray((count - 1,), _LATER_EVENT, body, start + 14, (16,))
+        for name in _LATER_EVENT.names:  # field by field: numpy copies a whole record of another layout slowly
+            out[name][1:] = later[name]
     return out
 
 

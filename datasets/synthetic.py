@@ -21,22 +21,34 @@ from eas_vo.io import cache_folder
 from eas_vo.types import LENS_MODELS
 from eas_vo.validation import check_choice, check_range
 
-#: Named sequences. `default` is the embedded sequence `eas-vo run` uses.
+#: Named sequences. `default` is the embedded sequence `eas-vo run` uses. `walk` (and its short
+#: first 5 s, `walk_short`) is a hand-held walk through a lit room: the translation ten times the
+#: default's (40-50 cm amplitude per axis, the boxes 1.7-3.7 m away, the back wall 5 m), the
+#: default's rotation at a constant pace, a hundred times the light (original frames about
+#: 80 DN mean, 300-400 ORB features): the parallax and texture monocular SLAM needs.
+_WALK = {"illumination": 100.0, "translation_scale": 10.0, "speed_growth": 0.0}
 PRESETS = {
     "default": SimConfig(duration_s=10.0, seed=0),
     "short": SimConfig(duration_s=3.0, seed=1),
+    "walk": SimConfig(duration_s=10.0, seed=2, **_WALK),
+    "walk_short": SimConfig(duration_s=5.0, seed=2, **_WALK),
 }
 
 
 @dataclass(frozen=True)
 class SyntheticConfig(DvsModel):
-    """The scene's light, the camera's speed, the camera and the DVS pixel (DvsModel's fields,
-    same units and defaults).
+    """The scene's light, the camera's speed and translation, the camera and the DVS pixel
+    (DvsModel's fields, same units and defaults). Light, speed and translation scale the
+    preset's own (PRESETS: the default sequence's are all 1).
 
     Attributes:
-        illumination: scale of the scene's light (1.0: the default dim room, 0.1: ten times darker).
-        speed: scale of the motion's speed (1.0: hand-held, 44 deg/s mean; 4.0: 177 deg/s, more
-            than the real excerpt's 147 over its 30 s); the same path, travelled faster.
+        illumination: scale of the scene's light (1.0: the preset's; the default one is the dim
+            room, 0.1 ten times darker).
+        speed: scale of the motion's speed (1.0: the preset's; the default one is hand-held,
+            44 deg/s mean; 4.0: 177 deg/s, more than the real excerpt's 147 over its 30 s); the
+            same path, travelled faster.
+        translation_scale: scale of the motion's translation (1.0: the preset's; the default
+            one moves 4-5 cm per axis, `walk` tens of cm); the same path, its positions scaled.
         sensor: the camera's preset (SENSORS): `davis240` (240x180, radial-tangential lens) or
             `davis346` (346x260, MVSEC's calibration: an equidistant lens).
         width, height: another sensor size [px] (0: the preset's), with the preset's diagonal
@@ -48,6 +60,7 @@ class SyntheticConfig(DvsModel):
 
     illumination: float = 1.0
     speed: float = 1.0
+    translation_scale: float = 1.0
     sensor: str = "davis240"
     width: int = 0
     height: int = 0
@@ -71,6 +84,7 @@ class SyntheticConfig(DvsModel):
     def validate(self) -> None:
         check_range(self, "illumination", 0.0, 1e6, lo_open=True)
         check_range(self, "speed", 0.0, 20.0, lo_open=True)
+        check_range(self, "translation_scale", 0.0, 100.0)
         check_choice(self, "sensor", SENSORS)
         check_range(self, "width", 0, MAX_SENSOR_PX)
         check_range(self, "height", 0, MAX_SENSOR_PX)
@@ -99,9 +113,11 @@ class SyntheticConfig(DvsModel):
         check_range(self, "hot_pixel_rate_hz", 0.0, 1e6)
 
     def applied_to(self, preset: SimConfig) -> SimConfig:
-        """The preset seen by this camera and pixel under this light, at this speed."""
+        """The preset seen by this camera and pixel, its light, speed and translation scaled."""
         dvs = DvsModel(**{f.name: getattr(self, f.name) for f in dataclasses.fields(DvsModel)})
-        return dataclasses.replace(preset, illumination=self.illumination, speed=self.speed, dvs=dvs, camera=self.camera())
+        return dataclasses.replace(preset, illumination=preset.illumination * self.illumination, speed=preset.speed * self.speed,
+                                   translation_scale=preset.translation_scale * self.translation_scale, dvs=dvs,
+                                   camera=self.camera())
 
 
 def sequence_folder(name: str, config: SyntheticConfig | None = None, progress: bool = True) -> Path:

@@ -1,5 +1,5 @@
-"""Command-line interface: `eas-vo run | compare | list | info | render | export | convert | evaluate |
-reproduce | fetch | cache | simulate`.
+"""Command-line interface: `eas-vo run | compare | list | info | render | export | slam | vocabulary |
+convert | evaluate | reproduce | fetch | cache | simulate`.
 
 Each command is a pair here: `_parse_NAME` declares its arguments and help (the options several
 commands share are declared once, in `_add_*`), and `cmd_NAME` turns the parsed arguments into a
@@ -54,8 +54,8 @@ def build_parser() -> argparse.ArgumentParser:
         description="3-DoF rotation estimation from event cameras fused with frames (EAS and peers).",
     )
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND", parser_class=_OneLineParser)
-    for add in (_parse_run, _parse_compare, _parse_list, _parse_info, _parse_render, _parse_export, _parse_convert,
-                _parse_evaluate, _parse_reproduce, _parse_fetch, _parse_cache, _parse_simulate):
+    for add in (_parse_run, _parse_compare, _parse_list, _parse_info, _parse_render, _parse_export, _parse_slam,
+                _parse_vocabulary, _parse_convert, _parse_evaluate, _parse_reproduce, _parse_fetch, _parse_cache, _parse_simulate):
         add(sub)
     return parser
 
@@ -523,6 +523,111 @@ def cmd_export(args) -> int:
     return 0
 
 
+# ----------------------------------------------------------------------------- slam
+
+EPILOG_SLAM = """\
+outputs (in --out):
+  run_R/frames.csv      per frame: index, t, state (not_initialised, ok, recently_lost, lost, relocalised),
+                        tracked map points, the pose ORB-SLAM3 gave then (camera-to-world, its map's frame)
+  run_R/keyframes.tum   the keyframe trajectory; run_R/trajectory.tum every tracked frame, both after ORB-SLAM3's
+                        final optimisation
+  run_R/metrics.json    status (ok, never_initialised, lost, crashed), time to first initialisation, fractions tracked,
+                        Sim(3) APE of both trajectories [m, rad]
+  run_R/settings.yaml, run_R/slam.log   what ORB-SLAM3 read and printed
+  summary.md, summary.json              median, min and max over the runs that tracked; ORB features and matches
+
+examples:
+  eas-vo vocabulary --dataset synthetic:walk --frontend original --out walk.voc.txt
+  eas-vo slam --dataset synthetic:walk --frontend original --vocabulary walk.voc.txt --out slam_walk
+  eas-vo fetch orb-vocabulary && eas-vo slam --dataset ecd:hdr_boxes --frontend eas --duration 25 --out slam_boxes
+"""
+
+
+def _parse_slam(sub) -> None:
+    slam = sub.add_parser(
+        "slam",
+        help="run monocular ORB-SLAM3 on a frontend's images and score it (the paper's Table 2; extra: slam)",
+        description="Feed a frontend's images of the window frame by frame to monocular ORB-SLAM3 (pyorbslam3, "
+        "in a child process; settings from the dataset's calibration), --runs times (its threads make each run "
+        "differ), and score each run's keyframe and all-frame trajectories against ground truth after Sim(3) "
+        "alignment. A run that never initialises, loses track or crashes is reported as such.",
+        epilog=EPILOG_SLAM, formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    _add_dataset(slam)
+    slam.add_argument("--frontend", metavar="NAME", help="image source (default eas)")
+    slam.add_argument("--vocabulary", metavar="FILE",
+                      help="DBoW2 text vocabulary (default: $PYORBSLAM3_VOCAB, else ORBvoc.txt from eas-vo fetch orb-vocabulary)")
+    slam.add_argument("--runs", type=_positive_int, default=5, help="runs (default 5, as the ORB-SLAM papers report)")
+    _add_config(slam)
+    _add_window(slam)
+    _add_quiet(slam)
+    _add_output_options(slam, required=True)
+    slam.set_defaults(func=cmd_slam)
+
+
+def cmd_slam(args) -> int:
+    from eas_vo import config as config_mod
+    from eas_vo.io import check_output_folder, figure_text
+    from eas_vo.slam.run import SUMMARISED, find_vocabulary, require_extra, run_slam
+
+    require_extra()
+    vocabulary = find_vocabulary(args.vocabulary)
+    config = config_mod.resolve(args.config, {"dataset": args.dataset, "frontend": args.frontend, **_window_overrides(args)},
+                                args.assignments)
+    out = check_output_folder(args.out, replace=args.overwrite)
+    _refuse_inputs_inside(out, config.run.dataset, ("the --config", args.config), ("the --vocabulary", str(vocabulary)))
+    done = run_slam(config, out, str(vocabulary), args.runs, progress=_progress(args), replace=args.overwrite)
+    statuses = ", ".join(f"{n} {s}" for s, n in done["statuses"].items())
+    print(f"ORB-SLAM3 on {done['frames']} {done['frontend']} images of {done['dataset']}: {done['runs']} run(s), {statuses} -> {out}")
+    for key, text in SUMMARISED:
+        s = done[key]
+        if s:
+            print(f"  {text}: median {figure_text(s['median'], 4)} (min {figure_text(s['min'], 4)}, "
+                  f"max {figure_text(s['max'], 4)}, {s['n']} run(s))")
+    if not done["statuses"].get("ok"):
+        print("  no run tracked: " + "; ".join(f"run {m['run']} {m['status']}" for m in done["per_run"]))
+    for line in done["crashed"]:
+        print(f"eas-vo: error: {line}", file=sys.stderr)
+    return 2 if done["crashed"] else 0
+
+
+def _parse_vocabulary(sub) -> None:
+    vocabulary = sub.add_parser(
+        "vocabulary",
+        help="train a DBoW2 ORB vocabulary (ORB-SLAM's text format) on a sequence's own images",
+        description="Extract ORB descriptors (ORB-SLAM's extractor settings) from every image of a frontend over "
+        "the window and cluster them by hierarchical k-majority on Hamming distance, as DBoW2 does; word weights "
+        "are inverse document frequencies over the images. Small by default: k=10 branches, L=4 levels (up to "
+        "10^4 words; ORB-SLAM's ORBvoc.txt has 10^6).",
+    )
+    _add_dataset(vocabulary)
+    vocabulary.add_argument("--frontend", metavar="NAME", help="image source (default eas)")
+    vocabulary.add_argument("--k", type=_positive_int, default=10, help="branches per node (default 10)")
+    vocabulary.add_argument("--levels", type=_positive_int, default=4, help="levels L (default 4)")
+    vocabulary.add_argument("--seed", type=int, default=0, help="random seed of the clustering (default 0)")
+    _add_config(vocabulary)
+    _add_window(vocabulary)
+    _add_quiet(vocabulary)
+    vocabulary.add_argument("--out", required=True, metavar="FILE", help="the vocabulary file to write")
+    vocabulary.add_argument("--overwrite", action="store_true", help="replace an existing --out")
+    vocabulary.set_defaults(func=cmd_vocabulary)
+
+
+def cmd_vocabulary(args) -> int:
+    from eas_vo import config as config_mod
+    from eas_vo.io import check_output_file
+    from eas_vo.slam.train import train_vocabulary
+
+    config = config_mod.resolve(args.config, {"dataset": args.dataset, "frontend": args.frontend, **_window_overrides(args)},
+                                args.assignments)
+    out = check_output_file(args.out, replace=args.overwrite)
+    _refuse_inputs_inside(out, config.run.dataset, ("the --config", args.config), out_is_file=True)
+    done = train_vocabulary(config, out, args.k, args.levels, args.seed, progress=_progress(args))
+    print(f"wrote a vocabulary of {done['nodes']} nodes ({done['words']} words, k={args.k}, L={args.levels}) from "
+          f"{done['descriptors']} ORB descriptors of {done['images']} {done['frontend']} images of {done['dataset']} to {out}")
+    return 0
+
+
 # ----------------------------------------------------------------------------- convert
 
 def _parse_convert(sub) -> None:
@@ -611,19 +716,29 @@ def _parse_reproduce(sub) -> None:
         description="table1: fetch hdr_boxes and hdr_poster, run the six sources with --config paper on the first "
         "25 s (time offset estimated) with both backends, and write table1.md (ours beside the paper's, ratios, "
         "orderings), compare's tables and figures, and Fig. 3-style Euler plots. table2: ORB features and matches "
-        "of original and EAS images and, for ORB-SLAM2 keyframe trajectories given with --estimate (run it on "
-        "`eas-vo export` output), their APE after Sim(3) alignment: table2.md beside the paper's. Resumable: "
-        "the same command runs only what is missing.",
+        "of original and EAS images (or --frontends) and the keyframe APE after Sim(3) alignment of monocular SLAM "
+        "on them: with the slam extra, --runs runs of ORB-SLAM3 per cell (eas-vo slam; ORBvoc.txt fetched unless "
+        "--vocabulary), and for ORB-SLAM2 keyframe trajectories given with --estimate (run it on `eas-vo export` "
+        "output), those; table2.md beside the paper's and Fig. 4-style keyframe plots. Resumable: the same command "
+        "runs only what is missing.",
     )
     reproduce.add_argument("table", choices=("table1", "table2"))
     reproduce.add_argument("--out", metavar="DIR", help="output folder (default: reproduce/TABLE)")
-    reproduce.add_argument("--duration", type=_seconds(allow_zero=False), default=25.0, metavar="S", help="seconds of each sequence (default 25, the paper's)")
+    reproduce.add_argument("--duration", type=_seconds(allow_zero=False), metavar="S",
+                           help="seconds of each sequence (default: the paper's, table1 the first 25 s, table2 the whole "
+                           "sequences: §4.3 names no window and Fig. 4 shows the whole trajectories)")
     reproduce.add_argument("--config", default="paper", metavar="FILE", help="configuration (default paper, the paper's)")
     reproduce.add_argument("--backends", default="chain,gtsam", metavar="A,B",
                            help="table1's backends (default chain,gtsam): chain on klt's consecutive edges (the paper), "
                            "any other fed also its keyframe edges (tracker.klt.keyframe_interval=3, as configs/best.toml)")
     reproduce.add_argument("--estimate", dest="estimates", action="append", default=[], metavar="SEQUENCE:SOURCE=FILE",
                            help="table2: an ORB-SLAM2 KeyFrameTrajectory.txt, e.g. hdr_boxes:eas=KeyFrameTrajectory.txt (repeatable)")
+    reproduce.add_argument("--frontends", default="original,eas", metavar="A,B",
+                           help="table2's sources (default original,eas, the paper's); any frontend, e.g. original,histeq,eas,sits")
+    reproduce.add_argument("--runs", type=_positive_int, default=5,
+                           help="table2 with the slam extra: ORB-SLAM3 runs per cell (default 5; the median is reported)")
+    reproduce.add_argument("--vocabulary", metavar="FILE",
+                           help="table2 with the slam extra: ORB vocabulary (default: $PYORBSLAM3_VOCAB, else ORBvoc.txt, fetched if missing)")
     _add_jobs(reproduce)
     _add_quiet(reproduce, help="no progress bars")
     reproduce.set_defaults(func=cmd_reproduce)
@@ -646,33 +761,43 @@ def cmd_reproduce(args) -> int:
         estimates[key] = path
     if estimates and args.table != "table2":
         raise EasVoError("--estimate belongs to table2 (ORB-SLAM2 trajectories)")
+    if args.vocabulary and args.table != "table2":
+        raise EasVoError("--vocabulary belongs to table2 (ORB-SLAM3 runs)")
     out = check_writable_folder(args.out or f"reproduce/{args.table}")
     _refuse_inputs_inside(out, list(reproduce.SPECS.values()), ("the --config", args.config),
                           ("the data folder", str(data_dir())), *(("the --estimate", path) for path in estimates.values()))
     check_grid_folder(out)  # before any download
     progress = _progress(args)
     if args.table == "table1":
-        rows, n_run, markdown = reproduce.table1(out, args.duration, _names("--backends", args.backends), args.config,
+        rows, n_run, markdown = reproduce.table1(out, args.duration or reproduce.PAPER_DURATION_S,
+                                                 _names("--backends", args.backends), args.config,
                                                  args.jobs, progress)
     else:
-        rows, n_run, markdown = reproduce.table2(out, estimates, args.duration, args.config, args.jobs, progress)
+        rows, n_run, markdown = reproduce.table2(out, estimates, args.duration, args.config, args.jobs, progress,
+                                                 _names("--frontends", args.frontends), args.runs, args.vocabulary)
     return _report_cells(rows, n_run, out / f"{args.table}.md", markdown)
 
 
 # ----------------------------------------------------------------------------- fetch
 
+#: The `eas-vo fetch` name of ORB-SLAM3's published vocabulary (ORBvoc.txt).
+ORB_VOCABULARY = "orb-vocabulary"
+
+
 def _parse_fetch(sub) -> None:
     fetch = sub.add_parser(
         "fetch",
-        help="download Event Camera Dataset sequences (verified against their published MD5)",
+        help="download Event Camera Dataset sequences (verified against their published MD5) or ORB-SLAM3's vocabulary",
         description="Download recordings by name (e.g. hdr_boxes hdr_poster; `eas-vo list` shows the catalogue) "
         "as the dataset publishes them, check each against its MD5, and skip those already there and whole. "
         "A download goes to a temporary file moved into place only once verified; an interrupted one is "
-        "restarted by the same command. --dataset ecd:NAME then opens it (and fetches it if missing).",
+        "restarted by the same command. --dataset ecd:NAME then opens it (and fetches it if missing). "
+        "`orb-vocabulary` downloads ORB-SLAM3's ORBvoc.txt (checked against the SHA-1 of its archive) for eas-vo slam.",
         epilog="environment: EAS_VO_DATA_DIR (default folder), EAS_VO_DATA_URL (a mirror), "
-        "EAS_VO_DATA_REGISTRY (a file of 'name md5' lines replacing the built-in registry)",
+        "EAS_VO_DATA_REGISTRY (a file of 'name md5' lines replacing the built-in registry), "
+        "EAS_VO_ORB_VOCABULARY_URL (a mirror of ORBvoc.txt.tar.gz)",
     )
-    fetch.add_argument("names", nargs="+", metavar="NAME", help="a sequence name, or PLUGIN:NAME")
+    fetch.add_argument("names", nargs="+", metavar="NAME", help="a sequence name, PLUGIN:NAME, or orb-vocabulary")
     fetch.add_argument("--dir", metavar="DIR", help="where to keep them (default: $EAS_VO_DATA_DIR, else the cache's data/)")
     fetch.set_defaults(func=cmd_fetch)
 
@@ -680,7 +805,11 @@ def _parse_fetch(sub) -> None:
 def cmd_fetch(args) -> int:
     from eas_vo.registry import fetchable
 
-    wanted = [fetchable(spec) for spec in args.names]  # every name checked before any download
+    wanted = [fetchable(spec) for spec in args.names if spec != ORB_VOCABULARY]  # every name checked before any download
+    if ORB_VOCABULARY in args.names:
+        from eas_vo.slam.orbvoc import fetch_orb_vocabulary
+
+        print(f"{ORB_VOCABULARY}: {fetch_orb_vocabulary(args.dir, progress=sys.stderr.isatty())} (verified)")
     for plugin, name in wanted:
         path = plugin.fetch(name, args.dir, progress=sys.stderr.isatty())
         print(f"{name}: {path} (verified)")

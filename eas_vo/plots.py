@@ -326,3 +326,31 @@ def plot_euler_grid(path: str | Path, panels: list[tuple[str, np.ndarray, np.nda
     axes[0][0].legend(loc="best", fontsize="x-small")
     fig.suptitle(title, fontsize="medium")
     fig.savefig(path, dpi=100, format="png")
+
+
+def plot_keyframes(path: str | Path, panels: list[tuple], title: str = "") -> None:
+    """The paper's Fig. 4 for one sequence: a column per source, rows x, y, z [m] of the
+    Sim(3)-aligned keyframe positions (red dots) over the ground truth (black line), and each
+    keyframe's translation APE [m] at the bottom. `panels`: (label, keyframe t [s] (M,),
+    aligned positions (M, 3) [m], ground truth PoseSeries)."""
+    fig = _figure(figsize=(3.0 * len(panels) + 0.8, 7.5), layout="constrained")
+    axes = fig.subplots(4, len(panels), sharex="col", squeeze=False)
+    for c, (label, t, p, gt) in enumerate(panels):
+        t0 = gt.t[0]
+        shown = (gt.t >= t[0] - 0.5) & (gt.t <= t[-1] + 0.5)
+        at = np.array([np.argmin(np.abs(gt.t - v)) for v in t])
+        for axis, name in enumerate("xyz"):
+            ax = axes[axis][c]
+            ax.plot(gt.t[shown] - t0, gt.p_w_c[shown, axis], "k-", lw=1, label="ground truth")
+            ax.plot(t - t0, p[:, axis], "r.", ms=4, label="keyframes")
+            if c == 0:
+                ax.set_ylabel(f"{name} [m]")
+        ax = axes[3][c]
+        ax.plot(t - t0, np.linalg.norm(p - gt.p_w_c[at], axis=1), "r.-", ms=4, lw=0.8)
+        if c == 0:
+            ax.set_ylabel("APE [m]")
+        ax.set_xlabel("time [s]")
+        axes[0][c].set_title(label, fontsize="medium")
+    axes[0][0].legend(loc="best", fontsize="x-small")
+    fig.suptitle(title, fontsize="medium")
+    fig.savefig(path, dpi=100, format="png")

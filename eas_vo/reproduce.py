@@ -35,8 +35,11 @@ PAPER_TABLE2 = {
                    "eas": {"ape_m": 0.058, "features": 392, "matches": 53}},
 }
 
-#: What the paper ran: its first 25 s of each sequence, its configuration, time offset estimated.
+#: What the paper ran: its first 25 s of each sequence (§4.2), its configuration, time offset estimated.
 PAPER_DURATION_S = 25.0
+#: Table 2's window: §4.3 names none and Fig. 4 shows keyframes "in the whole trajectories of
+#: the camera", so the whole sequences (None).
+PAPER_TABLE2_DURATION_S = None
 
 
 #: The --dataset spec of each sequence (fetched on first use).
@@ -83,14 +86,14 @@ def _cells(frontends, methods) -> list[compare.Cell]:
     return [dataclasses.replace(c, dataset_name=names[c.dataset]) for c in cells]
 
 
-def _overrides(duration_s: float, orb: bool) -> dict:
+def _overrides(duration_s: float | None, orb: bool) -> dict:
     """The [run] values of the paper's runs: its window, the time offset estimated, ORB statistics for Table 2."""
     return {"start_s": 0.0, "duration_s": duration_s, "time_offset_s": None, "time_offset_auto": True,
             "orb_stats": orb or None}
 
 
 #: The files reproduce writes in its output folder beside compare's.
-OUTPUT_FILES = ("table1.md", "table1.json", "table2.md", "table2.json", "fig3_*.png")
+OUTPUT_FILES = ("table1.md", "table1.json", "table2.md", "table2.json", "fig3_*.png", "fig4_*.png")
 
 
 def _check(cells, config: str, overrides: dict, out: Path) -> None:
@@ -201,18 +204,33 @@ def _euler_figures(out: Path, cells: list[compare.Cell], rows: list[dict]) -> No
 # ----------------------------------------------------------------------------- Table 2
 
 
-def table2(out: Path, estimates: dict[tuple[str, str], str], duration_s: float = PAPER_DURATION_S,
-           config: str = "paper", jobs: int = 1, progress: bool = False) -> tuple[list[dict], int, str]:
-    """ORB features and matches per image (original and EAS, both sequences) and, for each
-    ORB-SLAM2 keyframe trajectory given as {(sequence, source): file}, its APE after Sim(3)
-    alignment (written under OUT/slam/SEQUENCE_SOURCE); table2.md beside the paper's."""
+#: Table 2's sources in the paper.
+TABLE2_SOURCES = ("original", "eas")
+
+
+def table2(out: Path, estimates: dict[tuple[str, str], str], duration_s: float | None = PAPER_TABLE2_DURATION_S,
+           config: str = "paper", jobs: int = 1, progress: bool = False, frontends=TABLE2_SOURCES,
+           runs: int = 5, vocabulary: str | None = None) -> tuple[list[dict], int, str]:
+    """ORB features and matches per image (each of `frontends`, both sequences) and the keyframe
+    APE after Sim(3) alignment of monocular SLAM on the same images: for {(sequence, source):
+    file} given, that ORB-SLAM2 trajectory scored (OUT/slam/SEQUENCE_SOURCE); for the others,
+    with the slam extra installed, `runs` runs of ORB-SLAM3 (eas-vo slam, into the same
+    folders; a folder holding that many runs with this vocabulary is kept: resumable).
+    Writes table2.md beside the paper's, table2.json and the Fig. 4 panels."""
+    import importlib.util
+
     from eas_vo.orbslam import evaluate_estimate, read_estimate
 
     for (seq, source), path in estimates.items():
-        if seq not in SEQUENCES or source not in ("original", "eas"):
-            raise EasVoError(f"--estimate {seq}:{source}: the paper's Table 2 has {', '.join(SEQUENCES)} x original, eas")
+        if seq not in SEQUENCES or source not in frontends:
+            raise EasVoError(f"--estimate {seq}:{source}: the Table 2 asked for has {', '.join(SEQUENCES)} x {', '.join(frontends)}")
         read_estimate(path)  # a missing or malformed file is an error before any download
-    cells, overrides = _cells(("original", "eas"), [PAPER]), _overrides(duration_s, orb=True)
+    with_slam = importlib.util.find_spec("pyorbslam3") is not None
+    if with_slam and vocabulary:
+        from eas_vo.slam.run import find_vocabulary
+
+        vocabulary = str(find_vocabulary(vocabulary))
+    cells, overrides = _cells(frontends, [PAPER]), _overrides(duration_s, orb=True)
     _check(cells, config, overrides, out)
     fetch_sequences(progress)
     # scored before the cells run: an estimate the ground truth cannot score is an error before that work
@@ -220,34 +238,135 @@ def table2(out: Path, estimates: dict[tuple[str, str], str], duration_s: float =
                                    label=f"{key[0]} {key[1]}", replace=True)
             for key, path in estimates.items()}
     rows, n_run = compare.run_experiment(cells, out, config, [], overrides, jobs, progress)
-    markdown = table2_markdown(rows, slam, duration_s)
+    best_rows = []
+    if with_slam:
+        if config != "best":  # eas-vo's most accurate configuration on the same images, for the rotation rows
+            best_rows, n_best = compare.run_experiment(cells, out / "best", "best", [], _overrides(duration_s, orb=False),
+                                                       jobs, progress)
+            n_run += n_best
+        vocabulary = vocabulary or str(_vocabulary(progress))
+        for cell in cells:
+            key = (cell.dataset_name, cell.frontend)
+            if key not in slam:
+                slam[key] = _slam_cell(cell, config, overrides, out / "slam" / f"{key[0]}_{key[1]}", vocabulary, runs,
+                                       progress)
+        _keyframe_figures(out, cells, slam)
+    markdown = table2_markdown(rows, slam, duration_s, frontends, with_slam, best_rows)
     write_text_atomic(out / "table2.md", markdown)
     write_text_atomic(out / "table2.json", json_text({"paper": PAPER_TABLE2, "orb": rows,
                                                       "slam": {f"{s}:{f}": m for (s, f), m in slam.items()}}))
     return rows, n_run, markdown
 
 
-def table2_markdown(rows: list[dict], slam: dict, duration_s: float) -> str:
-    """The paper's Table 2 layout, each of our figures followed by the paper's."""
+def _vocabulary(progress: bool) -> Path:
+    """The vocabulary ORB-SLAM3 loads: $PYORBSLAM3_VOCAB or the data folder's ORBvoc.txt,
+    fetched first if neither is there."""
+    from eas_vo.slam.orbvoc import fetch_orb_vocabulary
+    from eas_vo.slam.run import find_vocabulary
+
+    try:
+        return find_vocabulary(None)
+    except EasVoError:
+        return fetch_orb_vocabulary(progress=progress)
+
+
+def _slam_cell(cell: compare.Cell, config: str, overrides: dict, folder: Path, vocabulary: str, runs: int,
+               progress: bool) -> dict:
+    """`eas-vo slam` on one cell (its summary.json reused when it holds `runs` runs with
+    `vocabulary`); the summary with its median keyframe APE as `ape_trans_mean_m` (None when
+    no run tracked and scored)."""
+    import json
+
+    from eas_vo.slam.run import run_slam
+
+    summary_path = folder / "summary.json"
+    summary = json.loads(summary_path.read_text()) if summary_path.is_file() else {}
+    if summary.get("runs") != runs or summary.get("vocabulary") != vocabulary:
+        summary = run_slam(compare.cell_config(cell, config, [], overrides), folder, vocabulary, runs, progress, replace=True)
+        summary.pop("crashed")
+    median = (summary.get("ape_keyframes.ape_trans_mean_m") or {}).get("median")
+    return {**summary, "ape_trans_mean_m": median, "folder": str(folder)}
+
+
+def _keyframe_figures(out: Path, cells: list[compare.Cell], slam: dict) -> None:
+    """fig4_SEQUENCE.png: the paper's Fig. 4, a column per source: the keyframe positions of the
+    run with the median keyframe APE, Sim(3)-aligned, per axis over ground truth, and each
+    keyframe's APE."""
+    from eas_vo.io import read_tum
+    from eas_vo.plots import plot_keyframes
+    from eas_vo.registry import open_dataset
+
+    panels: dict = {}
+    for cell in cells:
+        m = slam.get((cell.dataset_name, cell.frontend), {})
+        scored = [r for r in m.get("per_run", []) if "ape_trans_mean_m" in r.get("ape_keyframes", {})]
+        if not scored:
+            continue
+        run = sorted(scored, key=lambda r: r["ape_keyframes"]["ape_trans_mean_m"])[(len(scored) - 1) // 2]
+        folder = Path(m["folder"]) / f"run_{run['run']}"
+        t, p, _ = read_tum(folder / "keyframes_aligned.tum")
+        gt = open_dataset(SPECS[cell.dataset_name]).ground_truth
+        label = f"{cell.frontend} (run {run['run']}, APE {run['ape_keyframes']['ape_trans_mean_m']:.3f} m)"
+        panels.setdefault(cell.dataset_name, []).append((label, t, p, gt))
+    for seq, grid in panels.items():
+        with atomic_path(out / f"fig4_{seq}.png") as tmp:
+            plot_keyframes(tmp, grid, title=f"{seq}: ORB-SLAM3 keyframes (Sim(3)-aligned, red) over ground truth")
+
+
+def table2_markdown(rows: list[dict], slam: dict, duration_s: float | None, frontends=TABLE2_SOURCES,
+                    with_slam: bool = False, best_rows: list[dict] = ()) -> str:
+    """The paper's Table 2 layout, each of our figures followed by the paper's (a source the
+    paper has not: -); with ORB-SLAM3, its rotation scored by Eq. 3 beside eas-vo's on the same
+    images (the configuration asked for, and `best_rows`: configs/best.toml's)."""
     by_key = {(r["dataset_name"], r["frontend"]): r for r in rows}
-    columns = [(seq, source) for seq in SEQUENCES for source in ("original", "eas")]
+    columns = [(seq, source) for seq in SEQUENCES for source in frontends]
     head = ["", *[f"{seq} {source}" for seq, source in columns]]
-    lines = [f"# Table 2: ours (first {duration_s:g} s) beside the paper's", "",
+    window = f"first {duration_s:g} s" if duration_s else "whole sequences"
+    lines = [f"# Table 2: ours ({window}) beside the paper's", "",
              "| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    missing = "- (no ORB-SLAM2 trajectory given; ORB-SLAM3 runs with pip install 'eas-vo[slam]')"
 
     def ours(seq, source, key, fmt):
         if key == "ape_m":
             m = slam.get((seq, source))
-            return figure_text(m["ape_trans_mean_m"], 3) if m else "- (no ORB-SLAM2 trajectory given)"
+            if not m:
+                return missing
+            if m.get("ape_trans_mean_m") is None:
+                return "no run tracked (" + ", ".join(f"{n} {s}" for s, n in m.get("statuses", {}).items()) + ")"
+            runs = f" ({m['ape_keyframes.ape_trans_mean_m']['n']}/{m['runs']} runs)" if "runs" in m else ""
+            return figure_text(m["ape_trans_mean_m"], 3) + runs
         r = by_key.get((seq, source))
         return f"{r[key]:{fmt}}" if r and r["status"] == "ok" and r[key] is not None else "-"
+
+    def paper(seq, source, key, fmt):
+        value = PAPER_TABLE2[seq].get(source, {}).get(key)
+        return f"{value:{fmt}}" if value is not None else "-"
 
     for label, key, row_key, fmt in (("average APE [m]", "ape_m", "ape_m", ".3f"),
                                      ("ORB features", "orb_keypoints_mean", "features", ".0f"),
                                      ("matches", "orb_matches_mean", "matches", ".0f")):
         lines.append("| " + " | ".join([f"{label} (ours)", *[ours(s, f, key, fmt) for s, f in columns]]) + " |")
-        lines.append("| " + " | ".join([f"{label} (paper)", *[f"{PAPER_TABLE2[s][f][row_key]:{fmt}}" for s, f in columns]]) + " |")
-    lines += ["", "APE: ORB-SLAM2 keyframes after Sim(3) Umeyama alignment (evo_ape -as). ORB features and matches: "
+        lines.append("| " + " | ".join([f"{label} (paper)", *[paper(s, f, row_key, fmt) for s, f in columns]]) + " |")
+    if with_slam:  # a 6-DoF system beside the 3-DoF one on rotation, on the same images
+        def eq3(seq, source):
+            m = (slam.get((seq, source)) or {}).get("rotation_eq3.ape_mean_rad")
+            return f"{m['median']:.3f}" if m else "-"
+
+        def ours_eq3(runs, seq, source):
+            r = runs.get((seq, source))
+            return f"{r['ape_mean_rad']:.3f}" if r and r["status"] == "ok" and r["ape_mean_rad"] is not None else "-"
+
+        lines.append("| " + " | ".join(["rotation APE, Eq. 3 [rad] (ORB-SLAM3, tracked frames)",
+                                        *[eq3(s, f) for s, f in columns]]) + " |")
+        lines.append("| " + " | ".join([f"rotation APE, Eq. 3 [rad] (eas-vo {PAPER.label}, every frame)",
+                                        *[ours_eq3(by_key, s, f) for s, f in columns]]) + " |")
+        if best_rows:
+            best = {(r["dataset_name"], r["frontend"]): r for r in best_rows}
+            lines.append("| " + " | ".join(["rotation APE, Eq. 3 [rad] (eas-vo best.toml, every frame)",
+                                            *[ours_eq3(best, s, f) for s, f in columns]]) + " |")
+    system = ("ORB-SLAM3 (monocular, pyorbslam3): the median over its runs that initialised and never lost track "
+              "(runs scored / runs), an --estimate's ORB-SLAM2 keyframes as given" if with_slam else "ORB-SLAM2")
+    lines += ["", f"APE: {system}; keyframes after Sim(3) Umeyama alignment (evo_ape -as). ORB features and matches: "
               "per image and matched (cross-checked Hamming) per adjacent pair, OpenCV ORB with ORB-SLAM2's settings "
               "(1000 features, scale 1.2, 8 levels, FAST 20) but not its grid-bucketed extractor (eas-vo compare --orb).", ""]
     return "\n".join(lines)

@@ -21,6 +21,7 @@ BOTTOM = {"eas_vo.types", "eas_vo.errors", "eas_vo.validation", "eas_vo.geometry
 MIDDLE = {"eas_vo.plugins", "eas_vo.registry", "eas_vo.io", "eas_vo.eventfile", "eas_vo.evaluation", "eas_vo.imu_check", "eas_vo.plots",
           "eas_vo.orb"}
 TOP = {"eas_vo.config", "eas_vo.pipeline", "eas_vo.compare", "eas_vo.gallery", "eas_vo.orbslam", "eas_vo.reproduce", "eas_vo.sequence",
+       "eas_vo.slam",
        "eas_vo.cli", "eas_vo.__main__"}
 PLUGIN_KINDS = {"eas_vo.frontends", "eas_vo.trackers", "eas_vo.backends", "eas_vo.datasets"}
 

@@ -2,11 +2,15 @@
 
 from __future__ import annotations
 
+import collections
 import dataclasses
+import functools
 import math
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import numba
 import numpy as np
 
 from eas_vo.validation import check_range
@@ -75,6 +79,9 @@ class SimConfig:
         speed: the motion's speed scale: 1 is the hand-held default (44 deg/s mean, 90 deg/s p95
             over 10 s), 4 gives 177 / 343-353 (seeds 71, 72; the real excerpt: 147 / 380 over its
             30 s); the same path and scene, travelled faster.
+        translation_scale: the motion's translation scale (1: the hand-held default, 4-5 cm
+            amplitude per axis; 5: a hand-held walk's tens of cm); the same path, its positions
+            scaled, the rotation unchanged.
         exposure_samples: renders averaged over a frame's exposure at speed 1 (motion blur);
             `speed` times as many at other speeds, so each sample moves as far as at speed 1.
         illumination: scale of the scene's light (1.0: the default dim room); the APS and the
@@ -89,6 +96,7 @@ class SimConfig:
     max_flow_px: float = 0.5
     speed_growth: float = 1.5
     speed: float = 1.0
+    translation_scale: float = 1.0
     exposure_samples: int = 8
     aps: ApsModel = field(default_factory=ApsModel)
     dvs: DvsModel = field(default_factory=DvsModel)
@@ -101,14 +109,17 @@ class SimConfig:
         check_range(self, "frame_rate_hz", 1.0, 1000.0)
         check_range(self, "illumination", 0.0, 1e6, lo_open=True)
         check_range(self, "speed", 0.0, 20.0, lo_open=True)
+        check_range(self, "translation_scale", 0.0, 100.0)
 
     def fingerprint(self) -> str:
         """The simulator version and every value, float fields as floats (speed=4 and 4.0 are
-        one sequence); the default camera left out, so that sequences simulated before the
-        camera could change keep their key (their output is the same)."""
+        one sequence); the default camera and translation scale left out, so that sequences
+        simulated before they could change keep their key (their output is the same)."""
         values = _as_typed_dict(self)
         if self.camera == SimCamera():
             del values["camera"]
+        if self.translation_scale == 1.0:
+            del values["translation_scale"]
         return repr((SIMULATOR_VERSION, values))
 
 
@@ -171,17 +182,22 @@ def simulate(config: SimConfig, out_dir: str | Path, progress: bool = False) -> 
     scene_rng, motion_rng, dvs_rng, aps_rng, imu_rng = _generators(config)
     camera = config.camera.model()
     shape = (camera.height, camera.width)
-    motion = HandHeldMotion(motion_rng, config.duration_s, config.speed_growth, config.speed)
+    motion = HandHeldMotion(motion_rng, config.duration_s, config.speed_growth, config.speed, config.translation_scale)
     render = _renderer(config, camera, motion, scene_rng)
-    events, stats = _simulate_events(config, camera, motion, render, dvs_rng, progress)
     frame_times = np.arange(config.aps.exposure_s, config.duration_s - config.aps.exposure_s, 1.0 / config.frame_rate_hz)
-    fixed_pattern = config.aps.fixed_pattern(shape, aps_rng)
-    frames = []
     samples = max(1, math.ceil(config.exposure_samples * config.speed))
     offsets = (np.arange(samples) + 0.5) / samples - 0.5
-    for t in frame_times:
-        mean = np.mean([render(t + dt * config.aps.exposure_s) for dt in offsets], axis=0)
-        frames.append(config.aps.expose(mean, fixed_pattern, aps_rng))
+
+    def exposure(t: float) -> np.ndarray:
+        """The radiance averaged over the frame exposure centred on t (motion blur)."""
+        return np.mean([render(t + dt * config.aps.exposure_s) for dt in offsets], axis=0)
+
+    steps = _render_steps(config, camera, motion)
+    rendered = _rendered_ahead([functools.partial(render, t) for t in steps]
+                               + [functools.partial(exposure, t) for t in frame_times])
+    events, stats = _simulate_events(config, camera, steps, rendered, dvs_rng, progress)
+    fixed_pattern = config.aps.fixed_pattern(shape, aps_rng)
+    frames = [config.aps.expose(next(rendered), fixed_pattern, aps_rng) for _ in frame_times]
 
     gt_t = np.arange(0.0, config.duration_s, 1.0 / config.gt_rate_hz)
     R_w_c, p_w_c = motion.pose(gt_t)
@@ -197,7 +213,9 @@ def simulate_events(config: SimConfig, motion) -> tuple[np.ndarray, SimStats]:
     HandHeldMotion's, e.g. motion.ConstantMotion) instead of the hand-held path."""
     scene_rng, _, dvs_rng, _, _ = _generators(config)
     camera = config.camera.model()
-    return _simulate_events(config, camera, motion, _renderer(config, camera, motion, scene_rng), dvs_rng, False)
+    render = _renderer(config, camera, motion, scene_rng)
+    steps = _render_steps(config, camera, motion)
+    return _simulate_events(config, camera, steps, (render(t) for t in steps), dvs_rng, False)
 
 
 def _generators(config: SimConfig) -> tuple[np.random.Generator, ...]:
@@ -218,30 +236,49 @@ def _renderer(config: SimConfig, camera: CameraModel, motion, scene_rng: np.rand
     return render
 
 
-def _simulate_events(config, camera, motion, render, rng, progress) -> tuple[np.ndarray, SimStats]:
-    """Adaptive render steps (largest flow `max_flow_px`), events between consecutive steps."""
+def _render_steps(config, camera, motion) -> list[float]:
+    """The times [s] the scene is rendered at for the events: 0, then adaptive steps (the
+    largest image motion in a step `max_flow_px`, ESIM's rule) up to the duration."""
+    max_ray = math.hypot(camera.width, camera.height) / (2 * camera.focal_px)
+    t, steps = 0.0, [0.0]
+    while t < config.duration_s:
+        omega = float(np.linalg.norm(motion.angular_velocity([t])[0]))
+        flow_rate = camera.focal_px * omega * (1 + max_ray**2) + 1e-6  # px/s at the image corner
+        t = min(t + float(np.clip(config.max_flow_px / flow_rate, 2e-4, 5e-3)), config.duration_s)
+        steps.append(t)
+    return steps
+
+
+def _rendered_ahead(jobs: list, depth: int = 3):
+    """Each job's result (a rendered image), in order, computed on a worker thread up to
+    `depth` jobs ahead: the ray cast (compiled, one thread, without the GIL) runs while the
+    sensor model works on the previous image. The same images as computed in turn."""
+    with ThreadPoolExecutor(1, initializer=numba.set_num_threads, initargs=(1,)) as worker:
+        pending = collections.deque(worker.submit(job) for job in jobs[:depth])
+        for job in jobs[depth:]:
+            yield pending.popleft().result()
+            pending.append(worker.submit(job))
+        while pending:
+            yield pending.popleft().result()
+
+
+def _simulate_events(config, camera, steps, rendered, rng, progress) -> tuple[np.ndarray, SimStats]:
+    """Events between consecutive render steps (`steps` [s], their images from `rendered`)."""
     from tqdm import tqdm
 
     sim = EventSimulator(config.dvs, (camera.height, camera.width), rng)
-    t = 0.0
-    sim.start(render(t))
+    sim.start(next(rendered))
     chunks, truths = [], []
     pixel_s = np.zeros(2)  # dark, bright
     white = config.dvs.white_radiance
-    max_ray = math.hypot(camera.width, camera.height) / (2 * camera.focal_px)
     with tqdm(total=round(config.duration_s, 3), disable=not progress, unit="s", desc="simulating events") as bar:
-        while t < config.duration_s:
-            omega = float(np.linalg.norm(motion.angular_velocity([t])[0]))
-            flow_rate = camera.focal_px * omega * (1 + max_ray**2) + 1e-6  # px/s at the image corner
-            dt = float(np.clip(config.max_flow_px / flow_rate, 2e-4, 5e-3))
-            t1 = min(t + dt, config.duration_s)
-            radiance = render(t1)
+        for t, t1 in zip(steps, steps[1:]):
+            radiance = next(rendered)
             events, truth = sim.step(t, t1, radiance)
             chunks.append(events)
             truths.append(truth)
             pixel_s += (t1 - t) * np.array([np.count_nonzero(radiance < DARK * white), np.count_nonzero(radiance > BRIGHT * white)])
             bar.update(round(t1 - t, 6))
-            t = t1
     events = np.concatenate(chunks) if chunks else np.empty(0, EVENT_DTYPE)
     return events, _stats(config.duration_s, truths, pixel_s, white)
 

@@ -18,15 +18,19 @@ TRANSLATION_TERMS = (((0.04, 0.20), (0.01, 0.7)), ((0.03, 0.25), (0.01, 0.9)), (
 
 class HandHeldMotion:
     """Smooth random motion; frequencies (hence speeds) grow linearly by `speed_growth` over
-    `duration_s`, all scaled by `speed` (the same path, travelled `speed` times as fast).
+    `duration_s`, all scaled by `speed` (the same path, travelled `speed` times as fast); the
+    translation is `translation_scale` times TRANSLATION_TERMS' (the same path, its positions
+    scaled about the origin).
 
     Poses are camera-to-world: R_w_c(t) = R_w_c0 Exp(rotvec(t)), p_w_c(t).
     """
 
-    def __init__(self, rng: np.random.Generator, duration_s: float, speed_growth: float = 1.5, speed: float = 1.0):
+    def __init__(self, rng: np.random.Generator, duration_s: float, speed_growth: float = 1.5, speed: float = 1.0,
+                 translation_scale: float = 1.0):
         self.duration_s = duration_s
         self.speed_growth = speed_growth
         self.speed = speed
+        self.translation_scale = translation_scale
         self.rot_phase = rng.uniform(0, 2 * np.pi, (3, len(ROTATION_TERMS[0])))
         self.trans_phase = rng.uniform(0, 2 * np.pi, (3, len(TRANSLATION_TERMS[0])))
         self.R_w_c0 = rotvec_to_matrix(np.array([0.05, 0.15, -0.03]))
@@ -49,7 +53,7 @@ class HandHeldMotion:
         phi = self._warped_time(np.atleast_1d(np.asarray(t, dtype=float)))
         rotvec = self._sines(phi, ROTATION_TERMS, self.rot_phase)
         rotvec -= self._sines(np.zeros(1), ROTATION_TERMS, self.rot_phase)  # start at R_w_c0
-        return self.R_w_c0 @ rotvec_to_matrix(rotvec), self._sines(phi, TRANSLATION_TERMS, self.trans_phase)
+        return self.R_w_c0 @ rotvec_to_matrix(rotvec), self.translation_scale * self._sines(phi, TRANSLATION_TERMS, self.trans_phase)
 
     def angular_velocity(self, t, h: float = 1e-4) -> np.ndarray:
         """Body angular velocity omega_c [rad/s] (N, 3) by central differences of R_w_c."""

@@ -149,7 +149,7 @@ class Scene:
         return out.reshape(shape)
 
 
-@numba.njit(cache=True, fastmath=True, parallel=True)
+@numba.njit(cache=True, fastmath=True, parallel=True, nogil=True)
 def _ray_cast(R, o, rays, lo, hi, inside, uv_axes, uv_lo, offset, size, atlas, texels_per_m, out):
     """For each ray: nearest box face hit (slab method), then a bilinear atlas lookup."""
     for n in numba.prange(rays.shape[0]):

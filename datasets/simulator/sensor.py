@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import numba
 import numpy as np
 
 from eas_vo.types import EVENT_DTYPE
@@ -182,42 +183,28 @@ class EventSimulator:
         n_neg = np.floor(np.maximum(-diff, 0) / self.c_neg).astype(np.int64)
         return n_pos, n_neg
 
-    def _each_crossing(self, t0, t1, ref, v0, v1, n_pos, n_neg):
-        """Yield (k, pixels, positive, level, time) for the k-th crossing of each pixel."""
-        for k in range(1, int((n_pos + n_neg).max(initial=0)) + 1):
-            pix = np.flatnonzero(n_pos + n_neg >= k)
-            positive = n_pos[pix] > 0
-            level = ref[pix] + k * np.where(positive, self.c_pos[pix], -self.c_neg[pix])
-            span = v1[pix] - v0[pix]
-            frac = np.clip((level - v0[pix]) / np.where(span == 0, 1e-12, span), 0.0, 1.0)
-            yield pix, positive, level, t0 + frac.astype(np.float64) * (t1 - t0)  # float64: us times
-
     def _record_raw_crossings(self, t0, t1, raw1) -> None:
         n_pos, n_neg = self._levels_crossed(self.raw_ref, self.last_raw, raw1)
-        for pix, positive, level, t in self._each_crossing(t0, t1, self.raw_ref, self.last_raw, raw1, n_pos, n_neg):
-            slot = self.ring_next[pix] % self.HISTORY
-            self.ring_level[pix, slot], self.ring_t[pix, slot], self.ring_up[pix, slot] = level, t, positive
-            self.ring_next[pix] += 1
+        _record_crossings(t0, t1, self.raw_ref, self.last_raw, raw1, n_pos, n_neg, self.c_pos, self.c_neg,
+                          self.ring_level, self.ring_t, self.ring_up, self.ring_next)
         self.raw_ref += n_pos * self.c_pos - n_neg * self.c_neg
         self.last_raw = raw1
 
     def _crossings(self, t0, t1, v0, v1) -> tuple[np.ndarray, np.ndarray]:
-        """Signal events of the filtered signal from v0 to v1 and the levels they crossed."""
+        """Signal events of the filtered signal from v0 to v1 and the levels they crossed, in
+        the order of the k-th crossings of all pixels (k = 1, 2, ...), pixels in index order."""
         w = self.shape[1]
         n_pos, n_neg = self._levels_crossed(self.ref, v0, v1)
-        out, levels = [], []
-        for pix, positive, level, t in self._each_crossing(t0, t1, self.ref, v0, v1, n_pos, n_neg):
-            keep = t - self.last_t[pix] >= self.model.refractory_s
-            pix, t, positive, level = pix[keep], t[keep], positive[keep], level[keep]
-            self.last_t[pix] = t
-            ev = np.empty(len(pix), EVENT_DTYPE)
-            ev["t"], ev["x"], ev["y"], ev["p"] = t, pix % w, pix // w, positive
-            out.append(ev)
-            levels.append(level)
+        total = int((n_pos + n_neg).sum())
+        pix, t, up, level, k = (np.empty(total, dtype) for dtype in (np.int64, np.float64, np.bool_, np.float32, np.int64))
+        kept = _signal_crossings(t0, t1, self.ref, v0, v1, n_pos, n_neg, self.c_pos, self.c_neg, self.last_t,
+                                 self.model.refractory_s, pix, t, up, level, k)
         self.ref += n_pos * self.c_pos - n_neg * self.c_neg
-        if not out:
-            return np.empty(0, EVENT_DTYPE), np.empty(0, np.float32)
-        return np.concatenate(out), np.concatenate(levels)
+        order = np.argsort(k[:kept], kind="stable")  # pixel-major -> crossing-major, pixels still in order
+        pix, level = pix[order], level[order]
+        ev = np.empty(kept, EVENT_DTYPE)
+        ev["t"], ev["x"], ev["y"], ev["p"] = t[order], pix % w, pix // w, up[order]
+        return ev, level
 
     def _latency(self, events: np.ndarray, levels: np.ndarray) -> np.ndarray:
         """Each event's time minus the latest earlier unfiltered crossing in its pixel of the
@@ -264,3 +251,63 @@ class ImuModel:
         acc = np.einsum("nji,nj->ni", R_w_c, specific_w)
         acc += rng.normal(0, self.acc_bias, 3) + rng.normal(0, self.acc_noise * sqrt_rate, (n, 3))
         return acc, gyro
+
+
+# -- compiled crossing loops: each pixel's crossings in order, in float32 as numpy computes them --
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _crossing(t0, t1, ref, v0, span, step, k):
+    """The k-th level crossed from v0 (span: v1 - v0, 1e-12 if 0) and its time [s]: the level
+    ref + k * step in float32, its time linear between t0 and t1 (float64)."""
+    level = ref + np.float32(k) * step
+    frac = (level - v0) / span
+    if frac < np.float32(0.0):
+        frac = np.float32(0.0)
+    elif frac > np.float32(1.0):
+        frac = np.float32(1.0)
+    return level, t0 + np.float64(frac) * (t1 - t0)
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _pixel_run(ref, v0, v1, n_pos, n_neg, c_pos, c_neg, p):
+    """(crossings, direction, step, span) of pixel p."""
+    up = n_pos[p] > 0
+    step = c_pos[p] if up else -c_neg[p]
+    span = v1[p] - v0[p]
+    if span == 0:
+        span = np.float32(1e-12)
+    return n_pos[p] + n_neg[p], up, step, span
+
+
+@numba.njit(cache=True, nogil=True)
+def _record_crossings(t0, t1, ref, v0, v1, n_pos, n_neg, c_pos, c_neg, ring_level, ring_t, ring_up, ring_next):
+    """Each pixel's crossings from v0 to v1 into its ring of the last crossings (level, time, direction)."""
+    history = ring_level.shape[1]
+    for p in range(len(ref)):
+        if n_pos[p] + n_neg[p] == 0:
+            continue
+        n, up, step, span = _pixel_run(ref, v0, v1, n_pos, n_neg, c_pos, c_neg, p)
+        for k in range(1, n + 1):
+            level, t = _crossing(t0, t1, ref[p], v0[p], span, step, k)
+            slot = ring_next[p] % history
+            ring_level[p, slot], ring_t[p, slot], ring_up[p, slot] = level, t, up
+            ring_next[p] += 1
+
+
+@numba.njit(cache=True, nogil=True)
+def _signal_crossings(t0, t1, ref, v0, v1, n_pos, n_neg, c_pos, c_neg, last_t, refractory_s, pix, t, up, level, k):
+    """Each pixel's crossings from v0 to v1 that come at least `refractory_s` after its last
+    event, pixel by pixel (pixel, time, direction, level, crossing number); returns their count."""
+    kept = 0
+    for p in range(len(ref)):
+        if n_pos[p] + n_neg[p] == 0:
+            continue
+        n, direction, step, span = _pixel_run(ref, v0, v1, n_pos, n_neg, c_pos, c_neg, p)
+        for j in range(1, n + 1):
+            lv, tj = _crossing(t0, t1, ref[p], v0[p], span, step, j)
+            if tj - last_t[p] >= refractory_s:
+                last_t[p] = tj
+                pix[kept], t[kept], up[kept], level[kept], k[kept] = p, tj, direction, lv, j
+                kept += 1
+    return kept

@@ -30,6 +30,7 @@ from eas_vo.eventfile.cache import (
     load_event_text,
     open_cache,
     prime_text_cache,
+    write_behind,
     write_cache,
 )
 from eas_vo.eventfile.convert import convert_text_to_cache
@@ -53,6 +54,7 @@ __all__ = [
     "pack_rows",
     "parse_block",
     "prime_text_cache",
+    "write_behind",
     "write_cache",
     "write_events_text",
     "CACHE_MAGIC",

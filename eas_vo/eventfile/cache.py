@@ -14,6 +14,8 @@ import hashlib
 import os
 import sys
 from pathlib import Path
+from collections.abc import Iterable
+from concurrent.futures import ThreadPoolExecutor
 from typing import BinaryIO, Callable
 
 import numpy as np
@@ -77,13 +79,39 @@ def open_cache(path: Path) -> np.ndarray | None:
         print(f"eas-vo: the event cache {path} is damaged or of another version; rebuilding it", file=sys.stderr)
         path.unlink(missing_ok=True)
         return None
+    return _map_records(path, count)
+
+
+def _map_records(path: Path, count: int) -> np.ndarray:
     if count == 0:
         return np.empty(0, EVENT_DTYPE)
     return np.memmap(path, dtype=EVENT_DTYPE, mode="r", offset=HEADER_BYTES, shape=(count,))
 
 
+class _HashingWriter:
+    """A binary file's `write`/`writelines` that also hash what they write (XXH3-64, streamed:
+    the digest of all bytes written so far) and count its bytes."""
+
+    def __init__(self, fh: BinaryIO):
+        import xxhash
+
+        self.fh, self.hash, self.bytes = fh, xxhash.xxh3_64(), 0
+
+    def write(self, data) -> int:
+        view = memoryview(data).cast("B")
+        self.hash.update(view)
+        self.bytes += len(view)
+        return self.fh.write(view)
+
+    def writelines(self, chunks) -> None:
+        for data in chunks:
+            self.write(data)
+
+
 def build_cache(path: Path, fill: Callable[[BinaryIO], int], max_events: int = 0) -> np.ndarray:
-    """Write a cache file atomically: `fill(fh)` writes the records and returns their count.
+    """Write a cache file atomically: `fill(out)` writes the records with `out.write` or
+    `out.writelines` and returns their count. The checksum is taken as they are written (no
+    second pass over the file), and the finished file is mapped without reading it again.
 
     `max_events` > 0 reserves the file's blocks up front (fewer, faster writes on most file
     systems); the file is cut to its real size at the end.
@@ -96,13 +124,44 @@ def build_cache(path: Path, fill: Callable[[BinaryIO], int], max_events: int = 0
                 except OSError:
                     pass  # no space to reserve (or no support): plain writes still work
             fh.write(CACHE_MAGIC + bytes(16))
-            count = int(fill(fh))
-            fh.truncate(HEADER_BYTES + count * EVENT_DTYPE.itemsize)
-        checksum = records_checksum(np.memmap(tmp, dtype=np.uint8, mode="r", offset=HEADER_BYTES)) if count else 0
-        with open(tmp, "r+b") as fh:
+            out = _HashingWriter(fh)
+            count = int(fill(out))
+            if out.bytes != count * EVENT_DTYPE.itemsize:
+                raise AssertionError(f"{out.bytes} bytes of records written for {count} events")
+            fh.truncate(HEADER_BYTES + out.bytes)
+            checksum = out.hash.intdigest() if count else 0
             fh.seek(8)
             fh.write(count.to_bytes(8, "little") + checksum.to_bytes(8, "little"))
-    return open_cache(path)
+    return _map_records(path, count)
+
+
+def write_behind(out: BinaryIO, blocks: Iterable[Callable[[], np.ndarray | list[np.ndarray]]]) -> int:
+    """Write the EVENT_DTYPE records each of `blocks` returns (an array, or a list of arrays
+    written one after the other) to `out`, in order; returns their count. Block k is checked and written on a worker thread while the caller's
+    iterator reads block k+1: the readers' libraries hold the GIL, the compiled checks and
+    the write release it. One block waits at most (memory: two blocks). An error raised by
+    the iterator comes after block k's own, so the earliest bad event is the one named."""
+    total, pending = 0, None
+    with ThreadPoolExecutor(1) as worker:
+        try:
+            for block in blocks:
+                if pending is not None:
+                    total += pending.result()
+                pending = worker.submit(_write_block, out, block)
+        except BaseException:
+            if pending is not None:
+                pending.result()
+            raise
+        if pending is not None:
+            total += pending.result()
+    return total
+
+
+def _write_block(out: BinaryIO, block: Callable[[], np.ndarray | list[np.ndarray]]) -> int:
+    parts = block()
+    parts = [parts] if isinstance(parts, np.ndarray) else parts
+    out.writelines(events.data for events in parts)
+    return sum(len(events) for events in parts)
 
 
 def write_cache(path: Path, events: np.ndarray) -> np.ndarray:
@@ -151,7 +210,7 @@ def load_cached(
         write_text_atomic(target.with_suffix(".warnings"), local.to_json())
     elif target is tolerant:
         os.replace(tolerant, strict)
-        events = open_cache(strict)
+        events = _map_records(strict, len(events))
     warnings.merge(local)
     return events
 

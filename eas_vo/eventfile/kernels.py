@@ -130,12 +130,14 @@ def parse_and_pack(buf, pow10, width, height, tolerance_s, last_t, out):
 
 
 @numba.njit(cache=True, nogil=True)
-def check_and_pack(t, x, y, p, last_t, width, height, tolerance_s, out):
-    """Validate parsed rows and pack them into the bytes `out`. Returns (index of the first
-    row with any problem or -1, the last timestamp); rows before a problem are packed."""
+def check_and_pack(ticks, per_second, x, y, p, last_t, width, height, tolerance_s, out):
+    """Validate parsed rows and pack them into the bytes `out`; row i's time [s] is
+    ticks[i] / per_second (per_second 1: seconds already; integer microseconds or nanoseconds
+    divided as numpy divides them). Returns (index of the first row with any problem or -1,
+    the last timestamp); rows before a problem are packed."""
     scratch = np.empty(1, np.float64)
-    for i in range(len(t)):
-        ok, ti = _accept(t[i], x[i], y[i], p[i], last_t, width, height, tolerance_s)
+    for i in range(len(ticks)):
+        ok, ti = _accept(ticks[i] / per_second, x[i], y[i], p[i], last_t, width, height, tolerance_s)
         if not ok:
             return i, last_t
         last_t = ti

@@ -22,18 +22,18 @@ class Validator:
         self.tolerance_s, self.lenient, self.warnings = tolerance_s, lenient, warnings
         self.last_t = -np.inf
 
-    def __call__(self, t, x, y, p, line_of: Callable[[int], int]) -> np.ndarray:
-        """EVENT_DTYPE records of the valid rows, in order (t may be clamped in place)."""
-        t = np.ascontiguousarray(t, dtype=np.float64)
+    def __call__(self, t, x, y, p, line_of: Callable[[int], int], per_second: float = 1.0) -> np.ndarray:
+        """EVENT_DTYPE records of the valid rows, in order. Times are t / per_second [s]: t in
+        seconds, or integer ticks (per_second 1e6 for microseconds), divided as numpy divides.
+        Any integer dtypes, strided views too (the fields of a library's records)."""
         events = np.empty(len(t), EVENT_DTYPE)
-        bad, last_t = check_and_pack(
-            t, np.ascontiguousarray(x), np.ascontiguousarray(y), np.ascontiguousarray(p),
-            self.last_t, self.width, self.height, self.tolerance_s, events.view(np.uint8),
-        )
+        bad, last_t = check_and_pack(t, float(per_second), x, y, p, self.last_t, self.width, self.height,
+                                     self.tolerance_s, events.view(np.uint8))
         if bad < 0:  # the common case: every row is valid
             self.last_t = last_t
             return events
-        return self._filter(t, x, y, p, line_of)
+        t = np.asarray(t, dtype=np.float64) if per_second == 1.0 else np.asarray(t) / per_second
+        return self._filter(t, np.asarray(x, np.int64), np.asarray(y, np.int64), np.asarray(p, np.int64), line_of)
 
     def _filter(self, t, x, y, p, line_of) -> np.ndarray:
         """Row-by-row verdicts. Strict: the earliest bad row raises, naming its first problem.

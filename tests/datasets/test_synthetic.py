@@ -47,3 +47,15 @@ def test_the_davis346_preset_and_a_lens_of_ones_own():
 def test_an_impossible_camera_is_one_line_naming_the_key(values, says):
     with pytest.raises(ConfigError, match=says):
         build(SyntheticConfig, values, "dataset")
+
+
+def test_light_speed_and_translation_scale_the_presets_own():
+    """The walk's preset is lit 100 times and translates 10 times the default's; a dataset value
+    scales that (1: the preset as it is; illumination 0.01 on the walk is the dim room's light)."""
+    from eas_vo.datasets.synthetic import PRESETS
+
+    walk = SyntheticConfig().applied_to(PRESETS["walk"])
+    assert (walk.illumination, walk.translation_scale, walk.speed) == (100.0, 10.0, 1.0)
+    dim = SyntheticConfig(illumination=0.01, translation_scale=0.5, speed=2.0).applied_to(PRESETS["walk"])
+    assert (dim.illumination, dim.translation_scale, dim.speed) == (pytest.approx(1.0), 5.0, 2.0)
+    assert SyntheticConfig().applied_to(PRESETS["default"]).fingerprint() == PRESETS["default"].fingerprint()

@@ -25,9 +25,9 @@ def test_a_sequence_is_cached_under_its_values_not_their_python_types():
 
     assert SimConfig(speed=4).fingerprint() == SimConfig(speed=4.0).fingerprint() != SimConfig(speed=4.5).fingerprint()
     assert SimConfig(seed=3).fingerprint() != SimConfig(seed=4).fingerprint()
-    # the default's key is what it was before types were normalised and the camera could change:
-    # its cached folder stays valid
-    before = {key: value for key, value in dataclasses.asdict(SimConfig()).items() if key != "camera"}
+    # the default's key is what it was before types were normalised and the camera and the
+    # translation scale could change: its cached folder stays valid
+    before = {key: value for key, value in dataclasses.asdict(SimConfig()).items() if key not in ("camera", "translation_scale")}
     assert SimConfig().fingerprint() == repr((SIMULATOR_VERSION, before))
     assert SimConfig(camera=SENSORS["davis346"]).fingerprint() != SimConfig().fingerprint()
 
@@ -74,3 +74,33 @@ def test_the_rendered_rays_are_those_of_the_lens():
         camera = SENSORS[name].model()
         u, v = np.meshgrid(np.arange(camera.width), np.arange(camera.height))
         np.testing.assert_allclose(camera.project(camera_rays(camera)), np.stack([u.ravel(), v.ravel()], 1), rtol=0, atol=atol_px)
+
+
+#: What a 0.3 s sequence (seed 3, the default camera) holds, hashed: its events, frames, frame
+#: times, IMU and poses, as simulated before the simulator's loops were compiled and its ray
+#: cast overlapped with the sensor model. A change of any event (or pixel, or reading) shows
+#: here; one meant to change them bumps SIMULATOR_VERSION and this value.
+SHORT_SEQUENCE_SHA256 = "bf85b3f89af9d999"
+
+
+def test_a_short_sequence_is_what_it_always_was(tmp_path):
+    import hashlib
+
+    simulate(SimConfig(duration_s=0.3, seed=3), tmp_path / "s")
+    ds = EcdFolderDataset(tmp_path / "s")
+    digest = hashlib.sha256(np.asarray(ds.events()).tobytes())
+    for k in range(len(ds.frame_times())):
+        digest.update(ds.load_frame(k).tobytes())
+    for values in (ds.frame_times(), ds.imu.t, ds.imu.acc, ds.imu.gyro, ds.ground_truth.t, ds.ground_truth.p_w_c,
+                   ds.ground_truth.q_w_c):
+        digest.update(np.ascontiguousarray(values).tobytes())
+    assert len(ds.events()) == 286_785
+    assert digest.hexdigest()[:16] == SHORT_SEQUENCE_SHA256
+
+
+def test_a_translation_scale_of_one_keeps_every_earlier_sequences_cache_key():
+    from eas_vo.datasets.simulator import SimConfig
+
+    assert "translation_scale" not in SimConfig().fingerprint()
+    assert SimConfig(translation_scale=1).fingerprint() == SimConfig().fingerprint()
+    assert SimConfig(translation_scale=2.0).fingerprint() != SimConfig().fingerprint()

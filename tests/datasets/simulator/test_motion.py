@@ -25,3 +25,15 @@ def test_a_faster_motion_is_the_same_path_travelled_faster():
     np.testing.assert_allclose(R_fast, R_slow, atol=1e-12)
     np.testing.assert_allclose(p_fast, p_slow, atol=1e-12)
     np.testing.assert_allclose(fast.angular_velocity(t), 4.0 * slow.angular_velocity(4.0 * t), atol=1e-4)  # central differences
+
+
+def test_a_scaled_translation_is_the_same_path_its_positions_scaled():
+    """translation_scale s: the same rotations, s times the positions and the acceleration
+    (what the accelerometer measures)."""
+    t = np.linspace(0, 5, 301)
+    base = HandHeldMotion(np.random.default_rng(4), 10.0)
+    walk = HandHeldMotion(np.random.default_rng(4), 10.0, translation_scale=10.0)
+    (R_base, p_base), (R_walk, p_walk) = base.pose(t), walk.pose(t)
+    np.testing.assert_array_equal(R_walk, R_base)
+    np.testing.assert_allclose(p_walk, 10.0 * p_base, rtol=1e-12)
+    np.testing.assert_allclose(walk.acceleration(t), 10.0 * base.acceleration(t), rtol=1e-9, atol=1e-9)

@@ -104,3 +104,56 @@ def test_frames_are_noisy_quantised_and_saturate():
     bright = aps.expose(np.full((50, 50), 100.0), fpn, rng)
     assert dark.dtype == np.uint8 and dark.mean() < 2 and dark.std() > 0
     assert (bright == 255).all()
+
+
+def _numpy_crossings(sim, t0, t1, ref, v0, v1):
+    """The k-th crossings of all pixels, k = 1, 2, ..., written with numpy: the reference the
+    compiled loops must equal bit for bit (level, time [s], direction, pixel, k)."""
+    diff = v1 - ref
+    n_pos = np.floor(np.maximum(diff, 0) / sim.c_pos).astype(np.int64)
+    n_neg = np.floor(np.maximum(-diff, 0) / sim.c_neg).astype(np.int64)
+    for k in range(1, int((n_pos + n_neg).max(initial=0)) + 1):
+        pix = np.flatnonzero(n_pos + n_neg >= k)
+        positive = n_pos[pix] > 0
+        level = ref[pix] + k * np.where(positive, sim.c_pos[pix], -sim.c_neg[pix])
+        span = v1[pix] - v0[pix]
+        frac = np.clip((level - v0[pix]) / np.where(span == 0, 1e-12, span), 0.0, 1.0)
+        yield pix, positive, level, t0 + frac.astype(np.float64) * (t1 - t0), k
+
+
+def test_the_compiled_crossing_loops_equal_the_numpy_reference():
+    """Signal events (with the refractory period) and the ring of unfiltered crossings from the
+    compiled per-pixel loops: bit for bit those of the numpy formulation, in its order."""
+    shape = (30, 40)
+    n = shape[0] * shape[1]
+    rng = np.random.default_rng(4)
+    sim = EventSimulator(DvsModel(), shape, np.random.default_rng(5))
+    ref = rng.normal(0, 1, n).astype(np.float32)
+    v0 = (ref + rng.normal(0, 0.1, n)).astype(np.float32)
+    v1 = (v0 + rng.normal(0, 0.8, n)).astype(np.float32)
+    v1[:50] = v0[:50]  # no change: span 0
+    sim.ref, sim.last_t = ref.copy(), rng.uniform(-1e-3, 1e-3, n)
+    last_t = sim.last_t.copy()
+    events, levels = sim._crossings(0.001, 0.003, v0, v1)
+
+    expected, expected_levels = [], []
+    for pix, positive, level, t, _ in _numpy_crossings(sim, 0.001, 0.003, ref, v0, v1):
+        keep = t - last_t[pix] >= sim.model.refractory_s
+        pix, t, positive, level = pix[keep], t[keep], positive[keep], level[keep]
+        last_t[pix] = t
+        expected.append(np.rec.fromarrays([t, pix % shape[1], pix // shape[1], positive], dtype=events.dtype))
+        expected_levels.append(level)
+    assert len(events) > 1000
+    assert events.tobytes() == np.concatenate(expected).tobytes()
+    assert levels.tobytes() == np.concatenate(expected_levels).astype(np.float32).tobytes()
+    assert sim.last_t.tobytes() == last_t.tobytes()
+
+    sim.raw_ref, sim.last_raw = ref.copy(), v0
+    ring = [a.copy() for a in (sim.ring_level, sim.ring_t, sim.ring_up, sim.ring_next)]
+    sim._record_raw_crossings(0.001, 0.003, v1)
+    for pix, positive, level, t, _ in _numpy_crossings(sim, 0.001, 0.003, ref, v0, v1):
+        slot = ring[3][pix] % sim.HISTORY
+        ring[0][pix, slot], ring[1][pix, slot], ring[2][pix, slot] = level, t, positive
+        ring[3][pix] += 1
+    for got, want in zip((sim.ring_level, sim.ring_t, sim.ring_up, sim.ring_next), ring):
+        assert got.tobytes() == want.tobytes()

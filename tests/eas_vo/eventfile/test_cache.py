@@ -171,3 +171,78 @@ def test_strict_reports_the_earliest_bad_line_whatever_its_problem(tmp_path):
         f"{path}: 1 dropped: pixel outside the 240x180 sensor (first at line 3)",
     ])
 
+
+
+def test_the_checksum_taken_while_writing_is_the_records_checksum(tmp_path):
+    """build_cache hashes records as they are written, in pieces of any size: the header holds
+    the XXH3-64 of all the records at once, and the cache maps back to what was written."""
+    from eas_vo.eventfile.cache import HEADER_BYTES, build_cache, open_cache, records_checksum
+    from eas_vo.types import EVENT_DTYPE
+
+    rng = np.random.default_rng(3)
+    events = np.zeros(10_007, EVENT_DTYPE)
+    events["t"], events["x"], events["y"], events["p"] = np.sort(rng.random(10_007)), rng.integers(0, 240, 10_007), 7, 1
+
+    def fill(out):
+        out.write(events[:5].data)
+        out.writelines([events[5:4000].data, events[4000:].data])
+        return len(events)
+
+    built = build_cache(tmp_path / "c.ev", fill)
+    header = (tmp_path / "c.ev").read_bytes()[:HEADER_BYTES]
+    assert int.from_bytes(header[16:24], "little") == records_checksum(events.tobytes())
+    assert built.tobytes() == events.tobytes()
+    assert open_cache(tmp_path / "c.ev").tobytes() == events.tobytes()
+
+
+def test_write_behind_writes_in_order_and_names_the_earlier_problem_first():
+    """Blocks are written in order; when the reading fails after a block whose check fails,
+    the block's own error (the earlier event) is the one raised."""
+    import io
+
+    from eas_vo.eventfile import write_behind
+    from eas_vo.types import EVENT_DTYPE
+
+    def block(k):
+        events = np.zeros(3, EVENT_DTYPE)
+        events["t"] = k
+        return lambda: events
+
+    out = io.BytesIO()
+    assert write_behind(out, (block(k) for k in range(5))) == 15
+    assert np.array_equal(np.frombuffer(out.getvalue(), EVENT_DTYPE)["t"], np.repeat(np.arange(5.0), 3))
+
+    def bad_check():
+        raise DataError("f", "bad pixel", 2)
+
+    def blocks():
+        yield block(0)
+        yield bad_check
+        raise DataError("f", "unreadable", 9)
+
+    with pytest.raises(DataError, match="bad pixel"):
+        write_behind(io.BytesIO(), blocks())
+
+
+def test_validator_divides_integer_ticks_as_numpy_does():
+    """Microsecond ticks in the library's own dtypes (int64 times, int16 pixels, int8
+    polarity, strided fields of one record array) give the records of seconds computed by
+    numpy, on the fast path and on the row-by-row path (a bad row dropped)."""
+    from eas_vo.errors import DataWarnings
+    from eas_vo.eventfile import Validator
+
+    raw = np.zeros(6, [("timestamp", "<i8"), ("x", "<i2"), ("y", "<i2"), ("polarity", "i1")])
+    raw["timestamp"] = [1_000_001, 1_333_333, 2_718_281, 3_141_592, 9_999_999, 12_345_678]
+    raw["x"], raw["y"], raw["polarity"] = [0, 5, 239, 17, 300, 3], [0, 179, 1, 2, 3, 4], [0, 1, 1, 0, 1, 0]
+    seconds = raw["timestamp"] / 1e6
+    valid = raw[[0, 1, 2, 3, 5]]  # (x = 300 is off the sensor)
+    assert not valid["x"].flags.c_contiguous
+    fast = Validator("f", 240, 180, 1e-6, False, DataWarnings())(valid["timestamp"], valid["x"], valid["y"],
+                                                                  valid["polarity"], lambda i: i, per_second=1e6)
+    assert np.array_equal(fast["t"], seconds[[0, 1, 2, 3, 5]])
+    assert np.array_equal(fast["x"], valid["x"]) and np.array_equal(fast["p"], valid["polarity"])
+    warnings = DataWarnings()
+    slow = Validator("f", 240, 180, 1e-6, True, warnings)(raw["timestamp"], raw["x"], raw["y"], raw["polarity"],
+                                                          lambda i: i, per_second=1e6)
+    assert slow.tobytes() == fast.tobytes()
+    assert sum(warnings.counts.values()) == 1
