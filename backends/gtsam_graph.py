@@ -31,7 +31,8 @@ class GtsamConfig:
         edge_noise: how an edge's noise [rad] follows from its quality: `inliers` (the default):
             sigma_rad * sqrt(reference_inliers / inliers); `residual`: the edge's own inlier
             noise over sqrt(inliers) divided by the inlier ratio (RelativeRotation.sigma_rad),
-            never below sigma_floor_rad.
+            never below sigma_floor_rad. An edge with its estimator's own sigma
+            (RelativeRotation.estimated_sigma_rad, e.g. cmax's) gets that in either mode.
         sigma_rad: (`inliers`) noise of an edge measured with `reference_inliers` inliers.
         reference_inliers: see sigma_rad.
         sigma_floor_rad: (`residual`) the smallest edge noise [rad].
@@ -98,8 +99,11 @@ class GtsamBackend(Backend):
         return self.config.gyro in (True, "auto")
 
     def edge_sigma(self, edge: RelativeRotation) -> float:
-        """The isotropic noise [rad] of a measured edge, from its quality (see edge_noise)."""
+        """The isotropic noise [rad] of a measured edge: the estimator's own when it gives one
+        (RelativeRotation.estimated_sigma_rad), else from its quality (see edge_noise)."""
         c = self.config
+        if edge.estimated_sigma_rad > 0:
+            return max(edge.estimated_sigma_rad, c.sigma_floor_rad)
         if c.edge_noise == "inliers":
             return c.sigma_rad * np.sqrt(c.reference_inliers / max(edge.inliers, 1))
         return max(min(edge.sigma_rad, 1e3), c.sigma_floor_rad)

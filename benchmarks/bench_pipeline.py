@@ -2,7 +2,9 @@
 default sequence), with --config that file's plugins, each replaced where a flag names another.
 
 Prints frames/s and the real-time factor (sequence duration / processing time) of a
-whole run, and where the time goes (loading, frontend, tracker, backend).
+whole run, and where the time goes (loading, frontend, tracker, backend); for a tracker that
+reads events, the events/s it processes; for cmax, its objective's evaluations/s beside a plain
+numpy version of the same kernel.
 
     python benchmarks/bench_pipeline.py [--config FILE] [--dataset SPEC] [--frontend F] [--tracker T]
                                         [--backend B] [--set KEY=VALUE] [--repeat 3]
@@ -25,15 +27,17 @@ def stage_times(cfg) -> dict:
     parts = pipeline.open_pipeline(cfg)
     samples = list(parts.dataset.samples(rc.start_s, rc.duration_s))
     t1 = time.perf_counter()
-    images = [parts.frontend(s) for s in samples]
+    images = [parts.frontend(s) if parts.frontend.makes_images else None for s in samples]
     t2 = time.perf_counter()
-    edges = [e for img, s in zip(images, samples) for e in parts.tracker.process(img, s.t)[1]]
+    events = (lambda s: {"sample": s}) if parts.tracker.needs_events else (lambda s: {})
+    edges = [e for img, s in zip(images, samples) for e in parts.tracker.process(img, s.t, **events(s))[1]]
     t3 = time.perf_counter()
     times = np.array([s.t for s in samples])
     parts.backend.solve(len(samples), edges, times=times, imu=parts.imu)
     t4 = time.perf_counter()
     n = getattr(cfg.frontend, "n", 0)
     n_events = sum(min(n, len(s.events) - s.event_index) for s in samples)
+    tracker_events = sum(len(s.events_since_previous) for s in samples) if parts.tracker.needs_events else 0
     return {
         "load": t1 - t0,
         "frontend": t2 - t1,
@@ -41,7 +45,34 @@ def stage_times(cfg) -> dict:
         "backend": t4 - t3,
         "frames": len(samples),
         "events": n_events,
+        "tracker_events": tracker_events,
     }
+
+
+def contrast_evaluations(cfg, repeat: int) -> None:
+    """cmax's objective on one window of the dataset (tracker.window_events events from its
+    middle): evaluations per second of the compiled kernel (value; value and gradient) beside
+    the plain numpy version of the same value (trackers.contrast.variance_numpy)."""
+    from eas_vo.trackers.cmax import CmaxTracker
+    from eas_vo.trackers.contrast import Contrast, variance_numpy
+
+    dataset = registry.open_dataset(cfg.run.dataset, cfg.dataset)
+    events = dataset.events()
+    n = cfg.tracker.window_events
+    window = events[max(0, len(events) // 2 - n // 2):][:n]
+    tracker = CmaxTracker(cfg.tracker, dataset.camera)
+    xy = tracker._bearing[window["y"].astype(np.intp), window["x"].astype(np.intp)]
+    dt = window["t"] - 0.5 * (window["t"][0] + window["t"][-1])
+    contrast = Contrast(xy, dt, tracker._grid, cfg.tracker.sigma_px)
+    omega = np.radians([20.0, -40.0, 10.0])
+    contrast.value_and_gradient(omega)  # compiled outside the timing
+    rows = (("numba value", lambda: contrast.value(omega), 50),
+            ("numba value+gradient", lambda: contrast.value_and_gradient(omega), 50),
+            ("numpy value", lambda: variance_numpy(xy, dt, omega, tracker._grid, cfg.tracker.sigma_px), 5))
+    print(f"cmax objective on {len(window):,} events ({dataset.camera.width}x{dataset.camera.height}):")
+    for label, fn, count in rows:
+        seconds = min(_timed(lambda: [fn() for _ in range(count)]) for _ in range(repeat)) / count
+        print(f"  {label:21s} {1 / seconds:8.1f} evaluations/s  ({len(window) / seconds / 1e6:6.1f} M events/s)")
 
 
 def _timed(fn) -> float:
@@ -75,7 +106,12 @@ def main() -> None:
     if stages["events"]:
         print(f"  frontend: {stages['events'] / max(stages['frontend'], 1e-9) / 1e6:.1f} M events/s aggregated "
               f"({stages['events']:,} events in {stages['frames']} slices)")
+    if stages["tracker_events"]:
+        print(f"  tracker: {stages['tracker_events'] / max(stages['tracker'], 1e-9) / 1e6:.2f} M events/s "
+              f"({stages['tracker_events']:,} events)")
     print(f"  APE {best.get('ape_mean_rad', np.nan):.4f} rad, NC {best['nc_mean']:.1f}")
+    if rc.tracker == "cmax":
+        contrast_evaluations(cfg, args.repeat)
 
     result = pipeline.run(cfg)
     imu = pipeline.open_pipeline(cfg).imu  # as the run gives it (the gyro fused where configured)

@@ -18,7 +18,8 @@ from pathlib import Path
 
 import numpy as np
 
-from eas_vo.config import parse_set
+from eas_vo import registry
+from eas_vo.config import NO_IMAGES, parse_set
 from eas_vo.errors import EasVoError, Interrupted, sigterm_as_interrupt
 from eas_vo.io import claim_grid_folder, json_text, markdown_cell, output_folder, remove_stale_temporaries, slug, write_text_atomic
 
@@ -90,10 +91,16 @@ def plan(datasets: list[str], frontends: list[str], methods: list[Method], sweep
     parsed = parse_sweeps(sweeps)
     points = [tuple(zip([k for k, _ in parsed], combo)) for combo in itertools.product(*[v for _, v in parsed])]
     names = dataset_names(datasets)
-    return [
-        Cell(d, f, m.tracker, m.backend, point, names[d], m.settings)
+    trackers = registry.available("trackers")  # an unknown one is its cells' failure, as any bad setting
+
+    def frontend(f: str, tracker: str) -> str:
+        return NO_IMAGES if tracker in trackers and not trackers[tracker].reads_images else f
+
+    cells = [
+        Cell(d, frontend(f, m.tracker), m.tracker, m.backend, point, names[d], m.settings)
         for d, f, m, point in itertools.product(datasets, frontends, dict.fromkeys(methods), points or [()])
     ]
+    return list(dict.fromkeys(cells))  # a tracker that reads no images runs once, with the `no_image` frontend
 
 
 def dataset_names(datasets: list[str]) -> dict[str, str]:
@@ -345,6 +352,7 @@ def table_rows(cells: list[Cell], results: dict) -> list[dict]:
             "error": results.get(cell, {}).get("error", ""),
             "nc_mean": results.get(cell, {}).get("nc_mean"),
             "ape_mean_rad": results.get(cell, {}).get("ape_mean_rad"),
+            **{key: results.get(cell, {}).get(key) for key in MOTION_KEYS},
             "time_offset_estimated": results.get(cell, {}).get("time_offset_estimated"),
             "orb_keypoints_mean": results.get(cell, {}).get("orb_keypoints_mean"),
             "orb_matches_mean": results.get(cell, {}).get("orb_matches_mean"),
@@ -415,7 +423,7 @@ def _best(rows: list[dict], key: str, lower: bool) -> dict:
     """Per (dataset, method) column: the best value of `key`."""
     best = {}
     for r in rows:
-        v = r[key]
+        v = r.get(key)
         if v is None or v != v:
             continue
         col = (r["dataset"], r["method"])
@@ -424,36 +432,40 @@ def _best(rows: list[dict], key: str, lower: bool) -> dict:
     return best
 
 
-def table_markdown(rows: list[dict]) -> str:
+#: Table 1's figures: (row key, column title, format, lower is better).
+TABLE1_FIGURES = (("nc_mean", "average NC", "{:.0f}", False), ("ape_mean_rad", "average APE [rad]", "{:.3f}", True))
+#: The event-rotation literature's figures (evaluation.motion_errors), in table_motion.md.
+MOTION_FIGURES = (("omega_rms_deg_s", "omega RMS [deg/s]", "{:.1f}", True), ("rpe_1s_mean_deg", "RPE 1 s [deg]", "{:.2f}", True))
+MOTION_KEYS = ("omega_rms_deg_s", "omega_rms_x_deg_s", "omega_rms_y_deg_s", "omega_rms_z_deg_s", "rpe_1s_mean_deg",
+               "rpe_1s_rmse_deg")
+
+
+def table_markdown(rows: list[dict], figures=TABLE1_FIGURES) -> str:
     """The paper's Table 1: a row per source type (and sweep point), per sequence and method
-    (tracker+backend) the average NC and average APE [rad]; the best of each column in bold.
-    A method whose results are an earlier one's (row `same_as`) is no column of its own: that
-    one's header names it."""
+    (tracker+backend) the average NC and average APE [rad] (or other `figures`); the best of
+    each column in bold. A method whose results are an earlier one's (row `same_as`) is no
+    column of its own: that one's header names it."""
     sources = list(dict.fromkeys((r["frontend"], r["sweep"]) for r in rows))
     by_key = {(r["dataset"], r["method"], r["frontend"], r["sweep"]): r for r in rows}
-    best_nc, best_ape = _best(rows, "nc_mean", lower=False), _best(rows, "ape_mean_rad", lower=True)
+    best = [_best(rows, key, lower=lower) for key, _, _, lower in figures]
     name = {r["dataset"]: r.get("dataset_name") or slug(r["dataset"]) for r in rows}
     columns = equal_methods(rows)
     head = ["Source type"]
     for (d, m), equals in columns.items():
         title = markdown_cell(" = ".join([f"{name[d]} {m}", *equals]))
-        head += [f"{title}: average NC", f"{title}: average APE [rad]"]
+        head += [f"{title}: {label}" for _, label, _, _ in figures]
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for frontend, sweep in sources:
         cells = [markdown_cell(frontend + (f" ({sweep})" if sweep else ""))]
         for d, m in columns:
             r = by_key.get((d, m, frontend, sweep))
             if r is None or r["status"] != "ok":
-                cells += ["failed" if r else "", markdown_cell((r or {}).get("error", "")[:60])]
+                cells += ["failed" if r else "", markdown_cell((r or {}).get("error", "")[:60])] + [""] * (len(figures) - 2)
                 continue
-            nc, ape = r["nc_mean"], r["ape_mean_rad"]
-            nc_text = f"{nc:.0f}"
-            ape_text = f"{ape:.3f}" if ape == ape else "n/a"
-            if nc == best_nc.get((d, m)):
-                nc_text = f"**{nc_text}**"
-            if ape == best_ape.get((d, m)):
-                ape_text = f"**{ape_text}**"
-            cells += [nc_text, ape_text]
+            for (key, _, form, _), bests in zip(figures, best):
+                value = r.get(key)
+                text = form.format(value) if value is not None and value == value else "n/a"
+                cells.append(f"**{text}**" if value is not None and value == bests.get((d, m)) else text)
         lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n"
 
@@ -470,7 +482,7 @@ def equal_methods(rows: list[dict]) -> dict[tuple[str, str], list[str]]:
 
 def table_csv(rows: list[dict]) -> str:
     fields = ["dataset", "frontend", "tracker", "backend", "method", "sweep", "status", "nc_mean", "ape_mean_rad",
-              "orb_keypoints_mean", "orb_matches_mean", "best_nc", "best_ape", "same_as", "folder", "error"]
+              *MOTION_KEYS, "orb_keypoints_mean", "orb_matches_mean", "best_nc", "best_ape", "same_as", "folder", "error"]
     best_nc, best_ape = _best(rows, "nc_mean", lower=False), _best(rows, "ape_mean_rad", lower=True)
     buffer = io.StringIO()
     writer = csv.DictWriter(buffer, fieldnames=fields, extrasaction="ignore", lineterminator="\n")  # LF, as every file we write
@@ -484,6 +496,7 @@ def table_csv(rows: list[dict]) -> str:
 
 def write_tables(out_root: Path, rows: list[dict]) -> None:
     write_text_atomic(out_root / "table.md", table_markdown(rows))
+    write_text_atomic(out_root / "table_motion.md", table_markdown(rows, MOTION_FIGURES))
     write_text_atomic(out_root / "table.csv", table_csv(rows))
     write_text_atomic(out_root / "table.json", json_text(rows))
 

@@ -8,6 +8,7 @@ every frontend. Precedence: dataclass defaults < file < CLI flags < `--set`.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import tomllib
 from dataclasses import dataclass, field, fields
@@ -20,6 +21,8 @@ from eas_vo.errors import ConfigError
 from eas_vo.validation import check_range, check_vector
 
 SECTIONS = ("run", "dataset", "frontend", "tracker", "backend")
+#: The frontend a tracker that reads no images runs with (Tracker.reads_images).
+NO_IMAGES = "no_image"
 
 
 @dataclass(frozen=True)
@@ -29,7 +32,8 @@ class RunConfig:
     Attributes:
         dataset: `PLUGIN:LOCATION`, or a location one dataset plugin recognises (a folder,
             a `.zip`, a `.bag`); default the embedded `synthetic:default`.
-        frontend, tracker, backend: plugin names.
+        frontend, tracker, backend: plugin names (frontend: `no_image` whatever is given when the
+            tracker reads no images, Tracker.reads_images).
         start_s, duration_s: processed window, from the sequence's first timestamp [s].
         time_offset_s: ground truth is sampled at `t_frame + time_offset_s` [s].
         time_offset_auto: estimate the offset from the data instead (relative rotations
@@ -252,6 +256,8 @@ def resolve(
 
     _move_to_run(raw)
     run = build(RunConfig, raw["run"], "run")
+    if not registry.get("trackers", run.tracker).reads_images:  # nothing would look at the images
+        run = dataclasses.replace(run, frontend=NO_IMAGES)
     dataset_cls, _ = registry.resolve_dataset(run.dataset)
     chosen = {
         "dataset": dataset_cls,

@@ -19,7 +19,7 @@ from eas_vo import registry
 from eas_vo.config import ResolvedConfig
 from eas_vo.errors import EasVoError, Interrupted
 from eas_vo.evaluation import (OFFSET_SEARCH_S, ImuAgreement, RotationErrors, estimate_time_offset, imu_agreement,
-                               rotation_errors)
+                               motion_errors, rotation_errors)
 from eas_vo.geometry.rotations import geodesic_angle, matrix_to_rotvec, quats_from_matrices, rotvec_to_matrix
 from eas_vo.imu_check import GyroVerdict, check_readings, judge_gyro
 from eas_vo.io import atomic_path, json_text, output_folder, write_text_atomic
@@ -27,7 +27,8 @@ from eas_vo.orb import OrbStats
 from eas_vo.plugins import Backend, Dataset, Frontend, Tracker
 from eas_vo.types import FrameRecord, ImuSeries, RelativeRotation
 
-FRAMES_CSV_FIELDS = ("index", "t", "nc", "inliers", "status", "redetected", "inlier_ratio", "residual_px", "reason")
+FRAMES_CSV_FIELDS = ("index", "t", "nc", "inliers", "status", "redetected", "inlier_ratio", "residual_px", "reason",
+                     "events", "contrast_gain")
 
 
 @dataclass
@@ -163,6 +164,8 @@ def open_pipeline(config: ResolvedConfig) -> Pipeline:
     frontend_cls = registry.get("frontends", rc.frontend)
     if frontend_cls.needs_frames and dataset.load_frame(0) is None:
         raise EasVoError(f"frontend {rc.frontend!r} needs APS frames: {dataset.no_frames_reason}")
+    if not frontend_cls.makes_images and registry.get("trackers", rc.tracker).reads_images:
+        raise EasVoError(f"frontend {rc.frontend!r} makes no images and tracker {rc.tracker!r} reads them; choose an image frontend")
     n_window = len(dataset.window(rc.start_s, rc.duration_s))
     if n_window < 2:
         raise EasVoError(
@@ -248,11 +251,14 @@ def track(parts: Pipeline, config: ResolvedConfig, frames_csv: Path | None = Non
     with _FrameLog(frames_csv) as log, _progress(n_window, progress, rc) as bar:
         try:
             for sample in parts.dataset.samples(rc.start_s, rc.duration_s):
-                image = parts.frontend(sample)
-                check_image(image, parts.dataset.camera, rc.frontend, sample)
-                if tracked.orb is not None:
-                    tracked.orb.add(image)
-                record, edges = parts.tracker.process(image, sample.t)
+                image = None
+                if parts.frontend.makes_images:
+                    image = parts.frontend(sample)
+                    check_image(image, parts.dataset.camera, rc.frontend, sample)
+                    if tracked.orb is not None:
+                        tracked.orb.add(image)
+                events = {"sample": sample} if parts.tracker.needs_events else {}
+                record, edges = parts.tracker.process(image, sample.t, **events)
                 tracked.records.append(record)
                 tracked.edges.extend(edges)
                 log.write(record)
@@ -316,6 +322,7 @@ def summarise(config: ResolvedConfig, dataset: Dataset, tracked: Tracked, errors
     }
     if errors is not None:
         metrics.update(errors.summary())
+        metrics.update(motion_errors(tracked.times, errors, tracked.edges))
     metrics["time_offset_s"] = offset
     metrics["time_offset_estimated"] = offset_estimated
     reclocked = imu_offset is not None and imu_offset != config.run.imu_time_offset_s
@@ -345,20 +352,24 @@ def _offset_not_estimated(config: ResolvedConfig, dataset: Dataset, tracked: Tra
 
 
 def _events_end_early(config: ResolvedConfig, dataset: Dataset, times: np.ndarray) -> list[str]:
-    """A warning when an event frontend's frames outlast the events, or there are none (a
-    still camera without noise; more often events that were not recorded or not found)."""
-    frontend = config.run.frontend
-    if not registry.get("frontends", frontend).needs_events:
+    """A warning when an event frontend's or tracker's frames outlast the events, or there are
+    none (a still camera without noise; more often events that were not recorded or not found)."""
+    frontend, tracker = config.run.frontend, config.run.tracker
+    if registry.get("frontends", frontend).needs_events:
+        what = f"the {frontend} images"
+    elif registry.get("trackers", tracker).needs_events:
+        what = f"the {tracker} tracker's samples"
+    else:
         return []
     events = dataset.events()
     if len(events) == 0:
-        return [f"{dataset.label} holds no events: the {frontend} images of its {len(times)} frames hold none"]
+        return [f"{dataset.label} holds no events: {what} of its {len(times)} frames hold none"]
     last = float(events["t"][-1])
     late = int(np.sum(times > last))
     if late == 0:
         return []
     return [f"{dataset.label}: the events end at {last:.3f} s, before {late} of the {len(times)} frames: "
-            f"their {frontend} images hold no events"]
+            f"{what.replace('the ', 'their ', 1)} hold no events"]
 
 
 #: Above this angle [deg] the gyro and the tracker disagree on the axes: on correctly mounted
@@ -563,7 +574,8 @@ class _FrameLog:
     def write(self, r: FrameRecord) -> None:
         if self._fh:
             self._writer.writerow([r.index, f"{r.t:.9f}", r.nc, r.inliers, r.status, int(r.redetected),
-                                   f"{r.inlier_ratio:.4f}", f"{r.residual_px:.4f}", r.reason])
+                                   f"{r.inlier_ratio:.4f}", f"{r.residual_px:.4f}", r.reason, r.events,
+                                   f"{r.contrast_gain:.4f}"])
             self._fh.flush()
 
     def __exit__(self, *exc):

@@ -38,15 +38,19 @@ def plot_rotation(path: str | Path, result, title: str = "") -> None:
 
 def rotation_figure(result, title: str = ""):
     """Estimated (aligned to ground truth at the first frame) and true roll/pitch/yaw over time,
-    like the paper's Fig. 3, over a tracking panel: the rotation error [deg] per frame (with
+    like the paper's Fig. 3, then the angular velocity per axis (edges against ground truth),
+    over a tracking panel: the rotation error [deg] per frame (with
     ground truth) and loop closures marked at the frame that closed them; under it a thin
     status row, one line per status, marking the weak and lost frames. Without ground truth
     only the estimate is drawn. The title's second line gives the APE, the NC and the ground
-    truth's time offset the errors were measured with (metrics, where present)."""
+    truth's time offset the errors were measured with, the angular-velocity RMS error and the
+    RPE over 1 s (metrics, where present)."""
     t0 = result.t[0]
     errors = result.errors
-    fig = _figure(figsize=(8, 8.4), layout="constrained")
-    axes = fig.subplots(5, 1, sharex=True, height_ratios=(1, 1, 1, 0.8, 0.16))
+    fig = _figure(figsize=(8, 10), layout="constrained")
+    axes = fig.subplots(6, 1, sharex=True, height_ratios=(1, 1, 1, 1, 0.8, 0.16))
+    _draw_angular_velocity(axes[3], result, t0)
+    axes = [*axes[:3], *axes[4:]]  # below: roll, pitch, yaw 0-2, the tracking panel 3, the status row 4
     if errors is not None and errors.valid.any():
         _draw_euler(axes[:3], result.t[errors.valid] - t0, errors.R_w_c_aligned, errors.R_w_c_gt)
         axes[3].plot(result.t[errors.valid] - t0, np.degrees(errors.ape_rad), color="k", lw=0.9, label="error")
@@ -72,8 +76,32 @@ def rotation_figure(result, title: str = ""):
                      + (" (estimated)" if m.get("time_offset_estimated") else ""))
     if facts:
         title += "\n" + ", ".join(facts)
+    motion = []
+    if m.get("omega_rms_deg_s") is not None:
+        motion.append(f"angular velocity RMS error {m['omega_rms_deg_s']:.1f} deg/s")
+    if m.get("rpe_1s_mean_deg") is not None:
+        motion.append(f"RPE over 1 s {m['rpe_1s_mean_deg']:.2f} deg")
+    if motion:
+        title += "\n" + ", ".join(motion)
     fig.suptitle(title, fontsize="medium")
     return fig
+
+
+def _draw_angular_velocity(ax, result, t0: float) -> None:
+    """The angular velocity per camera axis [deg/s] the consecutive edges measured (dots) over
+    the ground truth's over the same intervals (lines), evaluation.angular_velocities."""
+    from eas_vo.evaluation import angular_velocities
+
+    errors = result.errors if result.errors is not None and result.errors.valid.any() else None
+    mid, est, gt = angular_velocities(result.t, result.edges, errors)
+    for k, (name, colour) in enumerate(zip("xyz", ("tab:red", "tab:green", "tab:blue"))):
+        if gt is not None:
+            ax.plot(mid - t0, np.degrees(gt[:, k]), color=colour, lw=0.9, label=f"omega {name} truth")
+        ax.plot(mid - t0, np.degrees(est[:, k]), ".", color=colour, ms=2.5, label=f"omega {name} estimate")
+    ax.set_ylabel("ang. velocity [deg/s]")
+    ax.grid(alpha=0.3)
+    if len(mid):
+        ax.legend(loc="upper left", fontsize="x-small", ncol=3)
 
 
 def _status_row(ax, records, t0: float) -> None:

@@ -134,8 +134,8 @@ class Frontend:
 
     Required: `__call__(sample)`. Optional: `needs_frames` (default False: the frontend
     reads only events), `needs_events` (default False), `shows_the_past` (default False),
-    `reset()` (default: nothing to forget). Stateful frontends consume
-    `sample.events_since_previous` incrementally.
+    `makes_images` (default True), `reset()` (default: nothing to forget). Stateful frontends
+    consume `sample.events_since_previous` incrementally.
     """
 
     name: ClassVar[str] = "frontend"
@@ -151,6 +151,9 @@ class Frontend:
     #: for the image's lag, not the IMU's clock (no run.imu_time_offset_s is suggested, and
     #: run.imu_time_offset_auto keeps the configured clock).
     shows_the_past: ClassVar[bool] = False
+    #: False for the `no_image` frontend only: it makes no image, the pipeline never calls it and
+    #: the tracker gets `image=None` (for trackers that read no images: Tracker.reads_images).
+    makes_images: ClassVar[bool] = True
 
     def __init__(self, config=None, camera: CameraModel | None = None):
         self.config = config if config is not None else self.Config()
@@ -168,13 +171,23 @@ class Tracker:
     """Measures relative rotations between the images of one sequence, fed in time order.
 
     Required: `process(image, t)`. Optional: `reset()`, which `__init__` calls last, so a
-    tracker sets up its per-sequence state there, `needs_imu`, `uses_imu` and `closes_loops`. It never knows which
+    tracker sets up its per-sequence state there, `needs_imu`, `uses_imu`, `closes_loops`,
+    `needs_events` (default False) and `reads_images` (default True). It never knows which
     frontend made the images. Frame indices count the images given since construction (or reset), from 0.
     """
 
     name: ClassVar[str] = "tracker"
     description: ClassVar[str] = ""
     Config: ClassVar[type] = NoConfig
+    #: True if `process` reads events: it is then called with `sample=` (the dataset's Sample,
+    #: as frontends get it: `sample.events_since_previous` are the events since the previous
+    #: sample; `sample.events[:sample.event_index]` reaches further back, for a longer window).
+    #: The run warns when there are no events, or when they end before the window's last frames.
+    needs_events: ClassVar[bool] = False
+    #: False if `process` ignores its image (it works from events alone): the run then uses the
+    #: `no_image` frontend whatever run.frontend says (no image is made; `image` is None), so an
+    #: event-only dataset needs no frontend choice.
+    reads_images: ClassVar[bool] = True
 
     def __init__(self, config=None, camera: CameraModel | None = None, *, imu: ImuSeries | None = None):
         """`camera`: the images' intrinsics and distortion; `imu`: the dataset's, when it has one,
@@ -207,8 +220,10 @@ class Tracker:
         though rotation.png still marks any edge marked `loop`)."""
         return False
 
-    def process(self, image: np.ndarray, t: float) -> tuple[FrameRecord, list[RelativeRotation]]:
-        """Take the next image (uint8, sensor size) taken at `t` [s].
+    def process(self, image: np.ndarray | None, t: float, *,
+                sample: Sample | None = None) -> tuple[FrameRecord, list[RelativeRotation]]:
+        """Take the next image (uint8, sensor size; None when `reads_images` is False) taken at
+        `t` [s], and (only when `needs_events`) its `sample`.
 
         Returns the frame's record (its `index` is this image's frame index) and the
         relative rotations measured now, each `R_i_j` with j this frame and i < j, with

@@ -265,13 +265,16 @@ class RelativeRotation:
     """A measured rotation between frames i and j (j > i): `R_i_j` maps frame-j vectors into frame i.
 
     Attributes:
-        inliers: correspondences the model explains.
+        inliers: correspondences the model explains (an event tracker: the events it rests on).
         inlier_ratio: inliers / correspondences offered to the estimator.
         residual_rad: robust per-axis noise of the inliers [rad, ~ px / focal length], from the
             median of their residuals (the angle between rotated and observed bearings for
             the rotation model, the Sampson distance for the essential matrix); 0 when unknown.
         loop: a loop closure (frame i is a keyframe seen again) rather than a measurement of
             the motion since a recent frame.
+        estimated_sigma_rad: the estimator's own 1-sigma uncertainty of R_i_j [rad, per axis]
+            (e.g. from the curvature of its objective); 0: it gives none, the backends then
+            derive one from the inliers.
     """
 
     i: int
@@ -281,11 +284,15 @@ class RelativeRotation:
     inlier_ratio: float = 1.0
     residual_rad: float = 0.0
     loop: bool = False
+    estimated_sigma_rad: float = 0.0
 
     @property
     def sigma_rad(self) -> float:
-        """A rough 1-sigma uncertainty of R_i_j [rad] from its quality: the inlier noise over
-        sqrt(inliers), inflated by 1 / inlier_ratio (inf without inliers)."""
+        """A rough 1-sigma uncertainty of R_i_j [rad]: the estimator's own when it gives one,
+        else from its quality: the inlier noise over sqrt(inliers), inflated by 1 / inlier_ratio
+        (inf without inliers)."""
+        if self.estimated_sigma_rad > 0:
+            return self.estimated_sigma_rad
         if self.inliers <= 0:
             return float("inf")
         return self.residual_rad / np.sqrt(self.inliers) / max(self.inlier_ratio, 1e-3)
@@ -298,7 +305,8 @@ class FrameRecord:
     Attributes:
         index, t: frame index and time [s].
         nc: correspondences tracked from the previous frame (the paper's NC).
-        inliers: inliers of the frame-to-frame model (0 when no model was estimated).
+        inliers: inliers of the frame-to-frame model (0 when no model was estimated); for an
+            event tracker (cmax), the events its estimate rests on.
         status: `first`; `ok`; `weak` (a rotation was measured but its model is weak: too few
             inliers, a low inlier ratio or a large residual, see `reason`); `lost` (nothing was
             measured, the previous rotation is kept: too few correspondences or no model);
@@ -308,8 +316,11 @@ class FrameRecord:
             without one): nc, except where klt's descriptor fallback measured the frame (nc: its
             matches; the model: the LK tracks refined from them, unless that refinement was weak).
         residual_px: per-axis noise of that model's inliers [px] (sigma from their median
-            residual; 0 without one).
+            residual; 0 without one); cmax: how far apart the image quadrants' optima lie [px].
         reason: why the frame is `weak` or `lost` ("" otherwise).
+        events: events the tracker read for this frame (0 for a tracker of images).
+        contrast_gain: an event tracker's contrast at its estimate over the contrast at no
+            motion (cmax; 0 when not measured).
     """
 
     index: int
@@ -321,3 +332,5 @@ class FrameRecord:
     inlier_ratio: float = 0.0
     residual_px: float = 0.0
     reason: str = ""
+    events: int = 0
+    contrast_gain: float = 0.0

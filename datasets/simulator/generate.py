@@ -179,18 +179,11 @@ def simulate(config: SimConfig, out_dir: str | Path, progress: bool = False) -> 
     """Simulate `config`, write the sequence into `out_dir` (ECD layout) and return its stats."""
     from eas_vo.datasets.ecd import write_ecd_folder
 
-    seeds = np.random.SeedSequence(config.seed).spawn(5)
-    scene_rng, motion_rng, dvs_rng, aps_rng, imu_rng = (np.random.default_rng(s) for s in seeds)
+    scene_rng, motion_rng, dvs_rng, aps_rng, imu_rng = _generators(config)
     camera = config.camera.model()
     shape = (camera.height, camera.width)
-    scene = Scene(scene_rng)
     motion = HandHeldMotion(motion_rng, config.duration_s, config.speed_growth, config.speed, config.translation_scale)
-    rays = camera_rays(camera)
-
-    def render(t: float) -> np.ndarray:
-        R, p = motion.pose(t)
-        return scene.render(R[0], p[0], rays, shape) * np.float32(config.illumination)
-
+    render = _renderer(config, camera, motion, scene_rng)
     frame_times = np.arange(config.aps.exposure_s, config.duration_s - config.aps.exposure_s, 1.0 / config.frame_rate_hz)
     samples = max(1, math.ceil(config.exposure_samples * config.speed))
     offsets = (np.arange(samples) + 0.5) / samples - 0.5
@@ -212,6 +205,35 @@ def simulate(config: SimConfig, out_dir: str | Path, progress: bool = False) -> 
     acc, gyro = config.imu.measure(R_w_c, motion.angular_velocity(gt_t), motion.acceleration(gt_t), config.gt_rate_hz, imu_rng)
     write_ecd_folder(out_dir, camera, frame_times, frames, events, ground_truth, ImuSeries(gt_t, acc, gyro))
     return stats
+
+
+def simulate_events(config: SimConfig, motion) -> tuple[np.ndarray, SimStats]:
+    """The events (EVENT_DTYPE) and their stats of `config`'s scene, camera and DVS over
+    config.duration_s, the camera moving along `motion` (pose(t), angular_velocity(t) as
+    HandHeldMotion's, e.g. motion.ConstantMotion) instead of the hand-held path."""
+    scene_rng, _, dvs_rng, _, _ = _generators(config)
+    camera = config.camera.model()
+    render = _renderer(config, camera, motion, scene_rng)
+    steps = _render_steps(config, camera, motion)
+    return _simulate_events(config, camera, steps, (render(t) for t in steps), dvs_rng, False)
+
+
+def _generators(config: SimConfig) -> tuple[np.random.Generator, ...]:
+    """The scene's, motion's, DVS's, APS's and IMU's generators, from config.seed."""
+    return tuple(np.random.default_rng(s) for s in np.random.SeedSequence(config.seed).spawn(5))
+
+
+def _renderer(config: SimConfig, camera: CameraModel, motion, scene_rng: np.random.Generator):
+    """t [s] -> the radiance every pixel sees then (H, W), the scene built from scene_rng."""
+    scene = Scene(scene_rng)
+    rays = camera_rays(camera)
+    shape = (camera.height, camera.width)
+
+    def render(t: float) -> np.ndarray:
+        R, p = motion.pose(t)
+        return scene.render(R[0], p[0], rays, shape) * np.float32(config.illumination)
+
+    return render
 
 
 def _render_steps(config, camera, motion) -> list[float]:

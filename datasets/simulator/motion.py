@@ -70,3 +70,23 @@ class HandHeldMotion:
         _, p1 = self.pose(t)
         _, p2 = self.pose(t + h)
         return (p0 - 2 * p1 + p2) / h**2
+
+
+class ConstantMotion:
+    """A constant body angular velocity omega_c [rad/s] and a constant world velocity [m/s]:
+    R_w_c(t) = R_w_c0 Exp(omega_c t), p_w_c(t) = p_w_c0 + velocity t (known-answer motion)."""
+
+    def __init__(self, omega_c, velocity_w=(0.0, 0.0, 0.0), R_w_c0=None, p_w_c0=(0.0, 0.0, 0.0)):
+        self.omega_c = np.asarray(omega_c, float)
+        self.velocity_w = np.asarray(velocity_w, float)
+        self.R_w_c0 = np.eye(3) if R_w_c0 is None else np.asarray(R_w_c0, float)
+        self.p_w_c0 = np.asarray(p_w_c0, float)
+
+    def pose(self, t) -> tuple[np.ndarray, np.ndarray]:
+        """(R_w_c (N, 3, 3), p_w_c (N, 3) [m]) at times `t` [s]."""
+        t = np.atleast_1d(np.asarray(t, dtype=float))
+        return self.R_w_c0 @ rotvec_to_matrix(t[:, None] * self.omega_c), self.p_w_c0 + t[:, None] * self.velocity_w
+
+    def angular_velocity(self, t) -> np.ndarray:
+        """omega_c [rad/s] (N, 3) at times `t`."""
+        return np.tile(self.omega_c, (len(np.atleast_1d(t)), 1))

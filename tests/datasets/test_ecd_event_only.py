@@ -6,6 +6,7 @@ import pytest
 from eas_vo import config, pipeline
 from eas_vo.cli import main
 from eas_vo.datasets.ecd import EcdConfig, EcdFolderDataset
+from eas_vo.geometry.rotations import matrix_to_rotvec
 from helpers import EVENT_WINDOWS, require
 
 
@@ -26,3 +27,27 @@ def test_frame_frontend_on_an_event_only_stream_is_a_clear_error(capsys):
     assert main(["run", "--dataset", str(folder), "--frontend", "eas"]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "needs APS frames" in err and "images.txt does not exist" in err
+
+
+@pytest.mark.parametrize("name", ["boxes_rotation", "poster_rotation", "dynamic_rotation"])
+def test_event_only_real_windows_run_cmax_without_a_frontend(name):
+    """No frontend is chosen (the configured default, eas, needs frames): cmax runs with `no_image`.
+    A sample every 5000 events, windows of 15000 reaching back: every full window brings the
+    events into focus (contrast gain over 1.1) and consecutive ones turn about similar axes."""
+    folder = require(EVENT_WINDOWS / name)
+    cfg = config.resolve(None, {"dataset": str(folder), "tracker": "cmax"},
+                         ["dataset.sample_every_events=5000", "tracker.window_events=15000"])
+    assert cfg.run.frontend == "no_image"
+    result = pipeline.run(cfg)
+    full = [r for r in result.records if r.events > 14000]  # the first ones reach back to the stream start
+    assert len(full) >= 3 and all(r.status == "ok" and r.contrast_gain > 1.1 for r in full)
+    steps = [matrix_to_rotvec(e.R_i_j) for e in result.edges if result.records[e.j].events > 14000]
+    cosines = [a @ b / np.linalg.norm(a) / np.linalg.norm(b) for a, b in zip(steps, steps[1:])]
+    assert min(cosines) > 0.8, np.round(cosines, 2)
+
+
+def test_an_image_tracker_with_the_none_frontend_is_a_clear_error(capsys):
+    folder = require(EVENT_WINDOWS / "boxes_rotation")
+    assert main(["run", "--dataset", str(folder), "--frontend", "no_image", "--tracker", "klt"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "makes no images" in err

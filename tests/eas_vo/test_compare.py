@@ -140,6 +140,15 @@ def test_plan_is_the_cartesian_product():
     assert smoothed.folder == "a/x_klt_gtsam_keyframe_interval-3" and smoothed.method.label == "klt+gtsam (keyframe_interval=3)"
 
 
+def test_a_tracker_of_events_alone_is_one_cell_per_dataset_with_the_none_frontend():
+    from eas_vo.compare import grid_methods
+
+    cells = plan(["a", "b"], ["original", "eas", "ts"], grid_methods(["klt", "cmax"], ["chain"]), [])
+    assert len(cells) == 2 * 3 + 2
+    assert [c.frontend for c in cells if c.tracker == "cmax"] == ["no_image", "no_image"]
+    assert {c.frontend for c in cells if c.tracker == "klt"} == {"original", "eas", "ts"}
+
+
 def test_compares_default_grid_runs_the_smoothed_method_beside_the_chain(short_sequence, tmp_path):
     """No --backends: klt+chain as the paper and klt+gtsam on klt's keyframe edges (interval 3,
     the cell's resolved config says so), which is not the chain's trajectory."""
@@ -202,6 +211,20 @@ def test_markdown_marks_the_best_of_each_column():
     ]
     md = table_markdown(rows)
     assert "| original | 20 | 0.600 |" in md and "| eas | **60** | **0.200** |" in md
+
+
+def test_the_motion_table_gives_angular_velocity_and_rpe_with_the_best_in_bold():
+    from eas_vo.compare import MOTION_FIGURES
+
+    rows = [{"dataset": "d", "method": m, "frontend": f, "sweep": "", "status": "ok", "nc_mean": 0.0, "ape_mean_rad": 0.1,
+             "omega_rms_deg_s": w, "rpe_1s_mean_deg": r, "same_as": ""}
+            for m, f, w, r in (("klt+chain", "eas", 30.2, 6.5), ("cmax+chain", "no_image", 7.0, 2.68))]
+    rows.append({**rows[0], "frontend": "original", "status": "failed", "error": "boom"})
+    lines = table_markdown(rows, MOTION_FIGURES).splitlines()
+    assert lines[0] == ("| Source type | d klt+chain: omega RMS [deg/s] | d klt+chain: RPE 1 s [deg] "
+                        "| d cmax+chain: omega RMS [deg/s] | d cmax+chain: RPE 1 s [deg] |")
+    assert lines[2:] == ["| eas | **30.2** | **6.50** |  |  |", "| no_image |  |  | **7.0** | **2.68** |",
+                         "| original | failed | boom |  |  |"]
 
 
 def test_markdown_has_one_header_row_and_a_column_pair_per_distinct_method():

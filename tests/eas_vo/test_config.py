@@ -208,3 +208,11 @@ def test_a_vector_key_its_config_does_not_check_is_still_refused_unless_an_array
     assert build(Unchecked, {"offsets": [1, 2]}, "plugin").offsets == (1, 2)
     with pytest.raises(ConfigError, match=r"^plugin.offsets must be an array, e.g. \[0.0, 0.0\], got 'abc'$"):
         build(Unchecked, {"offsets": "abc"}, "plugin")
+
+
+@pytest.mark.parametrize("given", [None, "eas", "original"])
+def test_a_tracker_that_reads_no_images_runs_with_the_none_frontend(given):
+    cfg = resolve(None, {"tracker": "cmax", "frontend": given})
+    assert cfg.run.frontend == "no_image" and not registry.get("frontends", "no_image").makes_images
+    assert "frontend = \"no_image\"" in cfg.to_toml()
+    assert resolve(None, {"tracker": "klt", "frontend": given}).run.frontend == (given or "eas")

@@ -283,3 +283,42 @@ def test_an_alignment_needs_its_least_poses_and_reaches_any_finite_scale():
     assert huge.scale == pytest.approx(1e-200, rel=1e-9) and huge.summary()["ape_trans_mean_m"] < 1e-12
     near = trajectory_ape(gt, PoseSeries(gt.t, gt.p_w_c + np.random.default_rng(1).normal(0, 1e-4, (3, 3)), gt.q_w_c), "sim3")
     assert near.summary()["ape_rot_mean_rad"] < 0.05
+
+
+def _constant_rotation_run(omega, drift_rad_s, error_rad_s, n=101, rate_hz=20.0):
+    """Ground truth turning at `omega` [rad/s] (camera frame); an estimate whose edges measure
+    omega + error_rad_s and whose trajectory drifts about z at drift_rad_s (known answers)."""
+    from eas_vo.evaluation import rotation_errors
+    from eas_vo.geometry.rotations import quats_from_matrices, rotvec_to_matrix
+    from eas_vo.types import PoseSeries, RelativeRotation
+
+    t = np.arange(n) / rate_hz
+    gt_t = np.arange(0, t[-1] + 0.5, 0.005)
+    R_gt = rotvec_to_matrix(gt_t[:, None] * omega)
+    gt = PoseSeries(gt_t, np.zeros((len(gt_t), 3)), quats_from_matrices(R_gt))
+    R_est = rotvec_to_matrix(t[:, None] * omega) @ rotvec_to_matrix(t[:, None] * np.array([0.0, 0.0, drift_rad_s]))
+    edges = [RelativeRotation(k - 1, k, rotvec_to_matrix((omega + error_rad_s) / rate_hz)) for k in range(1, n)]
+    return t, rotation_errors(t, R_est, gt), edges
+
+
+def test_angular_velocity_and_rpe_errors_have_known_answers():
+    from eas_vo.evaluation import motion_errors
+
+    omega = np.radians([0.0, 0.0, 90.0])  # about z, so the drift about z adds to it exactly
+    t, errors, edges = _constant_rotation_run(omega, np.radians(2.0), np.radians([3.0, 0.0, 4.0]))
+    m = motion_errors(t, errors, edges)
+    assert m["omega_pairs"] == 100
+    assert m["omega_rms_x_deg_s"] == pytest.approx(3.0, abs=1e-6)
+    assert m["omega_rms_y_deg_s"] == pytest.approx(0.0, abs=1e-6)
+    assert m["omega_rms_z_deg_s"] == pytest.approx(4.0, abs=1e-6)
+    assert m["omega_rms_deg_s"] == pytest.approx(5.0, abs=1e-6)
+    assert m["rpe_pairs"] == 81  # frames 0-80 of 0-100 have one 1 s (20 frames) later
+    assert m["rpe_1s_mean_deg"] == pytest.approx(2.0, abs=1e-6) and m["rpe_1s_rmse_deg"] == pytest.approx(2.0, abs=1e-6)
+
+
+def test_motion_errors_say_none_where_nothing_compares():
+    from eas_vo.evaluation import motion_errors
+
+    t, errors, _ = _constant_rotation_run(np.zeros(3), 0.0, np.zeros(3), n=10)
+    m = motion_errors(t, errors, [])
+    assert m["omega_pairs"] == 0 and m["omega_rms_deg_s"] is None and m["rpe_pairs"] == 0 and m["rpe_1s_mean_deg"] is None

@@ -106,8 +106,8 @@ def test_the_rotation_plot_shows_where_tracking_was_weak_or_lost_and_where_loops
     for errors in (None, rotation_errors(t, R_w_c, gt)):
         result = SimpleNamespace(t=t, R_w_c=R_w_c, errors=errors, records=records, edges=edges, metrics={})
         axes = plots.rotation_figure(result).axes
-        assert all(not ax.collections for ax in axes[:4])  # the panels themselves are not shaded
-        strip = axes[4]  # the status row: the runs of weak frames (2-3, 7) and the lost frame (5), each on its line
+        assert all(not ax.collections for ax in axes[:5])  # the panels themselves are not shaded
+        strip = axes[5]  # the status row: the runs of weak frames (2-3, 7) and the lost frame (5), each on its line
         spans = {}
         for collection in strip.collections:
             colour = collection.get_facecolor()[0][:3]
@@ -116,12 +116,17 @@ def test_the_rotation_plot_shows_where_tracking_was_weak_or_lost_and_where_loops
                              for p in collection.get_paths()]
         assert spans == {"weak": [[0.1, 0.3, 0.1], [0.6, 0.7, 0.1]], "lost": [[0.4, 0.5, 1.1]]}, spans
         assert [label.get_text() for label in strip.get_yticklabels()] == ["weak (3)", "lost (1)"]
-        marks = [line for line in axes[3].lines if line.get_label() != "error"]
+        omega = axes[3]  # angular velocity: the one consecutive edge measured (8 -> 9, no motion) at its middle
+        estimates = [line for line in omega.lines if "estimate" in line.get_label()]
+        assert len(estimates) == 3 and all(np.allclose(line.get_xdata(), [0.85]) for line in estimates)
+        assert all(line.get_ydata().tolist() == [0.0] for line in estimates)
+        assert len(omega.lines) == (3 if errors is None else 6)  # and the truth's, where it has one
+        marks = [line for line in axes[4].lines if line.get_label() != "error"]
         np.testing.assert_allclose([line.get_xdata()[0] for line in marks], [0.6, 0.8])  # loops closed at frames 6 and 8
-        labels = set(axes[3].get_legend_handles_labels()[1])
+        labels = set(axes[4].get_legend_handles_labels()[1])
         assert labels == {"loop closed"} | ({"error"} if errors is not None else set())
         if errors is not None:  # the error [deg] of frames 2-9, aligned at frame 2
-            (curve,) = [line for line in axes[3].lines if line.get_label() == "error"]
+            (curve,) = [line for line in axes[4].lines if line.get_label() == "error"]
             np.testing.assert_allclose(curve.get_xdata(), t[2:])
             np.testing.assert_allclose(curve.get_ydata(), np.degrees(0.01 * np.arange(8)), atol=1e-9)
 

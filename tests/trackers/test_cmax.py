@@ -1,0 +1,110 @@
+"""`cmax` on events the project's simulator makes under a known constant motion: the angular
+velocity it recovers, and what it says of noise alone and of translation.
+
+The bound: the contrast peak is found to a fraction of a pixel (the solver stops within ~0.005
+px, the bilinear votes and the texture leave ~0.1 px), so over a window in which the motion
+displaces the image centre by D px, |omega| is off by at most ~0.1 / D relative. The windows
+below displace it by 2 * HALF_DISPLACEMENT_PX = 24 px: 2 % is 0.5 px, a bound with room for the
+noise events (the simulator's shot noise and hot pixels stay on). The sensor's photoreceptor
+low-pass is off here (an ideal pixel): with it, dim pixels lag bright ones by several ms, which
+biases the optimum (docs/cmax.md measures how much); this test checks the estimator.
+"""
+
+import functools
+
+import numpy as np
+import pytest
+
+from eas_vo.datasets.simulator.generate import SENSORS, SimConfig, simulate_events
+from eas_vo.datasets.simulator.motion import ConstantMotion
+from eas_vo.datasets.simulator.sensor import DvsModel
+from eas_vo.errors import ConfigError
+from eas_vo.geometry.rotations import geodesic_angle, rotvec_to_matrix
+from eas_vo.trackers.cmax import CmaxConfig, CmaxTracker
+from eas_vo import config as config_module
+from eas_vo.types import Sample
+
+HALF_DISPLACEMENT_PX = 12.0
+R_W_C0 = rotvec_to_matrix(np.array([0.05, 0.15, -0.03]))  # the hand-held start: the room's textured boxes ahead
+WARM_UP_S = 0.01
+
+
+@functools.lru_cache(maxsize=None)
+def events_of(omega_deg: tuple, sensor: str, duration_s: float, velocity=(0.0, 0.0, 0.0), p0=(0.0, 0.0, 0.0),
+              ideal: bool = True) -> np.ndarray:
+    dvs = DvsModel(cutoff_hz=0.0) if ideal else DvsModel()
+    motion = ConstantMotion(np.radians(omega_deg), velocity, R_W_C0 if not any(velocity) else np.eye(3), p0)
+    events, _ = simulate_events(SimConfig(duration_s=duration_s, seed=5, dvs=dvs, camera=SENSORS[sensor]), motion)
+    return events
+
+
+@pytest.mark.parametrize("sensor,omega_deg", [
+    ("davis240", (200.0, 0.0, 0.0)),
+    ("davis240", (0.0, 0.0, 300.0)),  # roll: the image centre does not move, its rim does
+    ("davis240", (346.4, 346.4, 346.4)),  # 600 deg/s about the diagonal
+    ("davis240", (0.0, -1000.0, 0.0)),
+    ("davis346", (150.0, -480.0, 90.0)),  # 510 deg/s, the equidistant lens
+])
+def test_cmax_recovers_a_constant_angular_velocity_within_2_percent(sensor, omega_deg):
+    camera = SENSORS[sensor].model()
+    omega = np.radians(omega_deg)
+    span_s = 2 * HALF_DISPLACEMENT_PX / (np.linalg.norm(omega) * camera.focal_px)
+    events = events_of(omega_deg, sensor, WARM_UP_S + span_s + 0.002)
+    window = events[(events["t"] >= WARM_UP_S) & (events["t"] < WARM_UP_S + span_s)]
+    tracker = CmaxTracker(CmaxConfig(init="search"), camera)  # no start given: the coarse search finds it
+    found = tracker.measure(window, 0.0, span_s)
+    error = np.linalg.norm(found.omega - omega) / np.linalg.norm(omega)
+    assert error < 0.02, f"omega {np.degrees(found.omega).round(1)} deg/s for {omega_deg}: {100 * error:.2f} % off"
+    assert found.gain > 1.2 and found.focus > CmaxConfig().weak_focus
+    assert 0 < found.sigma_rad_s < np.linalg.norm(omega)
+
+
+def samples_of(events: np.ndarray, times: np.ndarray):
+    starts = np.searchsorted(events["t"], times)
+    return [Sample(n, float(t), None, events, int(first), int(starts[n - 1]) if n else 0)
+            for n, (t, first) in enumerate(zip(times, starts))]
+
+
+def statuses(tracker: CmaxTracker, events: np.ndarray, times: np.ndarray):
+    return [tracker.process(None, s.t, sample=s) for s in samples_of(events, times)]
+
+
+def test_a_still_camera_seeing_only_noise_measures_nothing():
+    events = events_of((0.0, 0.0, 0.0), "davis240", 0.3, ideal=False)  # shot noise, leaks, 500 Hz hot pixels
+    results = statuses(CmaxTracker(CmaxConfig(window_events=15000), SENSORS["davis240"].model()), events,
+                       np.arange(0.05, 0.3, 0.05))
+    assert results[0][0].status == "first"
+    assert all(r.status in ("weak", "lost") and "in focus" in r.reason for r, _ in results[1:]), \
+        [(r.status, r.reason) for r, _ in results]
+
+
+def test_a_camera_moving_forward_before_a_near_box_is_not_reported_ok():
+    # 2 m/s along the optical axis, 1 m from the box ahead: the image expands, no rotation explains it
+    events = events_of((0.0, 0.0, 0.0), "davis240", 0.1, velocity=(0.0, 0.0, 2.0), p0=(0.0, 0.0, 1.0), ideal=False)
+    results = statuses(CmaxTracker(CmaxConfig(window_events=15000), SENSORS["davis240"].model()), events,
+                       np.arange(0.02, 0.1, 0.02))
+    assert all(r.status in ("weak", "lost") for r, _ in results[1:]), [(r.status, r.reason) for r, _ in results]
+
+
+def test_intervals_are_cut_into_windows_by_count_or_time_and_integrated():
+    omega_deg = (0.0, -1000.0, 0.0)
+    events = events_of(omega_deg, "davis240", 0.04)
+    camera = SENSORS["davis240"].model()
+    times = np.array([0.015, 0.035])
+    between = int(np.sum((events["t"] >= times[0]) & (events["t"] < times[1])))
+    for cfg, n_windows in ((CmaxConfig(window_events=between // 3), 3), (CmaxConfig(window_s=0.005), 4)):
+        tracker = CmaxTracker(cfg, camera)
+        (_, _), (record, (edge,)) = statuses(tracker, events, times)
+        assert len(tracker.windows) == n_windows
+        assert record.status == "ok" and record.events == between
+        truth = rotvec_to_matrix(np.radians(omega_deg) * 0.02)
+
+        assert geodesic_angle(edge.R_i_j, truth) < 0.02 * np.radians(1000.0) * 0.02
+        assert 0 < edge.estimated_sigma_rad < 0.35  # the rotation itself; SIGMA_SCALE says how it is scaled
+
+
+def test_bad_settings_are_one_line_errors():
+    with pytest.raises(ConfigError, match="weak_focus"):
+        config_module.resolve(None, {"tracker": "cmax"}, ["tracker.lost_focus=1.2", "tracker.weak_focus=1.1"])
+    with pytest.raises(ConfigError, match="init"):
+        config_module.resolve(None, {"tracker": "cmax"}, ["tracker.init=gyro"])

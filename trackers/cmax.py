@@ -1,0 +1,320 @@
+"""`cmax`: the camera's angular velocity from events alone, by contrast maximisation (Gallego
+and Scaramuzza, RA-L 2017), integrated into the rotation between consecutive samples.
+
+Between two samples the events are cut into windows (by count or by time); in each, the
+angular velocity maximising the variance of the image of warped events (trackers.contrast)
+is found by L-BFGS-B from the previous window's estimate, the gyro's mean rate over the window
+when the dataset has one, or (nothing to start from, or no contrast found) a coarse search.
+The rotation between the samples multiplies each window's Exp(omega dt) over the part of the
+interval the window stands for; its uncertainty comes from the objective's curvature.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.optimize import minimize
+
+from eas_vo.geometry.rotations import rotvec_to_matrix
+from eas_vo.plugins import Tracker
+from eas_vo.trackers.contrast import Contrast, WarpGrid
+from eas_vo.types import FrameRecord, RelativeRotation, Sample
+from eas_vo.validation import check_choice, check_range
+
+INITS = ("auto", "previous", "search")
+
+#: The uncertainty of a window's omega is SIGMA_SCALE times the objective's curvature radius
+#: (Window.sigma_rad_s), so that the per-axis errors of the rotations between frames have unit
+#: RMS on the development sequences (simulator seeds 51 and 52, their first 2 s, defaults:
+#: 0.038 and 0.030 times the curvature radius; the radius measures how far the gain falls, not
+#: how far the peak moves with the events' noise).
+SIGMA_SCALE = 0.034
+#: The 1-sigma [rad] of a rotation whose objective has no curvature (a flat optimum): a
+#: backend weighing it by its sigma all but ignores it.
+FLAT_SIGMA_RAD = 1.0
+#: The focus of a window compares its contrast with that of warps displacing the events this
+#: far [px over half the window]: about the width of the peak a sharp edge makes (sigma_px 1).
+FOCUS_STEP_PX = 1.0
+#: A hot pixel has fired this many times the mean pixel's count (CmaxTracker._without_hot_pixels):
+#: the simulator's hot pixels fire 500 Hz, its signal pixels 18 Hz on average (synthetic:default),
+#: an edge-rich pixel in 1000 deg/s motion under 15 times the mean within a window.
+HOT_PIXEL_FACTOR = 20.0
+#: scipy's L-BFGS-B on the contrast over that at no motion, in px of displacement over half a
+#: window: a gradient under 1e-4 per px is within about 0.005 px of the peak (its curvature on
+#: synthetic:default is about 0.02-0.04 per px^2). BFGS's Wolfe line search spent 3-5 times
+#: the evaluations on the objective's kinks (bilinear voting), for the same optimum.
+SOLVER_OPTIONS = {"gtol": 1e-4, "maxiter": 50}
+#: The quadrants' optima need less: a fraction of max_residual_px.
+QUADRANT_OPTIONS = {"gtol": 1e-3, "maxiter": 10}
+HOT_PIXEL_MIN_EVENTS = 8
+
+
+@dataclass(frozen=True)
+class CmaxConfig:
+    """Attributes:
+        window_events: events per window when window_s is 0: the interval between two samples is
+            cut into round(N / window_events) windows (at least one); an interval with fewer
+            events than this takes the window_events events before the sample (reaching back).
+        window_s: window length [s] instead (0: by events): round(interval / window_s) windows.
+        sigma_px: the Gaussian smoothing the image of warped events [px of the sensor].
+        min_events: a window with fewer events is not measured (the frame is `lost`).
+        lost_focus, lost_gain: a focus (the optimum's contrast over that of warps FOCUS_STEP_PX
+            away) at or below lost_focus with a contrast gain (over no motion) at or below
+            lost_gain measures nothing: nothing was brought into focus and no blur removed
+            (noise alone: focus 1.000 +- 0.002, gains up to 1.11 where the search found warps
+            that crowd the events together). Neither alone is a test: slow motion, well
+            measured, has gains near 1; fast motion in dim light, gains of 1.2 and a focus of
+            1.005 (the events' latency spread blurs its sharpest image beyond a pixel).
+        weak_focus: a focus below this makes the frame `weak`.
+        max_residual_px: the frame is `weak` when the image quadrants' own optima lie further
+            apart than this [px of displacement over half a window]: one rotation does not
+            explain the events (translation before a near scene, independent motion).
+        init: where the solver starts: `auto` (the gyro when the dataset has one, else the previous
+            window; a coarse search when neither; no motion too when the optimum found is no
+            better than no motion), `previous` (never the gyro), `search` (the coarse search
+            and no motion, always).
+        max_rate_deg_s: the coarse search covers |omega| per axis up to this [deg/s].
+    """
+
+    window_events: int = 40000
+    window_s: float = 0.0
+    sigma_px: float = 1.0
+    min_events: int = 1000
+    lost_focus: float = 1.005
+    lost_gain: float = 1.15
+    weak_focus: float = 1.01
+    max_residual_px: float = 1.5
+    init: str = "auto"
+    max_rate_deg_s: float = 1500.0
+
+    def validate(self) -> None:
+        check_range(self, "window_events", 100, 10_000_000)
+        check_range(self, "window_s", 0.0, 10.0)
+        check_range(self, "sigma_px", 0.0, 20.0)
+        check_range(self, "min_events", 10, 10_000_000)
+        check_range(self, "lost_focus", 1.0, 100.0)
+        check_range(self, "lost_gain", 1.0, 100.0)
+        check_range(self, "weak_focus", self.lost_focus, 100.0)
+        check_range(self, "max_residual_px", 0.0, 1e6, lo_open=True)
+        check_choice(self, "init", INITS)
+        check_range(self, "max_rate_deg_s", 1.0, 100_000.0)
+
+
+@dataclass(frozen=True)
+class Window:
+    """One window's estimate: omega [rad/s] (camera frame), its 1-sigma per axis [rad/s] (from
+    the curvature of the objective), the contrast gain (over no motion), the focus (over warps
+    FOCUS_STEP_PX away), the events read, the span [s] of the
+    interval it stands for, how many times the objective was evaluated, and how far apart the
+    image quadrants' own optima lie (CmaxTracker._quadrant_residual_px)."""
+
+    omega: np.ndarray
+    sigma_rad_s: float
+    gain: float
+    focus: float
+    events: int
+    t0: float
+    t1: float
+    evaluations: int
+    residual_px: float
+
+
+class CmaxTracker(Tracker):
+    """Angular velocity by contrast maximisation per window of events; R_{k-1}_{k} integrated from it."""
+
+    name = "cmax"
+    description = "events alone: angular velocity by contrast maximisation (variance of warped events), integrated"
+    Config = CmaxConfig
+    needs_events = True
+    reads_images = False
+
+    @property
+    def uses_imu(self) -> bool:
+        return self.config.init == "auto"
+
+    def reset(self) -> None:
+        cam = self.camera
+        u, v = np.meshgrid(np.arange(cam.width, dtype=np.float64), np.arange(cam.height, dtype=np.float64))
+        self._bearing = cam.undistort(np.column_stack([u.ravel(), v.ravel()])).reshape(cam.height, cam.width, 2)
+        self._grid = WarpGrid.of(cam.K, cam.width, cam.height)
+        self._omega: np.ndarray | None = None  # the last window's, None when lost
+        self._counts = np.zeros(cam.width * cam.height, np.int64)  # events per pixel so far (hot pixels)
+        self._prev_t = -np.inf
+        self._k = -1
+        self.windows: list[Window] = []  # every window measured, in time order
+
+    def process(self, image, t: float, *, sample: Sample | None = None) -> tuple[FrameRecord, list[RelativeRotation]]:
+        self._k += 1
+        k = self._k
+        if k == 0:
+            self._prev_t = t
+            return FrameRecord(k, t, 0, 0, "first", False), []
+        if t <= self._prev_t:
+            return FrameRecord(k, t, 0, 0, "same_time", False), []
+        t_prev, self._prev_t = self._prev_t, t
+        windows = [self.measure(chunk, lo, hi) for chunk, lo, hi in self._windows(sample, t_prev, t)]
+        n = sum(w.events for w in windows)
+        gain = min(w.gain for w in windows)
+        focus = min(w.focus for w in windows)
+        if any(w.events < self.config.min_events for w in windows):
+            self._omega = None
+            return FrameRecord(k, t, 0, 0, "lost", False, reason=f"too few events ({n})", events=n), []
+        if focus <= self.config.lost_focus and gain <= self.config.lost_gain:
+            self._omega = None
+            return FrameRecord(k, t, 0, 0, "lost", False, reason=f"nothing in focus ({focus:.3f})", events=n,
+                               contrast_gain=gain), []
+        self.windows.extend(windows)
+        R = np.eye(3)
+        variance = 0.0
+        for w in windows:
+            R = R @ rotvec_to_matrix(w.omega * (w.t1 - w.t0))
+            variance += (w.sigma_rad_s * (w.t1 - w.t0)) ** 2
+        sigma = float(np.sqrt(variance))
+        residual = max(w.residual_px for w in windows)
+        status, reason = "ok", ""
+        if focus < self.config.weak_focus:
+            status, reason = "weak", f"little in focus ({focus:.3f})"
+        elif residual > self.config.max_residual_px:
+            status, reason = "weak", f"quadrants disagree ({residual:.2f} px)"
+        elif not np.isfinite(sigma):
+            status, reason, sigma = "weak", "flat objective", FLAT_SIGMA_RAD
+        # inliers: the events the estimate rests on (what makes an edge confident for the gyro's check)
+        record = FrameRecord(k, t, 0, n, status, False, residual_px=residual, reason=reason, events=n, contrast_gain=gain)
+        return record, [RelativeRotation(k - 1, k, R, inliers=n, estimated_sigma_rad=min(sigma, FLAT_SIGMA_RAD))]
+
+    def _windows(self, sample: Sample, t_prev: float, t: float):
+        """(events, t0, t1) per window: its events and the part [t0, t1] of [t_prev, t] it stands for."""
+        c = self.config
+        events = sample.events_since_previous
+        if c.window_s > 0:
+            n = max(1, round((t - t_prev) / c.window_s))
+            cuts = np.linspace(t_prev, t, n + 1)
+            bounds = np.searchsorted(events["t"], cuts)
+            return [(events[bounds[i]:bounds[i + 1]], cuts[i], cuts[i + 1]) for i in range(n)]
+        if len(events) < c.window_events:  # reach back for a window's worth
+            start = max(0, sample.event_index - c.window_events)
+            return [(sample.events[start:sample.event_index], t_prev, t)]
+        n = max(1, round(len(events) / c.window_events))
+        bounds = np.linspace(0, len(events), n + 1).round().astype(int)
+        times = events["t"]
+        cuts = [t_prev] + [0.5 * (times[b - 1] + times[b]) for b in bounds[1:-1]] + [t]
+        return [(events[bounds[i]:bounds[i + 1]], cuts[i], cuts[i + 1]) for i in range(n)]
+
+    def measure(self, events: np.ndarray, t0: float, t1: float) -> Window:
+        """The angular velocity of one window of events standing for [t0, t1] [s]."""
+        c = self.config
+        n = len(events)
+        if n < c.min_events:
+            return Window(np.zeros(3), np.inf, 1.0, 1.0, n, t0, t1, 0, 0.0)
+        events = self._without_hot_pixels(events)
+        times = events["t"]
+        t_ref = 0.5 * (float(times[0]) + float(times[-1]))
+        xy = self._bearing[events["y"].astype(np.intp), events["x"].astype(np.intp)]
+        contrast = Contrast(xy, times - t_ref, self._grid, c.sigma_px)
+        # optimise in px: omega * (half the window) * focal length is the displacement it causes
+        scale = max(0.5 * (float(times[-1]) - float(times[0])), 1e-6) * self.camera.focal_px
+        v0 = contrast.value(np.zeros(3))
+        if v0 <= 0:
+            return Window(np.zeros(3), np.inf, 1.0, 1.0, n, t0, t1, contrast.evaluations, 0.0)
+
+        def cost(p):
+            value, grad = contrast.value_and_gradient(p / scale)
+            return -value / v0, -grad / (v0 * scale)
+
+        starts = self._starts(t0, t1)
+        if not starts or c.init == "search":
+            starts += [self._search(contrast, scale), np.zeros(3)]
+        best = _best(cost, [w * scale for w in starts])
+        if -best.fun <= 1.0 and c.init != "search":  # no better than no motion (slow motion, or a bad start)
+            best = _best(cost, [np.zeros(3)], best)
+        omega = best.x / scale
+        sigma = _curvature_sigma(cost, best.x)
+        focus = _focus(lambda p: contrast.value(p / scale), best.x)
+        self._omega = omega
+        return Window(omega, sigma / scale, float(-best.fun), focus, n, t0, t1, contrast.evaluations,
+                      self._quadrant_residual_px(contrast, omega, scale))
+
+    def _quadrant_residual_px(self, contrast: Contrast, omega: np.ndarray, scale: float) -> float:
+        """How far apart the four image quadrants' own optima lie [px of displacement over half
+        the window]: each quadrant's events, from `omega`, their own L-BFGS-B; the largest distance
+        from `omega`. One rotation moves every quadrant alike (a fraction of a pixel apart);
+        translation before a near scene (expansion, parallax) does not."""
+        far = 0.0
+        x, y = contrast.x, contrast.y  # bearings: the quadrants about the optical axis
+        for sx, sy in ((1, 1), (1, -1), (-1, 1), (-1, -1)):
+            keep = (np.sign(x) == sx) & (np.sign(y) == sy)
+            if keep.sum() < self.config.min_events // 4:
+                continue
+            part = Contrast(np.column_stack([x[keep], y[keep]]), contrast.dt[keep], contrast.grid, contrast.sigma_px)
+            v = part.value(omega)
+            if v <= 0:
+                continue
+
+            def cost(p, part=part, v=v):
+                value, grad = part.value_and_gradient(p / scale)
+                return -value / v, -grad / (v * scale)
+
+            found = minimize(cost, omega * scale, jac=True, method="L-BFGS-B", options=QUADRANT_OPTIONS)
+            contrast.evaluations += part.evaluations
+            far = max(far, float(np.linalg.norm(found.x - omega * scale)))
+        return far
+
+    def _without_hot_pixels(self, events: np.ndarray) -> np.ndarray:
+        """`events` less those of hot pixels: pixels that fired HOT_PIXEL_FACTOR times the mean
+        pixel's count since the sequence began (and at least HOT_PIXEL_MIN_EVENTS). Their
+        events stay where they are under any warp, so they would pass for a focused image of
+        no motion (the simulator's 500 Hz hot pixels, a 0.05 % of them, did on noise alone)."""
+        pixel = events["y"].astype(np.intp) * self.camera.width + events["x"].astype(np.intp)
+        self._counts += np.bincount(pixel, minlength=self._counts.size)
+        hot = self._counts > max(HOT_PIXEL_MIN_EVENTS, HOT_PIXEL_FACTOR * self._counts.mean())
+        return events[~hot[pixel]]
+
+    def _starts(self, t0: float, t1: float) -> list[np.ndarray]:
+        """Where the solver starts [rad/s]: the gyro's mean rate over [t0, t1], else the previous window's."""
+        if self.config.init == "auto" and self.imu is not None and self.imu.covered(t0, t1):
+            rates, durations = self.imu.rates_between(t0, t1)
+            return [rates.T @ durations / max(durations.sum(), 1e-12)]
+        return [] if self._omega is None else [self._omega]
+
+    def _search(self, contrast: Contrast, scale: float) -> np.ndarray:
+        """The best omega [rad/s] of a 7 x 7 x 7 grid up to max_rate_deg_s per axis, the image
+        smoothed to half the grid's spacing (so the optimum's basin is not stepped over)."""
+        steps = np.radians(self.config.max_rate_deg_s) * np.linspace(-1, 1, 7)
+        spacing_px = (steps[1] - steps[0]) * scale
+        coarse = Contrast(np.column_stack([contrast.x, contrast.y])[::4], contrast.dt[::4], contrast.grid,
+                          max(contrast.sigma_px, 0.5 * spacing_px))
+        grid = np.stack(np.meshgrid(steps, steps, steps, indexing="ij"), -1).reshape(-1, 3)
+        values = [coarse.value(w) for w in grid]
+        contrast.evaluations += coarse.evaluations
+        return grid[int(np.argmax(values))]
+
+
+def _best(cost, starts: list[np.ndarray], best=None):
+    """The lowest of L-BFGS-B's minima of `cost` from each start (and `best`, an earlier result)."""
+    for start in starts:
+        found = minimize(cost, start, jac=True, method="L-BFGS-B", options=SOLVER_OPTIONS)
+        if best is None or found.fun < best.fun:
+            best = found
+    return best
+
+
+def _curvature_sigma(cost, p: np.ndarray, h: float = 1.0) -> float:
+    """At the minimum p [px] of `cost` (minus the contrast over that at no motion): SIGMA_SCALE
+    times its RMS curvature radius, sqrt(trace(H^-1) / 3) [px] (inf where it is not a
+    minimum), H by central differences of the gradient (step h px)."""
+    H = np.empty((3, 3))
+    for i in range(3):
+        e = np.zeros(3)
+        e[i] = h
+        H[:, i] = (cost(p + e)[1] - cost(p - e)[1]) / (2 * h)
+    H = 0.5 * (H + H.T)
+    if not np.all(np.isfinite(H)) or np.any(np.linalg.eigvalsh(H) <= 0):
+        return float("inf")
+    return SIGMA_SCALE * float(np.sqrt(np.trace(np.linalg.inv(H)) / 3.0))
+
+
+def _focus(contrast, p: np.ndarray, h: float = FOCUS_STEP_PX) -> float:
+    """The contrast at p [px] over the mean contrast of the warps h px away along each axis."""
+    around = [contrast(p + sign * h * e) for e in np.eye(3) for sign in (1.0, -1.0)]
+    return float(contrast(p) / np.mean(around))
