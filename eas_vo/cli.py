@@ -451,7 +451,7 @@ def _parse_render(sub) -> None:
     )
     _add_dataset(render)
     render.add_argument("--frames", required=True, metavar="I,J,...", help="frame indices, e.g. 20,120")
-    render.add_argument("--frontends", metavar="A,B,...", help="frontends to show (default: all installed)")
+    render.add_argument("--frontends", metavar="A,B,...", help="frontends to show (default: every installed one that makes an image)")
     _add_config(render, config_help="config file for the frontends' settings",
                 set_help="override one config value, e.g. frontend.n=8000 (repeatable)")
     render.add_argument("--out", required=True, metavar="PNG", help="output image, e.g. gallery.png")

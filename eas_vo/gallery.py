@@ -29,9 +29,11 @@ def frontend_images(
     Every sample up to the last chosen one goes through every frontend, so that stateful
     frontends (ts, sits) have consumed the events before each chosen frame.
     """
-    names = frontends or sorted(
-        registry.available("frontends"), key=lambda n: (PAPER_ORDER.index(n) if n in PAPER_ORDER else len(PAPER_ORDER), n)
-    )
+    drawable = [n for n in registry.available("frontends") if registry.get("frontends", n).makes_images]
+    names = frontends or sorted(drawable, key=lambda n: (PAPER_ORDER.index(n) if n in PAPER_ORDER else len(PAPER_ORDER), n))
+    for name in names:
+        if name in registry.available("frontends") and name not in drawable:
+            raise EasVoError(f"frontend {name!r} makes no image to draw")
     base = config_mod.resolve(config_file, {"dataset": dataset_spec}, assignments)
     dataset = registry.open_dataset(base.run.dataset, base.dataset)
     n_samples = len(dataset.frame_times())

@@ -6,11 +6,17 @@ from eas_vo.gallery import frontend_images
 
 
 def test_render_draws_a_gallery_of_every_installed_frontend(short_sequence, tmp_path, capsys):
+    """Every frontend that makes an image (not no_image, for event-only trackers); asking for
+    no_image is a one-line error."""
     out = tmp_path / "gallery.png"
     assert main(["render", "--dataset", str(short_sequence), "--frames", "3,20", "--out", str(out)]) == 0
     assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
-    n_frontends = len(registry.available("frontends"))
+    n_frontends = sum(registry.get("frontends", name).makes_images for name in registry.available("frontends"))
+    assert n_frontends >= 6
     assert f"2 frame(s) x {n_frontends} frontend(s)" in capsys.readouterr().out
+    assert main(["render", "--dataset", str(short_sequence), "--frames", "3", "--frontends", "no_image",
+                 "--out", str(tmp_path / "none.png")]) == 2
+    assert "makes no image" in capsys.readouterr().err
 
 
 def test_render_images_match_running_each_frontend(short_sequence):
