@@ -21,15 +21,21 @@ def second_sequence(tmp_path_factory):
     return folder
 
 
-@pytest.fixture
-def paper_site(data_server, short_sequence, second_sequence, tmp_path, monkeypatch):
+def serve_as_paper_sequences(data_server, boxes, poster, tmp_path, monkeypatch) -> dict:
+    """`boxes` and `poster` (ECD folders) served by the loopback server as hdr_boxes and
+    hdr_poster, eas-vo pointed at it; the server's hit counts."""
     folder, url, _, hits = data_server
     registry = tmp_path / "registry.txt"
-    publish_sequences(folder, {"hdr_boxes": short_sequence, "hdr_poster": second_sequence}, registry)
+    publish_sequences(folder, {"hdr_boxes": boxes, "hdr_poster": poster}, registry)
     monkeypatch.setenv("EAS_VO_DATA_URL", url)
     monkeypatch.setenv("EAS_VO_DATA_REGISTRY", str(registry))
     monkeypatch.setenv("EAS_VO_DATA_DIR", str(tmp_path / "data"))
     return hits
+
+
+@pytest.fixture
+def paper_site(data_server, short_sequence, second_sequence, tmp_path, monkeypatch):
+    return serve_as_paper_sequences(data_server, short_sequence, second_sequence, tmp_path, monkeypatch)
 
 
 def test_table1_in_one_command_beside_the_papers(paper_site, tmp_path, capsys):
@@ -231,16 +237,9 @@ def walk_site(data_server, tmp_path, monkeypatch):
     from eas_vo.datasets.simulator import simulate
     from eas_vo.datasets.synthetic import PRESETS, sequence_folder
 
-    folder, url, _, hits = data_server
-    walk = sequence_folder("walk_short", progress=False)
     other = tmp_path / "walk_seed3"
     simulate(dataclasses.replace(PRESETS["walk_short"], seed=3), other)
-    registry = tmp_path / "registry.txt"
-    publish_sequences(folder, {"hdr_boxes": walk, "hdr_poster": other}, registry)
-    monkeypatch.setenv("EAS_VO_DATA_URL", url)
-    monkeypatch.setenv("EAS_VO_DATA_REGISTRY", str(registry))
-    monkeypatch.setenv("EAS_VO_DATA_DIR", str(tmp_path / "data"))
-    return hits
+    return serve_as_paper_sequences(data_server, sequence_folder("walk_short", progress=False), other, tmp_path, monkeypatch)
 
 
 def test_table2_runs_orbslam3_on_each_cell_beside_the_papers(walk_site, walk_vocabulary, tmp_path):
