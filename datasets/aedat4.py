@@ -1,4 +1,5 @@
-"""AEDAT4 recordings (iniVation's DV software), read with dv-processing.
+"""AEDAT4 recordings (iniVation's DV software): frames, IMU and the sensor size read with
+dv-processing, events decoded by datasets/aedat4_packets.py on both cores.
 
 From the file: the `events` stream (x, y, polarity, microsecond timestamps), the `frames`
 stream (APS frames with their start-of-exposure timestamp and exposure duration), the `imu`
@@ -21,15 +22,15 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from eas_vo.datasets.aedat4_packets import MAGIC, EventPackets, in_order
 from eas_vo.datasets.calibration import read_calibration
 from eas_vo.datasets.recording import RecordingReader, StreamConfig, check_increasing, read_tum_ground_truth
 from eas_vo.errors import DataError, DataWarnings
 from eas_vo.eventfile import Validator, cache_key, file_identity, load_cached
-from eas_vo.types import ImuSeries, empty_events
+from eas_vo.eventfile.kernels import check_and_pack
+from eas_vo.types import EVENT_DTYPE, ImuSeries, empty_events
 from eas_vo.validation import check_range
 
-#: The first bytes of every AEDAT 4.0 file.
-MAGIC = b"#!AER-DAT4.0\r\n"
 #: Standard gravity [m/s^2]: the g of accelerometer datasheets, in which DV stores readings.
 STANDARD_GRAVITY = 9.80665
 #: Calibration formats, for messages.
@@ -70,12 +71,6 @@ def _said(exc: Exception) -> str:
             break
         kept.append(line.replace("Error info: ", ""))
     return " ".join(kept) or type(exc).__name__
-
-
-def _checked_batch(validate: Validator, raw: np.ndarray, first: int) -> np.ndarray:
-    """EVENT_DTYPE records of the valid events of a dv-processing batch (`raw`: its numpy()
-    records, timestamps in us), `first` the batch's index in the stream (for messages)."""
-    return validate(raw["timestamp"], raw["x"], raw["y"], raw["polarity"], lambda row: first + row, per_second=1e6)
 
 
 def is_aedat4(path: Path) -> bool:
@@ -242,26 +237,35 @@ class Aedat4Dataset(RecordingReader):
     def _load_events(self) -> np.ndarray:
         c = self.config
         where = f"{self.path}:events"
-        r = self.recording
+        packets = EventPackets(self.path)
+        width, height = self.camera.width, self.camera.height
+
+        def checked(k):
+            """Packet k decoded, checked on its own and packed (on a worker thread: lz4, zstd
+            and the check kernel release the GIL): (records, packed, first bad row or -1,
+            its last time [s], its earliest tick [us])."""
+            records = packets.decode(k)
+            packed = np.empty(len(records), EVENT_DTYPE)
+            bad, last_t = check_and_pack(records["t"], 1e6, records["x"], records["y"], records["p"], -np.inf,
+                                         width, height, c.time_tolerance_s, packed.view(np.uint8))
+            return records, packed, bad, last_t, (records["t"].min() if len(records) else 0)
 
         def fill(out, warnings):
-            validate = Validator(where, self.camera.width, self.camera.height, c.time_tolerance_s, c.lenient, warnings, "event")
+            validate = Validator(where, width, height, c.time_tolerance_s, c.lenient, warnings, "event")
+            read = kept = 0  # events in the packets before this one (the index messages name), kept
+            for records, packed, bad, last_t, earliest in in_order(checked, len(packets)):
+                if bad < 0 and earliest / 1e6 >= validate.last_t:
+                    # Valid on its own and nothing before the stream so far: what the stream's
+                    # check would have packed, bit for bit.
+                    events, validate.last_t = packed, max(validate.last_t, last_t)
+                else:
+                    events = validate(records["t"], records["x"], records["y"], records["p"],
+                                      lambda row, first=read: first + row, per_second=1e6)
+                out.write(events.data)
+                read, kept = read + len(records), kept + len(events)
+            return kept
 
-            # Batch by batch in this thread: dv-processing holds the GIL, and a worker thread
-            # checking and writing behind it (eventfile.write_behind) made the first read slower.
-            r.resetSequentialRead()
-            try:
-                read = kept = 0  # events read from the file before this batch (the index messages name), kept
-                while (batch := self._dv(r.getNextEventBatch, f"the events after event {read}", "events")) is not None:
-                    raw = batch.numpy()
-                    events = _checked_batch(validate, raw, read)
-                    out.write(events.data)
-                    read, kept = read + len(raw), kept + len(events)
-                return kept
-            finally:
-                r.resetSequentialRead()
-
-        key = cache_key("aedat4", *file_identity(self.path), self.camera.width, self.camera.height, c.time_tolerance_s)
+        key = cache_key("aedat4", *file_identity(self.path), width, height, c.time_tolerance_s)
         return load_cached(key, c.lenient, self.warnings, fill, where)
 
     # -- plugin contract ---------------------------------------------------------------
