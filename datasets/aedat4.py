@@ -22,7 +22,8 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from eas_vo.datasets.aedat4_packets import MAGIC, EventPackets, in_order
+from eas_vo.concurrency import in_order
+from eas_vo.datasets.aedat4_packets import MAGIC, EventPackets
 from eas_vo.datasets.calibration import read_calibration
 from eas_vo.datasets.recording import RecordingReader, StreamConfig, check_increasing, read_tum_ground_truth
 from eas_vo.errors import DataError, DataWarnings

@@ -10,20 +10,17 @@ at all) that holds a size-prefixed FlatBuffer. An event packet's FlatBuffer (ide
 [us], int16 x, int16 y, bool polarity, 3 bytes of padding).
 
 `EventPackets` finds the event stream's packets once (8 bytes read per packet) and decodes any
-of them independently: lz4 and zstd release the GIL, so packets decompress on worker threads.
+of them independently: lz4 and zstd release the GIL, so packets decompress on worker threads
+(eas_vo.concurrency.in_order).
 Every offset is bounds-checked; damage is a one-line DataError naming the packet.
 """
 
 from __future__ import annotations
 
 import mmap
-import os
 import struct
 import xml.etree.ElementTree as ET
-from collections import deque
-from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
-from typing import Callable, Iterator, TypeVar
 
 import numpy as np
 
@@ -174,27 +171,6 @@ class EventPackets:
         if vector + 4 + count * PACKET_EVENT.itemsize > len(body):
             fail(f"its {count} events run past its end")
         return np.frombuffer(body, PACKET_EVENT, count, vector + 4)
-
-
-T = TypeVar("T")
-
-
-def in_order(work: Callable[[int], T], count: int, ahead: int = 6) -> Iterator[T]:
-    """work(0), ..., work(count - 1) computed on one worker thread per core, yielded in order,
-    at most `ahead` computed before they are taken (bounded memory). work(k)'s exception is
-    raised when k's turn comes; the work not yet taken is cancelled when the caller stops."""
-    with ThreadPoolExecutor(min(os.cpu_count() or 1, 8)) as pool:
-        pending: deque = deque()
-        try:
-            for k in range(count):
-                pending.append(pool.submit(work, k))
-                if len(pending) >= ahead:
-                    yield pending.popleft().result()
-            while pending:
-                yield pending.popleft().result()
-        finally:
-            for future in pending:
-                future.cancel()
 
 
 def _zstd():

@@ -9,6 +9,7 @@ import hashlib
 import io
 import itertools
 import json
+import os
 import signal
 import sys
 import traceback
@@ -18,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from eas_vo import registry
+from eas_vo import concurrency, registry
 from eas_vo.config import NO_IMAGES, parse_set
 from eas_vo.errors import EasVoError, Interrupted, sigterm_as_interrupt
 from eas_vo.io import claim_grid_folder, json_text, markdown_cell, output_folder, remove_stale_temporaries, slug, write_text_atomic
@@ -216,7 +217,8 @@ def run_grid(
                 results[cell] = run_cell(cell, *args)
                 bar.update(1)
         else:
-            pool = ProcessPoolExecutor(min(jobs, len(todo)), initializer=_end_with_parent)
+            workers = min(jobs, len(todo))
+            pool = ProcessPoolExecutor(workers, initializer=_worker_start, initargs=(max(1, (os.cpu_count() or 1) // workers),))
             futures = {pool.submit(run_cell, cell, *args): cell for cell in todo}
             try:
                 for future in as_completed(futures):
@@ -241,10 +243,13 @@ def _result(future) -> dict:
         return cell_failure(exc)
 
 
-def _end_with_parent() -> None:
-    """A pool worker's start: on Linux the kernel kills it when the process that started it dies
-    (after a `kill -9` of compare its workers ran on through the queue, then waited forever).
-    The cell it was running is left as a crashed run's folder, which the next compare takes over."""
+def _worker_start(threads: int) -> None:
+    """A pool worker's start: its share of the cores for eas-vo's own threads (no more threads
+    than cores across the workers); on Linux the kernel kills it when the process that started
+    it dies (after a `kill -9` of compare its workers ran on through the queue, then waited
+    forever). The cell it was running is left as a crashed run's folder, which the next compare
+    takes over."""
+    concurrency.set_threads(threads)
     if sys.platform.startswith("linux"):
         import ctypes
 

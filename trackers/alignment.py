@@ -14,6 +14,7 @@ import cv2
 import numba
 import numpy as np
 
+from eas_vo import concurrency
 from eas_vo.types import CameraModel
 
 #: Focal lengths [px] of the resolutions the alignment and the score work at, whatever the
@@ -39,6 +40,8 @@ SEARCH_KEEP = (8, 2, 1)
 #: under ALIGN_STOP_PX pixels of that resolution.
 ALIGN_ITERATIONS = 10
 ALIGN_STOP_PX = 0.01
+#: Rotations scored per thread at the least (the search's hundreds are split across the cores).
+PARALLEL_CANDIDATES = 64
 #: The overlap below which two views share too little to be scored [fraction of the view].
 MIN_OVERLAP = 0.2
 #: A rotation explains two views only where it leaves at most this fraction of the mismatch
@@ -47,8 +50,6 @@ MIN_OVERLAP = 0.2
 #: more than 2 deg off leave more; on the real excerpt thinned to every 3rd frame the right
 #: ones leave 0.02-0.64).
 IDENTITY_MARGIN = 0.7
-#: Columns per cv2.remap call (it takes maps under 32767 columns: a 1280 x 720 view has more).
-REMAP_COLUMNS = 32000
 
 
 class PhotometricAlignment:
@@ -130,36 +131,16 @@ class _Level:
         """`image` (the sensor's size) at this resolution."""
         return cv2.resize(image, self.size, interpolation=cv2.INTER_AREA)
 
-    def _sample(self, source: np.ndarray, Rs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """`source` at where each rotation of Rs (C, 3, 3) puts the image view's pixels: values
-        (C, N) and whether the source saw them (C, N)."""
-        u, v, inside = self._where(Rs)
-        step = REMAP_COLUMNS  # OpenCV's remap takes maps under 32767 columns
-        return np.concatenate([cv2.remap(source, u[:, a:a + step], v[:, a:a + step], cv2.INTER_LINEAR)
-                               for a in range(0, u.shape[1], step)], axis=1), inside
-
-    def _where(self, Rs: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Where each rotation of Rs (C, 3, 3) puts the image view's pixels in the source view:
-        u, v (C, N) [px, float32; -1 outside] and whether the source saw them there (inside its
-        image and its lens's view, C, N)."""
-        C, N = len(Rs), self.bearings.shape[1]
-        pixels = ((self.K @ Rs).reshape(3 * C, 3) @ self.bearings).reshape(C, 3, N).astype(np.float32)  # one GEMM
-        z = pixels[:, 2]
-        ahead = z > 1e-6
-        z = np.where(ahead, z, np.float32(1.0))
-        u, v = pixels[:, 0] / z, pixels[:, 1] / z
-        h, w = self.shape
-        inside = ahead & (u >= 0) & (u <= w - 1) & (v >= 0) & (v <= h - 1)
-        u[~inside], v[~inside] = -1.0, -1.0
-        inside[inside] = self.seen[(v[inside] + 0.5).astype(int), (u[inside] + 0.5).astype(int)]
-        return u, v, inside
-
     def scores(self, sources: list[np.ndarray], images: list[np.ndarray], Rs: np.ndarray) -> np.ndarray:
         """The ZNCC of each image of `images` with the same-index image of `sources` warped by
         each rotation of Rs (C, 3, 3), over the pixels both see: (len(images), C); -1 where
         they share under MIN_OVERLAP or either is flat there."""
-        return _zncc(np.stack(sources).astype(np.float32), np.stack([im[self.ys, self.xs] for im in images]).astype(np.float32),
-                     np.asarray(self.K @ Rs, np.float64), self.bearings, self.seen, max(MIN_OVERLAP * len(self.xs), 1.0))
+        sources = np.stack(sources).astype(np.float32)
+        targets = np.stack([im[self.ys, self.xs] for im in images]).astype(np.float32)
+        KRs = np.asarray(self.K @ Rs, np.float64)
+        min_count = max(MIN_OVERLAP * len(self.xs), 1.0)
+        return np.concatenate(concurrency.split(
+            lambda a, b: _zncc(sources, targets, KRs[a:b], self.bearings, self.seen, min_count), len(KRs), PARALLEL_CANDIDATES), axis=1)
 
     def refine(self, source: np.ndarray, image: np.ndarray, Rs: np.ndarray) -> np.ndarray:
         """Each R_source_image of Rs (C, 3, 3) refined by inverse-compositional Gauss-Newton on
@@ -174,25 +155,87 @@ class _Level:
         # d image(pi(K exp([d]x) b)) / d d at d = 0 is r (-[b]x), r = grad . d pi / d b
         r0, r1, r2 = gx * fx, gy * fy, -(gx * fx * X + gy * fy * Y)
         J = np.stack([r2 * Y - r1, r0 - r2 * X, r1 * X - r0 * Y], axis=1)  # (N, 3)
-        JJ = J[:, :, None] * J[:, None, :]  # (N, 3, 3)
         Rs = np.array(Rs, float)
+        J = np.ascontiguousarray(J)
         for _ in range(ALIGN_ITERATIONS):
-            values, inside = self._sample(source, Rs)
-            weights = inside.astype(float)
-            n = np.maximum(weights.sum(1, keepdims=True), 1.0)
-            v_mean, t_mean = (values * weights).sum(1, keepdims=True) / n, (target * weights).sum(1, keepdims=True) / n
-            v_std = np.sqrt((((values - v_mean) ** 2) * weights).sum(1, keepdims=True) / n)
-            t_std = np.sqrt((((target - t_mean) ** 2) * weights).sum(1, keepdims=True) / n)
-            usable = (n[:, 0] >= MIN_OVERLAP * len(self.xs)) & (v_std[:, 0] > 0) & (t_std[:, 0] > 0)
-            v_std, t_std = np.where(v_std > 0, v_std, 1.0), np.where(t_std > 0, t_std, 1.0)
-            residual = ((values - v_mean) / v_std - (target - t_mean) / t_std) * weights
-            H = np.einsum("cn,nij->cij", weights, JJ) / t_std[:, :, None] ** 2 + 1e-9 * np.eye(3)
-            deltas = np.linalg.solve(H, (residual @ J / t_std)[..., None])[..., 0]
-            deltas[~usable] = 0.0
+            deltas = _gauss_newton_steps(source.astype(np.float32), target, J, np.asarray(self.K @ Rs, np.float64),
+                                         self.bearings, self.seen, max(MIN_OVERLAP * len(self.xs), 1.0))
             Rs = np.array([R @ cv2.Rodrigues(-d)[0] for R, d in zip(Rs, deltas)])
             if np.linalg.norm(deltas, axis=1).max() * fx < ALIGN_STOP_PX:
                 break
         return Rs
+
+
+@numba.njit(cache=True, nogil=True)
+def _sample(sources, M, bearings, seen, values, inside):
+    """Each image of `sources` (P, h, w) sampled (bilinear) where the homography M puts each
+    bearing (3, N): values (P, N) and `inside` (N: ahead of the camera, inside the image and
+    where the lens saw, `seen`), written in place; returns how many are inside."""
+    P, h, w = sources.shape
+    count = 0
+    for n in range(bearings.shape[1]):
+        bx, by, bz = bearings[0, n], bearings[1, n], bearings[2, n]
+        z = M[2, 0] * bx + M[2, 1] * by + M[2, 2] * bz
+        inside[n] = False
+        if z <= 1e-6:
+            continue
+        u = (M[0, 0] * bx + M[0, 1] * by + M[0, 2] * bz) / z
+        v = (M[1, 0] * bx + M[1, 1] * by + M[1, 2] * bz) / z
+        if u < 0 or v < 0 or u > w - 1 or v > h - 1 or not seen[int(v + 0.5), int(u + 0.5)]:
+            continue
+        i, j = min(int(u), w - 2), min(int(v), h - 2)
+        a, b = u - i, v - j
+        for p in range(P):
+            values[p, n] = ((1 - a) * (1 - b) * sources[p, j, i] + a * (1 - b) * sources[p, j, i + 1]
+                            + (1 - a) * b * sources[p, j + 1, i] + a * b * sources[p, j + 1, i + 1])
+        inside[n] = True
+        count += 1
+    return count
+
+
+@numba.njit(cache=True, nogil=True)
+def _gauss_newton_steps(source, target, J, KRs, bearings, seen, min_count):
+    """One inverse-compositional Gauss-Newton step (C, 3) for each homography K R_c (C, 3, 3):
+    `source` (h, w) sampled where K R_c puts the image view's bearings (3, N), both it and
+    `target` (N) normalised to zero mean and unit variance over the pixels both see, `J` (N, 3)
+    the target's derivative by the rotation's angles. Zero where under `min_count` pixels are
+    shared or either view is flat there."""
+    C, N = KRs.shape[0], bearings.shape[1]
+    deltas = np.zeros((C, 3))
+    values = np.zeros((1, N))
+    inside = np.zeros(N, np.bool_)
+    sources = source.reshape((1,) + source.shape)
+    for c in range(C):
+        n = _sample(sources, KRs[c], bearings, seen, values, inside)
+        if n < min_count:
+            continue
+        sv = svv = st = stt = 0.0
+        for k in range(N):
+            if inside[k]:
+                sv += values[0, k]
+                svv += values[0, k] * values[0, k]
+                st += target[k]
+                stt += target[k] * target[k]
+        v_mean, t_mean = sv / n, st / n
+        v_var, t_var = svv / n - v_mean * v_mean, stt / n - t_mean * t_mean
+        if v_var <= 0.0 or t_var <= 0.0:
+            continue
+        v_std, t_std = np.sqrt(v_var), np.sqrt(t_var)
+        H = np.zeros((3, 3))
+        g = np.zeros(3)
+        for k in range(N):
+            if not inside[k]:
+                continue
+            r = (values[0, k] - v_mean) / v_std - (target[k] - t_mean) / t_std
+            for a in range(3):
+                g[a] += r * J[k, a]
+                for b in range(3):
+                    H[a, b] += J[k, a] * J[k, b]
+        H /= t_std * t_std
+        for a in range(3):
+            H[a, a] += 1e-9
+        deltas[c] = np.linalg.solve(H, g / t_std)
+    return deltas
 
 
 @numba.njit(cache=True, nogil=True)
@@ -201,39 +244,25 @@ def _zncc(sources, targets, KRs, bearings, seen, min_count):
     the image view's pixels) with sources[p] (P, h, w) sampled (bilinear) where K R_c puts the
     pixels' bearings (3, N), where the source's lens saw (`seen`, h x w); -1 with under
     `min_count` (at least 1) such pixels, or a flat image."""
-    P, h, w = sources.shape
+    P = sources.shape[0]
     C, N = KRs.shape[0], bearings.shape[1]
     out = np.full((P, C), -1.0)
-    sums = np.zeros((P, 5))
+    values = np.zeros((P, N))
+    inside = np.zeros(N, np.bool_)
     for c in range(C):
-        M = KRs[c]
-        sums[:] = 0.0
-        count = 0
-        for n in range(N):
-            bx, by, bz = bearings[0, n], bearings[1, n], bearings[2, n]
-            z = M[2, 0] * bx + M[2, 1] * by + M[2, 2] * bz
-            if z <= 1e-6:
-                continue
-            u = (M[0, 0] * bx + M[0, 1] * by + M[0, 2] * bz) / z
-            v = (M[1, 0] * bx + M[1, 1] * by + M[1, 2] * bz) / z
-            if u < 0 or v < 0 or u > w - 1 or v > h - 1 or not seen[int(v + 0.5), int(u + 0.5)]:
-                continue
-            i, j = min(int(u), w - 2), min(int(v), h - 2)
-            a, b = u - i, v - j
-            count += 1
-            for p in range(P):
-                x = ((1 - a) * (1 - b) * sources[p, j, i] + a * (1 - b) * sources[p, j, i + 1]
-                     + (1 - a) * b * sources[p, j + 1, i] + a * b * sources[p, j + 1, i + 1])
-                y = targets[p, n]
-                sums[p, 0] += x
-                sums[p, 1] += y
-                sums[p, 2] += x * x
-                sums[p, 3] += y * y
-                sums[p, 4] += x * y
+        count = _sample(sources, KRs[c], bearings, seen, values, inside)
         if count < min_count:
             continue
         for p in range(P):
-            sx, sy, sxx, syy, sxy = sums[p, 0], sums[p, 1], sums[p, 2], sums[p, 3], sums[p, 4]
+            sx = sy = sxx = syy = sxy = 0.0
+            for n in range(N):
+                if inside[n]:
+                    x, y = values[p, n], targets[p, n]
+                    sx += x
+                    sy += y
+                    sxx += x * x
+                    syy += y * y
+                    sxy += x * y
             vx, vy = sxx - sx * sx / count, syy - sy * sy / count
             if vx > 0 and vy > 0:
                 out[p, c] = (sxy - sx * sy / count) / np.sqrt(vx * vy)

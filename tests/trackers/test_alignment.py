@@ -140,6 +140,62 @@ def test_the_score_is_opencvs_warp_and_numpys_correlation():
         assert align.score(a, b, R) == pytest.approx(expected, abs=0.01)
 
 
+def test_a_gauss_newton_step_is_numpys_formulation():
+    """Cross-check of the compiled refinement step: the same step from scipy's bilinear sampling
+    and numpy's normal equations (both views normalised over the pixels both see)."""
+    from scipy.ndimage import map_coordinates
+
+    from eas_vo.trackers.alignment import _gauss_newton_steps
+
+    align = PhotometricAlignment(DAVIS)
+    f = 50.0
+    level = align._levels[f]
+    a, b = (align.pyramid(rendered_through_lens(DAVIS, Rotation.from_rotvec(r).as_matrix(), 4))[f]
+            for r in ([0, 0, 0], [0.03, -0.05, 0.02]))
+    gx = cv2.Sobel(b, cv2.CV_32F, 1, 0, ksize=3)[level.ys, level.xs] / 8
+    gy = cv2.Sobel(b, cv2.CV_32F, 0, 1, ksize=3)[level.ys, level.xs] / 8
+    X, Y = level.bearings[0], level.bearings[1]
+    r0, r1 = gx * level.K[0, 0], gy * level.K[1, 1]
+    r2 = -(r0 * X + r1 * Y)
+    J = np.stack([r2 * Y - r1, r0 - r2 * X, r1 * X - r0 * Y], axis=1).astype(float)
+    target = b[level.ys, level.xs].astype(float)
+    Rs = np.array([Rotation.from_rotvec(r).as_matrix() for r in ([0, 0, 0], [0.02, -0.04, 0.01])])
+    steps = _gauss_newton_steps(a, target, J, level.K @ Rs, level.bearings, level.seen, 1.0)
+    h, w = a.shape
+    for R, step in zip(Rs, steps):
+        p = level.K @ R @ level.bearings
+        u, v = p[0] / p[2], p[1] / p[2]
+        inside = (u >= 0) & (v >= 0) & (u <= w - 1) & (v <= h - 1)
+        inside[inside] = level.seen[(v[inside] + 0.5).astype(int), (u[inside] + 0.5).astype(int)]
+        values = map_coordinates(a.astype(float), [v[inside], u[inside]], order=1)
+        t = target[inside]
+        residual = (values - values.mean()) / values.std() - (t - t.mean()) / t.std()
+        Jin = J[inside]
+        expected = np.linalg.solve(Jin.T @ Jin / t.var() + 1e-9 * np.eye(3), Jin.T @ residual / t.std())
+        np.testing.assert_allclose(step, expected, rtol=1e-6, atol=1e-12)
+        assert np.linalg.norm(step) > 1e-3  # a real step, not the zero of a skipped candidate
+
+
+@pytest.mark.parametrize("threads", [1, 2, 3])
+def test_scores_do_not_depend_on_the_thread_count(threads):
+    from eas_vo import concurrency
+
+    align = PhotometricAlignment(CAMERA)
+    a, b = align.pyramid(textured_image(5)), align.pyramid(textured_image(6))
+    before = concurrency.threads()
+    try:
+        concurrency.set_threads(1)
+        serial = align.align(a, b, [np.eye(3)]), align._levels[25.0].scores([a[25.0]], [b[25.0]], align._grid)
+        concurrency.set_threads(threads)
+        parallel = align.align(a, b, [np.eye(3)]), align._levels[25.0].scores([a[25.0]], [b[25.0]], align._grid)
+    finally:
+        concurrency.set_threads(before)
+    assert (serial[0] is None) == (parallel[0] is None)
+    if serial[0] is not None:
+        np.testing.assert_array_equal(serial[0], parallel[0])
+    np.testing.assert_array_equal(serial[1], parallel[1])
+
+
 def test_a_gyro_prediction_is_left_to_lk():
     """Where the gyro predicts, LK's failure is the images' (here a gyro that says "still"
     while the view turned by 25-35 degrees): no alignment, LK's own weak step stays."""
