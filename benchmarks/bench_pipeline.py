@@ -2,8 +2,8 @@
 default sequence), with --config that file's plugins, each replaced where a flag names another.
 
 Prints frames/s and the real-time factor (sequence duration / processing time) of a
-whole run, and where the time goes (loading, frontend, tracker, backend); for a tracker that
-reads events, the events/s it processes; for cmax, its objective's evaluations/s beside a plain
+whole run, serial (--threads 1) and concurrent (a thread per core), alternated, and their
+ratio; where the time goes (loading, frontend, tracker, backend); for a tracker that reads events, the events/s it processes; for cmax, its objective's evaluations/s beside a plain
 numpy version of the same kernel.
 
     python benchmarks/bench_pipeline.py [--config FILE] [--dataset SPEC] [--frontend F] [--tracker T]
@@ -17,7 +17,7 @@ import time
 
 import numpy as np
 
-from eas_vo import config, pipeline, registry
+from eas_vo import concurrency, config, pipeline, registry
 
 
 def stage_times(cfg) -> dict:
@@ -94,11 +94,22 @@ def main() -> None:
     rc = cfg.run
     registry.open_dataset(rc.dataset).events()  # simulate and cache outside the timing
 
-    runs = [pipeline.run(cfg).metrics for _ in range(args.repeat)]
-    best = min(runs, key=lambda m: m["elapsed_s"])
+    cores = concurrency.threads()
+    runs: dict[int, list[dict]] = {1: [], cores: []}
+    for _ in range(args.repeat):  # alternated: the machine's drift touches both alike
+        for threads in runs:
+            concurrency.set_threads(threads)
+            runs[threads].append(pipeline.run(cfg).metrics)
+    concurrency.set_threads(cores)
+    fastest = {threads: min(ms, key=lambda m: m["elapsed_s"]) for threads, ms in runs.items()}
+    best = fastest[cores]
     print(f"{rc.frontend}+{rc.tracker}+{rc.backend} on {rc.dataset}: {best['frames']} frames, {best['sequence_s']:.2f} s of data")
-    print(f"  whole run (best of {args.repeat}): {best['elapsed_s']:.2f} s, "
-          f"{best['frames_per_s']:.1f} frames/s, real-time factor {best['realtime_factor']:.2f}x")
+    for threads, m in fastest.items():
+        label = "serial (--threads 1)" if threads == 1 else f"concurrent ({threads} threads)"
+        print(f"  whole run, {label:24s} best of {args.repeat}: {m['elapsed_s']:.2f} s, "
+              f"{m['frames_per_s']:.1f} frames/s, real-time factor {m['realtime_factor']:.2f}x")
+    if cores > 1:
+        print(f"  concurrent / serial: {fastest[cores]['frames_per_s'] / fastest[1]['frames_per_s']:.2f}x")
     stages = min((stage_times(cfg) for _ in range(args.repeat)), key=lambda s: s["frontend"] + s["tracker"])
     total = sum(stages[k] for k in ("load", "frontend", "tracker", "backend"))
     for k in ("load", "frontend", "tracker", "backend"):

@@ -112,6 +112,19 @@ def _add_output_options(parser, required: bool, default: str | None = None) -> N
                         help="replace a non-empty --out that holds only an earlier eas-vo output")
 
 
+def _add_threads(parser) -> None:
+    parser.add_argument("--threads", type=_positive_int, metavar="N",
+                        help="threads for eas-vo's own parallel work (default: one per core; 1: the serial path, "
+                             "which gives the same results)")
+
+
+def _apply_threads(args) -> None:
+    if getattr(args, "threads", None):
+        from eas_vo import concurrency
+
+        concurrency.set_threads(args.threads)
+
+
 def _add_jobs(parser) -> None:
     parser.add_argument("--jobs", type=_positive_int, default=os.cpu_count() or 1, help="parallel processes (default: all cores)")
 
@@ -242,6 +255,7 @@ def _parse_run(sub) -> None:
     _add_time_offset(run)
     _add_quiet(run)
     _add_lenient(run)
+    _add_threads(run)
     _add_output_options(run, required=False, default="runs/DATASET_FRONTEND_TRACKER_BACKEND_TIME")
     run.set_defaults(func=cmd_run)
 
@@ -251,6 +265,7 @@ def cmd_run(args) -> int:
     from eas_vo import pipeline
     from eas_vo.io import check_output_folder, slug
 
+    _apply_threads(args)
     config = config_mod.resolve(
         args.config,
         {"dataset": args.dataset, "frontend": args.frontend, "tracker": args.tracker, "backend": args.backend,

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from eas_vo import registry
+from eas_vo import concurrency, registry
 from eas_vo.config import ResolvedConfig
 from eas_vo.errors import EasVoError, Interrupted
 from eas_vo.evaluation import (OFFSET_SEARCH_S, ImuAgreement, RotationErrors, estimate_time_offset, imu_agreement,
@@ -248,6 +248,20 @@ def track(parts: Pipeline, config: ResolvedConfig, frames_csv: Path | None = Non
     rc = config.run
     tracked = Tracked(orb=OrbStats() if rc.orb_stats else None, closes_loops=parts.tracker.closes_loops)
     n_window = len(parts.dataset.window(rc.start_s, rc.duration_s))
+    overlap = concurrency.threads() > 1  # the tracker may finish a frame while the next is tracked
+    pending = None  # the submitted frame whose result is not taken yet
+
+    def take(result) -> None:
+        record, edges = result()
+        if record.index != len(tracked.records):  # an interrupt lost the frame before it
+            return
+        tracked.records.append(record)
+        tracked.edges.extend(edges)
+        log.write(record)
+        bar.update(1)
+        if record.index % 10 == 0:
+            bar.set_postfix(nc=record.nc, refresh=False)
+
     with _FrameLog(frames_csv) as log, _progress(n_window, progress, rc) as bar:
         try:
             for sample in parts.dataset.samples(rc.start_s, rc.duration_s):
@@ -258,14 +272,19 @@ def track(parts: Pipeline, config: ResolvedConfig, frames_csv: Path | None = Non
                     if tracked.orb is not None:
                         tracked.orb.add(image)
                 events = {"sample": sample} if parts.tracker.needs_events else {}
-                record, edges = parts.tracker.process(image, sample.t, **events)
-                tracked.records.append(record)
-                tracked.edges.extend(edges)
-                log.write(record)
-                bar.update(1)
-                if record.index % 10 == 0:
-                    bar.set_postfix(nc=record.nc, refresh=False)
+                if not overlap:
+                    result = parts.tracker.process(image, sample.t, **events)
+                    take(lambda: result)
+                    continue
+                submitted = parts.tracker.submit(image, sample.t, **events)
+                if pending is not None:
+                    take(pending)
+                pending = submitted
+            if pending is not None:
+                take(pending)
         except KeyboardInterrupt as exc:  # Ctrl-C or SIGTERM: keep what was processed
+            if pending is not None:
+                take(pending)  # a frame already tracked (unless taken or cut off): its measurement is a moment away
             tracked.interrupted = exc
     if len(tracked.records) < 2:
         if tracked.interrupted is not None:

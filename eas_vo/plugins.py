@@ -20,7 +20,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
-from typing import ClassVar, Iterator, Sequence
+from typing import Callable, ClassVar, Iterator, Sequence
 
 import numpy as np
 
@@ -171,7 +171,8 @@ class Tracker:
     """Measures relative rotations between the images of one sequence, fed in time order.
 
     Required: `process(image, t)`. Optional: `reset()`, which `__init__` calls last, so a
-    tracker sets up its per-sequence state there, `needs_imu`, `uses_imu`, `closes_loops`,
+    tracker sets up its per-sequence state there, `submit` (overlap with the next image),
+    `needs_imu`, `uses_imu`, `closes_loops`,
     `needs_events` (default False) and `reads_images` (default True). It never knows which
     frontend made the images. Frame indices count the images given since construction (or reset), from 0.
     """
@@ -230,6 +231,15 @@ class Tracker:
         `loop=True` on those that close a loop.
         """
         raise NotImplementedError
+
+    def submit(self, image: np.ndarray | None, t: float, **kwargs) -> Callable[[], tuple[FrameRecord, list[RelativeRotation]]]:
+        """Start on the next image (as `process`); returns a function that gives `process`'s
+        result for it. The run may submit the next image before it takes this result, and takes
+        results in order. By default the image is processed at once; a tracker overrides this to
+        leave part of its work to another thread while the next image is tracked, with results
+        identical to `process`'s (the run calls `process` with `--threads 1`)."""
+        result = self.process(image, t, **kwargs)
+        return lambda: result
 
 
 class Backend:

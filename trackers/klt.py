@@ -150,6 +150,7 @@ class KltTracker(Tracker):
         self._k = -1
         self._last_step: tuple[np.ndarray, float] | None = None  # (R_{k-2}_{k-1}, its interval [s]) for velocity
         self._loops = LoopCloser(self.config, self.camera) if self.config.loop_closure else None
+        self._measuring = None  # the worker thread of `submit`, made on first use
 
     @property
     def needs_imu(self) -> bool:
@@ -185,9 +186,9 @@ class KltTracker(Tracker):
             return scaled_rotation(R_last, (t - t_prev) / dt_last)
         return None
 
-    def process(self, image: np.ndarray, t: float) -> tuple[FrameRecord, list[RelativeRotation]]:
-        """Track into `image` (uint8, sensor size) taken at `t` [s]."""
-        c = self.config
+    def _begins(self, image: np.ndarray, t: float) -> tuple | None:
+        """The frame's start: its index, and the first frame's or a repeated time's whole result
+        (`("done", record, edges)`); else ("track", k, t_prev)."""
         self._k += 1
         k = self._k
         if self._prev_image is None:
@@ -195,25 +196,81 @@ class KltTracker(Tracker):
             self._prev_t = t
             if self._loops is not None:
                 self._loops.step(k, image, [], lost=False)
-            return FrameRecord(k, t, 0, 0, "first", True), []
+            return "done", FrameRecord(k, t, 0, 0, "first", True), []
         if t <= self._prev_t:  # no time between the two: nothing to measure, the rotation is kept
-            return FrameRecord(k, t, 0, 0, "same_time", False), []
+            return "done", FrameRecord(k, t, 0, 0, "same_time", False), []
         t_prev, self._prev_t = self._prev_t, t
+        return "track", k, t_prev
 
+    def _measured(self, k: int, t: float, nc: int, prev_pts: np.ndarray, cur: np.ndarray, kf_pts: np.ndarray,
+                  kf_index: int) -> tuple[FrameRecord, list[RelativeRotation], RelativeRotation | None]:
+        """Frame k's record, its edges (from the previous frame; from the keyframe, when
+        keyframe_interval > 0) and its step from the previous frame, from the tracked corners
+        (`prev_pts`, `kf_pts` -> `cur`; `nc` of them)."""
+        c = self.config
+        edges, step = [], None
+        if nc >= c.threshold1:
+            step = measure(c, self.camera, prev_pts, cur, k - 1, k)
+            if step is not None:
+                edges.append(step)
+                if c.keyframe_interval > 0 and k - kf_index >= 2:
+                    skip = measure(c, self.camera, kf_pts, cur, kf_index, k)
+                    if skip is not None:
+                        edges.append(skip)
+        return frame_record(c, self.camera, k, t, nc, step, nc < c.threshold2, nc >= c.threshold1), edges, step
+
+    def _advance(self, image: np.ndarray, redetected: bool, cur: np.ndarray, ok: np.ndarray, k: int) -> None:
+        """This image becomes the previous one: corners detected anew, or those tracked kept."""
+        c = self.config
+        if redetected:
+            self._start_keyframe(image, self.detect(image))
+        else:
+            self._prev_image, self._prev_pts, self._kf_pts = image, cur[ok], self._kf_pts[ok]
+            if c.keyframe_interval > 0 and k - self._kf_index >= c.keyframe_interval:
+                self._kf_index, self._kf_pts = k, cur[ok]
+
+    @property
+    def _in_turn(self) -> bool:
+        """Whether the next frame's tracking reads this frame's measured rotation (a prediction
+        from the previous step, a fallback, loop closure): then a frame is measured before the
+        next is tracked. The paper's tracker reads only how many corners were tracked."""
+        c = self.config
+        return self._predict == "velocity" or c.fallback != "none" or c.loop_closure
+
+    def submit(self, image: np.ndarray, t: float):
+        """As `process`, with the two-view geometry on a worker thread while the caller goes on
+        to the next frame, when nothing the next frame's tracking reads depends on it (not
+        `_in_turn`); in turn otherwise."""
+        if self._in_turn:
+            return super().submit(image, t)
+        begun = self._begins(image, t)
+        if begun[0] == "done":
+            return lambda: begun[1:]
+        _, k, t_prev = begun
+        cur, ok = self.track(image, self.predicted_rotation(t_prev, t))
+        nc = int(ok.sum())
+        measured = self._worker().submit(self._measured, k, t, nc, self._prev_pts[ok], cur[ok], self._kf_pts[ok], self._kf_index)
+        self._advance(image, nc < self.config.threshold2, cur, ok, k)
+        return lambda: measured.result()[:2]
+
+    def _worker(self):
+        if self._measuring is None:
+            from concurrent.futures import ThreadPoolExecutor
+
+            self._measuring = ThreadPoolExecutor(1, thread_name_prefix="klt-measure")  # in frame order
+        return self._measuring
+
+    def process(self, image: np.ndarray, t: float) -> tuple[FrameRecord, list[RelativeRotation]]:
+        """Track into `image` (uint8, sensor size) taken at `t` [s]."""
+        c = self.config
+        begun = self._begins(image, t)
+        if begun[0] == "done":
+            return begun[1:]
+        _, k, t_prev = begun
         predicted = self.predicted_rotation(t_prev, t)
         cur, ok = self.track(image, predicted)
         nc = int(ok.sum())
-        edges, step = [], None
-        if nc >= c.threshold1:
-            step = measure(c, self.camera, self._prev_pts[ok], cur[ok], k - 1, k)
-            if step is not None:
-                edges.append(step)
-                if c.keyframe_interval > 0 and k - self._kf_index >= 2:
-                    skip = measure(c, self.camera, self._kf_pts[ok], cur[ok], self._kf_index, k)
-                    if skip is not None:
-                        edges.append(skip)
-
-        record = frame_record(c, self.camera, k, t, nc, step, nc < c.threshold2, nc >= c.threshold1)
+        record, edges, step = self._measured(k, t, nc, self._prev_pts[ok], cur[ok], self._kf_pts[ok], self._kf_index)
         detected = None
         if self._matching is not None and record.status in ("weak", "lost"):
             detect = self._matching.features.detect
@@ -239,12 +296,7 @@ class KltTracker(Tracker):
                     record = replace(record, reason="aligned by intensities alone (no correspondences)")
         self._prev_pyramid = pyramid
         self._last_step = (step.R_i_j, t - t_prev) if step is not None else None
-        if record.redetected:
-            self._start_keyframe(image, self.detect(image))
-        else:
-            self._prev_image, self._prev_pts, self._kf_pts = image, cur[ok], self._kf_pts[ok]
-            if c.keyframe_interval > 0 and k - self._kf_index >= c.keyframe_interval:
-                self._kf_index, self._kf_pts = k, cur[ok]
+        self._advance(image, record.redetected, cur, ok, k)
         if self._loops is not None:
             edges = edges + self._loops.step(k, image, edges, lost=record.status == "lost")
         return record, edges
