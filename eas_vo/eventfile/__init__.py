@@ -34,7 +34,7 @@ from eas_vo.eventfile.cache import (
     write_cache,
 )
 from eas_vo.eventfile.convert import convert_text_to_cache
-from eas_vo.eventfile.table import pack_rows
+from eas_vo.eventfile.table import pack_rows, pack_table
 from eas_vo.eventfile.text import format_events, write_events_text
 from eas_vo.eventfile.validate import Validator
 
@@ -52,6 +52,7 @@ __all__ = [
     "load_event_text",
     "open_cache",
     "pack_rows",
+    "pack_table",
     "parse_block",
     "prime_text_cache",
     "write_behind",

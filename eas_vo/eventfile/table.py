@@ -1,9 +1,16 @@
 """Events held as rows of numbers (MVSEC's HDF5 `x y t p` float64 array, for one), checked
 and packed into EVENT_DTYPE records one block at a time: pixel and polarity whole numbers,
 then the Validator's checks (pixel on the sensor, time finite and not going back), the last
-time carried from block to block. Rows are named by their index in the table (from 0)."""
+time carried from block to block. Rows are named by their index in the table (from 0).
+A whole table at hand (a map of a file's bytes) is packed on several threads at once
+(`pack_table`)."""
 
 from __future__ import annotations
+
+import math
+from collections import deque
+from concurrent.futures import ThreadPoolExecutor
+from typing import Callable
 
 import numpy as np
 
@@ -13,20 +20,94 @@ from eas_vo.eventfile.validate import Validator
 from eas_vo.types import EVENT_DTYPE
 
 
-def pack_rows(rows: np.ndarray, columns: tuple[int, int, int, int], validate: Validator, first_row: int) -> np.ndarray:
+def pack_rows(
+    rows: np.ndarray, columns: tuple[int, int, int, int], validate: Validator, first_row: int,
+    out: np.ndarray | None = None,
+) -> np.ndarray:
     """EVENT_DTYPE records of the valid rows of `rows` ((N, k) float64, C order), in order.
 
     columns: the column indices of t [s], x, y [px] and p.
     first_row: the table index of rows[0], for errors (strict) and counted drops (lenient).
+    out: EVENT_DTYPE records (at least N) to pack into, reused from block to block: the
+        result is then a view of it when every row is valid. Default: a new array.
     """
     rows = np.ascontiguousarray(rows, dtype=np.float64)
-    events = np.empty(len(rows), EVENT_DTYPE)
+    events = np.empty(len(rows), EVENT_DTYPE) if out is None else out[: len(rows)]
     bad, last_t = check_and_pack_rows(rows, *columns, validate.last_t, validate.width, validate.height,
-                                      validate.tolerance_s, events.view(np.uint8))
+                                      validate.tolerance_s, events)
     if bad < 0:  # the common case: every row is valid
         validate.last_t = last_t
         return events
     return _checked_rows(rows, columns, validate, first_row)
+
+
+def pack_table(
+    rows: np.ndarray, columns: tuple[int, int, int, int], validate: Validator, write: Callable[[np.ndarray], object],
+    block_rows: int = 1 << 18, threads: int = 2, touch: Callable[[int, int], object] | None = None,
+) -> int:
+    """Check and pack a whole table of rows ((N, k) float64 of either byte order, C order: a
+    map of a file's bytes, say) and hand its valid records to `write`, in order, block by block;
+    returns their count. The records, errors and drops are those of pack_rows over the blocks
+    in turn.
+
+    Blocks are checked and packed on `threads` threads at once, each block from the time of
+    the row before it (the compiled pass releases the GIL); `write` runs on the calling thread.
+    At its turn, a block that had a problem, or whose first row's previous time is not where
+    the blocks before it left the last time (a step back clamped, a row dropped), is packed
+    again by pack_rows, from the right time: the first error raised is the earliest row's.
+    Memory: threads + 1 blocks of records (and of native rows for another byte order).
+    touch(start, stop), if given, runs on the packing thread before rows start..stop-1 are
+    read (for a map: fault their pages in at once).
+    """
+    n = len(rows)
+    size = max(1, min(block_rows, n))
+    col_t = columns[0]
+    native = rows.dtype == np.dtype(np.float64)
+    free = [(np.empty(size, EVENT_DTYPE), None if native else np.empty((size, rows.shape[1]), np.float64))
+            for _ in range(threads + 1)]
+
+    def pack(start: int, buffers) -> tuple:
+        events, scratch = buffers
+        if touch is not None:
+            touch(start, min(start + size, n))
+        block = rows[start : start + size]
+        if scratch is not None:
+            block = scratch[: len(block)]
+            np.copyto(block, rows[start : start + len(block)])
+        previous_t = float(rows[start - 1, col_t]) if start else -np.inf
+        bad, last_t = check_and_pack_rows(block, *columns, previous_t, validate.width, validate.height,
+                                          validate.tolerance_s, events[: len(block)])
+        return block, previous_t, bad, last_t
+
+    def commit(start: int, buffers, future) -> int:
+        block, previous_t, bad, last_t = future.result()
+        if bad < 0 and _same_time(previous_t, validate.last_t):  # what a pass in turn would have done
+            validate.last_t = last_t
+            events = buffers[0][: len(block)]
+        else:
+            events = pack_rows(block, columns, validate, start, buffers[0])
+        write(events)
+        free.append(buffers)
+        return len(events)
+
+    total, pending = 0, deque()
+    pool = ThreadPoolExecutor(threads)
+    try:
+        for start in range(0, n, size):
+            if not free:
+                total += commit(*pending.popleft())
+            buffers = free.pop()
+            pending.append((start, buffers, pool.submit(pack, start, buffers)))
+        while pending:
+            total += commit(*pending.popleft())
+    finally:
+        pool.shutdown(cancel_futures=True)
+    return total
+
+
+def _same_time(a: float, b: float) -> bool:
+    """a and b are one float64 (0.0 and -0.0 differ: a time clamped to either is written as it is)."""
+    return a == b and math.copysign(1.0, a) == math.copysign(1.0, b)
 
 
 def _checked_rows(rows, columns, validate: Validator, first_row: int) -> np.ndarray:
