@@ -22,6 +22,7 @@ from __future__ import annotations
 import functools
 import mmap
 import os
+import sys
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
@@ -49,8 +50,9 @@ MAP_BLOCK_ROWS = 1 << 18
 #: Whether events stored contiguously and unfiltered are mapped from the file (h5py only
 #: locates them) rather than read through h5py; off, every file takes h5py's block path.
 MAP_EVENTS = True
-#: madvise(2)'s MADV_POPULATE_READ (Linux 5.14), which Python's mmap module names from 3.12 on.
-MADV_POPULATE_READ = getattr(mmap, "MADV_POPULATE_READ", 22)
+#: madvise(2)'s MADV_POPULATE_READ (Linux 5.14; Python's mmap module names it from 3.12 on):
+#: a block's pages of the map faulted in with one call. None elsewhere.
+MADV_POPULATE_READ = getattr(mmap, "MADV_POPULATE_READ", 22 if sys.platform.startswith("linux") else None)
 #: The largest sensor side [px] a recording may have (as for the ECD reader).
 MAX_SENSOR_PX = 16384
 #: MVSEC's kalibr camera of each DAVIS.
@@ -333,21 +335,22 @@ class MvsecDataset(RecordingReader):
             validate = Validator(where, self.camera.width, self.camera.height, c.time_tolerance_s, c.lenient, warnings, "row")
             mapped = self._map_events(dset) if MAP_EVENTS else None
             if mapped is not None:
-                return pack_table(mapped[0], (2, 0, 1, 3), validate, out.write, MAP_BLOCK_ROWS, touch=mapped[1])
+                return pack_table(mapped[0], (2, 0, 1, 3), validate, out.write, MAP_BLOCK_ROWS, group_rows=BLOCK_ROWS,
+                                  touch=mapped[1])
             return write_behind(out, self._h5py_blocks(dset, where, validate))
 
         key = cache_key("mvsec", *file_identity(self.path), self.group, self.camera.width, self.camera.height,
                         c.time_tolerance_s)
         return load_cached(key, c.lenient, self.warnings, fill, where, len(dset))
 
-    def _map_events(self, dset) -> tuple[np.ndarray, Callable[[int, int], None]] | None:
+    def _map_events(self, dset) -> tuple[np.ndarray, Callable[[int, int], None] | None] | None:
         """The (N, 4) event rows as a read-only map of the file's own bytes, when h5py would only
         copy them: one contiguous, unfiltered, fully written block of IEEE float64 (either byte
         order) in a plain file, entirely inside it; with a function that faults the pages of
-        rows start..stop-1 in at once. None otherwise (chunked, compressed, external or
-        unwritten storage, another file driver, a file cut short: h5py's block path reads
-        those, and names what is wrong). The file must not shrink while it is read (as for any
-        map: the process would be killed by SIGBUS)."""
+        rows start..stop-1 in at once (None where madvise cannot). None otherwise: chunked,
+        compressed, external or unwritten storage, another file driver, a file shorter than
+        its rows' end go through h5py's block path. The file must not shrink while it is read
+        (as for any map: the process would be killed by SIGBUS)."""
         import h5py
 
         try:
@@ -370,7 +373,7 @@ class MvsecDataset(RecordingReader):
             return None
         row_bytes = dset.shape[1] * 8
 
-        def touch(first: int, stop: int) -> None:  # fault a block's pages in with one call
+        def touch(first: int, stop: int) -> None:
             lo = offset - start + first * row_bytes
             lo -= lo % mmap.PAGESIZE
             try:
@@ -378,7 +381,8 @@ class MvsecDataset(RecordingReader):
             except OSError:
                 pass  # before Linux 5.14: the pages fault in as they are read
 
-        return np.frombuffer(mapped, orders[0] + "f8", dset.size, offset - start).reshape(dset.shape), touch
+        rows = np.frombuffer(mapped, orders[0] + "f8", dset.size, offset - start).reshape(dset.shape)
+        return rows, (touch if MADV_POPULATE_READ is not None and hasattr(mapped, "madvise") else None)
 
     def _h5py_blocks(self, dset, where: str, validate: Validator):
         """Blocks of events read through h5py (whole chunks of a chunked dataset), each checked

@@ -43,63 +43,68 @@ def pack_rows(
 
 def pack_table(
     rows: np.ndarray, columns: tuple[int, int, int, int], validate: Validator, write: Callable[[np.ndarray], object],
-    block_rows: int = 1 << 18, threads: int = 2, touch: Callable[[int, int], object] | None = None,
+    block_rows: int = 1 << 18, threads: int = 2, group_rows: int = 0,
+    touch: Callable[[int, int], object] | None = None,
 ) -> int:
     """Check and pack a whole table of rows ((N, k) float64 of either byte order, C order: a
-    map of a file's bytes, say) and hand its valid records to `write`, in order, block by block;
-    returns their count. The records, errors and drops are those of pack_rows over the blocks
-    in turn.
+    map of a file's bytes, say) and hand its valid records to `write`, in order; returns their
+    count. Records, errors and drops (counted, and in the order the warnings list them) are
+    those of pack_rows over groups of `group_rows` rows in turn (default: block_rows).
 
-    Blocks are checked and packed on `threads` threads at once, each block from the time of
-    the row before it (the compiled pass releases the GIL); `write` runs on the calling thread.
-    At its turn, a block that had a problem, or whose first row's previous time is not where
-    the blocks before it left the last time (a step back clamped, a row dropped), is packed
-    again by pack_rows, from the right time: the first error raised is the earliest row's.
-    Memory: threads + 1 blocks of records (and of native rows for another byte order).
-    touch(start, stop), if given, runs on the packing thread before rows start..stop-1 are
-    read (for a map: fault their pages in at once).
+    Blocks of `block_rows` are checked and packed on `threads` threads at once, each from the
+    time of the row before it (the compiled pass releases the GIL); `write` runs on the
+    calling thread. At its turn, a block is taken as it is if it had no problem and the blocks
+    before it left the last time at the time of its previous row. Otherwise (a problem; a step
+    back clamped or a row dropped just before it) it is packed again by pack_rows from the
+    right time, together with the rest of its group in one pass: the first error raised is the
+    earliest row's. Memory: threads + 1 blocks of records (and of native rows for another
+    byte order). touch(start, stop), if given, runs on a packing thread before rows
+    start..stop-1 are read (for a map: fault their pages in at once).
     """
     n = len(rows)
     size = max(1, min(block_rows, n))
-    col_t = columns[0]
+    group = group_rows or size
     native = rows.dtype == np.dtype(np.float64)
     free = [(np.empty(size, EVENT_DTYPE), None if native else np.empty((size, rows.shape[1]), np.float64))
             for _ in range(threads + 1)]
 
     def pack(start: int, buffers) -> tuple:
         events, scratch = buffers
+        stop = min(start + size, n)
         if touch is not None:
-            touch(start, min(start + size, n))
-        block = rows[start : start + size]
+            touch(start, stop)
+        block = rows[start:stop]
         if scratch is not None:
-            block = scratch[: len(block)]
-            np.copyto(block, rows[start : start + len(block)])
-        previous_t = float(rows[start - 1, col_t]) if start else -np.inf
+            block = scratch[: stop - start]
+            np.copyto(block, rows[start:stop])
+        previous_t = float(rows[start - 1, columns[0]]) if start else -np.inf
         bad, last_t = check_and_pack_rows(block, *columns, previous_t, validate.width, validate.height,
-                                          validate.tolerance_s, events[: len(block)])
-        return block, previous_t, bad, last_t
+                                          validate.tolerance_s, events[: stop - start])
+        return events[: stop - start], previous_t, bad, last_t
 
-    def commit(start: int, buffers, future) -> int:
-        block, previous_t, bad, last_t = future.result()
-        if bad < 0 and _same_time(previous_t, validate.last_t):  # what a pass in turn would have done
-            validate.last_t = last_t
-            events = buffers[0][: len(block)]
-        else:
-            events = pack_rows(block, columns, validate, start, buffers[0])
-        write(events)
-        free.append(buffers)
-        return len(events)
-
-    total, pending = 0, deque()
+    total, pending, start = 0, deque(), 0
     pool = ThreadPoolExecutor(threads)
     try:
-        for start in range(0, n, size):
-            if not free:
-                total += commit(*pending.popleft())
-            buffers = free.pop()
-            pending.append((start, buffers, pool.submit(pack, start, buffers)))
-        while pending:
-            total += commit(*pending.popleft())
+        while start < n or pending:
+            while start < n and free:
+                buffers = free.pop()
+                pending.append((start, buffers, pool.submit(pack, start, buffers)))
+                start += size
+            first, buffers, future = pending.popleft()
+            events, previous_t, bad, last_t = future.result()
+            free.append(buffers)
+            if bad < 0 and _same_time(previous_t, validate.last_t):  # what a pass in turn would have done
+                validate.last_t = last_t
+            else:
+                stop = min(n, (first // group + 1) * group)
+                while pending:  # the blocks under way start again after the group
+                    _, buffers, future = pending.popleft()
+                    future.result()
+                    free.append(buffers)
+                start = stop
+                events = pack_rows(rows[first:stop], columns, validate, first)
+            write(events)
+            total += len(events)
     finally:
         pool.shutdown(cancel_futures=True)
     return total
