@@ -12,7 +12,8 @@ Modules (each imports only those above it):
 - `blocks`: text in blocks of whole lines; the parallel block parser.
 - `validate`: row checks carrying the last timestamp from block to block.
 - `slowpath`: the line-by-line path for pieces the compiled parser rejected.
-- `table`: events held as rows of numbers (HDF5 arrays), checked and packed block by block.
+- `table`: events held as rows of numbers (HDF5 arrays), checked and packed block by block
+  (a whole table at hand, a map of a file's bytes, on several threads at once).
 - `convert`: the streaming text -> cache converter tying the above together.
 - `cache`: the cache file format: naming, writing, mapping, loading event text through it.
 - `text`: writing event text (and priming its cache).
