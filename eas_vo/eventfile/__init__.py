@@ -12,7 +12,8 @@ Modules (each imports only those above it):
 - `blocks`: text in blocks of whole lines; the parallel block parser.
 - `validate`: row checks carrying the last timestamp from block to block.
 - `slowpath`: the line-by-line path for pieces the compiled parser rejected.
-- `table`: events held as rows of numbers (HDF5 arrays), checked and packed block by block.
+- `table`: events held as rows of numbers (HDF5 arrays), checked and packed block by block
+  (a whole table at hand, a map of a file's bytes, on several threads at once).
 - `convert`: the streaming text -> cache converter tying the above together.
 - `cache`: the cache file format: naming, writing, mapping, loading event text through it.
 - `text`: writing event text (and priming its cache).
@@ -34,7 +35,7 @@ from eas_vo.eventfile.cache import (
     write_cache,
 )
 from eas_vo.eventfile.convert import convert_text_to_cache
-from eas_vo.eventfile.table import pack_rows
+from eas_vo.eventfile.table import pack_rows, pack_table
 from eas_vo.eventfile.text import format_events, write_events_text
 from eas_vo.eventfile.validate import Validator
 
@@ -52,6 +53,7 @@ __all__ = [
     "load_event_text",
     "open_cache",
     "pack_rows",
+    "pack_table",
     "parse_block",
     "prime_text_cache",
     "write_behind",

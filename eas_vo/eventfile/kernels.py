@@ -145,22 +145,60 @@ def check_and_pack(ticks, per_second, x, y, p, last_t, width, height, tolerance_
     return -1, last_t
 
 
+#: Rows a table kernel checks at once: the block's rows stay in the L1 cache between its two passes.
+TABLE_CHUNK_ROWS = 1024
+#: 2**52: (v + 2**52) - 2**52 == v for 0 <= v < 2**52 exactly when v is a whole number.
+_TWO52 = 4503599627370496.0
+
+
 @numba.njit(cache=True, nogil=True)
-def check_and_pack_rows(rows, col_t, col_x, col_y, col_p, last_t, width, height, tolerance_s, out):
+def _plain_rows(rows, a, e, col_t, col_x, col_y, col_p, last_t, width, height):
+    """Whether rows a..e-1 are all plain: pixel whole numbers on the sensor, polarity -1, 0 or
+    1, time finite and not before the previous row's (last_t for row a). No branch in the
+    loop, so that it runs on vectors; a block that is not plain is taken row by row."""
+    bad = False
+    for i in range(a, e):
+        xf, yf, pf, t = rows[i, col_x], rows[i, col_y], rows[i, col_p], rows[i, col_t]
+        prev = rows[i - 1, col_t] if i > a else last_t
+        bad |= not ((xf >= 0.0) & (xf < width) & (yf >= 0.0) & (yf < height)
+                    & ((xf + _TWO52) - _TWO52 == xf) & ((yf + _TWO52) - _TWO52 == yf)
+                    & ((pf == 1.0) | (pf == -1.0) | (pf == 0.0)) & (t >= prev) & (t - t == 0.0))
+    return not bad
+
+
+@numba.njit(cache=True, nogil=True)
+def check_and_pack_rows(rows, col_t, col_x, col_y, col_p, last_t, width, height, tolerance_s, events):
     """check_and_pack for events held as float64 rows of a table (columns col_t, col_x, col_y,
-    col_p of `rows`): a pixel coordinate or polarity that is not a whole number is a problem too.
-    Returns (index of the first row with any problem or -1, the last timestamp)."""
-    scratch = np.empty(1, np.float64)
-    for i in range(rows.shape[0]):
-        xf, yf, pf = rows[i, col_x], rows[i, col_y], rows[i, col_p]
-        if not (0.0 <= xf < 65536.0 and 0.0 <= yf < 65536.0 and -1.0 <= pf <= 1.0):  # also NaN
-            return i, last_t
-        x, y, p = np.int64(xf), np.int64(yf), np.int64(pf)
-        if x != xf or y != yf or p != pf:
-            return i, last_t
-        ok, t = _accept(rows[i, col_t], x, y, p, last_t, width, height, tolerance_s)
-        if not ok:
-            return i, last_t
-        last_t = t
-        _pack(out, i, t, x, y, p, scratch)
+    col_p of `rows`) into the EVENT_DTYPE records `events`: a pixel coordinate or polarity that
+    is not a whole number is a problem too. Returns (index of the first row with any problem
+    or -1, the last timestamp); rows before a problem are packed.
+
+    Block by block (TABLE_CHUNK_ROWS): pack every row, then check the block in one branch-free
+    pass; a block that is not plain (a problem, or a small step back to clamp) is checked and
+    packed again row by row."""
+    n = rows.shape[0]
+    for a in range(0, n, TABLE_CHUNK_ROWS):
+        e = min(a + TABLE_CHUNK_ROWS, n)
+        for i in range(a, e):
+            r = events[i]
+            r.t = rows[i, col_t]
+            r.x = np.uint16(np.int32(rows[i, col_x]))  # any value: a block not plain is packed again
+            r.y = np.uint16(np.int32(rows[i, col_y]))
+            r.p = rows[i, col_p] > 0.0
+        if _plain_rows(rows, a, e, col_t, col_x, col_y, col_p, last_t, width, height):
+            last_t = rows[e - 1, col_t]
+            continue
+        for i in range(a, e):
+            xf, yf, pf = rows[i, col_x], rows[i, col_y], rows[i, col_p]
+            if not (0.0 <= xf < 65536.0 and 0.0 <= yf < 65536.0 and -1.0 <= pf <= 1.0):  # also NaN
+                return i, last_t
+            x, y, p = np.int64(xf), np.int64(yf), np.int64(pf)
+            if x != xf or y != yf or p != pf:
+                return i, last_t
+            ok, t = _accept(rows[i, col_t], x, y, p, last_t, width, height, tolerance_s)
+            if not ok:
+                return i, last_t
+            last_t = t
+            r = events[i]
+            r.t, r.x, r.y, r.p = t, x, y, 1 if p > 0 else 0
     return -1, last_t

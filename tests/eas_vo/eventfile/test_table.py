@@ -8,7 +8,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from eas_vo.errors import DataError, DataWarnings
-from eas_vo.eventfile import Validator, pack_rows
+from eas_vo.eventfile import Validator, pack_rows, pack_table
 from eas_vo.types import EVENT_DTYPE
 
 WIDTH, HEIGHT = 640, 480
@@ -94,3 +94,68 @@ def test_the_compiled_pass_agrees_with_row_by_row_verdicts(damage, lenient):
         assert not isinstance(got, str), got
         assert got.tobytes() == want.tobytes()
         assert sorted(got_w.lines()) == sorted(want_w.lines())
+
+
+def in_turn(rows: np.ndarray, group: int, lenient: bool):
+    """pack_rows over groups of `group` rows in turn: (records, warning lines), or the error."""
+    warnings = DataWarnings()
+    validate = validator(lenient, warnings)
+    try:
+        parts = [pack_rows(rows[a : a + group], (0, 1, 2, 3), validate, a).copy() for a in range(0, len(rows), group)]
+    except DataError as exc:
+        return str(exc)
+    return np.concatenate(parts) if parts else np.empty(0, EVENT_DTYPE), warnings.lines()
+
+
+def packed_table(rows: np.ndarray, block: int, group: int, lenient: bool, threads: int = 2):
+    """pack_table's records and warning lines (or its error), and the rows `touch` was given."""
+    warnings, parts, touched = DataWarnings(), [], []
+    try:
+        count = pack_table(rows, (0, 1, 2, 3), validator(lenient, warnings), lambda ev: parts.append(ev.copy()),
+                           block, threads, group, touch=lambda a, b: touched.append((a, b)))
+    except DataError as exc:
+        return str(exc), touched
+    events = np.concatenate(parts) if parts else np.empty(0, EVENT_DTYPE)
+    assert count == len(events)
+    return (events, warnings.lines()), touched
+
+
+@hostile_settings(120)
+@given(damage=st.lists(st.tuples(st.integers(1, 2999), st.integers(0, 3),
+                                 st.sampled_from([-0.5, -5e-7, -1e-9, 0.5, 640.0, -1.0, np.nan, np.inf, 1e300])),
+                       max_size=6),
+       near_seams=st.booleans(), block=st.sampled_from([1, 7, 100, 256, 1024, 5000]),
+       group=st.sampled_from([0, 300, 1000]), lenient=st.booleans(), big_endian=st.booleans(), threads=st.sampled_from([1, 2, 3]))
+def test_pack_table_is_pack_rows_over_groups_in_turn(damage, near_seams, block, group, lenient, big_endian, threads):
+    """On several threads, blocks packed from the previous row's time, a block taken again
+    when it had a problem or the time before it was clamped or dropped: the same records, the
+    same first error, the same drops listed in the same order as one pass over the groups."""
+    rows = table(3000, seed=len(damage))
+    for row, column, value in damage:
+        if near_seams:
+            row = min(2999, max(1, row // block * block + row % 3 - 1))
+        rows[row, column] = rows[row - 1, column] + value if column == 0 else value
+    got, touched = packed_table(rows.astype(">f8") if big_endian else rows, block, group, lenient, threads)
+    want = in_turn(rows, group or block, lenient)
+    if isinstance(want, str):
+        assert got == want
+        return
+    assert not isinstance(got, str), got
+    assert got[0].tobytes() == want[0].tobytes()
+    assert got[1] == want[1]
+    assert all(b - a <= block for a, b in touched)
+
+
+def test_pack_table_of_no_rows_writes_nothing():
+    assert packed_table(np.empty((0, 4)), 100, 0, False)[0][0].size == 0
+
+
+def test_pack_table_tells_minus_zero_from_zero():
+    """A block packed from the time -0.0 of the row before it is not taken when the last time
+    kept is 0.0 (that row was dropped): a step back clamped to it is written as 0.0."""
+    rows = table(8)
+    rows[:, 0] = [-3e-7, -2e-7, -1e-7, 0.0, -0.0, -1e-7, 1e-6, 2e-6]
+    rows[4, 1] = WIDTH  # dropped: off the sensor
+    (events, lines), _ = packed_table(rows, 5, 5, True)
+    assert events["t"][4] == 0.0 and np.signbit(events["t"][3:5]).tolist() == [False, False]
+    assert lines == ["f.h5:events: 1 dropped: pixel outside the 640x480 sensor (first at row 4)"]
