@@ -14,6 +14,7 @@ from typing import Callable
 
 import numpy as np
 
+from eas_vo import concurrency
 from eas_vo.errors import DataError
 from eas_vo.eventfile.kernels import check_and_pack_rows
 from eas_vo.eventfile.validate import Validator
@@ -43,7 +44,7 @@ def pack_rows(
 
 def pack_table(
     rows: np.ndarray, columns: tuple[int, int, int, int], validate: Validator, write: Callable[[np.ndarray], object],
-    block_rows: int = 1 << 18, threads: int = 2, group_rows: int = 0,
+    block_rows: int = 1 << 18, threads: int = 0, group_rows: int = 0,
     touch: Callable[[int, int], object] | None = None,
 ) -> int:
     """Check and pack a whole table of rows ((N, k) float64 of either byte order, C order: a
@@ -51,7 +52,8 @@ def pack_table(
     count. Records, errors and drops (counted, and in the order the warnings list them) are
     those of pack_rows over groups of `group_rows` rows in turn (default: block_rows).
 
-    Blocks of `block_rows` are checked and packed on `threads` threads at once, each from the
+    Blocks of `block_rows` are checked and packed on `threads` threads at once (default:
+    eas_vo.concurrency's count), each from the
     time of the row before it (the compiled pass releases the GIL); `write` runs on the
     calling thread. At its turn, a block is taken as it is if it had no problem and the blocks
     before it left the last time at the time of its previous row. Otherwise (a problem; a step
@@ -62,6 +64,7 @@ def pack_table(
     start..stop-1 are read (for a map: fault their pages in at once).
     """
     n = len(rows)
+    threads = threads or concurrency.threads()
     size = max(1, min(block_rows, n))
     group = group_rows or size
     native = rows.dtype == np.dtype(np.float64)
