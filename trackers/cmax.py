@@ -14,7 +14,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.optimize import minimize
 
 from eas_vo.geometry.rotations import rotvec_to_matrix
 from eas_vo.plugins import Tracker
@@ -40,13 +39,22 @@ FOCUS_STEP_PX = 1.0
 #: the simulator's hot pixels fire 500 Hz, its signal pixels 18 Hz on average (synthetic:default),
 #: an edge-rich pixel in 1000 deg/s motion under 15 times the mean within a window.
 HOT_PIXEL_FACTOR = 20.0
-#: scipy's L-BFGS-B on the contrast over that at no motion, in px of displacement over half a
-#: window: a gradient under 1e-4 per px is within about 0.005 px of the peak (its curvature on
-#: synthetic:default is about 0.02-0.04 per px^2). BFGS's Wolfe line search spent 3-5 times
-#: the evaluations on the objective's kinks (bilinear voting), for the same optimum.
-SOLVER_OPTIONS = {"gtol": 1e-4, "maxiter": 50}
-#: The quadrants' optima need less: a fraction of max_residual_px.
-QUADRANT_OPTIONS = {"gtol": 1e-3, "maxiter": 10}
+#: The solver (_newton) works on the contrast over that at no motion, in px of displacement over
+#: half a window, with Newton steps in the metric of the objective's curvature (central
+#: differences of the analytic gradient 1 px apart: the scale on which the bilinear votes'
+#: kinks are smoothed over), which the window before measured at its optimum. It stops once a
+#: step would be under NEWTON_TOL_PX (the peak's curvature on synthetic:default is 0.004-0.1 per
+#: px^2, and its position is good to about 0.1 px: bilinear votes, texture). scipy's L-BFGS-B
+#: (gtol 1e-4) spent 69 evaluations a window on synthetic:default for 7 iterations, its line
+#: search failing on those kinks in two windows of three; this takes 3-6.
+NEWTON_TOL_PX = 0.01
+#: A step is at most this long [px] (the curvature's 1 px scale; halved after a step that lowered
+#: the contrast, doubled after one that raised it), and the solver evaluates at most NEWTON_EVALS points.
+NEWTON_RADIUS_PX = 2.0
+NEWTON_EVALS = 20
+#: The quadrants' optima need less: a fraction of max_residual_px, at most QUADRANT_EVALS passes.
+QUADRANT_TOL_PX = 0.05
+QUADRANT_EVALS = 4
 HOT_PIXEL_MIN_EVENTS = 8
 
 
@@ -139,6 +147,7 @@ class CmaxTracker(Tracker):
         self._bearing = cam.undistort(np.column_stack([u.ravel(), v.ravel()])).reshape(cam.height, cam.width, 2)
         self._grid = WarpGrid.of(cam.K, cam.width, cam.height)
         self._omega: np.ndarray | None = None  # the last window's, None when lost
+        self._metric: np.ndarray | None = None  # the curvature at the last window's optimum [per px^2]
         self._counts = np.zeros(cam.width * cam.height, np.int64)  # events per pixel so far (hot pixels)
         self._prev_t = -np.inf
         self._k = -1
@@ -225,40 +234,66 @@ class CmaxTracker(Tracker):
         starts = self._starts(t0, t1)
         if not starts or c.init == "search":
             starts += [self._search(contrast, scale), np.zeros(3)]
-        best = _best(cost, [w * scale for w in starts])
-        if -best.fun <= 1.0 and c.init != "search":  # no better than no motion (slow motion, or a bad start)
-            best = _best(cost, [np.zeros(3)], best)
-        omega = best.x / scale
-        sigma = _curvature_sigma(cost, best.x)
-        focus = _focus(lambda p: contrast.value(p / scale), best.x)
+        best = None
+        for start in starts:
+            best = _lower(best, _newton(cost, start * scale, self._metric))
+        if -best[1] <= 1.0 and c.init != "search":  # no better than no motion (slow motion, or a bad start)
+            best = _lower(best, _newton(cost, np.zeros(3), self._metric))
+        p = best[0]
+        omega = p / scale
+        # the curvature, the focus and the quadrants' gradients and curvatures, from the 7 passes
+        # at the optimum and 1 px from it along each axis
+        centre = contrast.with_quadrants(omega)
+        around = [contrast.with_quadrants((p + sign * FOCUS_STEP_PX * e) / scale)
+                  for e in np.eye(3) for sign in (1.0, -1.0)]
+        H = np.column_stack([(around[2 * i][1] - around[2 * i + 1][1]) for i in range(3)]) / (-2 * FOCUS_STEP_PX * v0 * scale)
+        H = 0.5 * (H + H.T)
+        sigma = _curvature_sigma(H)
+        self._metric = H if np.isfinite(sigma) else None
+        focus = float(centre[0] / np.mean([a[0] for a in around]))
+        residual = self._quadrant_residual_px(contrast, p, scale, centre, around, H)
         self._omega = omega
-        return Window(omega, sigma / scale, float(-best.fun), focus, n, t0, t1, contrast.evaluations,
-                      self._quadrant_residual_px(contrast, omega, scale))
+        return Window(omega, sigma / scale, float(-best[1]), focus, n, t0, t1, contrast.evaluations, residual)
 
-    def _quadrant_residual_px(self, contrast: Contrast, omega: np.ndarray, scale: float) -> float:
+    def _quadrant_residual_px(self, contrast: Contrast, p: np.ndarray, scale: float, centre, around, H) -> float:
         """How far apart the four image quadrants' own optima lie [px of displacement over half
-        the window]: each quadrant's events, from `omega`, their own L-BFGS-B; the largest distance
-        from `omega`. One rotation moves every quadrant alike (a fraction of a pixel apart);
-        translation before a near scene (expansion, parallax) does not."""
-        far = 0.0
-        x, y = contrast.x, contrast.y  # bearings: the quadrants about the optical axis
-        for sx, sy in ((1, 1), (1, -1), (-1, 1), (-1, -1)):
-            keep = (np.sign(x) == sx) & (np.sign(y) == sy)
-            if keep.sum() < self.config.min_events // 4:
-                continue
-            part = Contrast(np.column_stack([x[keep], y[keep]]), contrast.dt[keep], contrast.grid, contrast.sigma_px)
-            v = part.value(omega)
-            if v <= 0:
-                continue
-
-            def cost(p, part=part, v=v):
-                value, grad = part.value_and_gradient(p / scale)
-                return -value / v, -grad / (v * scale)
-
-            found = minimize(cost, omega * scale, jac=True, method="L-BFGS-B", options=QUADRANT_OPTIONS)
-            contrast.evaluations += part.evaluations
-            far = max(far, float(np.linalg.norm(found.x - omega * scale)))
-        return far
+        the window]: each quadrant's events alone, from the window's optimum p [px] (its gradient
+        `centre` there and curvature from `around`, Contrast.with_quadrants; H the window's
+        curvature), Newton steps of all four at once (Contrast.quadrants); the largest distance
+        from p. One rotation moves every
+        quadrant alike (a fraction of a pixel apart); translation before a near scene (expansion,
+        parallax) does not."""
+        counts = np.bincount(contrast.label[contrast.label >= 0], minlength=4)
+        v = centre[2]
+        use = [q for q in range(4) if counts[q] >= self.config.min_events // 4 and v[q] > 0]
+        if not use:
+            return 0.0
+        h = FOCUS_STEP_PX
+        # cost_q(p) = -V_q(p) / V_q(optimum), in px
+        grads = {q: -centre[3][q] / (v[q] * scale) for q in use}
+        metrics = {q: np.column_stack([(around[2 * i][3][q] - around[2 * i + 1][3][q]) for i in range(3)])
+                      / (-2 * h * v[q] * scale) for q in use}
+        # a direction a quadrant alone hardly constrains (roll, within a quadrant, is nearly a
+        # shift) would send its Newton steps far on its texture's noise: its curvature is taken
+        # as at least the whole window's flattest
+        floor = np.linalg.eigvalsh(_positive_definite(H))[0]
+        for q in use:
+            lam, V = np.linalg.eigh(0.5 * (metrics[q] + metrics[q].T))
+            metrics[q] = (V * np.maximum(lam, floor)) @ V.T
+        solvers = {q: _NewtonSteps(p, -1.0, grads[q], metrics[q], QUADRANT_TOL_PX) for q in use}
+        for _ in range(QUADRANT_EVALS):
+            trial = {q: solvers[q].proposal() for q in use}
+            if all(t is None for t in trial.values()):
+                break
+            omegas = np.tile(p, (4, 1))
+            for q, t in trial.items():
+                if t is not None:
+                    omegas[q] = t
+            values, gradients = contrast.quadrants(omegas / scale)
+            for q, t in trial.items():
+                if t is not None:
+                    solvers[q].update(-values[q] / v[q], -gradients[q] / (v[q] * scale))
+        return max(float(np.linalg.norm(solvers[q].p - p)) for q in use)
 
     def _without_hot_pixels(self, events: np.ndarray) -> np.ndarray:
         """`events` less those of hot pixels: pixels that fired HOT_PIXEL_FACTOR times the mean
@@ -290,31 +325,89 @@ class CmaxTracker(Tracker):
         return grid[int(np.argmax(values))]
 
 
-def _best(cost, starts: list[np.ndarray], best=None):
-    """The lowest of L-BFGS-B's minima of `cost` from each start (and `best`, an earlier result)."""
-    for start in starts:
-        found = minimize(cost, start, jac=True, method="L-BFGS-B", options=SOLVER_OPTIONS)
-        if best is None or found.fun < best.fun:
-            best = found
-    return best
+class _NewtonSteps:
+    """Newton's method on a cost [px] from p (its value f and gradient g there) in the metric of
+    the curvature H (its eigenvalues' magnitudes, floored at 1e-3 of the largest, so every step
+    goes downhill), updated by BFGS from each accepted step of at least 0.25 px; a step is at most
+    `radius` px long, halved after a step that raised the cost. `proposal` is the next point to
+    evaluate (None once a step would be under tol_px), `update` takes its cost and gradient."""
+
+    def __init__(self, p, f, g, H, tol_px: float, radius: float = NEWTON_RADIUS_PX):
+        self.p, self.f, self.g = np.asarray(p, float), float(f), np.asarray(g, float)
+        self.M, self.tol, self.radius = _positive_definite(H), tol_px, radius
+        self._step = None
+
+    def proposal(self):
+        step = -np.linalg.solve(self.M, self.g)
+        length = float(np.linalg.norm(step))
+        if not np.isfinite(length):
+            return None
+        if length > self.radius:
+            step *= self.radius / length
+            length = self.radius
+        if length < self.tol:
+            return None
+        self._step = step
+        return self.p + step
+
+    def update(self, f: float, g: np.ndarray) -> None:
+        step, length = self._step, float(np.linalg.norm(self._step))
+        if f < self.f:
+            y = g - self.g
+            sy = float(step @ y)
+            if length >= 0.25 and sy > 0:
+                Ms = self.M @ step
+                self.M = self.M - np.outer(Ms, Ms) / float(step @ Ms) + np.outer(y, y) / sy
+            self.p, self.f, self.g = self.p + step, f, g
+            self.radius = NEWTON_RADIUS_PX
+        else:
+            self.radius = 0.5 * length
 
 
-def _curvature_sigma(cost, p: np.ndarray, h: float = 1.0) -> float:
-    """At the minimum p [px] of `cost` (minus the contrast over that at no motion): SIGMA_SCALE
-    times its RMS curvature radius, sqrt(trace(H^-1) / 3) [px] (inf where it is not a
-    minimum), H by central differences of the gradient (step h px)."""
+def _newton(cost, p: np.ndarray, H: np.ndarray | None) -> tuple[np.ndarray, float]:
+    """The minimum of `cost` [px] found by _NewtonSteps from p [px], in the metric H (None: the
+    curvature at p, by central differences of the gradient 1 px apart); (p, cost)."""
+    f, g = cost(p)
+    if H is None:
+        H = _hessian(cost, p)
+    solver = _NewtonSteps(p, f, g, H, NEWTON_TOL_PX)
+    for _ in range(NEWTON_EVALS):
+        trial = solver.proposal()
+        if trial is None:
+            break
+        solver.update(*cost(trial))
+    return solver.p, solver.f
+
+
+def _lower(best, found):
+    """The lower of two (p, cost) (best None: found)."""
+    return found if best is None or found[1] < best[1] else best
+
+
+def _hessian(cost, p: np.ndarray, h: float = 1.0) -> np.ndarray:
+    """The Hessian of `cost` at p [px] by central differences of its gradient (step h px)."""
     H = np.empty((3, 3))
     for i in range(3):
         e = np.zeros(3)
         e[i] = h
         H[:, i] = (cost(p + e)[1] - cost(p - e)[1]) / (2 * h)
-    H = 0.5 * (H + H.T)
+    return 0.5 * (H + H.T)
+
+
+def _positive_definite(H: np.ndarray) -> np.ndarray:
+    """H with its eigenvalues' magnitudes, floored at 1e-3 of the largest (identity if none is finite)."""
+    if not np.all(np.isfinite(H)):
+        return np.eye(3)
+    lam, V = np.linalg.eigh(0.5 * (H + H.T))
+    lam = np.abs(lam)
+    lam = np.maximum(lam, max(1e-3 * lam.max(), 1e-12))
+    return (V * lam) @ V.T
+
+
+def _curvature_sigma(H: np.ndarray) -> float:
+    """From the Hessian H [per px^2] of the cost (minus the contrast over that at no motion) at
+    its minimum: SIGMA_SCALE times its RMS curvature radius, sqrt(trace(H^-1) / 3) [px] (inf
+    where it is not a minimum)."""
     if not np.all(np.isfinite(H)) or np.any(np.linalg.eigvalsh(H) <= 0):
         return float("inf")
     return SIGMA_SCALE * float(np.sqrt(np.trace(np.linalg.inv(H)) / 3.0))
-
-
-def _focus(contrast, p: np.ndarray, h: float = FOCUS_STEP_PX) -> float:
-    """The contrast at p [px] over the mean contrast of the warps h px away along each axis."""
-    around = [contrast(p + sign * h * e) for e in np.eye(3) for sign in (1.0, -1.0)]
-    return float(contrast(p) / np.mean(around))

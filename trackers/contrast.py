@@ -71,24 +71,21 @@ def _warp(x, y, dt, w0, w1, w2, fx, fy, cx, cy, jac, want_jac):
     u = fx * q0 * iz + cx
     v = fy * q1 * iz + cy
     if want_jac:
-        # dq/dphi = -[q]x J_l(phi), J_l = I + a [p]x + c [p]x^2 = (1 - c t2) I + a [p]x + c p p^T:
-        # its column m is l x q, l = J_l e_m = (1 - c t2) e_m + a (p x e_m) + c p_m p
+        # dq/dphi = -[q]x J_l(phi), J_l = I + a [p]x + c [p]x^2 = (1 - c t2) I + a [p]x + c p p^T, so
+        # a row r of d(pixel)/dq times it is w^T J_l, w = q x r: d w + a (w x p) + c (w . p) p
         d = 1.0 - c_ * t2
-        for m in range(3):
-            e0 = 1.0 if m == 0 else 0.0
-            e1 = 1.0 if m == 1 else 0.0
-            e2 = 1.0 if m == 2 else 0.0
-            pm = p0 * e0 + p1 * e1 + p2 * e2
-            # l = J_l e_m
-            l0 = d * e0 + a_ * (p1 * e2 - p2 * e1) + c_ * pm * p0
-            l1 = d * e1 + a_ * (p2 * e0 - p0 * e2) + c_ * pm * p1
-            l2 = d * e2 + a_ * (p0 * e1 - p1 * e0) + c_ * pm * p2
-            # dq = l x q
-            d0 = l1 * q2 - l2 * q1
-            d1 = l2 * q0 - l0 * q2
-            d2 = l0 * q1 - l1 * q0
-            jac[0, m] = dt * fx * iz * (d0 - q0 * iz * d2)
-            jac[1, m] = dt * fy * iz * (d1 - q1 * iz * d2)
+        for row in range(2):
+            if row == 0:  # d(u)/dq = fx iz (1, 0, -q0 iz)
+                r0, r1, r2 = fx * iz, 0.0, -fx * q0 * iz * iz
+            else:  # d(v)/dq = fy iz (0, 1, -q1 iz)
+                r0, r1, r2 = 0.0, fy * iz, -fy * q1 * iz * iz
+            w0 = q1 * r2 - q2 * r1
+            w1 = q2 * r0 - q0 * r2
+            w2 = q0 * r1 - q1 * r0
+            wp = c_ * (w0 * p0 + w1 * p1 + w2 * p2)
+            jac[row, 0] = dt * (d * w0 + a_ * (w1 * p2 - w2 * p1) + wp * p0)
+            jac[row, 1] = dt * (d * w1 + a_ * (w2 * p0 - w0 * p2) + wp * p1)
+            jac[row, 2] = dt * (d * w2 + a_ * (w0 * p1 - w1 * p0) + wp * p2)
     return u, v, True
 
 
@@ -132,16 +129,159 @@ def gather_gradient(x, y, dt, omega, fx, fy, cx, cy, B):
     return g
 
 
+#: Events per chunk of the parallel kernels: their partial sums are added in chunk order, so a
+#: result does not depend on how many threads ran them.
+CHUNK = 4096
+#: The images a pass can vote into: the whole window's, then its four quadrants' (about the
+#: optical axis: x > 0, y > 0; x > 0, y < 0; x < 0, y > 0; x < 0, y < 0).
+FULL, QUADRANTS = 1, 2
+
+
+@numba.njit(cache=True, parallel=True)
+def warp_events(x, y, dt, label, omegas, fx, fy, cx, cy, width, height, want_jac, cell, frac, jac):
+    """Every event warped by its own omega (omegas[max(label, 0)]; label < 0 and several omegas:
+    skipped), in parallel: cell[k] = i * width + j of the bilinear cell it lands in (-1: it does
+    not), frac[k] = its offsets (a, b) in the cell, with `want_jac` jac[k] = d(u, v)/domega (6,)."""
+    n = len(x)
+    several = omegas.shape[0] > 1
+    for c in numba.prange((n + CHUNK - 1) // CHUNK):
+        J = np.empty((2, 3))
+        for k in range(c * CHUNK, min(n, (c + 1) * CHUNK)):
+            q = label[k]
+            if several and q < 0:
+                cell[k] = -1
+                continue
+            r = q if several else 0
+            u, v, ok = _warp(x[k], y[k], dt[k], omegas[r, 0], omegas[r, 1], omegas[r, 2], fx, fy, cx, cy, J, want_jac)
+            if not ok or not (0.0 <= u < width - 1) or not (0.0 <= v < height - 1):
+                cell[k] = -1
+                continue
+            i, j = int(v), int(u)
+            cell[k] = i * width + j
+            frac[k, 0] = u - j
+            frac[k, 1] = v - i
+            if want_jac:
+                for m in range(3):
+                    jac[k, m] = J[0, m]
+                    jac[k, 3 + m] = J[1, m]
+
+
+@numba.njit(cache=True)
+def vote(cell, frac, label, images, which):
+    """Bilinear votes of the warped events into images (M, height, width) (zeroed first), in
+    event order: into images[0] when `which` has FULL, into images[1 + label] (label >= 0) when
+    it has QUADRANTS (the whole window's image then comes first only if it has FULL too).
+    Returns how many landed, and each image's box of cells voted into (M, 4): first and last
+    row, first and last column (first > last: none)."""
+    images[:] = 0.0
+    height, width = images.shape[1], images.shape[2]
+    first = 1 if which & FULL else 0
+    box = np.empty((images.shape[0], 4), np.int64)
+    box[:, 0], box[:, 1], box[:, 2], box[:, 3] = height, -1, width, -1
+    landed = 0
+    for k in range(len(cell)):
+        c = cell[k]
+        if c < 0:
+            continue
+        i, j = c // width, c % width
+        a, b = frac[k, 0], frac[k, 1]
+        w00, w01, w10, w11 = (1 - a) * (1 - b), a * (1 - b), (1 - a) * b, a * b
+        landed += 1
+        if which & FULL:
+            H = images[0]
+            _grow(box, 0, i, j)
+            H[i, j] += w00
+            H[i, j + 1] += w01
+            H[i + 1, j] += w10
+            H[i + 1, j + 1] += w11
+        if which & QUADRANTS and label[k] >= 0:
+            H = images[first + label[k]]
+            _grow(box, first + label[k], i, j)
+            H[i, j] += w00
+            H[i, j + 1] += w01
+            H[i + 1, j] += w10
+            H[i + 1, j + 1] += w11
+    return landed, box
+
+
+@numba.njit(cache=True, inline="always")
+def _grow(box, m, i, j):
+    """Box m of `vote` grown to the bilinear cell (i, j) (rows i, i + 1; columns j, j + 1)."""
+    if i < box[m, 0]:
+        box[m, 0] = i
+    if i + 1 > box[m, 1]:
+        box[m, 1] = i + 1
+    if j < box[m, 2]:
+        box[m, 2] = j
+    if j + 1 > box[m, 3]:
+        box[m, 3] = j + 1
+
+
+@numba.njit(cache=True, parallel=True)
+def gather(cell, frac, jac, label, B, which):
+    """The gradient sums of gather_gradient over the warped events, per image of `vote` (M, 3):
+    sum_k grad(B_m read bilinearly)(x'_k) . dx'_k/domega, in parallel over fixed chunks of
+    events whose partial sums are added in chunk order (the same result on any number of threads)."""
+    n = len(cell)
+    width = B.shape[2]
+    first = 1 if which & FULL else 0
+    chunks = (n + CHUNK - 1) // CHUNK
+    partial = np.zeros((chunks, B.shape[0], 3))
+    for c in numba.prange(chunks):
+        for k in range(c * CHUNK, min(n, (c + 1) * CHUNK)):
+            cl = cell[k]
+            if cl < 0:
+                continue
+            i, j = cl // width, cl % width
+            a, b = frac[k, 0], frac[k, 1]
+            for pick in range(2):
+                if pick == 0:
+                    if not which & FULL:
+                        continue
+                    m = 0
+                else:
+                    if not which & QUADRANTS or label[k] < 0:
+                        continue
+                    m = first + label[k]
+                Bm = B[m]
+                du = (1 - b) * (Bm[i, j + 1] - Bm[i, j]) + b * (Bm[i + 1, j + 1] - Bm[i + 1, j])
+                dv = (1 - a) * (Bm[i + 1, j] - Bm[i, j]) + a * (Bm[i + 1, j + 1] - Bm[i, j + 1])
+                for d in range(3):
+                    partial[c, m, d] += du * jac[k, d] + dv * jac[k, 3 + d]
+    total = np.zeros((B.shape[0], 3))
+    for c in range(chunks):
+        total += partial[c]
+    return total
+
+
 def blur(image: np.ndarray, sigma_px: float) -> np.ndarray:
     """Gaussian of sigma_px [px] with a zero border (a symmetric operator: its own transpose)."""
     if sigma_px <= 0:
         return image
-    k = 2 * int(np.ceil(3.0 * sigma_px)) + 1
+    k = 2 * _radius(sigma_px) + 1
     return cv2.GaussianBlur(image, (k, k), sigma_px, sigmaY=sigma_px, borderType=cv2.BORDER_CONSTANT)
 
 
+def _radius(sigma_px: float) -> int:
+    """The half-width [px] of blur's kernel (0: no smoothing)."""
+    return int(np.ceil(3.0 * sigma_px)) if sigma_px > 0 else 0
+
+
+def quadrant_labels(x: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """Each bearing's image quadrant about the optical axis (0: x > 0, y > 0; 1: x > 0, y < 0;
+    2: x < 0, y > 0; 3: x < 0, y < 0), -1 on an axis."""
+    label = (x < 0).astype(np.int8) * 2 + (y < 0).astype(np.int8)
+    label[(x == 0) | (y == 0)] = -1
+    return label
+
+
 class Contrast:
-    """The variance of the smoothed IWE of one window of events, and its gradient, per omega.
+    """The variance of the smoothed IWE of one window of events, and its gradient, per omega;
+    and the same of each image quadrant's events (`quadrants`).
+
+    Each evaluation warps every event once, in parallel (warp_events), votes them in event order
+    (vote), smooths and, for the gradient, gathers every event's share in parallel over fixed
+    chunks (gather): the same results on any number of threads.
 
     Args:
         xy: (N, 2) undistorted normalised coordinates of the events.
@@ -155,31 +295,84 @@ class Contrast:
         self.y = np.ascontiguousarray(xy[:, 1], dtype=np.float64)
         self.dt = np.ascontiguousarray(dt, dtype=np.float64)
         self.grid, self.sigma_px = grid, sigma_px
-        self._H = np.zeros((grid.height, grid.width))
+        n = len(self.x)
+        self.label = quadrant_labels(self.x, self.y)
+        self._cell = np.empty(n, np.int64)
+        self._frac = np.empty((n, 2))
+        self._jac = np.empty((n, 6))
+        self._images = {}
         self.evaluations = 0
         self.landed = 0
+
+    def _pass(self, omegas: np.ndarray, which: int, want_gradient: bool):
+        """(values (M,), gradients (M, 3) or None) of the images `which` names, each event
+        warped by omegas[0] or (several) its quadrant's omegas[label]."""
+        g = self.grid
+        M = (1 if which & FULL else 0) + (4 if which & QUADRANTS else 0)
+        if M not in self._images:
+            self._images[M] = np.empty((M, g.height, g.width))
+        images = self._images[M]
+        omegas = np.ascontiguousarray(omegas, dtype=np.float64).reshape(-1, 3)
+        warp_events(self.x, self.y, self.dt, self.label, omegas, g.fx, g.fy, g.cx, g.cy, g.width, g.height,
+                    want_gradient, self._cell, self._frac, self._jac)
+        self.landed, box = vote(self._cell, self._frac, self.label, images, which)
+        values = np.zeros(M)
+        B = np.empty_like(images) if want_gradient else None
+        n_px = g.height * g.width
+        r = 2 * _radius(self.sigma_px)
+        for m in range(M):
+            # the smoothed image is zero beyond the radius of the votes' box: smoothed there only
+            # (by twice the radius, so the second smoothing is exact over the box, where gather reads)
+            i0, i1, j0, j1 = box[m]
+            if i0 > i1:
+                if want_gradient:
+                    B[m] = 0.0
+                continue
+            rows = slice(max(0, i0 - r), min(g.height, i1 + 1 + r))
+            cols = slice(max(0, j0 - r), min(g.width, j1 + 1 + r))
+            image = blur(images[m, rows, cols], self.sigma_px)
+            mean = image.sum() / n_px
+            centred = image - mean
+            values[m] = (np.sum(centred * centred) + (n_px - centred.size) * mean * mean) / n_px
+            if want_gradient:
+                B[m, rows, cols] = blur(centred, self.sigma_px)
+        if not want_gradient:
+            return values, None
+        return values, 2.0 * gather(self._cell, self._frac, self._jac, self.label, B, which) / n_px
 
     def image(self, omega) -> np.ndarray:
         """The smoothed IWE at omega [rad/s] (height, width)."""
         g = self.grid
-        self.landed = accumulate(self.x, self.y, self.dt, np.asarray(omega, np.float64), g.fx, g.fy, g.cx, g.cy, self._H)
-        return blur(self._H, self.sigma_px)
+        omegas = np.asarray(omega, np.float64).reshape(1, 3)
+        warp_events(self.x, self.y, self.dt, self.label, omegas, g.fx, g.fy, g.cx, g.cy, g.width, g.height,
+                    False, self._cell, self._frac, self._jac)
+        H = np.empty((1, g.height, g.width))
+        self.landed = vote(self._cell, self._frac, self.label, H, FULL)[0]
+        return blur(H[0], self.sigma_px)
 
     def value(self, omega) -> float:
         """Var(IWE) at omega [rad/s] [votes^2 per px]."""
         self.evaluations += 1
-        return float(np.var(self.image(omega)))
+        return float(self._pass(omega, FULL, False)[0][0])
 
     def value_and_gradient(self, omega) -> tuple[float, np.ndarray]:
         """Var(IWE) and its gradient [votes^2 per px per rad/s] at omega [rad/s]."""
         self.evaluations += 1
-        omega = np.asarray(omega, np.float64)
-        image = self.image(omega)
-        mean = image.mean()
-        B = blur(image - mean, self.sigma_px)
-        g = self.grid
-        grad = gather_gradient(self.x, self.y, self.dt, omega, g.fx, g.fy, g.cx, g.cy, B)
-        return float(np.mean((image - mean) ** 2)), 2.0 * grad / image.size
+        values, grads = self._pass(omega, FULL, True)
+        return float(values[0]), grads[0]
+
+    def with_quadrants(self, omega) -> tuple[float, np.ndarray, np.ndarray, np.ndarray]:
+        """Var(IWE) and its gradient at omega [rad/s], and the same of each quadrant's events
+        alone (quadrant_labels), in one pass: (value, gradient (3,), values (4,), gradients (4, 3))."""
+        self.evaluations += 1
+        values, grads = self._pass(omega, FULL | QUADRANTS, True)
+        return float(values[0]), grads[0], values[1:], grads[1:]
+
+    def quadrants(self, omegas) -> tuple[np.ndarray, np.ndarray]:
+        """Each quadrant's Var(IWE) and gradient, its events warped by its own omegas[q] [rad/s]
+        (4, 3), in one pass: (values (4,), gradients (4, 3))."""
+        self.evaluations += 1
+        return self._pass(np.asarray(omegas, np.float64).reshape(4, 3), QUADRANTS, True)
 
 
 def variance_numpy(xy: np.ndarray, dt: np.ndarray, omega, grid: WarpGrid, sigma_px: float) -> float:
