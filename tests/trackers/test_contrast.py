@@ -1,11 +1,13 @@
 """The contrast-maximisation kernels: the compiled warp against scipy's rotations, the compiled
 objective against the plain numpy one, and the analytic gradient against finite differences."""
 
+import numba
 import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from eas_vo.trackers.contrast import Contrast, WarpGrid, accumulate, variance_numpy
+from eas_vo.trackers.contrast import (CHUNK, Contrast, WarpGrid, accumulate, blur, gather_gradient, quadrant_labels,
+                                      variance_numpy)
 
 
 def window(seed: int, n: int, width: int, height: int, focal: float, span_s: float = 0.02):
@@ -55,3 +57,57 @@ def test_the_gradient_is_the_derivative_of_the_objective(size, seed):
     h = 1e-5  # rad/s: ~2e-6 px, so few events cross a bilinear cell edge (where the derivative jumps)
     numeric = [(contrast.value(omega + h * e) - contrast.value(omega - h * e)) / (2 * h) for e in np.eye(3)]
     np.testing.assert_allclose(grad, numeric, rtol=2e-3, atol=1e-3 * np.abs(numeric).max())
+
+
+def serial_value_and_gradient(xy, dt, omega, grid, sigma_px):
+    """The objective and its gradient by the serial reference kernels (accumulate, gather_gradient)."""
+    x, y = np.ascontiguousarray(xy[:, 0]), np.ascontiguousarray(xy[:, 1])
+    H = np.zeros((grid.height, grid.width))
+    accumulate(x, y, dt, omega, grid.fx, grid.fy, grid.cx, grid.cy, H)
+    image = blur(H, sigma_px)
+    centred = image - image.mean()
+    B = blur(centred, sigma_px)
+    grad = gather_gradient(x, y, dt, omega, grid.fx, grid.fy, grid.cx, grid.cy, B)
+    return float(np.mean(centred**2)), 2.0 * grad / image.size
+
+
+@pytest.mark.parametrize("size", [(240, 180, 200.0), (346, 260, 226.0)])
+@pytest.mark.parametrize("sigma_px", [0.0, 1.0, 2.5])
+def test_the_parallel_kernels_equal_the_serial_ones_on_any_number_of_threads(size, sigma_px):
+    xy, dt, grid = window(4, 3 * CHUNK + 123, *size)  # several chunks, the last one partial
+    omega = np.radians([150.0, -420.0, 260.0])
+    expected = serial_value_and_gradient(xy, dt, omega, grid, sigma_px)
+    results = []
+    for threads in sorted({1, numba.config.NUMBA_NUM_THREADS}):
+        numba.set_num_threads(threads)
+        try:
+            results.append(Contrast(xy, dt, grid, sigma_px).value_and_gradient(omega))
+        finally:
+            numba.set_num_threads(numba.config.NUMBA_NUM_THREADS)
+    for value, grad in results:
+        assert value == pytest.approx(expected[0], rel=1e-12)
+        np.testing.assert_allclose(grad, expected[1], rtol=1e-10, atol=1e-14 * np.abs(expected[1]).max())
+    assert all(v == results[0][0] and np.array_equal(g, results[0][1]) for v, g in results)  # bit for bit
+
+
+def test_one_pass_gives_the_window_and_each_quadrant_as_if_alone():
+    xy, dt, grid = window(5, 20000, 240, 180, 200.0)
+    xy[:40, 0] = 0.0  # on an axis: in the window, in no quadrant
+    contrast = Contrast(xy, dt, grid, 1.0)
+    label = quadrant_labels(contrast.x, contrast.y)
+    assert np.all(label[:40] == -1) and {0, 1, 2, 3} <= set(np.unique(label[40:]).tolist())
+    omega = np.radians([40.0, -250.0, 120.0])
+    value, grad, values, grads = contrast.with_quadrants(omega)
+    whole_value, whole_grad = contrast.value_and_gradient(omega)
+    assert value == pytest.approx(whole_value, rel=1e-12)
+    np.testing.assert_allclose(grad, whole_grad, rtol=1e-10, atol=1e-14)
+    omegas = omega + np.radians([[0.0, 0.0, 0.0], [30.0, 0.0, 0.0], [0.0, -60.0, 10.0], [5.0, 5.0, -90.0]])
+    alone_values, alone_grads = contrast.quadrants(omegas)
+    for q in range(4):
+        part = Contrast(xy[label == q], dt[label == q], grid, 1.0)
+        v, g = part.value_and_gradient(omega)
+        assert values[q] == pytest.approx(v, rel=1e-12)
+        np.testing.assert_allclose(grads[q], g, rtol=1e-10, atol=1e-14)
+        v, g = part.value_and_gradient(omegas[q])
+        assert alone_values[q] == pytest.approx(v, rel=1e-12)
+        np.testing.assert_allclose(alone_grads[q], g, rtol=1e-10, atol=1e-14)
