@@ -137,33 +137,103 @@ CHUNK = 4096
 FULL, QUADRANTS = 1, 2
 
 
+@numba.njit(cache=True, error_model="numpy", inline="always")
+def _series_warp(x, y, dt, w0, w1, w2, fx, fy, cx, cy):
+    """_warp's series branch (|omega dt| < 0.3 rad) without branches, so that a loop of it is
+    vectorised: (u, v, q2, d(u)/domega (3), d(v)/domega (3)); the same arithmetic as _warp."""
+    p0, p1, p2 = w0 * dt, w1 * dt, w2 * dt
+    t2 = p0 * p0 + p1 * p1 + p2 * p2
+    s_ = 1.0 - t2 / 6.0 * (1.0 - t2 / 20.0 * (1.0 - t2 / 42.0))
+    a_ = 0.5 - t2 / 24.0 * (1.0 - t2 / 30.0 * (1.0 - t2 / 56.0))
+    c_ = 1.0 / 6.0 - t2 / 120.0 * (1.0 - t2 / 42.0 * (1.0 - t2 / 72.0))
+    cx0 = p1 * 1.0 - p2 * y
+    cx1 = p2 * x - p0 * 1.0
+    cx2 = p0 * y - p1 * x
+    dd0 = p1 * cx2 - p2 * cx1
+    dd1 = p2 * cx0 - p0 * cx2
+    dd2 = p0 * cx1 - p1 * cx0
+    q0 = x + s_ * cx0 + a_ * dd0
+    q1 = y + s_ * cx1 + a_ * dd1
+    q2 = 1.0 + s_ * cx2 + a_ * dd2
+    iz = 1.0 / q2
+    d = 1.0 - c_ * t2
+    # row u: r = fx iz (1, 0, -q0 iz), w = q x r
+    r0, r2 = fx * iz, -fx * q0 * iz * iz
+    wa, wb, wc = q1 * r2, q2 * r0 - q0 * r2, -q1 * r0
+    wp = c_ * (wa * p0 + wb * p1 + wc * p2)
+    ju0 = dt * (d * wa + a_ * (wb * p2 - wc * p1) + wp * p0)
+    ju1 = dt * (d * wb + a_ * (wc * p0 - wa * p2) + wp * p1)
+    ju2 = dt * (d * wc + a_ * (wa * p1 - wb * p0) + wp * p2)
+    # row v: r = fy iz (0, 1, -q1 iz)
+    r1, r2 = fy * iz, -fy * q1 * iz * iz
+    wa, wb, wc = q1 * r2 - q2 * r1, -q0 * r2, q0 * r1
+    wp = c_ * (wa * p0 + wb * p1 + wc * p2)
+    jv0 = dt * (d * wa + a_ * (wb * p2 - wc * p1) + wp * p0)
+    jv1 = dt * (d * wb + a_ * (wc * p0 - wa * p2) + wp * p1)
+    jv2 = dt * (d * wc + a_ * (wa * p1 - wb * p0) + wp * p2)
+    return fx * q0 * iz + cx, fy * q1 * iz + cy, q2, ju0, ju1, ju2, jv0, jv1, jv2
+
+
+@numba.njit(cache=True, error_model="numpy")
+def _series_one(x, y, dt, w0, w1, w2, fx, fy, cx, cy, U, V, Z, J0, J1, J2, J3, J4, J5):
+    """_series_warp of every event by one omega into U, V, Z (u, v, q2) and J0..J5 (d(u, v)/domega).
+    (A loop over range(len(x)): LLVM vectorises it, not one over range(lo, hi).)"""
+    for k in range(len(x)):
+        U[k], V[k], Z[k], J0[k], J1[k], J2[k], J3[k], J4[k], J5[k] = _series_warp(x[k], y[k], dt[k], w0, w1, w2,
+                                                                                  fx, fy, cx, cy)
+
+
+@numba.njit(cache=True, error_model="numpy")
+def _series_each(x, y, dt, W0, W1, W2, fx, fy, cx, cy, U, V, Z, J0, J1, J2, J3, J4, J5):
+    """The same, each event by its own omega (W0[k], W1[k], W2[k])."""
+    for k in range(len(x)):
+        U[k], V[k], Z[k], J0[k], J1[k], J2[k], J3[k], J4[k], J5[k] = _series_warp(x[k], y[k], dt[k], W0[k], W1[k],
+                                                                                  W2[k], fx, fy, cx, cy)
+
+
 @numba.njit(cache=True, parallel=True)
-def warp_events(x, y, dt, label, omegas, fx, fy, cx, cy, width, height, want_jac, cell, frac, jac):
-    """Every event warped by its own omega (omegas[max(label, 0)]; label < 0 and several omegas:
-    skipped), in parallel: cell[k] = i * width + j of the bilinear cell it lands in (-1: it does
-    not), frac[k] = its offsets (a, b) in the cell, with `want_jac` jac[k] = d(u, v)/domega (6,)."""
+def warp_events(x, y, dt, label, index, omegas, fx, fy, cx, cy, width, height, uvz, cell, frac, jac):
+    """Every event warped by its own omega (omegas[index[k]], index = max(label, 0); label < 0 and
+    several omegas: skipped), in parallel over fixed chunks: cell[k] = i * width + j of the bilinear cell it lands
+    in (-1: it does not), frac[:, k] = its offsets (a, b) in the cell, jac[:, k] = d(u, v)/domega
+    (6,); uvz (6, N) is scratch. The series (_series_warp) first, vectorised, then _warp's closed
+    forms where |omega dt| >= 0.3 rad: the same values as _warp."""
     n = len(x)
     several = omegas.shape[0] > 1
     for c in numba.prange((n + CHUNK - 1) // CHUNK):
+        lo, hi = c * CHUNK, min(n, (c + 1) * CHUNK)
+        if several:
+            for k in range(lo, hi):
+                for m in range(3):
+                    uvz[3 + m, k] = omegas[index[k], m]
+            _series_each(x[lo:hi], y[lo:hi], dt[lo:hi], uvz[3, lo:hi], uvz[4, lo:hi], uvz[5, lo:hi], fx, fy, cx, cy,
+                         uvz[0, lo:hi], uvz[1, lo:hi], uvz[2, lo:hi], jac[0, lo:hi], jac[1, lo:hi], jac[2, lo:hi],
+                         jac[3, lo:hi], jac[4, lo:hi], jac[5, lo:hi])
+        else:
+            _series_one(x[lo:hi], y[lo:hi], dt[lo:hi], omegas[0, 0], omegas[0, 1], omegas[0, 2], fx, fy, cx, cy,
+                        uvz[0, lo:hi], uvz[1, lo:hi], uvz[2, lo:hi], jac[0, lo:hi], jac[1, lo:hi], jac[2, lo:hi],
+                        jac[3, lo:hi], jac[4, lo:hi], jac[5, lo:hi])
         J = np.empty((2, 3))
-        for k in range(c * CHUNK, min(n, (c + 1) * CHUNK)):
-            q = label[k]
-            if several and q < 0:
+        for k in range(lo, hi):
+            if several and label[k] < 0:
                 cell[k] = -1
                 continue
-            r = q if several else 0
-            u, v, ok = _warp(x[k], y[k], dt[k], omegas[r, 0], omegas[r, 1], omegas[r, 2], fx, fy, cx, cy, J, want_jac)
+            r = label[k] if several else 0
+            w0, w1, w2 = omegas[r, 0] * dt[k], omegas[r, 1] * dt[k], omegas[r, 2] * dt[k]
+            if w0 * w0 + w1 * w1 + w2 * w2 >= 0.09:  # beyond the series
+                u, v, ok = _warp(x[k], y[k], dt[k], omegas[r, 0], omegas[r, 1], omegas[r, 2], fx, fy, cx, cy, J, True)
+                for m in range(3):
+                    jac[m, k] = J[0, m]
+                    jac[3 + m, k] = J[1, m]
+            else:
+                u, v, ok = uvz[0, k], uvz[1, k], uvz[2, k] > 1e-6
             if not ok or not (0.0 <= u < width - 1) or not (0.0 <= v < height - 1):
                 cell[k] = -1
                 continue
             i, j = int(v), int(u)
             cell[k] = i * width + j
-            frac[k, 0] = u - j
-            frac[k, 1] = v - i
-            if want_jac:
-                for m in range(3):
-                    jac[k, m] = J[0, m]
-                    jac[k, 3 + m] = J[1, m]
+            frac[0, k] = u - j
+            frac[1, k] = v - i
 
 
 @numba.njit(cache=True)
@@ -184,7 +254,7 @@ def vote(cell, frac, label, images, which):
         if c < 0:
             continue
         i, j = c // width, c % width
-        a, b = frac[k, 0], frac[k, 1]
+        a, b = frac[0, k], frac[1, k]
         w00, w01, w10, w11 = (1 - a) * (1 - b), a * (1 - b), (1 - a) * b, a * b
         landed += 1
         if which & FULL:
@@ -233,7 +303,7 @@ def gather(cell, frac, jac, label, B, which):
             if cl < 0:
                 continue
             i, j = cl // width, cl % width
-            a, b = frac[k, 0], frac[k, 1]
+            a, b = frac[0, k], frac[1, k]
             for pick in range(2):
                 if pick == 0:
                     if not which & FULL:
@@ -247,7 +317,7 @@ def gather(cell, frac, jac, label, B, which):
                 du = (1 - b) * (Bm[i, j + 1] - Bm[i, j]) + b * (Bm[i + 1, j + 1] - Bm[i + 1, j])
                 dv = (1 - a) * (Bm[i + 1, j] - Bm[i, j]) + a * (Bm[i + 1, j + 1] - Bm[i, j + 1])
                 for d in range(3):
-                    partial[c, m, d] += du * jac[k, d] + dv * jac[k, 3 + d]
+                    partial[c, m, d] += du * jac[d, k] + dv * jac[3 + d, k]
     total = np.zeros((B.shape[0], 3))
     for c in range(chunks):
         total += partial[c]
@@ -297,9 +367,11 @@ class Contrast:
         self.grid, self.sigma_px = grid, sigma_px
         n = len(self.x)
         self.label = quadrant_labels(self.x, self.y)
+        self._index = np.maximum(self.label, 0).astype(np.intp)
         self._cell = np.empty(n, np.int64)
-        self._frac = np.empty((n, 2))
-        self._jac = np.empty((n, 6))
+        self._uvz = np.empty((6, n))
+        self._frac = np.empty((2, n))
+        self._jac = np.empty((6, n))
         self._images = {}
         self.evaluations = 0
         self.landed = 0
@@ -313,8 +385,8 @@ class Contrast:
             self._images[M] = np.empty((M, g.height, g.width))
         images = self._images[M]
         omegas = np.ascontiguousarray(omegas, dtype=np.float64).reshape(-1, 3)
-        warp_events(self.x, self.y, self.dt, self.label, omegas, g.fx, g.fy, g.cx, g.cy, g.width, g.height,
-                    want_gradient, self._cell, self._frac, self._jac)
+        warp_events(self.x, self.y, self.dt, self.label, self._index, omegas, g.fx, g.fy, g.cx, g.cy, g.width, g.height,
+                    self._uvz, self._cell, self._frac, self._jac)
         self.landed, box = vote(self._cell, self._frac, self.label, images, which)
         values = np.zeros(M)
         B = np.empty_like(images) if want_gradient else None
@@ -344,8 +416,8 @@ class Contrast:
         """The smoothed IWE at omega [rad/s] (height, width)."""
         g = self.grid
         omegas = np.asarray(omega, np.float64).reshape(1, 3)
-        warp_events(self.x, self.y, self.dt, self.label, omegas, g.fx, g.fy, g.cx, g.cy, g.width, g.height,
-                    False, self._cell, self._frac, self._jac)
+        warp_events(self.x, self.y, self.dt, self.label, self._index, omegas, g.fx, g.fy, g.cx, g.cy, g.width, g.height,
+                    self._uvz, self._cell, self._frac, self._jac)
         H = np.empty((1, g.height, g.width))
         self.landed = vote(self._cell, self._frac, self.label, H, FULL)[0]
         return blur(H[0], self.sigma_px)
