@@ -51,8 +51,9 @@ def stage_times(cfg) -> dict:
 
 def contrast_evaluations(cfg, repeat: int) -> None:
     """cmax's objective on one window of the dataset (tracker.window_events events from its
-    middle): evaluations per second of the compiled kernel (value; value and gradient) beside
-    the plain numpy version of the same value (trackers.contrast.variance_numpy)."""
+    middle): evaluations per second of the compiled kernel (value; value and gradient; the
+    same with the four quadrants' images, as at the optimum) beside the plain numpy version of
+    the same value (trackers.contrast.variance_numpy)."""
     from eas_vo.trackers.cmax import CmaxTracker
     from eas_vo.trackers.contrast import Contrast, variance_numpy
 
@@ -68,6 +69,7 @@ def contrast_evaluations(cfg, repeat: int) -> None:
     contrast.value_and_gradient(omega)  # compiled outside the timing
     rows = (("numba value", lambda: contrast.value(omega), 50),
             ("numba value+gradient", lambda: contrast.value_and_gradient(omega), 50),
+            ("numba + quadrants", lambda: contrast.with_quadrants(omega), 50),
             ("numpy value", lambda: variance_numpy(xy, dt, omega, tracker._grid, cfg.tracker.sigma_px), 5))
     print(f"cmax objective on {len(window):,} events ({dataset.camera.width}x{dataset.camera.height}):")
     for label, fn, count in rows:

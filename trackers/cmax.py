@@ -13,7 +13,6 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-import numba
 import numpy as np
 
 from eas_vo.geometry.rotations import rotvec_to_matrix
@@ -57,10 +56,6 @@ NEWTON_EVALS = 20
 QUADRANT_TOL_PX = 0.05
 QUADRANT_EVALS = 2
 HOT_PIXEL_MIN_EVENTS = 8
-#: The kernels' threads by default: one. On a 2-core machine that other processes kept busy, two
-#: made a run 5-8 times slower than one (each parallel pass waits for a thread the system is
-#: not running); docs/speed.md has a quiet machine's figures.
-THREADS = 1
 
 
 @dataclass(frozen=True)
@@ -88,8 +83,6 @@ class CmaxConfig:
             better than no motion), `previous` (never the gyro), `search` (the coarse search
             and no motion, always).
         max_rate_deg_s: the coarse search covers |omega| per axis up to this [deg/s].
-        threads: threads of the compiled kernels (0: every core numba sees). The results are
-            the same on any number: the kernels add their partial sums in a fixed order.
     """
 
     window_events: int = 40000
@@ -102,7 +95,6 @@ class CmaxConfig:
     max_residual_px: float = 1.5
     init: str = "auto"
     max_rate_deg_s: float = 1500.0
-    threads: int = THREADS
 
     def validate(self) -> None:
         check_range(self, "window_events", 100, 10_000_000)
@@ -115,7 +107,6 @@ class CmaxConfig:
         check_range(self, "max_residual_px", 0.0, 1e6, lo_open=True)
         check_choice(self, "init", INITS)
         check_range(self, "max_rate_deg_s", 1.0, 100_000.0)
-        check_range(self, "threads", 0, 1024)
 
 
 @dataclass(frozen=True)
@@ -221,14 +212,6 @@ class CmaxTracker(Tracker):
 
     def measure(self, events: np.ndarray, t0: float, t1: float) -> Window:
         """The angular velocity of one window of events standing for [t0, t1] [s]."""
-        before = numba.get_num_threads()
-        numba.set_num_threads(min(self.config.threads or numba.config.NUMBA_NUM_THREADS, numba.config.NUMBA_NUM_THREADS))
-        try:
-            return self._measure(events, t0, t1)
-        finally:
-            numba.set_num_threads(before)
-
-    def _measure(self, events: np.ndarray, t0: float, t1: float) -> Window:
         c = self.config
         n = len(events)
         if n < c.min_events:
@@ -263,7 +246,8 @@ class CmaxTracker(Tracker):
         centre = contrast.with_quadrants(omega)
         around = [contrast.with_quadrants((p + sign * FOCUS_STEP_PX * e) / scale)
                   for e in np.eye(3) for sign in (1.0, -1.0)]
-        H = np.column_stack([(around[2 * i][1] - around[2 * i + 1][1]) for i in range(3)]) / (-2 * FOCUS_STEP_PX * v0 * scale)
+        H = np.column_stack([around[2 * i][1] - around[2 * i + 1][1] for i in range(3)])
+        H /= -2 * FOCUS_STEP_PX * v0 * scale
         H = 0.5 * (H + H.T)
         sigma = _curvature_sigma(H)
         self._metric = H if np.isfinite(sigma) else None

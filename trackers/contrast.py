@@ -22,6 +22,8 @@ import cv2
 import numba
 import numpy as np
 
+from eas_vo import concurrency
+
 
 @dataclass(frozen=True)
 class WarpGrid:
@@ -129,9 +131,14 @@ def gather_gradient(x, y, dt, omega, fx, fy, cx, cy, B):
     return g
 
 
-#: Events per chunk of the parallel kernels: their partial sums are added in chunk order, so a
-#: result does not depend on how many threads ran them.
+#: Events per chunk of the kernels split across threads: the chunks' partial sums are added in
+#: chunk order, so a result does not depend on how many threads ran them.
 CHUNK = 4096
+#: A thread takes at least this many chunks: a window of under 2 * MIN_CHUNKS * CHUNK events
+#: runs on one. Handing half of a 40 000-event window's warp and gather to a second thread cost
+#: 10-20 % per evaluation on a 2-core machine with other work on it (a 160 000-event window's
+#: split neither gained nor lost there).
+MIN_CHUNKS = 8
 #: The images a pass can vote into: the whole window's, then its four quadrants' (about the
 #: optical axis: x > 0, y > 0; x > 0, y < 0; x < 0, y > 0; x < 0, y < 0).
 FULL, QUADRANTS = 1, 2
@@ -191,16 +198,24 @@ def _series_each(x, y, dt, W0, W1, W2, fx, fy, cx, cy, U, V, Z, J0, J1, J2, J3, 
                                                                                   W2[k], fx, fy, cx, cy)
 
 
-@numba.njit(cache=True, parallel=True)
-def warp_events(x, y, dt, label, index, omegas, fx, fy, cx, cy, width, height, uvz, cell, frac, jac):
+def warp_events(x, y, dt, label, index, omegas, fx, fy, cx, cy, width, height, uvz, cell, frac, jac) -> None:
     """Every event warped by its own omega (omegas[index[k]], index = max(label, 0); label < 0 and
-    several omegas: skipped), in parallel over fixed chunks: cell[k] = i * width + j of the bilinear cell it lands
-    in (-1: it does not), frac[:, k] = its offsets (a, b) in the cell, jac[:, k] = d(u, v)/domega
-    (6,); uvz (6, N) is scratch. The series (_series_warp) first, vectorised, then _warp's closed
-    forms where |omega dt| >= 0.3 rad: the same values as _warp."""
+    several omegas: skipped): cell[k] = i * width + j of the bilinear cell it lands in (-1: it
+    does not), frac[:, k] = its offsets (a, b) in the cell, jac[:, k] = d(u, v)/domega (6,); uvz
+    (6, N) is scratch. The series (_series_warp) first, vectorised, then _warp's closed forms
+    where |omega dt| >= 0.3 rad: the same values as _warp. Chunks of CHUNK events split across
+    eas_vo.concurrency's threads (the kernel releases the GIL)."""
+    chunks = (len(x) + CHUNK - 1) // CHUNK
+    concurrency.split(lambda c0, c1: _warp_chunks(c0, c1, x, y, dt, label, index, omegas, fx, fy, cx, cy, width, height,
+                                                  uvz, cell, frac, jac), chunks, MIN_CHUNKS)
+
+
+@numba.njit(cache=True, nogil=True)
+def _warp_chunks(c0, c1, x, y, dt, label, index, omegas, fx, fy, cx, cy, width, height, uvz, cell, frac, jac):
+    """warp_events over the events of chunks c0..c1-1."""
     n = len(x)
     several = omegas.shape[0] > 1
-    for c in numba.prange((n + CHUNK - 1) // CHUNK):
+    for c in range(c0, c1):
         lo, hi = c * CHUNK, min(n, (c + 1) * CHUNK)
         if several:
             for k in range(lo, hi):
@@ -287,17 +302,34 @@ def _grow(box, m, i, j):
         box[m, 3] = j + 1
 
 
-@numba.njit(cache=True, parallel=True)
-def gather(cell, frac, jac, label, B, which):
+def gather(cell, frac, jac, label, B, which) -> np.ndarray:
     """The gradient sums of gather_gradient over the warped events, per image of `vote` (M, 3):
-    sum_k grad(B_m read bilinearly)(x'_k) . dx'_k/domega, in parallel over fixed chunks of
-    events whose partial sums are added in chunk order (the same result on any number of threads)."""
+    sum_k grad(B_m read bilinearly)(x'_k) . dx'_k/domega; each chunk of CHUNK events summed on
+    its own (chunks split across eas_vo.concurrency's threads), the chunks' sums added in order:
+    the same result on any number of threads."""
+    chunks = (len(cell) + CHUNK - 1) // CHUNK
+    partial = np.zeros((chunks, B.shape[0], 3))
+    concurrency.split(lambda c0, c1: _gather_chunks(c0, c1, cell, frac, jac, label, B, which, partial), chunks,
+                      MIN_CHUNKS)
+    return _in_order(partial)
+
+
+@numba.njit(cache=True)
+def _in_order(partial):
+    """partial[0] + partial[1] + ... in that order."""
+    total = np.zeros(partial.shape[1:])
+    for c in range(partial.shape[0]):
+        total += partial[c]
+    return total
+
+
+@numba.njit(cache=True, nogil=True)
+def _gather_chunks(c0, c1, cell, frac, jac, label, B, which, partial):
+    """gather's sums of chunks c0..c1-1 into partial[c0:c1]."""
     n = len(cell)
     width = B.shape[2]
     first = 1 if which & FULL else 0
-    chunks = (n + CHUNK - 1) // CHUNK
-    partial = np.zeros((chunks, B.shape[0], 3))
-    for c in numba.prange(chunks):
+    for c in range(c0, c1):
         for k in range(c * CHUNK, min(n, (c + 1) * CHUNK)):
             cl = cell[k]
             if cl < 0:
@@ -318,10 +350,6 @@ def gather(cell, frac, jac, label, B, which):
                 dv = (1 - a) * (Bm[i + 1, j] - Bm[i, j]) + a * (Bm[i + 1, j + 1] - Bm[i, j + 1])
                 for d in range(3):
                     partial[c, m, d] += du * jac[d, k] + dv * jac[3 + d, k]
-    total = np.zeros((B.shape[0], 3))
-    for c in range(chunks):
-        total += partial[c]
-    return total
 
 
 def blur(image: np.ndarray, sigma_px: float) -> np.ndarray:
@@ -349,9 +377,10 @@ class Contrast:
     """The variance of the smoothed IWE of one window of events, and its gradient, per omega;
     and the same of each image quadrant's events (`quadrants`).
 
-    Each evaluation warps every event once, in parallel (warp_events), votes them in event order
-    (vote), smooths and, for the gradient, gathers every event's share in parallel over fixed
-    chunks (gather): the same results on any number of threads.
+    Each evaluation warps every event once (warp_events), votes them in event order (vote),
+    smooths and, for the gradient, gathers every event's share (gather); the warp and the
+    gather split fixed chunks of events across eas_vo.concurrency's threads: the same results
+    on any number of threads.
 
     Args:
         xy: (N, 2) undistorted normalised coordinates of the events.

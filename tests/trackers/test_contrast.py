@@ -1,13 +1,13 @@
 """The contrast-maximisation kernels: the compiled warp against scipy's rotations, the compiled
 objective against the plain numpy one, and the analytic gradient against finite differences."""
 
-import numba
 import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from eas_vo.trackers.contrast import (CHUNK, Contrast, WarpGrid, accumulate, blur, gather_gradient, quadrant_labels,
-                                      variance_numpy)
+from eas_vo import concurrency
+from eas_vo.trackers.contrast import (CHUNK, MIN_CHUNKS, Contrast, WarpGrid, accumulate, blur, gather_gradient,
+                                      quadrant_labels, variance_numpy)
 
 
 def window(seed: int, n: int, width: int, height: int, focal: float, span_s: float = 0.02):
@@ -74,16 +74,17 @@ def serial_value_and_gradient(xy, dt, omega, grid, sigma_px):
 @pytest.mark.parametrize("size", [(240, 180, 200.0), (346, 260, 226.0)])
 @pytest.mark.parametrize("sigma_px", [0.0, 1.0, 2.5])
 def test_the_parallel_kernels_equal_the_serial_ones_on_any_number_of_threads(size, sigma_px):
-    xy, dt, grid = window(4, 3 * CHUNK + 123, *size)  # several chunks, the last one partial
+    xy, dt, grid = window(4, 3 * MIN_CHUNKS * CHUNK + 123, *size)  # 3 threads' parts, the last chunk partial
     omega = np.radians([150.0, -420.0, 260.0])
     expected = serial_value_and_gradient(xy, dt, omega, grid, sigma_px)
     results = []
-    for threads in sorted({1, numba.config.NUMBA_NUM_THREADS}):
-        numba.set_num_threads(threads)
+    before = concurrency.threads()
+    for threads in (1, 2, 3):  # 3: parts of unequal length
+        concurrency.set_threads(threads)
         try:
             results.append(Contrast(xy, dt, grid, sigma_px).value_and_gradient(omega))
         finally:
-            numba.set_num_threads(numba.config.NUMBA_NUM_THREADS)
+            concurrency.set_threads(before)
     for value, grad in results:
         assert value == pytest.approx(expected[0], rel=1e-12)
         np.testing.assert_allclose(grad, expected[1], rtol=1e-10, atol=1e-14 * np.abs(expected[1]).max())
