@@ -20,7 +20,7 @@ from eas_vo.datasets.simulator.motion import ConstantMotion
 from eas_vo.datasets.simulator.sensor import DvsModel
 from eas_vo.errors import ConfigError
 from eas_vo.geometry.rotations import geodesic_angle, rotvec_to_matrix
-from eas_vo.trackers.cmax import CmaxConfig, CmaxTracker
+from eas_vo.trackers.cmax import CmaxConfig, CmaxTracker, _newton
 from eas_vo import config as config_module
 from eas_vo.types import Sample
 
@@ -108,3 +108,26 @@ def test_bad_settings_are_one_line_errors():
         config_module.resolve(None, {"tracker": "cmax"}, ["tracker.lost_focus=1.2", "tracker.weak_focus=1.1"])
     with pytest.raises(ConfigError, match="init"):
         config_module.resolve(None, {"tracker": "cmax"}, ["tracker.init=gyro"])
+
+
+@pytest.mark.parametrize("metric_scale", [(1.0, 1.0, 1.0), (0.6, 1.5, 1.0), (1.5, 0.6, 1.4)])
+def test_newton_finds_the_peak_in_a_metric_half_wrong_in_a_few_evaluations(metric_scale):
+    """The metric is the previous window's curvature: on synthetic:default it differs from the
+    window's own by 3-48 %."""
+    rng = np.random.default_rng(3)
+    Q, _ = np.linalg.qr(rng.normal(size=(3, 3)))
+    H = (Q * np.array([0.005, 0.03, 0.1])) @ Q.T  # synthetic:default's range of curvatures [per px^2]
+    top = np.array([1.2, -0.8, 0.5])  # px from the start: the gyro's start is 0.1-1.8 px off there
+    costs = []
+
+    def cost(p):
+        d = p - top
+        costs.append(0.5 * d @ H @ d + 0.001 * np.sum(d**4))
+        return costs[-1], H @ d + 0.004 * d**3
+
+    metric = (Q * (np.array([0.005, 0.03, 0.1]) * metric_scale)) @ Q.T
+    p, f = _newton(cost, np.zeros(3), metric)
+    assert np.linalg.norm(p - top) < 0.05
+    assert f == min(costs) and len(costs) <= 12  # the lowest point it evaluated
+    p, f = _newton(cost, np.zeros(3), None)  # the curvature measured at the start
+    assert np.linalg.norm(p - top) < 0.05
