@@ -140,6 +140,13 @@ def test_the_readme_plugin_is_the_package_the_tests_install():
     assert pyproject[0] == (PLUGIN_PACKAGE / "pyproject.toml").read_text()
 
 
+def test_the_plugin_guides_event_tracker_is_the_package_the_tests_install():
+    """docs/plugins.md's event-reading tracker, character for character, is tests/plugin_example's."""
+    page = (REPOSITORY / "docs" / "plugins.md").read_text()
+    module = [b for b in code_blocks(page, "python") if "needs_events = True" in b]
+    assert module == [(PLUGIN_PACKAGE / "eas_vo_evflow.py").read_text()]
+
+
 def comparable(summary: str) -> str:
     """A summary line without what varies between machines and runs: speed and folder."""
     return re.sub(r", [0-9.]+ frames/s -> \S+$", "", summary.strip())

@@ -2,6 +2,8 @@
 (extracted from docs/plugins.md at test time) and a pip-installed plugin package, each run
 through the CLI in a subprocess with nothing installed globally."""
 
+import csv
+import json
 import os
 import re
 import subprocess
@@ -30,8 +32,9 @@ def test_list_shows_every_plugin_with_description_and_keys(capsys):
 
 
 def readme_plugin_guide() -> tuple[str, dict]:
-    """The plugin guide (docs/plugins.md): its Python blocks joined into one module, and its TOML block."""
-    section = (REPOSITORY / "docs" / "plugins.md").read_text()
+    """The plugin guide (docs/plugins.md, before its first section): its Python blocks joined
+    into one module, and its TOML block."""
+    section = (REPOSITORY / "docs" / "plugins.md").read_text().split("\n## ")[0]
     python = re.findall(r"```python\n(.*?)```", section, re.S)
     toml = re.findall(r"```toml\n(.*?)```", section, re.S)
     assert len(python) == 4 and len(toml) == 1, "the plugin guide holds one example per kind and their registration"
@@ -104,8 +107,19 @@ def plugin_site(tmp_path_factory):
     return target
 
 
+def with_site(folder) -> dict:
+    """The environment with `folder` first on PYTHONPATH."""
+    return dict(os.environ, PYTHONPATH=os.pathsep.join(filter(None, [str(folder), os.environ.get("PYTHONPATH")])))
+
+
+def still_ape_rad(run_folder) -> float:
+    """The average APE of a camera that never turns: the ground truth's mean angle from its first frame."""
+    q = np.loadtxt(run_folder / "groundtruth.tum")[:, 4:8]
+    return float(np.mean(2 * np.arccos(np.clip(np.abs(q @ q[0]), 0.0, 1.0))))
+
+
 def test_a_pip_installed_plugin_runs_through_the_cli(plugin_site, short_sequence, tmp_path):
-    env = dict(os.environ, PYTHONPATH=os.pathsep.join(filter(None, [str(plugin_site), os.environ.get("PYTHONPATH")])))
+    env = with_site(plugin_site)
     listing = run_eas_vo("list", env=env)
     assert "edges      Canny edges of the equalised frame (an example plugin)" in listing.stdout
     assert "config: low=50 high=150" in listing.stdout
@@ -114,3 +128,20 @@ def test_a_pip_installed_plugin_runs_through_the_cli(plugin_site, short_sequence
     assert run.returncode == 0, run.stderr
     assert "edges+klt+chain" in run.stdout and (out / "metrics.json").exists()
     assert "high = 120" in (out / "config.toml").read_text()
+
+
+def test_a_pip_installed_event_tracker_follows_the_camera(plugin_site, short_sequence, tmp_path):
+    """The package's tracker reads each sample's events (no image, no frontend) and its chained
+    rotations follow the camera: far closer to the ground truth than a camera kept still."""
+    env = with_site(plugin_site)
+    listing = run_eas_vo("list", env=env)
+    assert "evflow     pan and tilt from the flow between consecutive event images (an example plugin)" in listing.stdout
+    out = tmp_path / "evflow"
+    run = run_eas_vo("run", "--dataset", str(short_sequence), "--tracker", "evflow", "--out", str(out), env=env)
+    assert run.returncode == 0, run.stderr
+    assert "no_image+evflow+chain" in run.stdout
+    with open(out / "frames.csv", newline="") as f:
+        frames = list(csv.DictReader(f))
+    assert [r["status"] for r in frames] == ["first"] + ["ok"] * (len(frames) - 1)
+    assert min(int(r["events"]) for r in frames[1:]) >= 1000
+    assert json.loads((out / "metrics.json").read_text())["ape_mean_rad"] < 0.5 * still_ape_rad(out)
