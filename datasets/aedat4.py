@@ -242,13 +242,13 @@ class Aedat4Dataset(RecordingReader):
         width, height = self.camera.width, self.camera.height
 
         def checked(k):
-            """Packet k decoded, checked on its own and packed (on a worker thread: lz4, zstd
-            and the check kernel release the GIL): (records, packed, first bad row or -1,
-            its last time [s], its earliest tick [us])."""
+            """Packet k decoded, checked on its own and packed (on a worker thread: cramjam's
+            decoders and the check kernel release the GIL): (records, packed, first bad row or
+            -1, its last time [s], its earliest tick [us])."""
             records = packets.decode(k)
             packed = np.empty(len(records), EVENT_DTYPE)
             bad, last_t = check_and_pack(records["t"], 1e6, records["x"], records["y"], records["p"], -np.inf,
-                                         width, height, c.time_tolerance_s, packed.view(np.uint8))
+                                         width, height, c.time_tolerance_s, packed)
             return records, packed, bad, last_t, (records["t"].min() if len(records) else 0)
 
         def fill(out, warnings):

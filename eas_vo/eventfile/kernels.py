@@ -10,6 +10,8 @@ import numba
 import numpy as np
 
 POW10 = 10.0 ** np.arange(19)
+#: Rows a table kernel checks at once: the block's rows stay in the L1 cache between its two passes.
+TABLE_CHUNK_ROWS = 1024
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
@@ -130,23 +132,40 @@ def parse_and_pack(buf, pow10, width, height, tolerance_s, last_t, out):
 
 
 @numba.njit(cache=True, nogil=True)
-def check_and_pack(ticks, per_second, x, y, p, last_t, width, height, tolerance_s, out):
-    """Validate parsed rows and pack them into the bytes `out`; row i's time [s] is
-    ticks[i] / per_second (per_second 1: seconds already; integer microseconds or nanoseconds
-    divided as numpy divides them). Returns (index of the first row with any problem or -1,
-    the last timestamp); rows before a problem are packed."""
-    scratch = np.empty(1, np.float64)
-    for i in range(len(ticks)):
-        ok, ti = _accept(ticks[i] / per_second, x[i], y[i], p[i], last_t, width, height, tolerance_s)
-        if not ok:
-            return i, last_t
-        last_t = ti
-        _pack(out, i, ti, x[i], y[i], p[i], scratch)
+def check_and_pack(ticks, per_second, x, y, p, last_t, width, height, tolerance_s, events):
+    """Validate parsed rows and pack them into the EVENT_DTYPE records `events`; row i's time
+    [s] is ticks[i] / per_second (per_second 1: seconds already; integer microseconds or
+    nanoseconds divided as numpy divides them). Returns (index of the first row with any
+    problem or -1, the last timestamp); rows before a problem are packed.
+
+    Block by block (TABLE_CHUNK_ROWS): pack every row, then check the block in one
+    branch-free pass; a block that is not plain (a problem, or a small step back to clamp) is
+    checked and packed again row by row."""
+    n = len(ticks)
+    for a in range(0, n, TABLE_CHUNK_ROWS):
+        e = min(a + TABLE_CHUNK_ROWS, n)
+        bad = False
+        prev = last_t
+        for i in range(a, e):
+            t = ticks[i] / per_second
+            r = events[i]
+            r.t, r.x, r.y, r.p = t, np.uint16(x[i]), np.uint16(y[i]), p[i] > 0  # any value: a block not plain is packed again
+            bad |= not ((x[i] >= 0) & (x[i] < width) & (y[i] >= 0) & (y[i] < height) & (p[i] >= -1) & (p[i] <= 1)
+                        & (t >= prev) & (t - t == 0.0))
+            prev = t
+        if not bad:
+            last_t = prev
+            continue
+        for i in range(a, e):
+            ok, t = _accept(ticks[i] / per_second, x[i], y[i], p[i], last_t, width, height, tolerance_s)
+            if not ok:
+                return i, last_t
+            last_t = t
+            r = events[i]
+            r.t, r.x, r.y, r.p = t, x[i], y[i], p[i] > 0
     return -1, last_t
 
 
-#: Rows a table kernel checks at once: the block's rows stay in the L1 cache between its two passes.
-TABLE_CHUNK_ROWS = 1024
 #: 2**52: (v + 2**52) - 2**52 == v for 0 <= v < 2**52 exactly when v is a whole number.
 _TWO52 = 4503599627370496.0
 

@@ -28,7 +28,7 @@ class Validator:
         Any integer dtypes, strided views too (the fields of a library's records)."""
         events = np.empty(len(t), EVENT_DTYPE)
         bad, last_t = check_and_pack(t, float(per_second), x, y, p, self.last_t, self.width, self.height,
-                                     self.tolerance_s, events.view(np.uint8))
+                                     self.tolerance_s, events)
         if bad < 0:  # the common case: every row is valid
             self.last_t = last_t
             return events

@@ -246,3 +246,48 @@ def test_validator_divides_integer_ticks_as_numpy_does():
                                                           lambda i: i, per_second=1e6)
     assert slow.tobytes() == fast.tobytes()
     assert sum(warnings.counts.values()) == 1
+
+
+@hostile_settings(120)
+@given(st.data())
+def test_the_block_check_agrees_with_row_by_row_verdicts(data):
+    """check_and_pack's branch-free block pass (with its row-by-row redo) against _accept row by
+    row in Python: the same first bad row, last time and records, with damage near block edges
+    (bad pixels and polarities, NaN, steps back within and beyond the tolerance)."""
+    from eas_vo.eventfile.kernels import TABLE_CHUNK_ROWS, _accept, check_and_pack
+    from eas_vo.types import EVENT_DTYPE
+
+    n = data.draw(st.integers(1, 3 * TABLE_CHUNK_ROWS))
+    rng = np.random.default_rng(data.draw(st.integers(0, 2**32 - 1)))
+    ticks = np.cumsum(rng.integers(0, 50, n)) + 10_000_000
+    x, y, p = rng.integers(0, 240, n), rng.integers(0, 180, n), rng.integers(0, 2, n)
+    ticks = ticks.astype(float)
+    for _ in range(data.draw(st.integers(0, 4))):
+        i = data.draw(st.sampled_from([0, n - 1, min(n - 1, TABLE_CHUNK_ROWS), min(n - 1, TABLE_CHUNK_ROWS - 1),
+                                       data.draw(st.integers(0, n - 1))]))
+        kind = data.draw(st.sampled_from(["x", "y", "p", "nan", "back_small", "back_big"]))
+        if kind == "x":
+            x[i] = data.draw(st.sampled_from([-1, 240, 5000]))
+        elif kind == "y":
+            y[i] = data.draw(st.sampled_from([-1, 180]))
+        elif kind == "p":
+            p[i] = data.draw(st.sampled_from([-2, 2]))
+        elif kind == "nan":
+            ticks[i] = np.nan
+        else:
+            ticks[i] -= 0.5 if kind == "back_small" else 5000
+    last_t = data.draw(st.sampled_from([-np.inf, 9.0, 10.0000005]))
+    events = np.zeros(n, EVENT_DTYPE)
+    bad, got_last = check_and_pack(ticks, 1e6, x, y, p, last_t, 240, 180, 1e-6, events)
+    expected = np.zeros(n, EVENT_DTYPE)
+    want_bad, t_last = -1, last_t
+    for i in range(n):
+        ok, t = _accept.py_func(ticks[i] / 1e6, x[i], y[i], p[i], t_last, 240, 180, 1e-6)
+        if not ok:
+            want_bad = i
+            break
+        t_last = t
+        expected[i] = (t, x[i], y[i], p[i] > 0)
+    assert (bad, got_last) == (want_bad, t_last)
+    kept = n if bad < 0 else bad
+    assert events[:kept].tobytes() == expected[:kept].tobytes()
