@@ -250,9 +250,6 @@ def _worker_start(threads: int) -> None:
     forever). The cell it was running is left as a crashed run's folder, which the next compare
     takes over."""
     concurrency.set_threads(threads)
-    import cv2
-
-    cv2.setNumThreads(threads)
     if sys.platform.startswith("linux"):
         import ctypes
 
