@@ -1,12 +1,12 @@
 """The threads eas-vo's own parallel work runs on: kernels that release the GIL (numba's
-`nogil`, OpenCV, lz4) split across them. As many as the machine has cores, unless a process
+`nogil`, OpenCV, cramjam) split across them. As many as the machine has cores, unless a process
 that shares the cores with others (a `compare` worker) is given fewer; 1 is the serial path.
 Results never depend on the count: work is split into independent parts taken in order."""
 
 from __future__ import annotations
 
 import os
-from concurrent.futures import ThreadPoolExecutor
+from concurrent.futures import Future, ThreadPoolExecutor
 from typing import Callable, Iterator, TypeVar
 
 T = TypeVar("T")
@@ -46,6 +46,18 @@ def _shared_pool() -> ThreadPoolExecutor:
     if _pool is None:
         _pool = ThreadPoolExecutor(_threads, thread_name_prefix="eas-vo")
     return _pool
+
+
+def submit(work: Callable[..., T], *args) -> Future:
+    """work(*args) started on the threads (done at once, in the caller's thread, with one)."""
+    if _threads > 1:
+        return _shared_pool().submit(work, *args)
+    done: Future = Future()
+    try:
+        done.set_result(work(*args))
+    except Exception as exc:  # noqa: BLE001  (raised by result(), as from a thread)
+        done.set_exception(exc)
+    return done
 
 
 def in_order(work: Callable[[int], T], count: int, ahead: int = 6) -> Iterator[T]:

@@ -251,8 +251,7 @@ def track(parts: Pipeline, config: ResolvedConfig, frames_csv: Path | None = Non
     overlap = concurrency.threads() > 1  # the tracker may finish a frame while the next is tracked
     pending = None  # the submitted frame whose result is not taken yet
 
-    def take(result) -> None:
-        record, edges = result()
+    def take(record: FrameRecord, edges: list) -> None:
         if record.index != len(tracked.records):  # an interrupt lost the frame before it
             return
         tracked.records.append(record)
@@ -273,18 +272,17 @@ def track(parts: Pipeline, config: ResolvedConfig, frames_csv: Path | None = Non
                         tracked.orb.add(image)
                 events = {"sample": sample} if parts.tracker.needs_events else {}
                 if not overlap:
-                    result = parts.tracker.process(image, sample.t, **events)
-                    take(lambda: result)
+                    take(*parts.tracker.process(image, sample.t, **events))
                     continue
                 submitted = parts.tracker.submit(image, sample.t, **events)
                 if pending is not None:
-                    take(pending)
+                    take(*pending())
                 pending = submitted
             if pending is not None:
-                take(pending)
+                take(*pending())
         except KeyboardInterrupt as exc:  # Ctrl-C or SIGTERM: keep what was processed
             if pending is not None:
-                take(pending)  # a frame already tracked (unless taken or cut off): its measurement is a moment away
+                take(*pending())  # a frame already tracked (unless taken or cut off): its measurement is a moment away
             tracked.interrupted = exc
     if len(tracked.records) < 2:
         if tracked.interrupted is not None:

@@ -126,6 +126,7 @@ class _Level:
         self.shape = self.seen.shape
         self.ys, self.xs = np.nonzero(self.seen)
         self.bearings = np.linalg.inv(self.K) @ np.stack([self.xs, self.ys, np.ones_like(self.xs)]).astype(float)  # (3, N)
+        self.min_count = max(MIN_OVERLAP * len(self.xs), 1.0)  # pixels two views must share to be compared
 
     def resized(self, image: np.ndarray) -> np.ndarray:
         """`image` (the sensor's size) at this resolution."""
@@ -138,9 +139,9 @@ class _Level:
         sources = np.stack(sources).astype(np.float32)
         targets = np.stack([im[self.ys, self.xs] for im in images]).astype(np.float32)
         KRs = np.asarray(self.K @ Rs, np.float64)
-        min_count = max(MIN_OVERLAP * len(self.xs), 1.0)
         return np.concatenate(concurrency.split(
-            lambda a, b: _zncc(sources, targets, KRs[a:b], self.bearings, self.seen, min_count), len(KRs), PARALLEL_CANDIDATES), axis=1)
+            lambda a, b: _zncc(sources, targets, KRs[a:b], self.bearings, self.seen, self.min_count), len(KRs),
+            PARALLEL_CANDIDATES), axis=1)
 
     def refine(self, source: np.ndarray, image: np.ndarray, Rs: np.ndarray) -> np.ndarray:
         """Each R_source_image of Rs (C, 3, 3) refined by inverse-compositional Gauss-Newton on
@@ -156,10 +157,9 @@ class _Level:
         r0, r1, r2 = gx * fx, gy * fy, -(gx * fx * X + gy * fy * Y)
         J = np.stack([r2 * Y - r1, r0 - r2 * X, r1 * X - r0 * Y], axis=1)  # (N, 3)
         Rs = np.array(Rs, float)
-        J = np.ascontiguousarray(J)
+        J, source = np.ascontiguousarray(J), np.asarray(source, np.float32)
         for _ in range(ALIGN_ITERATIONS):
-            deltas = _gauss_newton_steps(source.astype(np.float32), target, J, np.asarray(self.K @ Rs, np.float64),
-                                         self.bearings, self.seen, max(MIN_OVERLAP * len(self.xs), 1.0))
+            deltas = _gauss_newton_steps(source, target, J, self.K @ Rs, self.bearings, self.seen, self.min_count)
             Rs = np.array([R @ cv2.Rodrigues(-d)[0] for R, d in zip(Rs, deltas)])
             if np.linalg.norm(deltas, axis=1).max() * fx < ALIGN_STOP_PX:
                 break

@@ -14,6 +14,7 @@ from dataclasses import dataclass, replace
 import cv2
 import numpy as np
 
+from eas_vo import concurrency
 from eas_vo.errors import ConfigError
 from eas_vo.geometry.rotations import gyro_rotation
 from eas_vo.plugins import Tracker
@@ -150,7 +151,6 @@ class KltTracker(Tracker):
         self._k = -1
         self._last_step: tuple[np.ndarray, float] | None = None  # (R_{k-2}_{k-1}, its interval [s]) for velocity
         self._loops = LoopCloser(self.config, self.camera) if self.config.loop_closure else None
-        self._measuring = None  # the worker thread of `submit`, made on first use
 
     @property
     def needs_imu(self) -> bool:
@@ -186,9 +186,9 @@ class KltTracker(Tracker):
             return scaled_rotation(R_last, (t - t_prev) / dt_last)
         return None
 
-    def _begins(self, image: np.ndarray, t: float) -> tuple | None:
-        """The frame's start: its index, and the first frame's or a repeated time's whole result
-        (`("done", record, edges)`); else ("track", k, t_prev)."""
+    def _begins(self, image: np.ndarray, t: float) -> tuple[int, float, tuple | None]:
+        """The frame's start: (its index, the previous frame's time [s], and for a first frame or
+        a repeated time its whole result (record, edges), else None: it is to be tracked)."""
         self._k += 1
         k = self._k
         if self._prev_image is None:
@@ -196,11 +196,11 @@ class KltTracker(Tracker):
             self._prev_t = t
             if self._loops is not None:
                 self._loops.step(k, image, [], lost=False)
-            return "done", FrameRecord(k, t, 0, 0, "first", True), []
+            return k, t, (FrameRecord(k, t, 0, 0, "first", True), [])
         if t <= self._prev_t:  # no time between the two: nothing to measure, the rotation is kept
-            return "done", FrameRecord(k, t, 0, 0, "same_time", False), []
+            return k, self._prev_t, (FrameRecord(k, t, 0, 0, "same_time", False), [])
         t_prev, self._prev_t = self._prev_t, t
-        return "track", k, t_prev
+        return k, t_prev, None
 
     def _measured(self, k: int, t: float, nc: int, prev_pts: np.ndarray, cur: np.ndarray, kf_pts: np.ndarray,
                   kf_index: int) -> tuple[FrameRecord, list[RelativeRotation], RelativeRotation | None]:
@@ -238,35 +238,26 @@ class KltTracker(Tracker):
         return self._predict == "velocity" or c.fallback != "none" or c.loop_closure
 
     def submit(self, image: np.ndarray, t: float):
-        """As `process`, with the two-view geometry on a worker thread while the caller goes on
+        """As `process`, with the two-view geometry on another thread while the caller goes on
         to the next frame, when nothing the next frame's tracking reads depends on it (not
         `_in_turn`); in turn otherwise."""
         if self._in_turn:
             return super().submit(image, t)
-        begun = self._begins(image, t)
-        if begun[0] == "done":
-            return lambda: begun[1:]
-        _, k, t_prev = begun
+        k, t_prev, done = self._begins(image, t)
+        if done is not None:
+            return lambda: done
         cur, ok = self.track(image, self.predicted_rotation(t_prev, t))
         nc = int(ok.sum())
-        measured = self._worker().submit(self._measured, k, t, nc, self._prev_pts[ok], cur[ok], self._kf_pts[ok], self._kf_index)
+        measured = concurrency.submit(self._measured, k, t, nc, self._prev_pts[ok], cur[ok], self._kf_pts[ok], self._kf_index)
         self._advance(image, nc < self.config.threshold2, cur, ok, k)
         return lambda: measured.result()[:2]
-
-    def _worker(self):
-        if self._measuring is None:
-            from concurrent.futures import ThreadPoolExecutor
-
-            self._measuring = ThreadPoolExecutor(1, thread_name_prefix="klt-measure")  # in frame order
-        return self._measuring
 
     def process(self, image: np.ndarray, t: float) -> tuple[FrameRecord, list[RelativeRotation]]:
         """Track into `image` (uint8, sensor size) taken at `t` [s]."""
         c = self.config
-        begun = self._begins(image, t)
-        if begun[0] == "done":
-            return begun[1:]
-        _, k, t_prev = begun
+        k, t_prev, done = self._begins(image, t)
+        if done is not None:
+            return done
         predicted = self.predicted_rotation(t_prev, t)
         cur, ok = self.track(image, predicted)
         nc = int(ok.sum())

@@ -68,3 +68,12 @@ def test_a_forked_child_makes_its_own_pool(threads):
     child.start()
     child.join(60)
     assert child.exitcode == 0 and queue.get(timeout=5) == list(range(1, 9))
+
+
+@pytest.mark.parametrize("n", [1, 2])
+def test_submit_gives_the_result_or_raises_at_result(threads, n):
+    threads(n)
+    assert concurrency.submit(lambda a, b: a * b, 6, 7).result() == 42
+    failed = concurrency.submit(lambda: 1 / 0)
+    with pytest.raises(ZeroDivisionError):
+        failed.result()
