@@ -23,12 +23,12 @@ import cv2
 import numpy as np
 
 from eas_vo.concurrency import in_order
-from eas_vo.datasets.aedat4_packets import MAGIC, EventPackets
+from eas_vo.datasets.aedat4_packets import MAGIC, EventPackets, Scratch
 from eas_vo.datasets.calibration import read_calibration
 from eas_vo.datasets.recording import RecordingReader, StreamConfig, check_increasing, read_tum_ground_truth
 from eas_vo.errors import DataError, DataWarnings
 from eas_vo.eventfile import Validator, cache_key, file_identity, load_cached
-from eas_vo.eventfile.kernels import check_and_pack
+from eas_vo.eventfile.kernels import check_and_pack_dv
 from eas_vo.types import EVENT_DTYPE, ImuSeries, empty_events
 from eas_vo.validation import check_range
 
@@ -81,6 +81,42 @@ def is_aedat4(path: Path) -> bool:
             return fh.read(len(MAGIC)) == MAGIC
     except (OSError, ValueError):  # ValueError: a NUL in the name
         return False
+
+
+#: Compressed bytes of event packets decoded as one task: several milliseconds of work, so
+#: that handing tasks between threads costs little (one packet per task lost half the second core).
+GROUP_BYTES = 1 << 20
+#: Groups decoded ahead of the one being written (bounded memory).
+GROUPS_AHEAD = 6
+
+
+def _groups(sizes: list[int], group_bytes: int) -> list[range]:
+    """Consecutive packet indices cut into groups of about `group_bytes` (at least one packet each)."""
+    groups, start, total = [], 0, 0
+    for k, size in enumerate(sizes):
+        total += size
+        if total >= group_bytes:
+            groups.append(range(start, k + 1))
+            start, total = k + 1, 0
+    if start < len(sizes):
+        groups.append(range(start, len(sizes)))
+    return groups
+
+
+class _Slot:
+    """A group's reused buffers: the decompression scratch and the packed records."""
+
+    def __init__(self):
+        self.scratch = Scratch()
+        self.packed = np.empty(0, EVENT_DTYPE)
+
+    def room(self, rows: int) -> np.ndarray:
+        """The packed records' buffer with room for `rows` (the rows already there kept)."""
+        if len(self.packed) < rows:
+            grown = np.empty(max(rows, 2 * len(self.packed)), EVENT_DTYPE)
+            grown[: len(self.packed)] = self.packed
+            self.packed = grown
+        return self.packed
 
 
 class Aedat4Dataset(RecordingReader):
@@ -240,30 +276,47 @@ class Aedat4Dataset(RecordingReader):
         where = f"{self.path}:events"
         packets = EventPackets(self.path)
         width, height = self.camera.width, self.camera.height
+        groups = _groups(packets.sizes, GROUP_BYTES)
+        slots = [_Slot() for _ in range(GROUPS_AHEAD)]  # in_order keeps GROUPS_AHEAD groups at most, the one taken included
 
-        def checked(k):
-            """Packet k decoded, checked on its own and packed (on a worker thread: cramjam's
-            decoders and the check kernel release the GIL): (records, packed, first bad row or
-            -1, its last time [s], its earliest tick [us])."""
-            records = packets.decode(k)
-            packed = np.empty(len(records), EVENT_DTYPE)
-            bad, last_t = check_and_pack(records["t"], 1e6, records["x"], records["y"], records["p"], -np.inf,
-                                         width, height, c.time_tolerance_s, packed)
-            return records, packed, bad, last_t, (records["t"].min() if len(records) else 0)
+        def checked(g):
+            """Group g's packets decoded, each checked on its own (as if it started the stream)
+            and packed, one after the other into its slot (on a worker thread: cramjam's
+            decoders and the check kernel release the GIL): (the slot, per packet: (index,
+            first row in the slot, rows, first bad row or -1, its last time [s]))."""
+            slot, verdicts, used = slots[g % len(slots)], [], 0
+            for k in groups[g]:
+                records = packets.decode(k, slot.scratch)
+                packed = slot.room(used + len(records))[used : used + len(records)]
+                bad, last_t = check_and_pack_dv(records.view(np.int64).reshape(-1, 2), -np.inf, width, height,
+                                                c.time_tolerance_s, packed)
+                verdicts.append((k, used, len(records), bad, last_t))
+                used += len(records)
+            return slot, verdicts
 
         def fill(out, warnings):
             validate = Validator(where, width, height, c.time_tolerance_s, c.lenient, warnings, "event")
             read = kept = 0  # events in the packets before this one (the index messages name), kept
-            for records, packed, bad, last_t, earliest in in_order(checked, len(packets)):
-                if bad < 0 and earliest / 1e6 >= validate.last_t:
-                    # Valid on its own and nothing before the stream so far: what the stream's
-                    # check would have packed, bit for bit.
-                    events, validate.last_t = packed, max(validate.last_t, last_t)
-                else:
-                    events = validate(records["t"], records["x"], records["y"], records["p"],
-                                      lambda row, first=read: first + row, per_second=1e6)
-                out.write(events.data)
-                read, kept = read + len(records), kept + len(events)
+            for slot, verdicts in in_order(checked, len(groups), ahead=GROUPS_AHEAD):
+                run = None  # (first, end) rows of the slot accepted as packed, not yet written
+                for k, first, rows, bad, last_t in verdicts:
+                    if bad < 0 and (rows == 0 or slot.packed["t"][first] >= validate.last_t):
+                        # Valid on its own, and its first time not before the stream so far:
+                        # what the stream's check would have packed, bit for bit.
+                        validate.last_t = max(validate.last_t, last_t)
+                        run, kept = (run[0] if run else first, first + rows), kept + rows
+                    else:
+                        if run:
+                            out.write(slot.packed[run[0] : run[1]].data)
+                            run = None
+                        records = packets.decode(k)  # again, on its own: the stream's check row by row
+                        events = validate(records["t"], records["x"], records["y"], records["p"],
+                                          lambda row, before=read: before + row, per_second=1e6)
+                        out.write(events.data)
+                        kept += len(events)
+                    read += rows
+                if run:
+                    out.write(slot.packed[run[0] : run[1]].data)
             return kept
 
         key = cache_key("aedat4", *file_identity(self.path), width, height, c.time_tolerance_s)

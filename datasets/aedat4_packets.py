@@ -12,7 +12,9 @@ at all) that holds a size-prefixed FlatBuffer. An event packet's FlatBuffer (ide
 `EventPackets` finds the event stream's packets once (8 bytes read per packet) and decodes any
 of them independently. cramjam's LZ4 and Zstandard decoders release the GIL (python-lz4's frame
 decoder does not: two threads took as long as one), so packets decompress on worker threads
-(eas_vo.concurrency.in_order).
+(eas_vo.concurrency.in_order), each into a reused buffer (`Scratch`): a fresh buffer per packet
+cost more in page faults, and in the address-space lock both threads' faults queue on, than the
+decompression itself.
 Every offset is bounds-checked; damage is a one-line DataError naming the packet.
 """
 
@@ -36,6 +38,9 @@ PACKET_EVENT = np.dtype({"names": ["t", "x", "y", "p"], "formats": ["<i8", "<i2"
 CODECS = {0: "none", 1: "lz4", 2: "lz4", 3: "zstd", 4: "zstd"}
 
 
+_LAYOUTS: dict[str, struct.Struct] = {}
+
+
 class _FlatBuffer:
     """Bounds-checked reads of little-endian scalars in a FlatBuffer; `fail(what)` raises."""
 
@@ -43,9 +48,10 @@ class _FlatBuffer:
         self.data, self.fail = data, fail
 
     def scalar(self, fmt: str, at: int):
-        if at < 0 or at + struct.calcsize(fmt) > len(self.data):
+        layout = _LAYOUTS.get(fmt) or _LAYOUTS.setdefault(fmt, struct.Struct(fmt))
+        if at < 0 or at + layout.size > len(self.data):
             self.fail(f"an offset points outside the buffer (byte {at} of {len(self.data)})")
-        return struct.unpack_from(fmt, self.data, at)[0]
+        return layout.unpack_from(self.data, at)[0]
 
     def field(self, table: int, index: int) -> int:
         """Absolute position of field `index` of the table at `table`, or 0 if absent."""
@@ -57,6 +63,14 @@ class _FlatBuffer:
     def follow(self, at: int) -> int:
         """The position an unsigned offset stored at `at` points to."""
         return at + self.scalar("<I", at)
+
+
+class Scratch:
+    """A decompression buffer reused packet after packet; it grows to twice a packet that did
+    not fit."""
+
+    def __init__(self, size: int = 1 << 20):
+        self.buffer = np.empty(size, np.uint8)
 
 
 class EventPackets:
@@ -88,6 +102,11 @@ class EventPackets:
 
     def __len__(self) -> int:
         return len(self._packets)
+
+    @property
+    def sizes(self) -> list[int]:
+        """Each event packet's stored (compressed) size [bytes]."""
+        return [size for _, size in self._packets]
 
     def _fail(self, what: str, stream: str = ""):
         raise DataError(f"{self.path}:{stream}" if stream else self.path, what)
@@ -140,8 +159,9 @@ class EventPackets:
             at, index = at + 8 + size, index + 1
         return packets
 
-    def decode(self, k: int) -> np.ndarray:
-        """Packet k's events as PACKET_EVENT records (a view of its decompressed bytes)."""
+    def decode(self, k: int, scratch: Scratch | None = None) -> np.ndarray:
+        """Packet k's events as PACKET_EVENT records: a view of its decompressed bytes, in
+        `scratch` if given (valid until its next use)."""
         offset, size = self._packets[k]
         body = self._data[offset : offset + size]
 
@@ -149,12 +169,7 @@ class EventPackets:
             self._fail(f"damaged AEDAT4 event packet {k} (at byte {offset - 8}): {what}", "events")
 
         if self.codec != "none":
-            import cramjam
-
-            try:
-                body = memoryview(getattr(cramjam, self.codec).decompress(body))
-            except cramjam.DecompressionError as exc:
-                fail(f"{self.codec} cannot decompress it ({exc})")
+            body = self._decompress(body, scratch, fail)
         fb = _FlatBuffer(body, fail)
         prefix = fb.scalar("<I", 0)
         if prefix > len(body) - 4:
@@ -170,3 +185,20 @@ class EventPackets:
         if vector + 4 + count * PACKET_EVENT.itemsize > len(body):
             fail(f"its {count} events run past its end")
         return np.frombuffer(body, PACKET_EVENT, count, vector + 4)
+
+    def _decompress(self, body, scratch: Scratch | None, fail) -> memoryview:
+        import cramjam
+
+        codec = getattr(cramjam, self.codec)
+        if scratch is not None:
+            try:
+                return memoryview(scratch.buffer)[: codec.decompress_into(body, scratch.buffer)]
+            except cramjam.DecompressionError:
+                pass  # too large for the buffer, or damaged: decompressing it on its own tells which
+        try:
+            data = memoryview(codec.decompress(body))
+        except cramjam.DecompressionError as exc:
+            fail(f"{self.codec} cannot decompress it ({exc})")
+        if scratch is not None:
+            scratch.buffer = np.empty(2 * len(data), np.uint8)
+        return data

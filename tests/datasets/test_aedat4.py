@@ -123,12 +123,23 @@ def test_events_are_cached_and_the_cache_is_used(tmp_path):
 
 
 @pytest.mark.parametrize("compression", ["NONE", "LZ4", "LZ4_HIGH", "ZSTD", "ZSTD_HIGH"])
-def test_every_compression_reads_what_dv_processing_reads(tmp_path, compression):
+@pytest.mark.parametrize("group_bytes", [1, 1 << 20])
+def test_every_compression_reads_what_dv_processing_reads(tmp_path, monkeypatch, compression, group_bytes):
     """The event packets, decoded by eas-vo (not dv-processing), against dv-processing's own
-    batch reading of the same file: every event, in order, many packets, each compression."""
+    batch reading of the same file: every event, in order, many packets, each compression; one
+    packet per task (the tasks' buffers reused around their ring) or all in one; decompressed
+    into a buffer too small for a packet (it grows) the same as into memory of its own."""
+    from eas_vo.datasets import aedat4
+    from eas_vo.datasets.aedat4_packets import EventPackets, Scratch
+
+    monkeypatch.setattr(aedat4, "GROUP_BYTES", group_bytes)
     path = tmp_path / "rec.aedat4"
     write_aedat4(path, events=random_stream(25_000, seed=7), kind="events", compression=compression, packet=1000)
     ours = Aedat4Dataset(path, Aedat4Config(calibration=str(write_calib(tmp_path)))).events()
+    packets, scratch = EventPackets(path), Scratch(64)
+    for k in range(len(packets)):
+        assert packets.decode(k, scratch).tobytes() == packets.decode(k).tobytes()
+    assert len(scratch.buffer) >= 16_000 if compression != "NONE" else len(scratch.buffer) == 64
     recording, batches = dv.io.MonoCameraRecording(str(path)), []
     while (batch := recording.getNextEventBatch()) is not None:
         batches.append(batch.numpy())

@@ -291,3 +291,42 @@ def test_the_block_check_agrees_with_row_by_row_verdicts(data):
     assert (bad, got_last) == (want_bad, t_last)
     kept = n if bad < 0 else bad
     assert events[:kept].tobytes() == expected[:kept].tobytes()
+
+
+@hostile_settings(120)
+@given(st.data())
+def test_the_dv_record_check_agrees_with_the_field_check(data):
+    """check_and_pack_dv on DV's 16-byte Event records as int64 word pairs against
+    check_and_pack on the records' fields: the same first bad row, last time and records, with
+    pixels negative or beyond the sensor (also beyond int16's 32767 as unsigned), polarity bytes
+    above 1, steps back within and beyond the tolerance, near block edges."""
+    from eas_vo.datasets.aedat4_packets import PACKET_EVENT
+    from eas_vo.eventfile.kernels import TABLE_CHUNK_ROWS, check_and_pack, check_and_pack_dv
+    from eas_vo.types import EVENT_DTYPE
+
+    n = data.draw(st.integers(1, 3 * TABLE_CHUNK_ROWS))
+    width, height = data.draw(st.sampled_from([(240, 180), (346, 260), (40000, 40000)]))
+    rng = np.random.default_rng(data.draw(st.integers(0, 2**32 - 1)))
+    records = np.zeros(n, PACKET_EVENT)
+    records["t"] = np.cumsum(rng.integers(0, 50, n)) + 10_000_000
+    records["x"], records["y"] = rng.integers(0, min(width, 32767), n), rng.integers(0, min(height, 32767), n)
+    records["p"] = rng.integers(0, 2, n)
+    for _ in range(data.draw(st.integers(0, 4))):
+        i = data.draw(st.sampled_from([0, n - 1, min(n - 1, TABLE_CHUNK_ROWS), min(n - 1, TABLE_CHUNK_ROWS - 1),
+                                       data.draw(st.integers(0, n - 1))]))
+        kind = data.draw(st.sampled_from(["x", "y", "p", "back_small", "back_big"]))
+        if kind in ("x", "y"):
+            records[kind][i] = data.draw(st.sampled_from([-1, -32768, min(width, 32767), min(height, 32767), 32767]))
+        elif kind == "p":
+            records["p"][i] = data.draw(st.integers(2, 255))
+        else:
+            records["t"][i] -= 1 if kind == "back_small" else 5000
+    last_t = data.draw(st.sampled_from([-np.inf, 9.0, 10.0000005]))
+    want = np.zeros(n, EVENT_DTYPE)
+    want_bad, want_last = check_and_pack(records["t"], 1e6, records["x"], records["y"], records["p"], last_t,
+                                         width, height, 1e-6, want)
+    got = np.zeros(n, EVENT_DTYPE)
+    bad, got_last = check_and_pack_dv(records.view(np.int64).reshape(-1, 2), last_t, width, height, 1e-6, got)
+    assert (bad, got_last) == (want_bad, want_last)
+    kept = n if bad < 0 else bad
+    assert got[:kept].tobytes() == want[:kept].tobytes()
