@@ -193,9 +193,9 @@ def simulate(config: SimConfig, out_dir: str | Path, progress: bool = False) -> 
         return np.mean([render(t + dt * config.aps.exposure_s) for dt in offsets], axis=0)
 
     steps = _render_steps(config, camera, motion)
-    rendered = _rendered_ahead([functools.partial(render, t) for t in steps]
-                               + [functools.partial(exposure, t) for t in frame_times])
-    events, stats = _simulate_events(config, camera, steps, rendered, dvs_rng, progress)
+    sim = EventSimulator(config.dvs, shape, dvs_rng)
+    rendered = _rendered_ahead(_event_inputs(sim, render, steps) + [functools.partial(exposure, t) for t in frame_times])
+    events, stats = _simulate_events(config, sim, steps, rendered, progress)
     fixed_pattern = config.aps.fixed_pattern(shape, aps_rng)
     frames = [config.aps.expose(next(rendered), fixed_pattern, aps_rng) for _ in frame_times]
 
@@ -215,7 +215,8 @@ def simulate_events(config: SimConfig, motion) -> tuple[np.ndarray, SimStats]:
     camera = config.camera.model()
     render = _renderer(config, camera, motion, scene_rng)
     steps = _render_steps(config, camera, motion)
-    return _simulate_events(config, camera, steps, (render(t) for t in steps), dvs_rng, False)
+    sim = EventSimulator(config.dvs, (camera.height, camera.width), dvs_rng)
+    return _simulate_events(config, sim, steps, (job() for job in _event_inputs(sim, render, steps)), False)
 
 
 def _generators(config: SimConfig) -> tuple[np.random.Generator, ...]:
@@ -249,11 +250,23 @@ def _render_steps(config, camera, motion) -> list[float]:
     return steps
 
 
-def _rendered_ahead(jobs: list, depth: int = 3):
-    """Each job's result (a rendered image), in order, computed on a worker thread up to
-    `depth` jobs ahead: the ray cast (compiled, one thread, without the GIL) runs while the
-    sensor model works on the previous image. The same images as computed in turn."""
-    with ThreadPoolExecutor(1, initializer=numba.set_num_threads, initargs=(1,)) as worker:
+def _event_inputs(sim: EventSimulator, render, steps: list[float]) -> list:
+    """Jobs giving what the sensor takes, in order: the radiance at steps[0], then per step
+    the radiance at its end with the sensor's radiance-only work done (EventSimulator.prepare)."""
+    return [functools.partial(render, steps[0])] + [functools.partial(_prepared, sim, render, t0, t1)
+                                                    for t0, t1 in zip(steps, steps[1:])]
+
+
+def _prepared(sim: EventSimulator, render, t0: float, t1: float):
+    return sim.prepare(t0, t1, render(t1))
+
+
+def _rendered_ahead(jobs: list, depth: int = 4):
+    """Each job's result, in order, computed on two worker threads up to `depth` jobs ahead:
+    the ray casts (compiled, one thread each, without the GIL) and the sensor's radiance-only
+    work run while the sensor model works on the previous step, and the frames' exposures two
+    at a time. The same results as computed in turn."""
+    with ThreadPoolExecutor(2, initializer=numba.set_num_threads, initargs=(1,)) as worker:
         pending = collections.deque(worker.submit(job) for job in jobs[:depth])
         for job in jobs[depth:]:
             yield pending.popleft().result()
@@ -262,21 +275,21 @@ def _rendered_ahead(jobs: list, depth: int = 3):
             yield pending.popleft().result()
 
 
-def _simulate_events(config, camera, steps, rendered, rng, progress) -> tuple[np.ndarray, SimStats]:
-    """Events between consecutive render steps (`steps` [s], their images from `rendered`)."""
+def _simulate_events(config, sim: EventSimulator, steps, inputs, progress) -> tuple[np.ndarray, SimStats]:
+    """Events between consecutive render steps (`steps` [s]; `inputs` as _event_inputs gives)."""
     from tqdm import tqdm
 
-    sim = EventSimulator(config.dvs, (camera.height, camera.width), rng)
-    sim.start(next(rendered))
+    sim.start(next(inputs))
     chunks, truths = [], []
     pixel_s = np.zeros(2)  # dark, bright
     white = config.dvs.white_radiance
     with tqdm(total=round(config.duration_s, 3), disable=not progress, unit="s", desc="simulating events") as bar:
         for t, t1 in zip(steps, steps[1:]):
-            radiance = next(rendered)
-            events, truth = sim.step(t, t1, radiance)
+            given = next(inputs)
+            events, truth = sim.step(t, t1, given)
             chunks.append(events)
             truths.append(truth)
+            radiance = given.radiance
             pixel_s += (t1 - t) * np.array([np.count_nonzero(radiance < DARK * white), np.count_nonzero(radiance > BRIGHT * white)])
             bar.update(round(t1 - t, 6))
     events = np.concatenate(chunks) if chunks else np.empty(0, EVENT_DTYPE)

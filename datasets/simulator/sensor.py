@@ -109,6 +109,26 @@ class EventTruth:
     radiance: np.ndarray
 
 
+@dataclass(frozen=True)
+class StepInput:
+    """EventSimulator.prepare's radiance-only part of a step, per pixel (flattened).
+
+    Attributes:
+        radiance: the radiance at the step's end.
+        log_radiance: log(radiance + log_eps), float32.
+        gain: the low-pass filter's gain over the step (None: no filter).
+        shot_rate: shot-noise rate [Hz]; noise_rate: shot + leak + hot-pixel rate [Hz];
+        noise_cdf: its cumulative sum over the pixels.
+    """
+
+    radiance: np.ndarray
+    log_radiance: np.ndarray
+    gain: np.ndarray | None
+    shot_rate: np.ndarray
+    noise_rate: np.ndarray
+    noise_cdf: np.ndarray
+
+
 class EventSimulator:
     """Per-pixel threshold crossings of the photoreceptor's low-passed log radiance between
     render steps (as ESIM, the filter as v2e's), timestamps interpolated linearly inside a
@@ -152,21 +172,28 @@ class EventSimulator:
         self.last_lp = self.ref.copy()
         self.raw_ref, self.last_raw = self.ref.copy(), self.ref.copy()
 
-    def step(self, t0: float, t1: float, radiance: np.ndarray) -> tuple[np.ndarray, EventTruth]:
-        """Events in (t0, t1] given the radiance at t1, sorted by time, and their truth."""
+    def prepare(self, t0: float, t1: float, radiance: np.ndarray) -> "StepInput":
+        """What step (t0, t1] needs of the radiance at t1 alone (no state of the pixels: any
+        thread may compute it while the previous step runs)."""
         m = self.model
         flat = radiance.ravel()
-        raw1 = self.log_intensity(radiance)
+        gain = None
         if m.cutoff_hz > 0:  # first-order low-pass, exact for a step held over the interval
             gain = 1.0 - np.exp(-2.0 * np.pi * m.cutoff_hz * m.inten01(flat) * (t1 - t0))
-            lp1 = (self.last_lp + gain * (raw1 - self.last_lp)).astype(np.float32)
-        else:
-            lp1 = raw1
+        shot = m.noise_rate_hz(flat)
+        rate = shot + self.leak_rate + self.hot_rate
+        return StepInput(flat, self.log_intensity(radiance), gain, shot, rate, np.cumsum(rate))
+
+    def step(self, t0: float, t1: float, radiance: "np.ndarray | StepInput") -> tuple[np.ndarray, EventTruth]:
+        """Events in (t0, t1] given the radiance at t1 (or its prepare()), sorted by time, and their truth."""
+        given = radiance if isinstance(radiance, StepInput) else self.prepare(t0, t1, radiance)
+        flat, raw1 = given.radiance, given.log_radiance
+        lp1 = raw1 if given.gain is None else (self.last_lp + given.gain * (raw1 - self.last_lp)).astype(np.float32)
         self._record_raw_crossings(t0, t1, raw1)
         signal, levels = self._crossings(t0, t1, self.last_lp, lp1)
         self.last_lp = lp1
         latency = self._latency(signal, levels)
-        noise = self._noise(t0, t1, flat)
+        noise = self._noise(t0, t1, given)
         events = np.concatenate([signal, noise])
         truth = EventTruth(
             np.concatenate([np.zeros(len(signal), bool), np.ones(len(noise), bool)]),
@@ -176,30 +203,27 @@ class EventSimulator:
         order = np.argsort(events["t"], kind="stable")
         return events[order], EventTruth(truth.noise[order], truth.latency_s[order], truth.radiance[order])
 
-    def _levels_crossed(self, ref, v0, v1):
-        """Crossings of the thresholds around `ref` from v0 to v1: counts up and down."""
-        diff = v1 - ref
-        n_pos = np.floor(np.maximum(diff, 0) / self.c_pos).astype(np.int64)
-        n_neg = np.floor(np.maximum(-diff, 0) / self.c_neg).astype(np.int64)
+    def _levels_crossed(self, ref, v1):
+        """Crossings of the thresholds around `ref` on the way to v1: counts up and down."""
+        n_pos, n_neg = np.empty(len(ref), np.int64), np.empty(len(ref), np.int64)
+        _count_levels(ref, v1, self.c_pos, self.c_neg, n_pos, n_neg)
         return n_pos, n_neg
 
     def _record_raw_crossings(self, t0, t1, raw1) -> None:
-        n_pos, n_neg = self._levels_crossed(self.raw_ref, self.last_raw, raw1)
+        n_pos, n_neg = self._levels_crossed(self.raw_ref, raw1)
         _record_crossings(t0, t1, self.raw_ref, self.last_raw, raw1, n_pos, n_neg, self.c_pos, self.c_neg,
                           self.ring_level, self.ring_t, self.ring_up, self.ring_next)
-        self.raw_ref += n_pos * self.c_pos - n_neg * self.c_neg
         self.last_raw = raw1
 
     def _crossings(self, t0, t1, v0, v1) -> tuple[np.ndarray, np.ndarray]:
         """Signal events of the filtered signal from v0 to v1 and the levels they crossed, in
         the order of the k-th crossings of all pixels (k = 1, 2, ...), pixels in index order."""
         w = self.shape[1]
-        n_pos, n_neg = self._levels_crossed(self.ref, v0, v1)
+        n_pos, n_neg = self._levels_crossed(self.ref, v1)
         total = int((n_pos + n_neg).sum())
         pix, t, up, level, k = (np.empty(total, dtype) for dtype in (np.int64, np.float64, np.bool_, np.float32, np.int64))
         kept = _signal_crossings(t0, t1, self.ref, v0, v1, n_pos, n_neg, self.c_pos, self.c_neg, self.last_t,
                                  self.model.refractory_s, pix, t, up, level, k)
-        self.ref += n_pos * self.c_pos - n_neg * self.c_neg
         order = np.argsort(k[:kept], kind="stable")  # pixel-major -> crossing-major, pixels still in order
         pix, level = pix[order], level[order]
         ev = np.empty(kept, EVENT_DTYPE)
@@ -216,16 +240,15 @@ class EventSimulator:
         t_raw = np.where(match & (self.ring_t[pix] <= events["t"][:, None]), self.ring_t[pix], -np.inf).max(axis=1)
         return np.where(np.isfinite(t_raw), events["t"] - t_raw, np.nan)
 
-    def _noise(self, t0, t1, radiance) -> np.ndarray:
+    def _noise(self, t0, t1, given: "StepInput") -> np.ndarray:
         """Shot-noise (either polarity), leak (ON) and hot-pixel events in (t0, t1]."""
-        rate = self.model.noise_rate_hz(radiance) + self.leak_rate + self.hot_rate
-        cdf = np.cumsum(rate)
+        rate, cdf = given.noise_rate, given.noise_cdf
         count = self.rng.poisson(cdf[-1] * (t1 - t0))
         pix = np.searchsorted(cdf, self.rng.uniform(0, cdf[-1], count))
         ev = np.empty(count, EVENT_DTYPE)
         ev["t"] = self.rng.uniform(t0, t1, count)
         ev["x"], ev["y"] = pix % self.shape[1], pix // self.shape[1]
-        shot = self.model.noise_rate_hz(radiance)[pix]
+        shot = given.shot_rate[pix]
         on_share = (0.5 * shot + self.leak_rate[pix] + 0.5 * self.hot_rate[pix]) / rate[pix]
         ev["p"] = self.rng.random(count) < on_share
         return ev
@@ -281,8 +304,27 @@ def _pixel_run(ref, v0, v1, n_pos, n_neg, c_pos, c_neg, p):
 
 
 @numba.njit(cache=True, nogil=True)
+def _count_levels(ref, v1, c_pos, c_neg, n_pos, n_neg):
+    """Per pixel, the thresholds around ref crossed on the way to v1, up and down, as numpy
+    computes floor(max(+-(v1 - ref), 0) / c) in float32 (exact operations: the same bits)."""
+    for p in range(len(ref)):
+        diff = v1[p] - ref[p]
+        n_pos[p] = np.int64(np.floor(max(diff, np.float32(0.0)) / c_pos[p]))
+        n_neg[p] = np.int64(np.floor(max(-diff, np.float32(0.0)) / c_neg[p]))
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _advance(ref, n_pos, n_neg, c_pos, c_neg, p):
+    """Pixel p's reference moved by the levels it crossed, as numpy's float32 `ref += n_pos *
+    c_pos - n_neg * c_neg` computes it (in float64, rounded to float32)."""
+    ref[p] = np.float32(np.float64(ref[p]) + (np.float64(n_pos[p]) * np.float64(c_pos[p])
+                                              - np.float64(n_neg[p]) * np.float64(c_neg[p])))
+
+
+@numba.njit(cache=True, nogil=True)
 def _record_crossings(t0, t1, ref, v0, v1, n_pos, n_neg, c_pos, c_neg, ring_level, ring_t, ring_up, ring_next):
-    """Each pixel's crossings from v0 to v1 into its ring of the last crossings (level, time, direction)."""
+    """Each pixel's crossings from v0 to v1 into its ring of the last crossings (level, time,
+    direction); its reference `ref` moved past them."""
     history = ring_level.shape[1]
     for p in range(len(ref)):
         if n_pos[p] + n_neg[p] == 0:
@@ -293,12 +335,14 @@ def _record_crossings(t0, t1, ref, v0, v1, n_pos, n_neg, c_pos, c_neg, ring_leve
             slot = ring_next[p] % history
             ring_level[p, slot], ring_t[p, slot], ring_up[p, slot] = level, t, up
             ring_next[p] += 1
+        _advance(ref, n_pos, n_neg, c_pos, c_neg, p)
 
 
 @numba.njit(cache=True, nogil=True)
 def _signal_crossings(t0, t1, ref, v0, v1, n_pos, n_neg, c_pos, c_neg, last_t, refractory_s, pix, t, up, level, k):
     """Each pixel's crossings from v0 to v1 that come at least `refractory_s` after its last
-    event, pixel by pixel (pixel, time, direction, level, crossing number); returns their count."""
+    event, pixel by pixel (pixel, time, direction, level, crossing number); returns their count.
+    Each pixel's reference `ref` is moved past all its crossings, kept or not."""
     kept = 0
     for p in range(len(ref)):
         if n_pos[p] + n_neg[p] == 0:
@@ -310,4 +354,5 @@ def _signal_crossings(t0, t1, ref, v0, v1, n_pos, n_neg, c_pos, c_neg, last_t, r
                 last_t[p] = tj
                 pix[kept], t[kept], up[kept], level[kept], k[kept] = p, tj, direction, lv, j
                 kept += 1
+        _advance(ref, n_pos, n_neg, c_pos, c_neg, p)
     return kept
