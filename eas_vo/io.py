@@ -146,6 +146,18 @@ def atomic_path(path: str | Path):
         raise
 
 
+@contextmanager
+def atomic_file(path: str | Path):
+    """An open binary file to write, renamed over `path` on success (atomic_path's temporary).
+
+    The temporary is opened without truncating it (it is empty): on ext4, an open that
+    truncates marks the file so that closing it writes all of it out at once (the file
+    system's safeguard for files rewritten in place), which took ~100 ms per 250 MB of
+    event cache on the close, with the caller waiting."""
+    with atomic_path(path) as tmp, open(tmp, "r+b") as fh:
+        yield fh
+
+
 def remove_stale_temporaries(folder: Path, names: tuple[str, ...]) -> None:
     """Delete the temporary files atomic_path left in `folder` for the files `names` (glob
     patterns, e.g. `fig3_*.png`) when the process that wrote them is gone (killed mid-write):

@@ -22,7 +22,7 @@ import numpy as np
 
 from eas_vo.errors import DataError, DataWarnings
 from eas_vo.eventfile.convert import convert_text_to_cache
-from eas_vo.io import atomic_path, cache_folder
+from eas_vo.io import atomic_file, cache_folder
 from eas_vo.types import EVENT_DTYPE
 
 CACHE_MAGIC = b"EASVOEV3"
@@ -116,22 +116,21 @@ def build_cache(path: Path, fill: Callable[[BinaryIO], int], max_events: int = 0
     `max_events` > 0 reserves the file's blocks up front (fewer, faster writes on most file
     systems); the file is cut to its real size at the end.
     """
-    with atomic_path(path) as tmp:
-        with open(tmp, "wb") as fh:
-            if max_events > 0 and hasattr(os, "posix_fallocate"):
-                try:
-                    os.posix_fallocate(fh.fileno(), 0, HEADER_BYTES + max_events * EVENT_DTYPE.itemsize)
-                except OSError:
-                    pass  # no space to reserve (or no support): plain writes still work
-            fh.write(CACHE_MAGIC + bytes(16))
-            out = _HashingWriter(fh)
-            count = int(fill(out))
-            if out.bytes != count * EVENT_DTYPE.itemsize:
-                raise AssertionError(f"{out.bytes} bytes of records written for {count} events")
-            fh.truncate(HEADER_BYTES + out.bytes)
-            checksum = out.hash.intdigest() if count else 0
-            fh.seek(8)
-            fh.write(count.to_bytes(8, "little") + checksum.to_bytes(8, "little"))
+    with atomic_file(path) as fh:
+        if max_events > 0 and hasattr(os, "posix_fallocate"):
+            try:
+                os.posix_fallocate(fh.fileno(), 0, HEADER_BYTES + max_events * EVENT_DTYPE.itemsize)
+            except OSError:
+                pass  # no space to reserve (or no support): plain writes still work
+        fh.write(CACHE_MAGIC + bytes(16))
+        out = _HashingWriter(fh)
+        count = int(fill(out))
+        if out.bytes != count * EVENT_DTYPE.itemsize:
+            raise AssertionError(f"{out.bytes} bytes of records written for {count} events")
+        fh.truncate(HEADER_BYTES + out.bytes)
+        checksum = out.hash.intdigest() if count else 0
+        fh.seek(8)
+        fh.write(count.to_bytes(8, "little") + checksum.to_bytes(8, "little"))
     return _map_records(path, count)
 
 

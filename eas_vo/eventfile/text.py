@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from eas_vo.eventfile.cache import prime_text_cache
-from eas_vo.io import atomic_path
+from eas_vo.io import atomic_file
 from eas_vo.types import EVENT_DTYPE
 
 
@@ -62,8 +62,7 @@ def write_events_text(path: str | Path, events: np.ndarray, width: int, height: 
     events["t"] = np.round(events["t"] * 1e9) / 1e9
     if (np.diff(events["t"]) < 0).any():
         raise ValueError("write_events_text needs events sorted by time")
-    with atomic_path(path) as tmp:
-        with open(tmp, "wb") as fh:
-            for start in range(0, len(events), chunk):
-                fh.write(format_events(events[start : start + chunk]))
+    with atomic_file(path) as fh:
+        for start in range(0, len(events), chunk):
+            fh.write(format_events(events[start : start + chunk]))
     prime_text_cache(path, events, width, height)

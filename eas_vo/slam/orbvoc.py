@@ -9,7 +9,7 @@ import tarfile
 from pathlib import Path
 
 from eas_vo.errors import EasVoError
-from eas_vo.io import atomic_path
+from eas_vo.io import atomic_file
 
 #: Where ORB-SLAM3 publishes it, and the SHA-1 of the archive: both as pyorbslam3's vocab.py
 #: (0.1.1) gives them. EAS_VO_ORB_VOCABULARY_URL names a mirror of the same archive.
@@ -50,7 +50,7 @@ def fetch_orb_vocabulary(folder: str | Path | None = None, progress: bool = Fals
             member = next((m for m in tar.getmembers() if m.isfile() and m.name.endswith(NAME)), None)
             if member is None:
                 raise EasVoError(f"{url}: the archive holds no {NAME}")
-            with tar.extractfile(member) as src, atomic_path(target) as tmp, open(tmp, "wb") as dst:
+            with tar.extractfile(member) as src, atomic_file(target) as dst:
                 while chunk := src.read(1 << 20):
                     dst.write(chunk)
     except (tarfile.TarError, EOFError) as exc:

@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from eas_vo.errors import DataError, EasVoError
-from eas_vo.io import atomic_path, check_output_folder, output_folder, read_table
+from eas_vo.io import atomic_file, atomic_path, check_output_folder, output_folder, read_table
 
 
 def test_read_table_skips_comments_and_blank_lines(tmp_path):
@@ -40,6 +40,22 @@ def test_atomic_path_leaves_the_old_file_on_failure(tmp_path):
             tmp.write_text("half")
             raise RuntimeError("interrupted")
     assert path.read_text() == "old" and list(tmp_path.iterdir()) == [path]
+
+
+def test_atomic_file_replaces_on_success_and_leaves_the_old_file_on_failure(tmp_path):
+    """atomic_file writes through an open temporary (never a truncating reopen): the new bytes
+    replace the old file whole on success; on failure the old file stays and no temporary does."""
+    path = tmp_path / "out.bin"
+    path.write_bytes(b"old contents, longer than the new")
+    with atomic_file(path) as fh:
+        assert fh.tell() == 0 and fh.read() == b""  # a fresh, empty temporary, readable and writable
+        fh.write(b"new")
+    assert path.read_bytes() == b"new"
+    with pytest.raises(RuntimeError):
+        with atomic_file(path) as fh:
+            fh.write(b"half")
+            raise RuntimeError("interrupted")
+    assert path.read_bytes() == b"new" and list(tmp_path.iterdir()) == [path]
 
 
 @pytest.mark.parametrize("umask", [0o022, 0o077, 0o002])
