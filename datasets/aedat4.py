@@ -283,8 +283,10 @@ class Aedat4Dataset(RecordingReader):
             """Group g's packets decoded, each checked on its own (as if it started the stream)
             and packed, one after the other into its slot (on a worker thread: cramjam's
             decoders and the check kernel release the GIL): (the slot, per packet: (index,
-            first row in the slot, rows, first bad row or -1, its last time [s]))."""
+            first row in the slot, rows, first bad row or -1, its last time [s]), and the
+            group's (first, last) time [s] if it is valid as a whole on its own, else None)."""
             slot, verdicts, used = slots[g % len(slots)], [], 0
+            first_t, latest, plain = np.inf, -np.inf, True
             for k in groups[g]:
                 records = packets.decode(k, slot.scratch)
                 packed = slot.room(used + len(records))[used : used + len(records)]
@@ -292,17 +294,29 @@ class Aedat4Dataset(RecordingReader):
                                                 c.time_tolerance_s, packed)
                 verdicts.append((k, used, len(records), bad, last_t))
                 used += len(records)
-            return slot, verdicts
+                if len(records):
+                    start = packed[0]["t"]
+                    plain &= bad < 0 and start >= latest
+                    first_t, latest = min(first_t, start), max(latest, last_t)
+            return slot, verdicts, ((first_t, latest) if plain else None)
 
         def fill(out, warnings):
             validate = Validator(where, width, height, c.time_tolerance_s, c.lenient, warnings, "event")
             read = kept = 0  # events in the packets before this one (the index messages name), kept
-            for slot, verdicts in in_order(checked, len(groups), ahead=GROUPS_AHEAD):
+            for slot, verdicts, plain in in_order(checked, len(groups), ahead=GROUPS_AHEAD):
+                if plain is not None and plain[0] >= validate.last_t:
+                    # Every packet valid on its own, none starting before the one before it,
+                    # nor the group before the stream so far: what the stream's check would
+                    # have packed, bit for bit.
+                    rows = sum(verdict[2] for verdict in verdicts)
+                    out.write(slot.packed[:rows].data)
+                    validate.last_t = max(validate.last_t, plain[1])
+                    read, kept = read + rows, kept + rows
+                    continue
                 run = None  # (first, end) rows of the slot accepted as packed, not yet written
                 for k, first, rows, bad, last_t in verdicts:
                     if bad < 0 and (rows == 0 or slot.packed["t"][first] >= validate.last_t):
-                        # Valid on its own, and its first time not before the stream so far:
-                        # what the stream's check would have packed, bit for bit.
+                        # Valid on its own, and its first time not before the stream so far.
                         validate.last_t = max(validate.last_t, last_t)
                         run, kept = (run[0] if run else first, first + rows), kept + rows
                     else:

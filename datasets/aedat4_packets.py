@@ -25,6 +25,7 @@ import struct
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
+import numba
 import numpy as np
 
 from eas_vo.errors import DataError
@@ -63,6 +64,64 @@ class _FlatBuffer:
     def follow(self, at: int) -> int:
         """The position an unsigned offset stored at `at` points to."""
         return at + self.scalar("<I", at)
+
+
+_OK, _SHORT, _NOT_EVENTS, _OUTSIDE, _PAST_END = range(5)
+_PROBLEMS = {
+    _SHORT: "its FlatBuffer claims {a} bytes, {b} are there",
+    _NOT_EVENTS: "it holds {tag!r}, not events ('EVTS')",
+    _OUTSIDE: "an offset points outside the buffer (byte {a} of {b})",
+    _PAST_END: "its {a} events run past its end",
+}
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _uint(data, at, size):
+    """The little-endian unsigned integer of `size` bytes at `at` (the caller checked the bounds)."""
+    value = 0
+    for i in range(size):
+        value |= np.int64(data[at + i]) << (8 * i)
+    return value
+
+
+@numba.njit(cache=True, nogil=True)
+def _event_vector(data):
+    """Where an event packet's events are in its decompressed bytes `data` (uint8): (_OK,
+    byte offset, count), count 0 for a packet without its events field; else (problem, a, b)
+    with the values _PROBLEMS names. The size-prefixed FlatBuffer: uint32 size, uint32 root
+    offset, the identifier `EVTS`, the root table's vtable, its field 0 (an offset to the
+    vector: uint32 count, then 16-byte events); every offset is checked against the end."""
+    n = len(data)
+    if n < 4:
+        return _OUTSIDE, 0, n
+    if _uint(data, 0, 4) > n - 4:
+        return _SHORT, _uint(data, 0, 4), n - 4
+    if n < 12 or not (data[8] == 69 and data[9] == 86 and data[10] == 84 and data[11] == 83):  # "EVTS"
+        return _NOT_EVENTS, 0, 0
+    root = 4 + _uint(data, 4, 4)
+    if root + 4 > n:
+        return _OUTSIDE, root, n
+    back = _uint(data, root, 4)
+    vtable = root - (back - (1 << 32) if back >= 1 << 31 else back)  # a signed offset
+    if vtable < 0 or vtable + 2 > n:
+        return _OUTSIDE, vtable, n
+    if _uint(data, vtable, 2) < 6:  # the vtable ends before field 0: no events
+        return _OK, 0, 0
+    if vtable + 6 > n:
+        return _OUTSIDE, vtable + 4, n
+    field = _uint(data, vtable + 4, 2)
+    if field == 0:  # field 0 absent
+        return _OK, 0, 0
+    elements = root + field
+    if elements + 4 > n:
+        return _OUTSIDE, elements, n
+    vector = elements + _uint(data, elements, 4)
+    if vector + 4 > n:
+        return _OUTSIDE, vector, n
+    count = _uint(data, vector, 4)
+    if vector + 4 + 16 * count > n:
+        return _PAST_END, count, 0
+    return _OK, vector + 4, count
 
 
 class Scratch:
@@ -170,21 +229,11 @@ class EventPackets:
 
         if self.codec != "none":
             body = self._decompress(body, scratch, fail)
-        fb = _FlatBuffer(body, fail)
-        prefix = fb.scalar("<I", 0)
-        if prefix > len(body) - 4:
-            fail(f"its FlatBuffer claims {prefix} bytes, {len(body) - 4} are there")
-        if bytes(body[8:12]) != b"EVTS":
-            fail(f"it holds {bytes(body[8:12])!r}, not events ('EVTS')")
-        root = 4 + fb.scalar("<I", 4)
-        elements = fb.field(root, 0)
-        if not elements:
-            return np.empty(0, PACKET_EVENT)
-        vector = fb.follow(elements)
-        count = fb.scalar("<I", vector)
-        if vector + 4 + count * PACKET_EVENT.itemsize > len(body):
-            fail(f"its {count} events run past its end")
-        return np.frombuffer(body, PACKET_EVENT, count, vector + 4)
+        data = np.frombuffer(body, np.uint8)
+        status, a, b = _event_vector(data)
+        if status != _OK:
+            fail(_PROBLEMS[status].format(a=a, b=b, tag=bytes(data[8:12])))
+        return np.frombuffer(body, PACKET_EVENT, b, a)
 
     def _decompress(self, body, scratch: Scratch | None, fail) -> memoryview:
         import cramjam

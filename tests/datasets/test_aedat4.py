@@ -282,6 +282,50 @@ def test_truncated_files_are_named_errors_or_read_whole(tmp_path):
     check()
 
 
+def test_damaged_event_packets_are_read_within_their_bytes(tmp_path, monkeypatch):
+    """The compiled FlatBuffer walk of an event packet (_event_vector), run as plain Python
+    (numpy's indexing raises on any read outside the bytes), on real packets cut short, with
+    bytes overwritten or random: it never reads outside them, gives what the compiled walk
+    gives, and an accepted packet's events lie inside it; the real packet gives the events
+    dv-processing wrote."""
+    from hypothesis import given, strategies as st
+
+    from eas_vo.datasets import aedat4_packets
+    from eas_vo.datasets.aedat4_packets import PACKET_EVENT, EventPackets, _event_vector
+    from helpers import hostile_settings
+
+    path = tmp_path / "rec.aedat4"
+    events = random_stream(300, seed=9)
+    write_aedat4(path, events=events, kind="events", compression="NONE", packet=300)
+    packets = EventPackets(path)
+    offset, size = packets._packets[0]
+    body = np.array(np.frombuffer(path.read_bytes()[offset : offset + size], np.uint8))
+    status, start, count = _event_vector(body)
+    assert status == 0 and count == 300
+    np.testing.assert_array_equal(np.frombuffer(body, PACKET_EVENT, count, start)["t"], events[0])
+    monkeypatch.setattr(aedat4_packets, "_uint", aedat4_packets._uint.py_func)  # its reads checked too (compiled above)
+
+    @hostile_settings(300)
+    @given(st.data())
+    def check(data):
+        kind = data.draw(st.sampled_from(["cut", "overwrite", "random"]))
+        if kind == "random":
+            damaged = np.array(np.frombuffer(data.draw(st.binary(max_size=64)), np.uint8))  # writable, as compiled
+        else:
+            damaged = body.copy()
+            if kind == "cut":
+                damaged = damaged[: data.draw(st.integers(0, len(body) - 1))]
+            else:
+                at = data.draw(st.integers(0, 40))
+                damaged[at : at + 4] = np.frombuffer(data.draw(st.binary(min_size=4, max_size=4)), np.uint8)[: len(damaged[at : at + 4])]
+        status, a, b = _event_vector.py_func(damaged)  # an IndexError here is a read outside the bytes
+        assert (status, a, b) == _event_vector(damaged)
+        if status == 0:
+            assert a + 16 * b <= len(damaged)
+
+    check()
+
+
 # -- the same sequence as an ECD folder and as an AEDAT4 --------------------------------------
 
 
