@@ -3,7 +3,8 @@ default sequence), with --config that file's plugins, each replaced where a flag
 
 Prints frames/s and the real-time factor (sequence duration / processing time) of a
 whole run, serial (--threads 1) and concurrent (a thread per core), alternated, and their
-ratio; where the time goes (loading, frontend, tracker, backend); for a tracker that reads events, the events/s it processes; for cmax, its objective's evaluations/s beside a plain
+ratio; the share of a serial run spent inside OpenCV's functions and numba's kernels (what
+no change to the Python around them can remove on one core); where the time goes (loading, frontend, tracker, backend); for a tracker that reads events, the events/s it processes; for cmax, its objective's evaluations/s beside a plain
 numpy version of the same kernel.
 
     python benchmarks/bench_pipeline.py [--config FILE] [--dataset SPEC] [--frontend F] [--tracker T]
@@ -77,6 +78,46 @@ def contrast_evaluations(cfg, repeat: int) -> None:
         print(f"  {label:21s} {1 / seconds:8.1f} evaluations/s  ({len(window) / seconds / 1e6:6.1f} M events/s)")
 
 
+def kernel_share(cfg) -> tuple[float, dict]:
+    """Wall time [s] of one serial run (--threads 1), and of it the seconds spent inside
+    OpenCV's functions (called as cv2.NAME) and inside numba-compiled kernels called from
+    Python (eas-vo's module-level ones), each wrapped with a timer for this run only. Run it
+    after the same configuration ran once: every kernel is compiled, so none is compiled
+    against a wrapper."""
+    import sys
+    import types
+
+    import cv2
+    from numba.core.registry import CPUDispatcher
+
+    spent = {"OpenCV": 0.0, "numba": 0.0}
+
+    def timer(fn, kind):
+        def timed(*args, **kwargs):
+            t0 = time.perf_counter()
+            try:
+                return fn(*args, **kwargs)
+            finally:
+                spent[kind] += time.perf_counter() - t0
+        return timed
+
+    originals = [(cv2, name, fn) for name, fn in vars(cv2).items() if isinstance(fn, types.BuiltinFunctionType)]
+    originals += [(module, name, obj) for module in list(sys.modules.values())
+                  if getattr(module, "__name__", "").startswith("eas_vo")
+                  for name, obj in list(vars(module).items()) if isinstance(obj, CPUDispatcher)]
+    threads = concurrency.threads()
+    try:
+        for module, name, fn in originals:
+            setattr(module, name, timer(fn, "OpenCV" if module is cv2 else "numba"))
+        concurrency.set_threads(1)
+        elapsed = pipeline.run(cfg).metrics["elapsed_s"]
+    finally:
+        concurrency.set_threads(threads)
+        for module, name, fn in originals:
+            setattr(module, name, fn)
+    return elapsed, spent
+
+
 def _timed(fn) -> float:
     t0 = time.perf_counter()
     fn()
@@ -112,6 +153,11 @@ def main() -> None:
               f"{m['frames_per_s']:.1f} frames/s, real-time factor {m['realtime_factor']:.2f}x")
     if cores > 1:
         print(f"  concurrent / serial: {fastest[cores]['frames_per_s'] / fastest[1]['frames_per_s']:.2f}x")
+    elapsed, inside = kernel_share(cfg)
+    floor = sum(inside.values())
+    print(f"  inside compiled kernels, serial run of {elapsed:.2f} s: " + ", ".join(
+        f"{kind} {100 * s / elapsed:.0f} %" for kind, s in inside.items())
+          + f": {100 * floor / elapsed:.0f} %, a floor of {floor:.2f} s ({best['frames'] / max(floor, 1e-9):.0f} frames/s) on one core")
     stages = min((stage_times(cfg) for _ in range(args.repeat)), key=lambda s: s["frontend"] + s["tracker"])
     total = sum(stages[k] for k in ("load", "frontend", "tracker", "backend"))
     for k in ("load", "frontend", "tracker", "backend"):
