@@ -6,8 +6,10 @@ Results never depend on the count: work is split into independent parts taken in
 from __future__ import annotations
 
 import os
+import queue
+import threading
 from concurrent.futures import Future, ThreadPoolExecutor
-from typing import Callable, Iterator, TypeVar
+from typing import Callable, Iterable, Iterator, TypeVar
 
 T = TypeVar("T")
 
@@ -78,6 +80,51 @@ def in_order(work: Callable[[int], T], count: int, ahead: int = 6) -> Iterator[T
     finally:
         for future in pending:
             future.cancel()
+
+
+def ahead(items: Iterable[T], depth: int = 2) -> Iterator[T]:
+    """The items of `items`, in order, drawn from it on a thread of their own at most `depth`
+    ahead of the caller (a reader decoding the next frame while the caller works on this one);
+    drawn in the caller's thread with one thread. An exception of the iterable comes at its
+    turn; when the caller stops early (an error, Ctrl-C), the thread stops drawing."""
+    if _threads == 1:
+        yield from items
+        return
+    done, stop = object(), threading.Event()
+    drawn: queue.Queue = queue.Queue(depth)
+
+    def draw():
+        try:
+            for item in items:
+                while not stop.is_set():
+                    try:
+                        drawn.put((item, None), timeout=0.05)
+                        break
+                    except queue.Full:
+                        continue
+                if stop.is_set():
+                    return
+            drawn.put((done, None))
+        except BaseException as exc:  # noqa: BLE001  (raised in the caller, at its turn)
+            drawn.put((done, exc))
+
+    thread = threading.Thread(target=draw, name="eas-vo-ahead", daemon=True)
+    thread.start()
+    try:
+        while True:
+            item, error = drawn.get()
+            if item is done:
+                if error is not None:
+                    raise error
+                return
+            yield item
+    finally:
+        stop.set()
+        while thread.is_alive():  # let a blocked put see the stop
+            try:
+                drawn.get_nowait()
+            except queue.Empty:
+                thread.join(0.01)
 
 
 def split(work: Callable[[int, int], T], count: int, min_part: int) -> list[T]:

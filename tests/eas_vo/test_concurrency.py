@@ -77,3 +77,37 @@ def test_submit_gives_the_result_or_raises_at_result(threads, n):
     failed = concurrency.submit(lambda: 1 / 0)
     with pytest.raises(ZeroDivisionError):
         failed.result()
+
+
+@pytest.mark.parametrize("n", [1, 2])
+def test_ahead_yields_in_order_raises_at_its_turn_and_stops_drawing(threads, n):
+    """ahead: the items in order; the iterable's exception after the items before it; a caller
+    that stops early leaves the drawing thread stopped, at most `depth` (+1 in hand) drawn."""
+    import time
+
+    threads(n)
+    assert list(concurrency.ahead(iter(range(50)), depth=3)) == list(range(50))
+
+    def failing():
+        yield from range(5)
+        raise ValueError("item 5")
+
+    got = []
+    with pytest.raises(ValueError, match="item 5"):
+        for item in concurrency.ahead(failing()):
+            got.append(item)
+    assert got == list(range(5))
+
+    drawn = []
+
+    def counted():
+        for k in range(1000):
+            drawn.append(k)
+            yield k
+
+    stream = concurrency.ahead(counted(), depth=2)
+    assert [next(stream) for _ in range(3)] == [0, 1, 2]
+    stream.close()
+    time.sleep(0.1)
+    assert len(drawn) <= 3 + 2 + 1
+    assert not [t for t in threading.enumerate() if t.name == "eas-vo-ahead"]
