@@ -39,9 +39,6 @@ PACKET_EVENT = np.dtype({"names": ["t", "x", "y", "p"], "formats": ["<i8", "<i2"
 CODECS = {0: "none", 1: "lz4", 2: "lz4", 3: "zstd", 4: "zstd"}
 
 
-_LAYOUTS: dict[str, struct.Struct] = {}
-
-
 class _FlatBuffer:
     """Bounds-checked reads of little-endian scalars in a FlatBuffer; `fail(what)` raises."""
 
@@ -49,10 +46,9 @@ class _FlatBuffer:
         self.data, self.fail = data, fail
 
     def scalar(self, fmt: str, at: int):
-        layout = _LAYOUTS.get(fmt) or _LAYOUTS.setdefault(fmt, struct.Struct(fmt))
-        if at < 0 or at + layout.size > len(self.data):
+        if at < 0 or at + struct.calcsize(fmt) > len(self.data):
             self.fail(f"an offset points outside the buffer (byte {at} of {len(self.data)})")
-        return layout.unpack_from(self.data, at)[0]
+        return struct.unpack_from(fmt, self.data, at)[0]
 
     def field(self, table: int, index: int) -> int:
         """Absolute position of field `index` of the table at `table`, or 0 if absent."""
@@ -236,6 +232,8 @@ class EventPackets:
         return np.frombuffer(body, PACKET_EVENT, b, a)
 
     def _decompress(self, body, scratch: Scratch | None, fail) -> memoryview:
+        """The packet body decompressed, into `scratch` when it fits (else into memory of its
+        own, and the scratch grown for the next packet); `fail` on damage."""
         import cramjam
 
         codec = getattr(cramjam, self.codec)

@@ -248,7 +248,7 @@ def track(parts: Pipeline, config: ResolvedConfig, frames_csv: Path | None = Non
     rc = config.run
     tracked = Tracked(orb=OrbStats() if rc.orb_stats else None, closes_loops=parts.tracker.closes_loops)
     n_window = len(parts.dataset.window(rc.start_s, rc.duration_s))
-    overlap = concurrency.threads() > 1  # the next frame read, and the tracker finishing one, while one is tracked
+    overlap = concurrency.threads() > 1  # the tracker may finish a frame while the next is tracked
     pending = None  # the submitted frame whose result is not taken yet
 
     def take(record: FrameRecord, edges: list) -> None:
@@ -263,8 +263,7 @@ def track(parts: Pipeline, config: ResolvedConfig, frames_csv: Path | None = Non
 
     with _FrameLog(frames_csv) as log, _progress(n_window, progress, rc) as bar:
         try:
-            samples = parts.dataset.samples(rc.start_s, rc.duration_s)
-            for sample in concurrency.ahead(samples) if overlap else samples:  # the next frame decoded meanwhile
+            for sample in concurrency.ahead(parts.dataset.samples(rc.start_s, rc.duration_s)):  # the next one read meanwhile
                 image = None
                 if parts.frontend.makes_images:
                     image = parts.frontend(sample)
