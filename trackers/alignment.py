@@ -36,8 +36,8 @@ SEARCH_GRID_DEG = np.arange(-45.0, 45.1, 7.5)
 SEARCH_ROLL_DEG = (-15.0, 0.0, 15.0)
 #: How many candidates go on to each resolution of ALIGN_FOCAL_PX (the best-scoring after the last).
 SEARCH_KEEP = (8, 2, 1)
-#: Gauss-Newton steps at each resolution, each run stopping sooner once a step moves the view by
-#: under ALIGN_STOP_PX pixels of that resolution.
+#: Gauss-Newton steps at each resolution, each candidate's stopping sooner once a step of it moves
+#: the view by under ALIGN_STOP_PX pixels of that resolution.
 ALIGN_ITERATIONS = 10
 ALIGN_STOP_PX = 0.01
 #: Rotations scored per thread at the least (the search's hundreds are split across the cores).
@@ -61,26 +61,36 @@ class PhotometricAlignment:
         self._levels = {f: _Level(camera, seen, f) for f in sorted({SCORE_FOCAL_PX, *ALIGN_FOCAL_PX})}
         self._grid = np.array([cv2.Rodrigues(np.radians([tilt, pan, roll]))[0]
                                for roll in SEARCH_ROLL_DEG for pan in SEARCH_GRID_DEG for tilt in SEARCH_GRID_DEG])
+        self._grid_warps = self._levels[ALIGN_FOCAL_PX[0]].warps(self._grid)  # the same for every pair of views
+        self._scored: tuple[dict, dict, dict] | None = None  # the last pair of views scored, and its scores by rotation
 
     def _undistort(self, image: np.ndarray) -> np.ndarray:
         return cv2.remap(image, *self._maps, cv2.INTER_LINEAR)
 
     def pyramid(self, image: np.ndarray) -> dict:
         """`image` undistorted at each resolution the alignment and the score use (keyed by
-        their focal lengths [px]), and the coarsest blurred by SEARCH_BLUR_PX (key "search");
-        float32."""
+        their focal lengths [px]), and the coarsest blurred by SEARCH_BLUR_PX (key "search"),
+        float32; under "pixels", the same keys: each one's pixels of the view (_Level.ys, xs)."""
         flat = self._undistort(image).astype(np.float32)
         levels: dict = {f: level.resized(flat) for f, level in self._levels.items()}
         levels["search"] = cv2.GaussianBlur(levels[ALIGN_FOCAL_PX[0]], (0, 0), SEARCH_BLUR_PX)
+        coarsest = self._levels[ALIGN_FOCAL_PX[0]]
+        levels["pixels"] = {f: levels[f][level.ys, level.xs] for f, level in self._levels.items()}
+        levels["pixels"]["search"] = levels["search"][coarsest.ys, coarsest.xs]
         return levels
 
     def score(self, source: dict, image: dict, R_source_image: np.ndarray) -> float:
         """How well R_source_image explains the two views (their `pyramid`s): the zero-mean
         normalised cross-correlation of `source` warped into `image`'s view with `image`, over
         the pixels both see (at SCORE_FOCAL_PX); -1 when they share under MIN_OVERLAP of the view
-        or either is flat there."""
-        f = SCORE_FOCAL_PX
-        return float(self._levels[f].scores([source[f]], [image[f]], R_source_image[None])[0, 0])
+        or either is flat there. Each rotation of the last pair of views is scored once."""
+        if self._scored is None or self._scored[0] is not source or self._scored[1] is not image:
+            self._scored = source, image, {}
+        scores, key = self._scored[2], np.asarray(R_source_image, float).tobytes()
+        if key not in scores:
+            f = SCORE_FOCAL_PX
+            scores[key] = float(self._levels[f].scores([source[f]], [image["pixels"][f]], R_source_image[None])[0, 0])
+        return scores[key]
 
     def explains(self, source: dict, image: dict, R_source_image: np.ndarray) -> bool:
         """Whether R_source_image explains the two views (`pyramid`s) clearly better than no
@@ -100,13 +110,15 @@ class PhotometricAlignment:
         for f, keep in zip(ALIGN_FOCAL_PX, SEARCH_KEEP):
             level = self._levels[f]
             if f == ALIGN_FOCAL_PX[0]:  # half ranked sharp, half blurred
-                sharp, blurred = np.argsort(-level.scores([source[f], source["search"]], [image[f], image["search"]], candidates))
+                pair = [source[f], source["search"]], [image["pixels"][f], image["pixels"]["search"]]
+                scores = np.concatenate([level.scores(*pair, candidates[: -len(self._grid)]), level.warped_scores(*pair, self._grid_warps)], axis=1)
+                sharp, blurred = np.argsort(-scores)
                 order = list(dict.fromkeys([*sharp[: keep // 2], *blurred[:keep], *sharp]))[:keep]
             else:
-                order = np.argsort(-level.scores([source[f]], [image[f]], candidates)[0])[:keep]
-            candidates = level.refine(source[f], image[f], candidates[np.asarray(order)])
+                order = np.argsort(-level.scores([source[f]], [image["pixels"][f]], candidates)[0])[:keep]
+            candidates = level.refine(source[f], image[f], image["pixels"][f], candidates[np.asarray(order)])
         last = ALIGN_FOCAL_PX[-1]
-        best = candidates[int(np.argmax(self._levels[last].scores([source[last]], [image[last]], candidates)[0]))]
+        best = candidates[0] if len(candidates) == 1 else candidates[int(np.argmax(self._levels[last].scores([source[last]], [image["pixels"][last]], candidates)[0]))]
         return best if self.explains(source, image, best) else None
 
 
@@ -132,23 +144,36 @@ class _Level:
         """`image` (the sensor's size) at this resolution."""
         return cv2.resize(image, self.size, interpolation=cv2.INTER_AREA)
 
-    def scores(self, sources: list[np.ndarray], images: list[np.ndarray], Rs: np.ndarray) -> np.ndarray:
-        """The ZNCC of each image of `images` with the same-index image of `sources` warped by
-        each rotation of Rs (C, 3, 3), over the pixels both see: (len(images), C); -1 where
-        they share under MIN_OVERLAP or either is flat there."""
-        sources = np.stack(sources).astype(np.float32)
-        targets = np.stack([im[self.ys, self.xs] for im in images]).astype(np.float32)
-        KRs = np.asarray(self.K @ Rs, np.float64)
-        return np.concatenate(concurrency.split(
-            lambda a, b: _zncc(sources, targets, KRs[a:b], self.bearings, self.seen, self.min_count), len(KRs),
-            PARALLEL_CANDIDATES), axis=1)
+    def warps(self, Rs: np.ndarray) -> tuple[np.ndarray, ...]:
+        """Where each rotation of Rs (C, 3, 3) takes the image view's pixels in a source view,
+        for `warped_scores`: (first (C + 1): each rotation's rows start, pixel (M): the image
+        view's pixel, corner (M): the source pixel at the top left of its four (row-major
+        index), weights (M, 4): their bilinear weights), rows only where the view's pixels land
+        inside the source and its lens saw them, none for a rotation with under min_count."""
+        return _warp_table(np.asarray(self.K @ Rs, np.float64), self.bearings, self.seen, self.min_count)
 
-    def refine(self, source: np.ndarray, image: np.ndarray, Rs: np.ndarray) -> np.ndarray:
+    def warped_scores(self, sources: list[np.ndarray], targets: list[np.ndarray], warps: tuple[np.ndarray, ...]) -> np.ndarray:
+        """`scores` of the rotations whose `warps` are given: the same numbers, without projecting."""
+        return np.stack([np.concatenate(concurrency.split(
+            lambda a, b: _zncc_warped(source.reshape(-1), target, warps[0][a: b + 1], *warps[1:], self.shape[1], self.min_count),
+            len(warps[0]) - 1, PARALLEL_CANDIDATES)) for source, target in zip(sources, targets)])
+
+    def scores(self, sources: list[np.ndarray], targets: list[np.ndarray], Rs: np.ndarray) -> np.ndarray:
+        """The ZNCC of each image's pixels of the view `targets` (its `pyramid`'s "pixels") with
+        the same-index image of `sources` (float32, this resolution) warped by each rotation of
+        Rs (C, 3, 3), over the pixels both see: (len(targets), C); -1 where they share under
+        MIN_OVERLAP or either is flat there."""
+        KRs = np.asarray(self.K @ Rs, np.float64)
+        return np.stack([np.concatenate(concurrency.split(
+            lambda a, b: _zncc(source, target, KRs[a:b], self.bearings, self.seen, self.min_count), len(KRs),
+            PARALLEL_CANDIDATES)) for source, target in zip(sources, targets)])
+
+    def refine(self, source: np.ndarray, image: np.ndarray, target: np.ndarray, Rs: np.ndarray) -> np.ndarray:
         """Each R_source_image of Rs (C, 3, 3) refined by inverse-compositional Gauss-Newton on
         the squared difference of the two views (each normalised to zero mean and unit variance
-        over the pixels both see), all at once, up to ALIGN_ITERATIONS steps, stopping once no
-        step moves the view by ALIGN_STOP_PX at this resolution."""
-        target = image[self.ys, self.xs].astype(float)
+        over the pixels both see), up to ALIGN_ITERATIONS steps, each stopping once its step
+        moves the view by under ALIGN_STOP_PX at this resolution. `target`: the image's pixels
+        of the view (its `pyramid`'s "pixels")."""
         gx = cv2.Sobel(image, cv2.CV_32F, 1, 0, ksize=3)[self.ys, self.xs] / 8
         gy = cv2.Sobel(image, cv2.CV_32F, 0, 1, ksize=3)[self.ys, self.xs] / 8
         X, Y = self.bearings[0], self.bearings[1]  # z = 1
@@ -156,41 +181,98 @@ class _Level:
         # d image(pi(K exp([d]x) b)) / d d at d = 0 is r (-[b]x), r = grad . d pi / d b
         r0, r1, r2 = gx * fx, gy * fy, -(gx * fx * X + gy * fy * Y)
         J = np.stack([r2 * Y - r1, r0 - r2 * X, r1 * X - r0 * Y], axis=1)  # (N, 3)
-        Rs = np.array(Rs, float)
-        J, source = np.ascontiguousarray(J), np.asarray(source, np.float32)
-        for _ in range(ALIGN_ITERATIONS):
-            deltas = _gauss_newton_steps(source, target, J, self.K @ Rs, self.bearings, self.seen, self.min_count)
-            Rs = np.array([R @ cv2.Rodrigues(-d)[0] for R, d in zip(Rs, deltas)])
-            if np.linalg.norm(deltas, axis=1).max() * fx < ALIGN_STOP_PX:
-                break
-        return Rs
+        return _refine(np.asarray(source, np.float32), target, np.ascontiguousarray(J), self.K, np.array(Rs, float),
+                       self.bearings, self.seen, self.min_count, ALIGN_STOP_PX / fx)
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _project(M, bearings, n, seen):
+    """Where the homography M puts bearing n of `bearings` (3, N) in an image of seen's size:
+    (whether it is inside: ahead of the camera, inside the image and where the lens saw,
+    `seen`; u, v [px])."""
+    h, w = seen.shape
+    bx, by, bz = bearings[0, n], bearings[1, n], bearings[2, n]
+    z = M[2, 0] * bx + M[2, 1] * by + M[2, 2] * bz
+    ahead = z > 1e-6
+    if not ahead:
+        z = 1.0  # u, v unused
+    u = (M[0, 0] * bx + M[0, 1] * by + M[0, 2] * bz) / z
+    v = (M[1, 0] * bx + M[1, 1] * by + M[1, 2] * bz) / z
+    return ahead and u >= 0 and v >= 0 and u <= w - 1 and v <= h - 1 and seen[int(v + 0.5), int(u + 0.5)], u, v
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _corner(u, v, seen):
+    """The top-left pixel i, j of the four around (u, v) [px] inside an image of seen's size,
+    and the offsets a, b from it (bilinear weights)."""
+    h, w = seen.shape
+    i, j = min(int(u), w - 2), min(int(v), h - 2)
+    return i, j, u - i, v - j
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _bilinear(image, u, v):
+    """`image` (h, w) at (u, v) [px] inside it, interpolated bilinearly (float64)."""
+    i, j, a, b = _corner(u, v, image)
+    i, j, one = np.uint32(i), np.uint32(j), np.uint32(1)  # unsigned: no negative-index handling
+    return ((1 - a) * (1 - b) * image[j, i] + a * (1 - b) * image[j, i + one]
+            + (1 - a) * b * image[j + one, i] + a * b * image[j + one, i + one])
 
 
 @numba.njit(cache=True, nogil=True)
-def _sample(sources, M, bearings, seen, values, inside):
-    """Each image of `sources` (P, h, w) sampled (bilinear) where the homography M puts each
-    bearing (3, N): values (P, N) and `inside` (N: ahead of the camera, inside the image and
-    where the lens saw, `seen`), written in place; returns how many are inside."""
-    P, h, w = sources.shape
-    count = 0
-    for n in range(bearings.shape[1]):
-        bx, by, bz = bearings[0, n], bearings[1, n], bearings[2, n]
-        z = M[2, 0] * bx + M[2, 1] * by + M[2, 2] * bz
-        inside[n] = False
-        if z <= 1e-6:
+def _warp_table(KRs, bearings, seen, min_count):
+    """_Level.warps of the homographies KRs (C, 3, 3)."""
+    C, N, w = KRs.shape[0], bearings.shape[1], seen.shape[1]
+    first = np.zeros(C + 1, np.int64)
+    pixel, corner = np.empty(C * N, np.uint32), np.empty(C * N, np.uint32)
+    weights = np.empty((C * N, 4))
+    m = 0
+    for c in range(C):
+        start = m
+        for n in range(N):
+            inside, u, v = _project(KRs[c], bearings, n, seen)
+            if inside:
+                i, j, a, b = _corner(u, v, seen)
+                pixel[m], corner[m] = n, j * w + i
+                weights[m, 0], weights[m, 1], weights[m, 2], weights[m, 3] = (1 - a) * (1 - b), a * (1 - b), (1 - a) * b, a * b
+                m += 1
+        if m - start < min_count:
+            m = start
+        first[c + 1] = m
+    return first, pixel[:m].copy(), corner[:m].copy(), weights[:m].copy()
+
+
+@numba.njit(cache=True, nogil=True)
+def _zncc_warped(source, target, first, pixel, corner, weights, w, min_count):
+    """_zncc of the rotations whose warp table (_Level.warps) is given, `source` (h * w)
+    row-major: the same sums in the same order, so the same scores."""
+    C = len(first) - 1
+    out = np.full(C, -1.0)
+    w, one = np.uint32(w), np.uint32(1)  # unsigned indices: no negative-index handling
+    for c in range(C):
+        count = first[c + 1] - first[c]
+        if count < min_count:
             continue
-        u = (M[0, 0] * bx + M[0, 1] * by + M[0, 2] * bz) / z
-        v = (M[1, 0] * bx + M[1, 1] * by + M[1, 2] * bz) / z
-        if u < 0 or v < 0 or u > w - 1 or v > h - 1 or not seen[int(v + 0.5), int(u + 0.5)]:
-            continue
-        i, j = min(int(u), w - 2), min(int(v), h - 2)
-        a, b = u - i, v - j
-        for p in range(P):
-            values[p, n] = ((1 - a) * (1 - b) * sources[p, j, i] + a * (1 - b) * sources[p, j, i + 1]
-                            + (1 - a) * b * sources[p, j + 1, i] + a * b * sources[p, j + 1, i + 1])
-        inside[n] = True
-        count += 1
-    return count
+        sx = sy = sxx = syy = sxy = 0.0
+        for m in range(first[c], first[c + 1]):
+            k = corner[m]
+            x = (weights[m, 0] * source[k] + weights[m, 1] * source[k + one]
+                 + weights[m, 2] * source[k + w] + weights[m, 3] * source[k + w + one])
+            y = target[pixel[m]]
+            sx += x
+            sy += y
+            sxx += x * x
+            syy += y * y
+            sxy += x * y
+        out[c] = _correlation(sx, sy, sxx, syy, sxy, count)
+    return out
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _correlation(sx, sy, sxx, syy, sxy, count):
+    """The correlation coefficient of `count` pairs (x, y) from their sums; -1 where either is flat."""
+    vx, vy = sxx - sx * sx / count, syy - sy * sy / count
+    return (sxy - sx * sy / count) / np.sqrt(vx * vy) if vx > 0 and vy > 0 else -1.0
 
 
 @numba.njit(cache=True, nogil=True)
@@ -202,68 +284,98 @@ def _gauss_newton_steps(source, target, J, KRs, bearings, seen, min_count):
     shared or either view is flat there."""
     C, N = KRs.shape[0], bearings.shape[1]
     deltas = np.zeros((C, 3))
-    values = np.zeros((1, N))
-    inside = np.zeros(N, np.bool_)
-    sources = source.reshape((1,) + source.shape)
     for c in range(C):
-        n = _sample(sources, KRs[c], bearings, seen, values, inside)
+        # in one pass over the pixels both see: the sums of v, v^2, t, t^2, J, v J, t J and J J^T
+        # (symmetric), from which the residual r = (v - mean v) / std v - (t - mean t) / std t gives J^T r
+        n = 0
+        sv = svv = st = stt = 0.0
+        s0 = s1 = s2 = v0 = v1 = v2 = t0 = t1 = t2 = h00 = h01 = h02 = h11 = h12 = h22 = 0.0
+        for k in range(N):
+            ok, u, v = _project(KRs[c], bearings, k, seen)
+            if not ok:
+                continue
+            x = _bilinear(source, u, v)
+            y, j0, j1, j2 = np.float64(target[k]), J[k, 0], J[k, 1], J[k, 2]
+            n += 1
+            sv, svv, st, stt = sv + x, svv + x * x, st + y, stt + y * y
+            s0, s1, s2 = s0 + j0, s1 + j1, s2 + j2
+            v0, v1, v2 = v0 + x * j0, v1 + x * j1, v2 + x * j2
+            t0, t1, t2 = t0 + y * j0, t1 + y * j1, t2 + y * j2
+            h00, h01, h02 = h00 + j0 * j0, h01 + j0 * j1, h02 + j0 * j2
+            h11, h12, h22 = h11 + j1 * j1, h12 + j1 * j2, h22 + j2 * j2
         if n < min_count:
             continue
-        sv = svv = st = stt = 0.0
-        for k in range(N):
-            if inside[k]:
-                sv += values[0, k]
-                svv += values[0, k] * values[0, k]
-                st += target[k]
-                stt += target[k] * target[k]
         v_mean, t_mean = sv / n, st / n
         v_var, t_var = svv / n - v_mean * v_mean, stt / n - t_mean * t_mean
         if v_var <= 0.0 or t_var <= 0.0:
             continue
         v_std, t_std = np.sqrt(v_var), np.sqrt(t_var)
-        H = np.zeros((3, 3))
-        g = np.zeros(3)
-        for k in range(N):
-            if not inside[k]:
-                continue
-            r = (values[0, k] - v_mean) / v_std - (target[k] - t_mean) / t_std
-            for a in range(3):
-                g[a] += r * J[k, a]
-                for b in range(3):
-                    H[a, b] += J[k, a] * J[k, b]
-        H /= t_std * t_std
-        for a in range(3):
-            H[a, a] += 1e-9
-        deltas[c] = np.linalg.solve(H, g / t_std)
+        g0 = (v0 - v_mean * s0) / v_std - (t0 - t_mean * s0) / t_std
+        g1 = (v1 - v_mean * s1) / v_std - (t1 - t_mean * s1) / t_std
+        g2 = (v2 - v_mean * s2) / v_std - (t2 - t_mean * s2) / t_std
+        H = np.array([[h00, h01, h02], [h01, h11, h12], [h02, h12, h22]]) / (t_std * t_std) + 1e-9 * np.eye(3)
+        deltas[c] = np.linalg.solve(H, np.array([g0, g1, g2]) / t_std)
     return deltas
 
 
 @numba.njit(cache=True, nogil=True)
-def _zncc(sources, targets, KRs, bearings, seen, min_count):
-    """scores (P, C): for each image pair p and rotation c, the ZNCC of targets[p] (P, N, at
-    the image view's pixels) with sources[p] (P, h, w) sampled (bilinear) where K R_c puts the
-    pixels' bearings (3, N), where the source's lens saw (`seen`, h x w); -1 with under
-    `min_count` (at least 1) such pixels, or a flat image."""
-    P = sources.shape[0]
+def _refine(source, target, J, K, Rs, bearings, seen, min_count, stop_rad):
+    """_Level.refine's iterations: each rotation of Rs (C, 3, 3) updated in place by up to
+    ALIGN_ITERATIONS _gauss_newton_steps (R <- R exp(-[d]x)), until a step of it is under
+    `stop_rad` long."""
+    moving = np.arange(len(Rs))
+    for _ in range(ALIGN_ITERATIONS):
+        KRs = np.empty((len(moving), 3, 3))
+        for m, c in enumerate(moving):
+            KRs[m] = K @ Rs[c]
+        deltas = _gauss_newton_steps(source, target, J, KRs, bearings, seen, min_count)
+        still = np.empty(len(moving), np.bool_)
+        for m, c in enumerate(moving):
+            Rs[c] = Rs[c] @ _exp_so3(-deltas[m])
+            still[m] = np.sqrt(deltas[m, 0] ** 2 + deltas[m, 1] ** 2 + deltas[m, 2] ** 2) >= stop_rad
+        moving = moving[still]
+        if len(moving) == 0:
+            break
+    return Rs
+
+
+@numba.njit(cache=True, nogil=True)
+def _exp_so3(d):
+    """The rotation matrix of rotation vector d [rad] (Rodrigues' formula)."""
+    theta = np.sqrt(d[0] ** 2 + d[1] ** 2 + d[2] ** 2)
+    if theta < 1e-300:
+        return np.eye(3)
+    x, y, z = d[0] / theta, d[1] / theta, d[2] / theta
+    c, s = np.cos(theta), np.sin(theta)
+    c1 = 1.0 - c
+    return np.array([[c + c1 * x * x, c1 * x * y - s * z, c1 * x * z + s * y],
+                     [c1 * x * y + s * z, c + c1 * y * y, c1 * y * z - s * x],
+                     [c1 * x * z - s * y, c1 * y * z + s * x, c + c1 * z * z]])
+
+
+@numba.njit(cache=True, nogil=True)
+def _zncc(source, target, KRs, bearings, seen, min_count):
+    """scores (C): for each rotation c, the ZNCC of `target` (N, the image view's pixels) with
+    `source` (h, w) sampled (bilinear) where K R_c puts the pixels' bearings (3, N), where the
+    source's lens saw (`seen`, h x w); -1 with under `min_count` (at least 1) such pixels, or
+    a flat image."""
     C, N = KRs.shape[0], bearings.shape[1]
-    out = np.full((P, C), -1.0)
-    values = np.zeros((P, N))
-    inside = np.zeros(N, np.bool_)
+    out = np.full(C, -1.0)
     for c in range(C):
-        count = _sample(sources, KRs[c], bearings, seen, values, inside)
-        if count < min_count:
-            continue
-        for p in range(P):
-            sx = sy = sxx = syy = sxy = 0.0
-            for n in range(N):
-                if inside[n]:
-                    x, y = values[p, n], targets[p, n]
-                    sx += x
-                    sy += y
-                    sxx += x * x
-                    syy += y * y
-                    sxy += x * y
-            vx, vy = sxx - sx * sx / count, syy - sy * sy / count
-            if vx > 0 and vy > 0:
-                out[p, c] = (sxy - sx * sy / count) / np.sqrt(vx * vy)
+        count = 0
+        sx = sy = sxx = syy = sxy = 0.0
+        for n in range(N):
+            ok, u, v = _project(KRs[c], bearings, n, seen)
+            if not ok:
+                continue
+            x = _bilinear(source, u, v)
+            y = target[n]
+            count += 1
+            sx += x
+            sy += y
+            sxx += x * x
+            syy += y * y
+            sxy += x * y
+        if count >= min_count:
+            out[c] = _correlation(sx, sy, sxx, syy, sxy, count)
     return out

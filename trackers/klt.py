@@ -144,6 +144,7 @@ class KltTracker(Tracker):
         """Forget every frame seen; the next frame is a first frame."""
         self._prev_image: np.ndarray | None = None
         self._prev_pts = np.empty((0, 2), np.float32)
+        self._prev_corners: np.ndarray | None = None  # the previous image's Shi-Tomasi corners, when they were detected
         self._prev_detected: tuple | None = None  # the previous image's keypoints, when the fallback detected them
         self._prev_pyramid: dict | None = None  # the previous image undistorted, when the alignment made it
         self._kf_pts = np.empty((0, 2), np.float32)  # where each tracked corner was in the keyframe
@@ -225,7 +226,7 @@ class KltTracker(Tracker):
         if redetected:
             self._start_keyframe(image, self.detect(image))
         else:
-            self._prev_image, self._prev_pts, self._kf_pts = image, cur[ok], self._kf_pts[ok]
+            self._prev_image, self._prev_pts, self._kf_pts, self._prev_corners = image, cur[ok], self._kf_pts[ok], None
             if c.keyframe_interval > 0 and k - self._kf_index >= c.keyframe_interval:
                 self._kf_index, self._kf_pts = k, cur[ok]
 
@@ -306,7 +307,7 @@ class KltTracker(Tracker):
         R_aligned = align.align(source, pyramid, [np.eye(3)] if predicted is None else [predicted, np.eye(3)])
         if R_aligned is None:
             return None if step is None or align.explains(source, pyramid, step.R_i_j) else (None, 0)
-        corners = self.detect(self._prev_image)
+        corners = self.detect(self._prev_image) if self._prev_corners is None else self._prev_corners
         cur, ok = lk_track(self.camera, self._prev_image, corners, image, self._lk_params, R_aligned, self.config.fb_max_px)
         retried = measure(self.config, self.camera, corners[ok], cur[ok], k - 1, k) if ok.sum() >= self.config.threshold1 else None
         if retried is not None and not weakness(self.config, retried, self.camera.focal_px):
@@ -319,4 +320,6 @@ class KltTracker(Tracker):
         return candidates[best]
 
     def _start_keyframe(self, image: np.ndarray, pts: np.ndarray) -> None:
+        """`image` starts a keyframe with its Shi-Tomasi corners `pts` (N, 2) [px]."""
         self._prev_image, self._prev_pts, self._kf_pts, self._kf_index = image, pts, pts, self._k
+        self._prev_corners = pts

@@ -176,6 +176,26 @@ def test_a_gauss_newton_step_is_numpys_formulation():
         assert np.linalg.norm(step) > 1e-3  # a real step, not the zero of a skipped candidate
 
 
+def test_the_grids_warp_table_gives_the_projected_scores_exactly():
+    """The search grid's warps, made once per camera, score as the per-pixel projection does:
+    the same numbers bit for bit, rotations sharing too little with the view included."""
+    align = PhotometricAlignment(DAVIS)
+    R = Rotation.from_rotvec(np.radians([4, -12, 6])).as_matrix()
+    a, b = (align.pyramid(rendered_through_lens(DAVIS, R_w_c, seed=3)) for R_w_c in (np.eye(3), R))
+    level = align._levels[25.0]
+    pair = [a[25.0], a["search"]], [b["pixels"][25.0], b["pixels"]["search"]]
+    projected = level.scores(*pair, align._grid)
+    np.testing.assert_array_equal(level.warped_scores(*pair, level.warps(align._grid)), projected)
+    assert (projected == -1.0).any() and (projected > 0.5).any()
+
+
+def test_the_refinements_rotation_update_is_rodrigues_formula():
+    from eas_vo.trackers.alignment import _exp_so3
+
+    for d in ([0.0, 0.0, 0.0], [1e-12, 0.0, -2e-12], [0.01, -0.02, 0.005], [0.5, 1.0, -2.0]):
+        np.testing.assert_allclose(_exp_so3(np.array(d)), cv2.Rodrigues(np.array(d))[0], rtol=0, atol=1e-15)
+
+
 @pytest.mark.parametrize("threads", [1, 2, 3])
 def test_scores_do_not_depend_on_the_thread_count(threads):
     from eas_vo import concurrency
@@ -185,9 +205,9 @@ def test_scores_do_not_depend_on_the_thread_count(threads):
     before = concurrency.threads()
     try:
         concurrency.set_threads(1)
-        serial = align.align(a, b, [np.eye(3)]), align._levels[25.0].scores([a[25.0]], [b[25.0]], align._grid)
+        serial = align.align(a, b, [np.eye(3)]), align._levels[25.0].scores([a[25.0]], [b["pixels"][25.0]], align._grid)
         concurrency.set_threads(threads)
-        parallel = align.align(a, b, [np.eye(3)]), align._levels[25.0].scores([a[25.0]], [b[25.0]], align._grid)
+        parallel = align.align(a, b, [np.eye(3)]), align._levels[25.0].scores([a[25.0]], [b["pixels"][25.0]], align._grid)
     finally:
         concurrency.set_threads(before)
     assert (serial[0] is None) == (parallel[0] is None)
