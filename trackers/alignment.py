@@ -40,6 +40,10 @@ SEARCH_KEEP = (8, 2, 1)
 #: the view by under ALIGN_STOP_PX pixels of that resolution.
 ALIGN_ITERATIONS = 10
 ALIGN_STOP_PX = 0.01
+#: The most rows (24 bytes each) of the search grid's warps tabulated once per camera (_Level.warps);
+#: a view wider than that (over 2000 pixels at the coarsest resolution) projects the grid
+#: pixel by pixel for every pair instead, with the same scores.
+GRID_TABLE_MAX_ROWS = 2_000_000
 #: Rotations scored per thread at the least (the search's hundreds are split across the cores).
 PARALLEL_CANDIDATES = 64
 #: The overlap below which two views share too little to be scored [fraction of the view].
@@ -62,7 +66,8 @@ class PhotometricAlignment:
         self._grid = np.array([cv2.Rodrigues(np.radians([tilt, pan, roll]))[0]
                                for roll in SEARCH_ROLL_DEG for pan in SEARCH_GRID_DEG for tilt in SEARCH_GRID_DEG])
         self._grid_warps = self._levels[ALIGN_FOCAL_PX[0]].warps(self._grid)  # the same for every pair of views
-        self._scored: tuple[dict, dict, dict] | None = None  # the last pair of views scored, and its scores by rotation
+        # the last pair of views scored and its scores by rotation (one tracker's, not shared across threads)
+        self._scored: tuple[dict, dict, dict] | None = None
 
     def _undistort(self, image: np.ndarray) -> np.ndarray:
         return cv2.remap(image, *self._maps, cv2.INTER_LINEAR)
@@ -111,7 +116,10 @@ class PhotometricAlignment:
             level = self._levels[f]
             if f == ALIGN_FOCAL_PX[0]:  # half ranked sharp, half blurred
                 pair = [source[f], source["search"]], [image["pixels"][f], image["pixels"]["search"]]
-                scores = np.concatenate([level.scores(*pair, candidates[: -len(self._grid)]), level.warped_scores(*pair, self._grid_warps)], axis=1)
+                n_starts = len(candidates) - len(self._grid)
+                grid = (level.scores(*pair, self._grid) if self._grid_warps is None
+                        else level.warped_scores(*pair, self._grid_warps))
+                scores = np.concatenate([level.scores(*pair, candidates[:n_starts]), grid], axis=1)
                 sharp, blurred = np.argsort(-scores)
                 order = list(dict.fromkeys([*sharp[: keep // 2], *blurred[:keep], *sharp]))[:keep]
             else:
@@ -140,20 +148,35 @@ class _Level:
         self.bearings = np.linalg.inv(self.K) @ np.stack([self.xs, self.ys, np.ones_like(self.xs)]).astype(float)  # (3, N)
         self.min_count = max(MIN_OVERLAP * len(self.xs), 1.0)  # pixels two views must share to be compared
 
+    def _check(self, sources: list[np.ndarray], targets: list[np.ndarray]) -> None:
+        """Views of this resolution, as the compiled kernels' unchecked indexing needs."""
+        if any(s.shape != self.shape for s in sources) or any(t.shape != self.xs.shape for t in targets):
+            raise ValueError(f"views of {self.shape[1]}x{self.shape[0]} px expected (another camera's pyramid?)")
+
     def resized(self, image: np.ndarray) -> np.ndarray:
         """`image` (the sensor's size) at this resolution."""
         return cv2.resize(image, self.size, interpolation=cv2.INTER_AREA)
 
-    def warps(self, Rs: np.ndarray) -> tuple[np.ndarray, ...]:
+    def warps(self, Rs: np.ndarray) -> tuple[np.ndarray, ...] | None:
         """Where each rotation of Rs (C, 3, 3) takes the image view's pixels in a source view,
         for `warped_scores`: (first (C + 1): each rotation's rows start, pixel (M): the image
         view's pixel, corner (M): the source pixel at the top left of its four (row-major
-        index), weights (M, 4): their bilinear weights), rows only where the view's pixels land
-        inside the source and its lens saw them, none for a rotation with under min_count."""
-        return _warp_table(np.asarray(self.K @ Rs, np.float64), self.bearings, self.seen, self.min_count)
+        index), offsets (M, 2): the point's from that pixel [px]), rows only where the view's
+        pixels land inside the source and its lens saw them, none for a rotation with under
+        min_count; None beyond GRID_TABLE_MAX_ROWS rows."""
+        KRs = np.asarray(self.K @ Rs, np.float64)
+        first = np.zeros(len(Rs) + 1, np.int64)
+        table = np.empty(0, np.uint32), np.empty(0, np.uint32), np.empty((0, 2))
+        _warp_rows(KRs, self.bearings, self.seen, self.min_count, first, *table, False)
+        if first[-1] > GRID_TABLE_MAX_ROWS:
+            return None
+        table = np.empty(first[-1], np.uint32), np.empty(first[-1], np.uint32), np.empty((first[-1], 2))
+        _warp_rows(KRs, self.bearings, self.seen, self.min_count, first, *table, True)
+        return (first, *table)
 
     def warped_scores(self, sources: list[np.ndarray], targets: list[np.ndarray], warps: tuple[np.ndarray, ...]) -> np.ndarray:
         """`scores` of the rotations whose `warps` are given: the same numbers, without projecting."""
+        self._check(sources, targets)
         return np.stack([np.concatenate(concurrency.split(
             lambda a, b: _zncc_warped(source.reshape(-1), target, warps[0][a: b + 1], *warps[1:], self.shape[1], self.min_count),
             len(warps[0]) - 1, PARALLEL_CANDIDATES)) for source, target in zip(sources, targets)])
@@ -163,6 +186,7 @@ class _Level:
         the same-index image of `sources` (float32, this resolution) warped by each rotation of
         Rs (C, 3, 3), over the pixels both see: (len(targets), C); -1 where they share under
         MIN_OVERLAP or either is flat there."""
+        self._check(sources, targets)
         KRs = np.asarray(self.K @ Rs, np.float64)
         return np.stack([np.concatenate(concurrency.split(
             lambda a, b: _zncc(source, target, KRs[a:b], self.bearings, self.seen, self.min_count), len(KRs),
@@ -174,6 +198,7 @@ class _Level:
         over the pixels both see), up to ALIGN_ITERATIONS steps, each stopping once its step
         moves the view by under ALIGN_STOP_PX at this resolution. `target`: the image's pixels
         of the view (its `pyramid`'s "pixels")."""
+        self._check([source], [target])
         gx = cv2.Sobel(image, cv2.CV_32F, 1, 0, ksize=3)[self.ys, self.xs] / 8
         gy = cv2.Sobel(image, cv2.CV_32F, 0, 1, ksize=3)[self.ys, self.xs] / 8
         X, Y = self.bearings[0], self.bearings[1]  # z = 1
@@ -182,7 +207,7 @@ class _Level:
         r0, r1, r2 = gx * fx, gy * fy, -(gx * fx * X + gy * fy * Y)
         J = np.stack([r2 * Y - r1, r0 - r2 * X, r1 * X - r0 * Y], axis=1)  # (N, 3)
         return _refine(np.asarray(source, np.float32), target, np.ascontiguousarray(J), self.K, np.array(Rs, float),
-                       self.bearings, self.seen, self.min_count, ALIGN_STOP_PX / fx)
+                       self.bearings, self.seen, self.min_count, ALIGN_ITERATIONS, ALIGN_STOP_PX / fx)
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
@@ -202,10 +227,10 @@ def _project(M, bearings, n, seen):
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
-def _corner(u, v, seen):
-    """The top-left pixel i, j of the four around (u, v) [px] inside an image of seen's size,
-    and the offsets a, b from it (bilinear weights)."""
-    h, w = seen.shape
+def _corner(u, v, image):
+    """The top-left pixel i, j of the four around (u, v) [px] inside `image` (h, w), and the
+    offsets a, b from it (bilinear weights)."""
+    h, w = image.shape
     i, j = min(int(u), w - 2), min(int(v), h - 2)
     return i, j, u - i, v - j
 
@@ -220,30 +245,29 @@ def _bilinear(image, u, v):
 
 
 @numba.njit(cache=True, nogil=True)
-def _warp_table(KRs, bearings, seen, min_count):
-    """_Level.warps of the homographies KRs (C, 3, 3)."""
-    C, N, w = KRs.shape[0], bearings.shape[1], seen.shape[1]
-    first = np.zeros(C + 1, np.int64)
-    pixel, corner = np.empty(C * N, np.uint32), np.empty(C * N, np.uint32)
-    weights = np.empty((C * N, 4))
-    m = 0
-    for c in range(C):
-        start = m
-        for n in range(N):
+def _warp_rows(KRs, bearings, seen, min_count, first, pixel, corner, offsets, fill):
+    """_Level.warps' table of the homographies KRs (C, 3, 3), in two calls: without `fill`,
+    where each rotation's rows start, first (C + 1) (no rows under min_count); then with
+    `fill`, the rows, into arrays of first[-1] rows."""
+    w = seen.shape[1]
+    for c in range(KRs.shape[0]):
+        if fill and first[c + 1] == first[c]:
+            continue
+        m = first[c]
+        for n in range(bearings.shape[1]):
             inside, u, v = _project(KRs[c], bearings, n, seen)
-            if inside:
+            if not inside:
+                continue
+            if fill:
                 i, j, a, b = _corner(u, v, seen)
-                pixel[m], corner[m] = n, j * w + i
-                weights[m, 0], weights[m, 1], weights[m, 2], weights[m, 3] = (1 - a) * (1 - b), a * (1 - b), (1 - a) * b, a * b
-                m += 1
-        if m - start < min_count:
-            m = start
-        first[c + 1] = m
-    return first, pixel[:m].copy(), corner[:m].copy(), weights[:m].copy()
+                pixel[m], corner[m], offsets[m, 0], offsets[m, 1] = n, j * w + i, a, b
+            m += 1
+        if not fill:
+            first[c + 1] = m if m - first[c] >= min_count else first[c]
 
 
 @numba.njit(cache=True, nogil=True)
-def _zncc_warped(source, target, first, pixel, corner, weights, w, min_count):
+def _zncc_warped(source, target, first, pixel, corner, offsets, w, min_count):
     """_zncc of the rotations whose warp table (_Level.warps) is given, `source` (h * w)
     row-major: the same sums in the same order, so the same scores."""
     C = len(first) - 1
@@ -255,9 +279,9 @@ def _zncc_warped(source, target, first, pixel, corner, weights, w, min_count):
             continue
         sx = sy = sxx = syy = sxy = 0.0
         for m in range(first[c], first[c + 1]):
-            k = corner[m]
-            x = (weights[m, 0] * source[k] + weights[m, 1] * source[k + one]
-                 + weights[m, 2] * source[k + w] + weights[m, 3] * source[k + w + one])
+            k, a, b = corner[m], offsets[m, 0], offsets[m, 1]
+            x = ((1 - a) * (1 - b) * source[k] + a * (1 - b) * source[k + one]
+                 + (1 - a) * b * source[k + w] + a * b * source[k + w + one])
             y = target[pixel[m]]
             sx += x
             sy += y
@@ -319,12 +343,12 @@ def _gauss_newton_steps(source, target, J, KRs, bearings, seen, min_count):
 
 
 @numba.njit(cache=True, nogil=True)
-def _refine(source, target, J, K, Rs, bearings, seen, min_count, stop_rad):
+def _refine(source, target, J, K, Rs, bearings, seen, min_count, iterations, stop_rad):
     """_Level.refine's iterations: each rotation of Rs (C, 3, 3) updated in place by up to
-    ALIGN_ITERATIONS _gauss_newton_steps (R <- R exp(-[d]x)), until a step of it is under
+    `iterations` _gauss_newton_steps (R <- R exp(-[d]x)), until a step of it is under
     `stop_rad` long."""
     moving = np.arange(len(Rs))
-    for _ in range(ALIGN_ITERATIONS):
+    for _ in range(iterations):
         KRs = np.empty((len(moving), 3, 3))
         for m, c in enumerate(moving):
             KRs[m] = K @ Rs[c]

@@ -189,6 +189,22 @@ def test_the_grids_warp_table_gives_the_projected_scores_exactly():
     assert (projected == -1.0).any() and (projected > 0.5).any()
 
 
+def test_a_grid_too_large_to_tabulate_is_projected_with_the_same_rotation(monkeypatch):
+    from eas_vo.trackers import alignment
+
+    R = Rotation.from_rotvec(np.radians([-8, 14, 5])).as_matrix()
+    tabled = PhotometricAlignment(DAVIS)
+    a, b = (tabled.pyramid(rendered_through_lens(DAVIS, R_w_c, seed=4)) for R_w_c in (np.eye(3), R))
+    monkeypatch.setattr(alignment, "GRID_TABLE_MAX_ROWS", 0)
+    projected = PhotometricAlignment(DAVIS)
+    assert projected._grid_warps is None and tabled._grid_warps is not None
+    found = tabled.align(a, b, [np.eye(3)])
+    assert_rotations_close(found, R, np.radians(0.2))
+    np.testing.assert_array_equal(projected.align(a, b, [np.eye(3)]), found)
+    with pytest.raises(ValueError, match="another camera's pyramid"):
+        projected._levels[25.0].scores([a[50.0]], [b["pixels"][25.0]], np.eye(3)[None])
+
+
 def test_the_refinements_rotation_update_is_rodrigues_formula():
     from eas_vo.trackers.alignment import _exp_so3
 
