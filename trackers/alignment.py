@@ -126,7 +126,9 @@ class PhotometricAlignment:
                 order = np.argsort(-level.scores([source[f]], [image["pixels"][f]], candidates)[0])[:keep]
             candidates = level.refine(source[f], image[f], image["pixels"][f], candidates[np.asarray(order)])
         last = ALIGN_FOCAL_PX[-1]
-        best = candidates[0] if len(candidates) == 1 else candidates[int(np.argmax(self._levels[last].scores([source[last]], [image["pixels"][last]], candidates)[0]))]
+        best = candidates[0]
+        if len(candidates) > 1:
+            best = candidates[int(np.argmax(self._levels[last].scores([source[last]], [image["pixels"][last]], candidates)[0]))]
         return best if self.explains(source, image, best) else None
 
 
@@ -176,21 +178,24 @@ class _Level:
 
     def warped_scores(self, sources: list[np.ndarray], targets: list[np.ndarray], warps: tuple[np.ndarray, ...]) -> np.ndarray:
         """`scores` of the rotations whose `warps` are given: the same numbers, without projecting."""
-        self._check(sources, targets)
-        return np.stack([np.concatenate(concurrency.split(
-            lambda a, b: _zncc_warped(source.reshape(-1), target, warps[0][a: b + 1], *warps[1:], self.shape[1], self.min_count),
-            len(warps[0]) - 1, PARALLEL_CANDIDATES)) for source, target in zip(sources, targets)])
+        return self._each_pair(sources, targets, len(warps[0]) - 1, lambda source, target, a, b: _zncc_warped(
+            source.reshape(-1), target, warps[0][a: b + 1], *warps[1:], self.shape[1], self.min_count))
 
     def scores(self, sources: list[np.ndarray], targets: list[np.ndarray], Rs: np.ndarray) -> np.ndarray:
         """The ZNCC of each image's pixels of the view `targets` (its `pyramid`'s "pixels") with
         the same-index image of `sources` (float32, this resolution) warped by each rotation of
         Rs (C, 3, 3), over the pixels both see: (len(targets), C); -1 where they share under
         MIN_OVERLAP or either is flat there."""
-        self._check(sources, targets)
         KRs = np.asarray(self.K @ Rs, np.float64)
-        return np.stack([np.concatenate(concurrency.split(
-            lambda a, b: _zncc(source, target, KRs[a:b], self.bearings, self.seen, self.min_count), len(KRs),
-            PARALLEL_CANDIDATES)) for source, target in zip(sources, targets)])
+        return self._each_pair(sources, targets, len(KRs), lambda source, target, a, b: _zncc(
+            source, target, KRs[a:b], self.bearings, self.seen, self.min_count))
+
+    def _each_pair(self, sources: list[np.ndarray], targets: list[np.ndarray], count: int, kernel) -> np.ndarray:
+        """kernel(source, target, a, b), the scores of candidates a..b-1, for each pair of views,
+        the candidates split across the threads: (len(targets), count)."""
+        self._check(sources, targets)
+        return np.stack([np.concatenate(concurrency.split(lambda a, b: kernel(source, target, a, b), count, PARALLEL_CANDIDATES))
+                         for source, target in zip(sources, targets)])
 
     def refine(self, source: np.ndarray, image: np.ndarray, target: np.ndarray, Rs: np.ndarray) -> np.ndarray:
         """Each R_source_image of Rs (C, 3, 3) refined by inverse-compositional Gauss-Newton on
