@@ -89,28 +89,47 @@ class CameraModel:
         """Normalised image coordinates (N, 2) or rays in the camera frame (N, 3) -> distorted
         pixel coordinates (N, 2) [px]. Rays need z > 0 for `radtan`; `equidistant` maps every
         direction but the backward axis (it distorts the angle to the optical axis, not its tangent)."""
+        from eas_vo.geometry.lens import project_points
+
         p = np.asarray(points, dtype=np.float64)
-        p = p.reshape(-1, p.shape[-1])
-        x, y = p[:, 0], p[:, 1]
-        z = p[:, 2] if p.shape[1] == 3 else np.ones(len(p))
-        if self.model == "equidistant":
-            k1, k2, k3, k4 = self.dist
-            r = np.hypot(x, y)
-            theta = np.arctan2(r, z)
-            t2 = theta * theta
-            theta_d = theta * (1.0 + t2 * (k1 + t2 * (k2 + t2 * (k3 + t2 * k4))))
-            # theta_d / r -> 1 / z on the optical axis
-            scale = np.divide(theta_d, r, out=1.0 / np.where(z > 0, z, 1.0), where=r > 0)
-            xd, yd = x * scale, y * scale
-        else:
-            k1, k2, p1, p2, k3 = self.dist
-            x, y = x / z, y / z
-            r2 = x * x + y * y
-            radial = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
-            xd = x * radial + 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x)
-            yd = y * radial + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y
-        K = self.K
-        return np.column_stack([K[0, 0] * xd + K[0, 1] * yd + K[0, 2], K[1, 1] * yd + K[1, 2]])
+        p = np.ascontiguousarray(p.reshape(-1, p.shape[-1]))
+        out = np.empty((len(p), 2))
+        project_points(p, np.asarray(self.K, np.float64), np.asarray(self.dist, np.float64), self.model == "equidistant", out)
+        return out
+
+    @property
+    def distorted(self) -> bool:
+        """Whether the lens distorts (any coefficient not zero): else a pinhole camera."""
+        return bool(np.any(np.asarray(self.dist) != 0))
+
+    @functools.cached_property
+    def pixel_rays(self) -> np.ndarray:
+        """(height * width, 3) rays (z = 1) of the sensor's pixels, row by row (undistorted once)."""
+        u, v = np.meshgrid(np.arange(self.width, dtype=np.float64), np.arange(self.height, dtype=np.float64))
+        rays = np.ones((u.size, 3))
+        rays[:, :2] = self.undistort(np.column_stack([u.ravel(), v.ravel()]))
+        return rays
+
+    def rotated_pixels(self, R_to_from: np.ndarray, pts_px: np.ndarray) -> np.ndarray:
+        """Where pixels pts_px (N, 2) [px] of a view lie in a view rotated from it (ray_to =
+        R_to_from @ ray_from), through the lens model both ways: (N, 2) [px]."""
+        rays = np.ones((len(pts_px), 3))
+        rays[:, :2] = self.undistort(pts_px)
+        return self._rays_to_pixels(rays @ np.asarray(R_to_from, np.float64).T)
+
+    def rotation_maps(self, R_from_to: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """cv2.remap maps (x, y), each (height, width) float32 [px]: for every pixel of a view
+        rotated from another (ray_from = R_from_to @ ray_to), where it lies in that other view's
+        image, through the lens model; -1 where the lens cannot see it."""
+        px = self._rays_to_pixels(self.pixel_rays @ np.asarray(R_from_to, np.float64).T).astype(np.float32)
+        return px[:, 0].reshape(self.height, self.width), px[:, 1].reshape(self.height, self.width)
+
+    def _rays_to_pixels(self, rays: np.ndarray) -> np.ndarray:
+        """project(rays), -1 for rays `radtan` cannot project (z <= 0: behind the camera)."""
+        px = self.project(rays)
+        if self.model == "radtan":
+            px[rays[:, 2] <= 0] = -1.0
+        return px
 
     def undistort(self, pts_px: np.ndarray) -> np.ndarray:
         """Distorted pixel coordinates (N, 2) [px] -> normalised image coordinates (N, 2)."""

@@ -31,13 +31,17 @@ def lk_track(
     tracked ones (inside the image; with `fb_max_px` > 0, back within that many pixels).
 
     With a predicted rotation R_source_image, `source` is first derotated into the view of
-    `image` (the homography K R_image_source K^-1) and each point is tracked from where that
-    puts it: LK then only corrects the prediction's error, on patches no longer rotated
-    against each other (a roll of 10 degrees otherwise biases it)."""
+    `image` and each point is tracked from where that puts it: LK then only corrects the
+    prediction's error, on patches no longer rotated against each other (a roll of 10 degrees
+    otherwise biases it). The derotation goes through the lens model (CameraModel.rotation_maps);
+    for a pinhole camera it is the homography K R_image_source K^-1, which is exact there."""
     if len(pts_px) == 0:
         return np.empty((0, 2), np.float32), np.zeros(0, bool)
     start = np.asarray(pts_px, np.float32).reshape(-1, 1, 2)
-    if R_source_image is not None:
+    if R_source_image is not None and camera.distorted:
+        source = cv2.remap(source, *camera.rotation_maps(R_source_image), cv2.INTER_LINEAR)
+        start = camera.rotated_pixels(R_source_image.T, start.reshape(-1, 2)).astype(np.float32).reshape(-1, 1, 2)
+    elif R_source_image is not None:
         H = camera.K @ R_source_image.T @ np.linalg.inv(camera.K)
         source = cv2.warpPerspective(source, H, image.shape[::-1], flags=cv2.INTER_LINEAR)
         start = cv2.perspectiveTransform(start, H).astype(np.float32)

@@ -111,3 +111,43 @@ def test_undistortion_maps_equal_opencvs(camera):
     for ours, theirs in zip(camera.undistort_maps(K_new), expected):
         assert ours.shape == (camera.height, camera.width) and ours.dtype == np.float32
         np.testing.assert_allclose(ours, theirs, rtol=0, atol=1e-3)
+
+
+def _opencv_rotated(camera: CameraModel, R_to_from: np.ndarray, px: np.ndarray) -> np.ndarray:
+    """Pixels px of a view in the view rotated from it, by OpenCV's own lens functions."""
+    fisheye = camera.model == "equidistant"
+    undistort = cv2.fisheye.undistortPoints if fisheye else cv2.undistortPoints
+    normalised = undistort(px.reshape(-1, 1, 2).astype(np.float64), camera.K, camera.dist).reshape(-1, 2)
+    rays = np.column_stack([normalised, np.ones(len(px))])
+    rvec = cv2.Rodrigues(np.asarray(R_to_from, np.float64))[0]
+    if fisheye:
+        return cv2.fisheye.projectPoints(rays.reshape(-1, 1, 3), rvec, np.zeros(3), camera.K, camera.dist)[0].reshape(-1, 2)
+    return cv2.projectPoints(rays, rvec, np.zeros(3), camera.K, camera.dist)[0].reshape(-1, 2)
+
+
+ROTATION = cv2.Rodrigues(np.radians([3.0, -5.0, 8.0]))[0]
+
+
+@pytest.mark.parametrize("camera", [MVSEC_LEFT, ECD_DAVIS240], ids=["equidistant", "radtan"])
+def test_rotated_views_follow_the_lens_as_opencv_does(camera):
+    px = _sensor_pixels(camera)[::37]
+    np.testing.assert_allclose(camera.rotated_pixels(ROTATION, px), _opencv_rotated(camera, ROTATION, px), rtol=0, atol=1e-6)
+    map_x, map_y = camera.rotation_maps(ROTATION)  # each pixel of the rotated view, where it is in the other
+    assert map_x.shape == (camera.height, camera.width) and map_x.dtype == np.float32
+    expected = _opencv_rotated(camera, ROTATION, _sensor_pixels(camera))
+    np.testing.assert_allclose(np.column_stack([map_x.ravel(), map_y.ravel()]), expected, rtol=0, atol=1e-3)
+
+
+def test_a_pinholes_rotated_view_is_the_homography():
+    pinhole = CameraModel(240, 180, ECD_DAVIS240.K, np.zeros(5))
+    assert not pinhole.distorted and ECD_DAVIS240.distorted and MVSEC_LEFT.distorted
+    px = _sensor_pixels(pinhole)
+    H = pinhole.K @ ROTATION @ np.linalg.inv(pinhole.K)
+    expected = cv2.perspectiveTransform(px.reshape(-1, 1, 2), H).reshape(-1, 2)
+    np.testing.assert_allclose(pinhole.rotated_pixels(ROTATION, px), expected, rtol=0, atol=1e-9)
+
+
+def test_a_ray_behind_a_radtan_camera_is_seen_nowhere():
+    behind = cv2.Rodrigues(np.radians([0.0, 180.0, 0.0]))[0]  # the view looking backwards
+    map_x, map_y = ECD_DAVIS240.rotation_maps(behind)
+    assert (map_x == -1).all() and (map_y == -1).all()
