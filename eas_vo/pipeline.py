@@ -7,6 +7,7 @@ dataset --Sample--> frontend --uint8 image--> tracker --records, edges--> backen
 from __future__ import annotations
 
 import csv
+import functools
 import itertools
 import time
 from collections import Counter
@@ -123,20 +124,49 @@ def _run_into(parts: Pipeline, config: ResolvedConfig, out: Path | None, progres
 
 
 def run_identity(config: ResolvedConfig) -> dict:
-    """What made a run (identity.json): the eas-vo version, the dataset's resolved location
-    (an absolute path where it is one), its content identity (dataset_identity) and the whole
-    resolved configuration. `compare` resumes a cell only when its folder's identity equals
-    the one it would write now."""
+    """What made a run (identity.json): the eas-vo version and a hash of the code that ran
+    (code_identity), the dataset's resolved location (an absolute path where it is one), its
+    content identity (dataset_identity) and the whole resolved configuration. `compare`
+    resumes a cell only when its folder's identity equals the one it would write now."""
     from eas_vo import __version__
 
     plugin, location = registry.resolve_dataset(config.run.dataset)
     path = Path(location).expanduser()
+    plugins = [plugin] + [registry.get(kind, name) for kind, name in (
+        ("frontends", config.run.frontend), ("trackers", config.run.tracker), ("backends", config.run.backend))]
     return {
         "eas_vo": __version__,
+        "code": code_identity(tuple(sorted({cls.__module__.split(".")[0] for cls in plugins} | {"eas_vo"}))),
         "dataset": str(path.resolve()) if path.exists() else location,
         "dataset_content": dataset_identity(plugin, location),
         "config": config.to_toml(),
     }
+
+
+@functools.cache
+def code_identity(packages: tuple[str, ...]) -> str:
+    """SHA-1 of the source (.py and .toml files) of `packages` and every subpackage they hold
+    (eas-vo's own: its core and the four plugin packages; a third-party plugin's top-level
+    package): a run made by other code, a tracker edited in place or another release, is
+    another run whatever the version number says."""
+    import hashlib
+    import importlib
+
+    files = {}  # each file by its dotted name in its package (the same whatever the install's layout)
+    for name in packages:
+        module = importlib.import_module(name)
+        for sub in [module] + [importlib.import_module(f"{name}.{part}") for part in (
+                "frontends", "trackers", "backends", "datasets", "configs") if name == "eas_vo"]:
+            for folder in getattr(sub, "__path__", []):
+                for path in Path(folder).rglob("*"):
+                    if path.suffix in (".py", ".toml") and path.is_file():
+                        files[".".join((sub.__name__, *path.relative_to(folder).parts))] = path
+            if not hasattr(sub, "__path__") and getattr(sub, "__file__", None):
+                files[sub.__name__ + ".py"] = Path(sub.__file__)
+    digest = hashlib.sha1()
+    for key in sorted(files):
+        digest.update(key.encode() + b"\0" + files[key].read_bytes() + b"\0")
+    return digest.hexdigest()
 
 
 def dataset_identity(plugin: type, location: str):

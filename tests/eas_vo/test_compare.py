@@ -372,6 +372,37 @@ def test_a_pool_never_has_more_workers_than_cells(short_sequence, tmp_path, monk
     assert main(argv) == 0 and sizes == [2]  # nothing left to run: no pool at all
 
 
+def test_a_cell_is_run_again_when_the_code_that_made_it_changed(short_sequence, tmp_path, capsys, monkeypatch):
+    """A tracker edited in place (or another release at the same version number) is another
+    run: the identity holds a hash of the code (pipeline.code_identity)."""
+    from eas_vo import pipeline
+
+    argv = ["compare", "--dataset", str(short_sequence), "--frontends", "original", "--backends", "chain",
+            "--duration", "1", "--out", str(tmp_path / "cmp"), "--jobs", "1", "--quiet"]
+    for code, runs in (("A", 1), ("A", 0), ("B", 1)):
+        monkeypatch.setattr(pipeline, "code_identity", lambda packages, code=code: code)
+        assert main(argv) == 0
+        assert f"1 cells ({runs} run, {1 - runs} already complete" in capsys.readouterr().out
+
+
+def test_the_code_identity_follows_every_source_file_of_a_plugins_package(tmp_path, monkeypatch):
+    from eas_vo.pipeline import code_identity
+
+    package = tmp_path / "eas_vo_probe"
+    (package / "inner").mkdir(parents=True)
+    (package / "__init__.py").write_text("")
+    (package / "inner" / "__init__.py").write_text("")
+    (package / "inner" / "tracker.py").write_text("STEP = 1\n")
+    monkeypatch.syspath_prepend(str(tmp_path))
+    first = code_identity.__wrapped__(("eas_vo_probe",))
+    assert code_identity.__wrapped__(("eas_vo_probe",)) == first
+    (package / "inner" / "tracker.py").write_text("STEP = 2\n")  # a nested module edited in place
+    second = code_identity.__wrapped__(("eas_vo_probe",))
+    (package / "inner" / "notes.txt").write_text("not code")
+    assert second != first and code_identity.__wrapped__(("eas_vo_probe",)) == second
+    assert code_identity.__wrapped__(("eas_vo", "eas_vo_probe")) not in (first, second)
+
+
 def test_a_cell_is_run_again_when_its_dataset_changed_at_the_same_path(sequence_copy, short_sequence, tmp_path, capsys):
     """Class 3 with the data, not the options, changed: the folder replaced by other content
     under the same path (here the same recording, its frames list cut to 1 s)."""
