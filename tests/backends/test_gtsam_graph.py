@@ -248,3 +248,18 @@ def test_levenberg_marquardt_stopped_early_is_said():
     backend = GtsamBackend(GtsamConfig(gyro=True, iterations=1))
     backend.solve(len(R), edges, times=times, imu=imu)
     assert len(backend.solver_warnings) == 1 and "stopped at backend.iterations = 1" in backend.solver_warnings[0]
+
+
+def test_levenberg_marquardt_at_its_limit_but_converged_is_not_said(monkeypatch):
+    """At backend.iterations but where one more step would turn no frame by over
+    CONVERGED_STEP_RAD, the estimate has converged for every purpose: no warning."""
+    from eas_vo.backends import gtsam_graph
+
+    times, R, imu, edges = gyro_rig()
+    converged = GtsamBackend(GtsamConfig(gyro=True, iterations=10_000))
+    converged.solve(len(R), edges, times=times, imu=imu)
+    assert converged.solver_warnings == []
+    backend = GtsamBackend(GtsamConfig(gyro=True, iterations=1))
+    monkeypatch.setattr(gtsam_graph, "CONVERGED_STEP_RAD", 10.0)  # any step counts as converged
+    backend.solve(len(R), edges, times=times, imu=imu)
+    assert backend.solver_warnings == []
