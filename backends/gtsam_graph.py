@@ -218,7 +218,7 @@ class GtsamBackend(Backend):
             raise RuntimeError(f"Levenberg-Marquardt ended at error {optimizer.error():.6g}, above its start {start_error:.6g}")
         R_w_c = np.stack([result.atRot3(k).matrix() for k in range(n_frames)])
         if optimizer.iterations() >= self.config.iterations:
-            moved = self._next_step_rad(gtsam, graph, result, params, R_w_c)
+            moved = self._next_step_rad(optimizer, R_w_c)
             if moved > CONVERGED_STEP_RAD:
                 self.solver_warnings.append(
                     f"the pose graph's Levenberg-Marquardt stopped at backend.iterations = {self.config.iterations} before "
@@ -227,12 +227,16 @@ class GtsamBackend(Backend):
         return R_w_c
 
     @staticmethod
-    def _next_step_rad(gtsam, graph, result, params, R_w_c: np.ndarray) -> float:
-        """How far [rad] one more Levenberg-Marquardt iteration from `result` turns the frame it
-        turns most (0 when no step lowers the error: a minimum)."""
-        params.setMaxIterations(1)
-        step = gtsam.LevenbergMarquardtOptimizer(graph, result, params).optimize()
-        return float(geodesic_angle(R_w_c, np.stack([step.atRot3(k).matrix() for k in range(len(R_w_c))])).max())
+    def _next_step_rad(optimizer, R_w_c: np.ndarray) -> float:
+        """How far [rad] the optimizer's next Levenberg-Marquardt iteration (from where it stopped,
+        its damping as it was) turns the frame it turns most from R_w_c (0 where no step lowers
+        the error: a minimum; infinite where the step fails)."""
+        try:
+            optimizer.iterate()
+            step = optimizer.values()
+            return float(geodesic_angle(R_w_c, np.stack([step.atRot3(k).matrix() for k in range(len(R_w_c))])).max())
+        except RuntimeError:
+            return float("inf")
 
     def _online(self, gtsam, n_frames, by_frame, initial_R) -> np.ndarray:
         params = gtsam.ISAM2Params()

@@ -168,8 +168,8 @@ def cell_failure(exc: Exception) -> dict:
 
 def completed(out_root: Path, cell: Cell, identity: dict) -> dict | None:
     """The metrics of a cell that already finished with the same inputs (pipeline.run_identity:
-    version, dataset, resolved configuration) and still holds all its files, else None: it
-    must run (again)."""
+    version and code, dataset and its content, resolved configuration) and still holds all its
+    files, else None: it must run (again)."""
     from eas_vo.pipeline import RUN_FILES
 
     folder = out_root / cell.folder

@@ -88,7 +88,8 @@ class CameraModel:
     def project(self, points: np.ndarray) -> np.ndarray:
         """Normalised image coordinates (N, 2) or rays in the camera frame (N, 3) -> distorted
         pixel coordinates (N, 2) [px]. Rays need z > 0 for `radtan`; `equidistant` maps every
-        direction but the backward axis (it distorts the angle to the optical axis, not its tangent)."""
+        direction (it distorts the angle to the optical axis, not its tangent; the backward axis
+        lands on the principal point)."""
         from eas_vo.geometry.lens import project_points
 
         p = np.asarray(points, dtype=np.float64)
@@ -99,8 +100,9 @@ class CameraModel:
 
     @property
     def distorted(self) -> bool:
-        """Whether the lens distorts (any coefficient not zero): else a pinhole camera."""
-        return bool(np.any(np.asarray(self.dist) != 0))
+        """Whether rays do not project as through a pinhole: any `radtan` coefficient not zero, or
+        the `equidistant` model (a fisheye even with its coefficients all zero)."""
+        return self.model != "radtan" or bool(np.any(np.asarray(self.dist) != 0))
 
     @functools.cached_property
     def pixel_rays(self) -> np.ndarray:
@@ -108,11 +110,13 @@ class CameraModel:
         u, v = np.meshgrid(np.arange(self.width, dtype=np.float64), np.arange(self.height, dtype=np.float64))
         rays = np.ones((u.size, 3))
         rays[:, :2] = self.undistort(np.column_stack([u.ravel(), v.ravel()]))
+        rays.flags.writeable = False  # shared by every use of this camera
         return rays
 
     def rotated_pixels(self, R_to_from: np.ndarray, pts_px: np.ndarray) -> np.ndarray:
         """Where pixels pts_px (N, 2) [px] of a view lie in a view rotated from it (ray_to =
-        R_to_from @ ray_from), through the lens model both ways: (N, 2) [px]."""
+        R_to_from @ ray_from), through the lens model both ways: (N, 2) [px]; -1 for rays
+        behind a `radtan` camera."""
         rays = np.ones((len(pts_px), 3))
         rays[:, :2] = self.undistort(pts_px)
         return self._rays_to_pixels(rays @ np.asarray(R_to_from, np.float64).T)
@@ -120,7 +124,8 @@ class CameraModel:
     def rotation_maps(self, R_from_to: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """cv2.remap maps (x, y), each (height, width) float32 [px]: for every pixel of a view
         rotated from another (ray_from = R_from_to @ ray_to), where it lies in that other view's
-        image, through the lens model; -1 where the lens cannot see it."""
+        image, through the lens model; -1 for rays behind a `radtan` camera (cv2.remap's border).
+        A lens model that folds back beyond its calibrated field of view maps what it gives there."""
         px = self._rays_to_pixels(self.pixel_rays @ np.asarray(R_from_to, np.float64).T).astype(np.float32)
         return px[:, 0].reshape(self.height, self.width), px[:, 1].reshape(self.height, self.width)
 

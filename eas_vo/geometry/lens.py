@@ -7,10 +7,9 @@ from __future__ import annotations
 import math
 
 import numba
-import numpy as np
 
 
-@numba.njit(cache=True, nogil=True)
+@numba.njit(cache=True, nogil=True, error_model="numpy")  # (a ray at z = 0: inf or nan, as numpy gives)
 def project_points(points, K, dist, equidistant, out):
     """Rays (N, 3) in the camera frame, or normalised image coordinates (N, 2) (z = 1), into
     `out` (N, 2): distorted pixel coordinates [px], through the `equidistant` (Kannala-Brandt:

@@ -250,16 +250,22 @@ def test_levenberg_marquardt_stopped_early_is_said():
     assert len(backend.solver_warnings) == 1 and "stopped at backend.iterations = 1" in backend.solver_warnings[0]
 
 
-def test_levenberg_marquardt_at_its_limit_but_converged_is_not_said(monkeypatch):
-    """At backend.iterations but where one more step would turn no frame by over
-    CONVERGED_STEP_RAD, the estimate has converged for every purpose: no warning."""
-    from eas_vo.backends import gtsam_graph
+def test_levenberg_marquardt_at_its_limit_but_converged_is_not_said():
+    """Stopped by backend.iterations where one more step turns no frame by over
+    CONVERGED_STEP_RAD: converged for every purpose, no warning; a step that still turns one is said."""
+    from eas_vo.backends.gtsam_graph import CONVERGED_STEP_RAD
 
     times, R, imu, edges = gyro_rig()
-    converged = GtsamBackend(GtsamConfig(gyro=True, iterations=10_000))
-    converged.solve(len(R), edges, times=times, imu=imu)
-    assert converged.solver_warnings == []
-    backend = GtsamBackend(GtsamConfig(gyro=True, iterations=1))
-    monkeypatch.setattr(gtsam_graph, "CONVERGED_STEP_RAD", 10.0)  # any step counts as converged
-    backend.solve(len(R), edges, times=times, imu=imu)
-    assert backend.solver_warnings == []
+    free = GtsamBackend(GtsamConfig(gyro=True, iterations=10_000))
+    free.solve(len(R), edges, times=times, imu=imu)
+    original = GtsamBackend._next_step_rad
+    steps = {}  # the limit -> how far the step after it turns a frame [rad]
+    for limit in range(1, 30):
+        backend = GtsamBackend(GtsamConfig(gyro=True, iterations=limit))
+        backend._next_step_rad = lambda optimizer, R_w_c, limit=limit: steps.setdefault(limit, original(optimizer, R_w_c))
+        backend.solve(len(R), edges, times=times, imu=imu)
+        if limit not in steps:  # converged by its tolerances before the limit
+            break
+        assert (steps[limit] > CONVERGED_STEP_RAD) == bool(backend.solver_warnings), (limit, steps)
+    assert steps[1] > CONVERGED_STEP_RAD and min(steps.values()) <= CONVERGED_STEP_RAD, steps  # both cases met
+    assert free.solver_warnings == []

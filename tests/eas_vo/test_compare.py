@@ -5,6 +5,7 @@ import io
 import json
 import os
 import shutil
+import sys
 import tempfile
 from pathlib import Path
 
@@ -394,6 +395,8 @@ def test_the_code_identity_follows_every_source_file_of_a_plugins_package(tmp_pa
     (package / "inner" / "__init__.py").write_text("")
     (package / "inner" / "tracker.py").write_text("STEP = 1\n")
     monkeypatch.syspath_prepend(str(tmp_path))
+    for name in ("eas_vo_probe", "eas_vo_probe.inner"):
+        monkeypatch.delitem(sys.modules, name, raising=False)  # (imported below; gone after the test)
     first = code_identity.__wrapped__(("eas_vo_probe",))
     assert code_identity.__wrapped__(("eas_vo_probe",)) == first
     (package / "inner" / "tracker.py").write_text("STEP = 2\n")  # a nested module edited in place

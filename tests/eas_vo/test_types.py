@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from eas_vo.types import CameraModel
-from helpers import random_events
+from helpers import ECD_DAVIS240, MVSEC_LEFT, opencv_rotated, random_events
 
 
 def test_search_times_equals_searchsorted_without_copying(tmp_path):
@@ -49,17 +49,6 @@ def test_the_integral_since_start_agrees_with_rates_between():
     for t0, t1 in [(t[10], t[20]), (t[10] + 0.001, t[20] - 0.002), (t[0] - 0.02, t[3] + 0.001), (t[-3] - 0.001, t[-1] + 0.03)]:
         rates, dt = imu.rates_between(t0, t1)
         np.testing.assert_allclose(turned(t1) - turned(t0), (rates * dt[:, None]).sum(axis=0), atol=1e-12)
-
-
-# MVSEC's left DAVIS346 (indoor_flying kalibr camchain): pinhole with an equidistant lens, 118 deg
-# across the diagonal, so the sensor's corners are 60 deg off the axis.
-MVSEC_LEFT = CameraModel(346, 260, np.array([[226.38018519795807, 0.0, 173.6470807871759], [0.0, 226.15002947047415, 133.73271487507847],
-                                              [0.0, 0.0, 1.0]]),
-                         np.array([-0.048031442223833355, 0.011330957517194437, -0.055378166304281135, 0.021500973881459395]),
-                         "equidistant")
-# The Event Camera Dataset's DAVIS240C (shapes_rotation calib.txt): strong barrel distortion.
-ECD_DAVIS240 = CameraModel.from_calib([199.092366542, 198.82882047, 132.192071378, 110.712660011,
-                                       -0.368436311798, 0.150947243557, -0.000296130534385, -0.000759431726241, 0.0])
 
 
 def _sensor_pixels(camera: CameraModel) -> np.ndarray:
@@ -113,38 +102,32 @@ def test_undistortion_maps_equal_opencvs(camera):
         np.testing.assert_allclose(ours, theirs, rtol=0, atol=1e-3)
 
 
-def _opencv_rotated(camera: CameraModel, R_to_from: np.ndarray, px: np.ndarray) -> np.ndarray:
-    """Pixels px of a view in the view rotated from it, by OpenCV's own lens functions."""
-    fisheye = camera.model == "equidistant"
-    undistort = cv2.fisheye.undistortPoints if fisheye else cv2.undistortPoints
-    normalised = undistort(px.reshape(-1, 1, 2).astype(np.float64), camera.K, camera.dist).reshape(-1, 2)
-    rays = np.column_stack([normalised, np.ones(len(px))])
-    rvec = cv2.Rodrigues(np.asarray(R_to_from, np.float64))[0]
-    if fisheye:
-        return cv2.fisheye.projectPoints(rays.reshape(-1, 1, 3), rvec, np.zeros(3), camera.K, camera.dist)[0].reshape(-1, 2)
-    return cv2.projectPoints(rays, rvec, np.zeros(3), camera.K, camera.dist)[0].reshape(-1, 2)
-
-
 ROTATION = cv2.Rodrigues(np.radians([3.0, -5.0, 8.0]))[0]
 
 
 @pytest.mark.parametrize("camera", [MVSEC_LEFT, ECD_DAVIS240], ids=["equidistant", "radtan"])
 def test_rotated_views_follow_the_lens_as_opencv_does(camera):
     px = _sensor_pixels(camera)[::37]
-    np.testing.assert_allclose(camera.rotated_pixels(ROTATION, px), _opencv_rotated(camera, ROTATION, px), rtol=0, atol=1e-6)
+    np.testing.assert_allclose(camera.rotated_pixels(ROTATION, px), opencv_rotated(camera, ROTATION, px), rtol=0, atol=1e-6)
     map_x, map_y = camera.rotation_maps(ROTATION)  # each pixel of the rotated view, where it is in the other
     assert map_x.shape == (camera.height, camera.width) and map_x.dtype == np.float32
-    expected = _opencv_rotated(camera, ROTATION, _sensor_pixels(camera))
+    expected = opencv_rotated(camera, ROTATION, _sensor_pixels(camera))
     np.testing.assert_allclose(np.column_stack([map_x.ravel(), map_y.ravel()]), expected, rtol=0, atol=1e-3)
 
 
 def test_a_pinholes_rotated_view_is_the_homography():
     pinhole = CameraModel(240, 180, ECD_DAVIS240.K, np.zeros(5))
-    assert not pinhole.distorted and ECD_DAVIS240.distorted and MVSEC_LEFT.distorted
+    ideal_fisheye = CameraModel(240, 180, ECD_DAVIS240.K, np.zeros(4), "equidistant")  # f theta: no pinhole
+    assert not pinhole.distorted and ECD_DAVIS240.distorted and MVSEC_LEFT.distorted and ideal_fisheye.distorted
     px = _sensor_pixels(pinhole)
     H = pinhole.K @ ROTATION @ np.linalg.inv(pinhole.K)
     expected = cv2.perspectiveTransform(px.reshape(-1, 1, 2), H).reshape(-1, 2)
     np.testing.assert_allclose(pinhole.rotated_pixels(ROTATION, px), expected, rtol=0, atol=1e-9)
+
+
+def test_a_ray_across_the_image_plane_projects_as_numpy_divides():
+    with np.errstate(divide="ignore", invalid="ignore"):
+        assert not np.isfinite(ECD_DAVIS240.project(np.array([[1.0, 0.0, 0.0]]))).all()  # z = 0: no exception
 
 
 def test_a_ray_behind_a_radtan_camera_is_seen_nowhere():

@@ -141,6 +141,30 @@ def large_rotation(rng, angle_deg=(15, 25), roll_deg=(10, 12)) -> np.ndarray:
     return Rotation.from_rotvec([tilt[0], tilt[1], roll]).as_matrix()
 
 
+#: MVSEC's left DAVIS346 (its indoor_flying kalibr camchain): an equidistant fisheye, 118 deg
+#: across the diagonal, so the sensor's corners are 60 deg off the axis.
+MVSEC_LEFT = CameraModel(346, 260, np.array([[226.38018519795807, 0.0, 173.6470807871759], [0.0, 226.15002947047415, 133.73271487507847],
+                                             [0.0, 0.0, 1.0]]),
+                         np.array([-0.048031442223833355, 0.011330957517194437, -0.055378166304281135, 0.021500973881459395]),
+                         "equidistant")
+#: The Event Camera Dataset's DAVIS240C (shapes_rotation calib.txt): strong barrel distortion.
+ECD_DAVIS240 = CameraModel.from_calib([199.092366542, 198.82882047, 132.192071378, 110.712660011,
+                                       -0.368436311798, 0.150947243557, -0.000296130534385, -0.000759431726241, 0.0])
+
+
+def opencv_rotated(camera: CameraModel, R_to_from: np.ndarray, px: np.ndarray) -> np.ndarray:
+    """Pixels px (N, 2) of a view in the view rotated from it (ray_to = R_to_from ray_from), by
+    OpenCV's own lens functions (cv2.fisheye for the equidistant model)."""
+    fisheye = camera.model == "equidistant"
+    undistort = cv2.fisheye.undistortPoints if fisheye else cv2.undistortPoints
+    normalised = undistort(px.reshape(-1, 1, 2).astype(np.float64), camera.K, camera.dist).reshape(-1, 2)
+    rays = np.column_stack([normalised, np.ones(len(px))])
+    rvec = cv2.Rodrigues(np.asarray(R_to_from, np.float64))[0]
+    if fisheye:
+        return cv2.fisheye.projectPoints(rays.reshape(-1, 1, 3), rvec, np.zeros(3), camera.K, camera.dist)[0].reshape(-1, 2)
+    return cv2.projectPoints(rays, rvec, np.zeros(3), camera.K, camera.dist)[0].reshape(-1, 2)
+
+
 # ----------------------------------------------------------------------------- download site
 
 

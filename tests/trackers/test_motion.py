@@ -7,24 +7,7 @@ import numpy as np
 import pytest
 
 from eas_vo.trackers.motion import lk_params, lk_track
-from eas_vo.types import CameraModel
-from helpers import textured_image
-
-MVSEC_LEFT = CameraModel(346, 260, np.array([[226.38, 0.0, 173.65], [0.0, 226.15, 133.73], [0.0, 0.0, 1.0]]),
-                         np.array([-0.048031, 0.011331, -0.055378, 0.021501]), "equidistant")
-ECD_DAVIS240 = CameraModel.from_calib([199.09, 198.83, 132.19, 110.71, -0.3684, 0.1509, -0.0003, -0.00076, 0.0])
-
-
-def opencv_rotated(camera: CameraModel, R_to_from: np.ndarray, px: np.ndarray) -> np.ndarray:
-    """Pixels px (N, 2) of a view in the view rotated from it (ray_to = R_to_from ray_from)."""
-    fisheye = camera.model == "equidistant"
-    undistort = cv2.fisheye.undistortPoints if fisheye else cv2.undistortPoints
-    normalised = undistort(px.reshape(-1, 1, 2).astype(np.float64), camera.K, camera.dist).reshape(-1, 2)
-    rays = np.column_stack([normalised, np.ones(len(px))])
-    rvec = cv2.Rodrigues(np.asarray(R_to_from, np.float64))[0]
-    if fisheye:
-        return cv2.fisheye.projectPoints(rays.reshape(-1, 1, 3), rvec, np.zeros(3), camera.K, camera.dist)[0].reshape(-1, 2)
-    return cv2.projectPoints(rays, rvec, np.zeros(3), camera.K, camera.dist)[0].reshape(-1, 2)
+from helpers import ECD_DAVIS240, MVSEC_LEFT, opencv_rotated, textured_image
 
 
 @pytest.mark.parametrize("camera", [MVSEC_LEFT, ECD_DAVIS240], ids=["equidistant", "radtan"])
