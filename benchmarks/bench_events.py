@@ -17,6 +17,7 @@ Prints, each stage in its own process (so peak memory is its own):
     only, and deserialised to messages).
 
     python benchmarks/bench_events.py [--events 20000000] [--bag-events 2000000] [--only text|aedat4|mvsec|ros2_sqlite3|ros2_mcap]
+                                      [--alternate 8]
 """
 
 from __future__ import annotations
@@ -26,6 +27,7 @@ import io
 import json
 import os
 import resource
+import statistics
 import subprocess
 import sys
 import tempfile
@@ -96,38 +98,22 @@ def make_aedat4(text: Path) -> Path:
     return path
 
 
-def aedat4_stage(name: str, path: Path, repeat: int, out: dict) -> None:
-    """dv-processing's batch reading of the AEDAT4 (`aedat4_dv`), the aedat4 reader's first read
-    into a fresh cache (`aedat4_first`) and its cached read (`aedat4_cached`)."""
+def aedat4_reads(path: Path) -> tuple:
+    """(dv-processing's batch reading of the AEDAT4, giving the event count; the aedat4 reader's
+    events, opened through the cache)."""
+    import dv_processing as dv
+
     from eas_vo.datasets.aedat4 import Aedat4Config, Aedat4Dataset
 
     config = Aedat4Config(calibration=str(path.with_name("calib.txt")))
-    if name == "aedat4_dv":
-        import dv_processing as dv
 
-        def read():
-            recording, n = dv.io.MonoCameraRecording(str(path)), 0
-            while (batch := recording.getNextEventBatch()) is not None:
-                n += len(batch.numpy())
-            return n
+    def library():
+        recording, n = dv.io.MonoCameraRecording(str(path)), 0
+        while (batch := recording.getNextEventBatch()) is not None:
+            n += len(batch.numpy())
+        return n
 
-        out["seconds"], out["events"] = timed(read, repeat)
-    elif name == "aedat4_first":
-        empty_cache()
-        Aedat4Dataset(path, config).events()  # dv-processing, cramjam and numba's compiled kernels loaded once
-
-        def first():  # open, check and cache every event, in an empty cache each time (set up untimed, as for mvsec)
-            return len(Aedat4Dataset(path, config).events())
-
-        out["seconds"], out["events"] = timed(first, repeat, setup=empty_cache)
-    else:
-        Aedat4Dataset(path, config).events()  # build the cache once
-
-        def cached():  # open, map, then read every byte of every record once
-            events = Aedat4Dataset(path, config).events()
-            return float(events.view(np.uint8).sum(dtype=np.uint64)), len(events)
-
-        out["seconds"], (_, out["events"]) = timed(cached, repeat)
+    return library, lambda: Aedat4Dataset(path, config).events()
 
 
 #: A pinhole 240x180 camera (the simulator's size) for the MVSEC file, as a kalibr camchain.
@@ -167,40 +153,64 @@ def load_text(path: Path) -> np.ndarray:
     return load_event_text(lambda: open(path, "rb"), file_identity(path), str(path), 240, 180)
 
 
-def mvsec_stage(name: str, path: Path, repeat: int, out: dict) -> None:
-    """h5py reading the whole event array (`mvsec_h5py`), the mvsec reader's first read into a
-    fresh cache (`mvsec_first`) and its cached read (`mvsec_cached`)."""
+def mvsec_reads(path: Path) -> tuple:
+    """(h5py reading the whole (N, 4) float64 event array into memory, unchecked, giving the
+    event count; the mvsec reader's events, opened through the cache)."""
     import h5py
 
     from eas_vo.datasets.mvsec import MvsecConfig, MvsecDataset
 
     config = MvsecConfig(calibration=str(path.with_name(path.name.replace("_data.hdf5", "_camchain.yaml"))),
                          width=240, height=180)
-    setup = None
-    if name == "mvsec_h5py":
-        def read():  # the whole (N, 4) float64 array into memory, unchecked
-            with h5py.File(path, "r") as f:
-                return len(f["davis/left/events"][()])
-    elif name == "mvsec_first":
+
+    def library():
+        with h5py.File(path, "r") as f:
+            return len(f["davis/left/events"][()])
+
+    return library, lambda: MvsecDataset(path, config).events()
+
+
+#: Each format with a library of its own: how its two reads are made.
+READS = {"aedat4": aedat4_reads, "mvsec": mvsec_reads}
+
+
+def format_stage(name: str, path: Path, repeat: int, out: dict) -> None:
+    """One of FORMAT_library (the library's own read), FORMAT_first (eas-vo's first read: open,
+    check and cache every event, into an empty cache each time), FORMAT_cached (open, map, read
+    every byte of every record) and FORMAT_alternate (the library's read and the first read in
+    turn, `repeat` times each: best and median of both)."""
+    fmt, kind = name.split("_", 1)
+    library, open_events = READS[fmt](path)
+    first = lambda: len(open_events())  # noqa: E731
+    if kind == "library":
+        out["seconds"], out["events"] = timed(library, repeat)
+    elif kind in ("first", "alternate"):
+        # Untimed before each first read: the previous run's cache removed, as the library's
+        # array of its previous run is freed before the next. Kept, each run wrote 250 MB more
+        # into new pages while the earlier runs' waited to be written back: up to 3x slower (VM).
         empty_cache()
-        MvsecDataset(path, config).events()  # h5py, hdf5plugin and numba's compiled kernels loaded once
-
-        def read():  # open, check and cache every event, in an empty cache each time
-            return len(MvsecDataset(path, config).events())
-
-        # Untimed before each run: the previous run's cache removed, as h5py's array of its
-        # previous run is freed before the next. Kept, each run wrote 250 MB more into new
-        # pages while the earlier runs' waited to be written back: 1.7x slower (2-core VM).
-        setup = empty_cache
+        first(), library()  # the libraries and numba's compiled kernels loaded once
+        if kind == "first":
+            out["seconds"], out["events"] = timed(first, repeat, setup=empty_cache)
+            return
+        times = {"library": [], "first": []}
+        for _ in range(repeat):
+            for part, read in (("library", library), ("first", first)):
+                empty_cache()
+                t0 = time.perf_counter()
+                out["events"] = read()
+                times[part].append(time.perf_counter() - t0)
+        out["seconds"] = min(times["first"])
+        out.update({f"{part}_{stat}": fn(values) for part, values in times.items()
+                    for stat, fn in (("best_s", min), ("median_s", statistics.median))})
     else:
-        MvsecDataset(path, config).events()  # build the cache once
+        open_events()  # build the cache once
 
-        def read():  # open, map the cache, read every byte of every record once
-            events = MvsecDataset(path, config).events()
-            float(events.view(np.uint8).sum(dtype=np.uint64))
-            return len(events)
+        def cached():
+            events = open_events()
+            return float(events.view(np.uint8).sum(dtype=np.uint64)), len(events)
 
-    out["seconds"], out["events"] = timed(read, repeat, setup)
+        out["seconds"], (_, out["events"]) = timed(cached, repeat)
 
 
 def make_bag(text: Path, n_events: int, storage: str) -> Path:
@@ -313,10 +323,8 @@ def stage(name: str, path: Path, repeat: int) -> dict:
 
     size_mb = path.stat().st_size / 1e6
     out = {"stage": name, "size_mb": size_mb}
-    if name.startswith("aedat4"):
-        aedat4_stage(name, path, repeat, out)
-    elif name.startswith("mvsec"):
-        mvsec_stage(name, path, repeat, out)
+    if name.split("_")[0] in READS:
+        format_stage(name, path, repeat, out)
     elif name == "pandas":
         import pandas as pd
 
@@ -387,10 +395,10 @@ ROS2_LABELS = ["rosbags iteration, raw bytes", "rosbags iteration, deserialised"
                "eas-vo rosbag2 cached read (open + map)"]
 FORMATS = {
     "text": (lambda path, args: path, ["pandas", "parse", "parse_to_cache", "cached", "window"], []),
-    "aedat4": (lambda path, args: make_aedat4(path), ["aedat4_dv", "aedat4_first", "aedat4_cached"],
+    "aedat4": (lambda path, args: make_aedat4(path), ["aedat4_library", "aedat4_first", "aedat4_cached"],
                ["dv-processing batch reading", "eas-vo aedat4 first read (validated + cache write)",
                 "eas-vo aedat4 cached read (map + read all)"]),
-    "mvsec": (lambda path, args: make_mvsec_file(path), ["mvsec_h5py", "mvsec_first", "mvsec_cached"],
+    "mvsec": (lambda path, args: make_mvsec_file(path), ["mvsec_library", "mvsec_first", "mvsec_cached"],
               ["h5py, whole array (unchecked)", "eas-vo mvsec first read (validated + cache write)",
                "eas-vo mvsec cached read (map + read all)"]),
     "ros2_sqlite3": (lambda path, args: make_bag(path, args.bag_events, "sqlite3"), ROS2_STAGES, ROS2_LABELS),
@@ -404,6 +412,9 @@ def main() -> None:
     parser.add_argument("--bag-events", type=int, default=2_000_000, help="events in the ROS 2 bags")
     parser.add_argument("--repeat", type=int, default=3, help="runs per stage; the best is reported")
     parser.add_argument("--only", choices=list(FORMATS), help="run only this format's rows")
+    parser.add_argument("--alternate", type=int, default=0, metavar="N",
+                        help="also alternate the library's read and the first read N times each in one process "
+                             "(AEDAT4, MVSEC): best and median of each, and their ratios")
     parser.add_argument("--stage", help=argparse.SUPPRESS)
     parser.add_argument("--path", help=argparse.SUPPRESS)
     args = parser.parse_args()
@@ -425,6 +436,15 @@ def main() -> None:
             print_text_rows(path, results, args.repeat)
         else:
             print_format_rows(source, results, stages, FORMATS[fmt][2], args.repeat)
+        if args.alternate and fmt in READS:
+            out = subprocess.run([sys.executable, __file__, "--stage", f"{fmt}_alternate", "--path", str(source),
+                                  "--repeat", str(args.alternate)], capture_output=True, text=True, check=True)
+            r = json.loads(out.stdout.strip().splitlines()[-1])
+            rate = lambda seconds: r["events"] / seconds / 1e6  # noqa: E731
+            print(f"  alternated in one process, {args.alternate} times each: library {rate(r['library_best_s']):.1f} "
+                  f"(median {rate(r['library_median_s']):.1f}), first read {rate(r['first_best_s']):.1f} "
+                  f"(median {rate(r['first_median_s']):.1f}) M events/s; first read / library "
+                  f"{r['library_best_s'] / r['first_best_s']:.2f}x best, {r['library_median_s'] / r['first_median_s']:.2f}x median")
 
 
 def print_format_rows(source: Path, results: dict, stages: list, labels: list, repeat: int) -> None:
