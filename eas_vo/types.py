@@ -108,8 +108,7 @@ class CameraModel:
     def pixel_rays(self) -> np.ndarray:
         """(height * width, 3) rays (z = 1) of the sensor's pixels, row by row (undistorted once)."""
         u, v = np.meshgrid(np.arange(self.width, dtype=np.float64), np.arange(self.height, dtype=np.float64))
-        rays = np.ones((u.size, 3))
-        rays[:, :2] = self.undistort(np.column_stack([u.ravel(), v.ravel()]))
+        rays = self._rays(np.column_stack([u.ravel(), v.ravel()]))
         rays.flags.writeable = False  # shared by every use of this camera
         return rays
 
@@ -117,9 +116,7 @@ class CameraModel:
         """Where pixels pts_px (N, 2) [px] of a view lie in a view rotated from it (ray_to =
         R_to_from @ ray_from), through the lens model both ways: (N, 2) [px]; -1 for rays
         behind a `radtan` camera."""
-        rays = np.ones((len(pts_px), 3))
-        rays[:, :2] = self.undistort(pts_px)
-        return self._rays_to_pixels(rays @ np.asarray(R_to_from, np.float64).T)
+        return self._rays_to_pixels(self._rays(pts_px) @ np.asarray(R_to_from, np.float64).T)
 
     def rotation_maps(self, R_from_to: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """cv2.remap maps (x, y), each (height, width) float32 [px]: for every pixel of a view
@@ -128,6 +125,12 @@ class CameraModel:
         A lens model that folds back beyond its calibrated field of view maps what it gives there."""
         px = self._rays_to_pixels(self.pixel_rays @ np.asarray(R_from_to, np.float64).T).astype(np.float32)
         return px[:, 0].reshape(self.height, self.width), px[:, 1].reshape(self.height, self.width)
+
+    def _rays(self, pts_px: np.ndarray) -> np.ndarray:
+        """Distorted pixels (N, 2) [px] -> their rays (N, 3) in the camera frame, z = 1."""
+        rays = np.ones((len(pts_px), 3))
+        rays[:, :2] = self.undistort(pts_px)
+        return rays
 
     def _rays_to_pixels(self, rays: np.ndarray) -> np.ndarray:
         """project(rays), -1 for rays `radtan` cannot project (z <= 0: behind the camera)."""

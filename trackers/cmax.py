@@ -145,8 +145,7 @@ class CmaxTracker(Tracker):
 
     def reset(self) -> None:
         cam = self.camera
-        u, v = np.meshgrid(np.arange(cam.width, dtype=np.float64), np.arange(cam.height, dtype=np.float64))
-        self._bearing = cam.undistort(np.column_stack([u.ravel(), v.ravel()])).reshape(cam.height, cam.width, 2)
+        self._bearing = cam.pixel_rays[:, :2].reshape(cam.height, cam.width, 2)
         self._grid = WarpGrid.of(cam.K, cam.width, cam.height)
         self._omega: np.ndarray | None = None  # the last window's, None when lost
         self._metric: np.ndarray | None = None  # the curvature at the last window's optimum [per px^2]

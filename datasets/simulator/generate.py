@@ -131,9 +131,7 @@ def _as_typed_dict(config) -> dict:
 
 def camera_rays(camera: CameraModel) -> np.ndarray:
     """Unit-depth ray (x, y, 1) in the camera frame for every pixel centre, (H*W, 3) float32."""
-    u, v = np.meshgrid(np.arange(camera.width, dtype=np.float64), np.arange(camera.height, dtype=np.float64))
-    normalised = camera.undistort(np.stack([u.ravel(), v.ravel()], 1))
-    return np.column_stack([normalised, np.ones(len(normalised))]).astype(np.float32)
+    return camera.pixel_rays.astype(np.float32)
 
 
 @dataclass(frozen=True)
