@@ -24,41 +24,19 @@ import numpy as np
 
 from eas_vo.concurrency import in_order
 from eas_vo.datasets.aedat4_packets import MAGIC, EventPackets, Scratch
-from eas_vo.datasets.calibration import read_calibration
-from eas_vo.datasets.recording import RecordingReader, StreamConfig, check_increasing, read_tum_ground_truth
+from eas_vo.datasets.recording import CALIBRATION_FORMATS, RecordingReader, StreamConfig, check_increasing
 from eas_vo.errors import DataError, DataWarnings
 from eas_vo.eventfile import Validator, cache_key, file_identity, load_cached
 from eas_vo.eventfile.kernels import check_and_pack_dv
 from eas_vo.types import EVENT_DTYPE, ImuSeries, empty_events
-from eas_vo.validation import check_range
 
 #: Standard gravity [m/s^2]: the g of accelerometer datasheets, in which DV stores readings.
 STANDARD_GRAVITY = 9.80665
-#: Calibration formats, for messages.
-CALIBRATION_FORMATS = "a DV calibration XML, a kalibr camchain YAML, a ROS camera_info YAML or an ECD calib.txt"
 
 
 @dataclass(frozen=True)
 class Aedat4Config(StreamConfig):
-    """StreamConfig plus where calibration and ground truth come from.
-
-    Attributes:
-        calibration: calibration file (CALIBRATION_FORMATS); required.
-        camera: which camera of the calibration file (a kalibr `camN`, a DV XML camera node);
-            empty: cam0, or the only one.
-        ground_truth: TUM file of camera-to-world poses; empty: none.
-        ground_truth_time_offset_s: added to the ground truth's times to put them on the
-            recording's clock [s].
-    """
-
-    calibration: str = ""
-    camera: str = ""
-    ground_truth: str = ""
-    ground_truth_time_offset_s: float = 0.0
-
-    def validate(self) -> None:
-        super().validate()
-        check_range(self, "ground_truth_time_offset_s", -1e10, 1e10)
+    """StreamConfig; `calibration` is required (an AEDAT4 file holds no lens calibration)."""
 
 
 def _said(exc: Exception) -> str:
@@ -145,13 +123,13 @@ class Aedat4Dataset(RecordingReader):
         if not c.calibration:
             raise DataError(self.path, f"an AEDAT4 file holds no lens calibration: give one with --set "
                                        f"dataset.calibration=FILE ({CALIBRATION_FORMATS})")
-        self.camera = read_calibration(c.calibration, width=width, height=height, camera=c.camera or None)
+        self.camera = self.calibration_file(width, height)
         self._frame_times = self._read_frame_times()
         self._times = self._frame_times
         if self._frame_times is None:
             self.no_frames_reason = f"{self.path} has no frames stream (an event-only recording)"
         self.imu = self._read_imu()
-        self.ground_truth = read_tum_ground_truth(c.ground_truth, c.ground_truth_time_offset_s) if c.ground_truth else None
+        self.ground_truth = self.ground_truth_file()
         self._events: np.ndarray | None = None
 
     def _dv(self, call, what: str, stream: str = ""):

@@ -18,7 +18,7 @@ import cv2
 import numpy as np
 
 from eas_vo.datasets.calibration import camera_from_camera_info
-from eas_vo.datasets.recording import RecordingReader, StreamConfig, check_increasing, pose_series
+from eas_vo.datasets.recording import CALIBRATION_FORMATS, RecordingReader, StreamConfig, check_increasing, pose_series
 from eas_vo.errors import DataError, DataWarnings
 from eas_vo.eventfile import Validator, cache_key, load_cached, write_behind
 from eas_vo.plugins import Dataset
@@ -31,7 +31,9 @@ BLOCK_BYTES = 8 << 20
 
 @dataclass(frozen=True)
 class BagConfig(StreamConfig):
-    """StreamConfig plus the topic names (the sensor size comes from camera_info)."""
+    """StreamConfig plus the topic names: where a default name is absent, the bag's one topic of
+    that message type is read (the sensor size: CameraInfo's, else the images' or the event
+    messages')."""
 
     events_topic: str = "/dvs/events"
     image_topic: str = "/dvs/image_raw"
@@ -92,14 +94,54 @@ class BagDataset(RecordingReader):
         self.label = str(self.path)
         self.warnings = DataWarnings()
         self.reader = self._open()
-        self.topics = {conn.topic for conn in self.reader.connections}
+        self.topic_types = {conn.topic: conn.msgtype for conn in self.reader.connections}
+        self.topic = {key: self._find_topic(key, types) for key, types in self._topic_kinds().items()}
         self._times, self._frames = self._read_images()
         if not self._frames:
-            self.no_frames_reason = f"{self.path} has no {c.image_topic} messages (an event-only stream)"
-        self.camera = self._read_camera()
-        self.ground_truth = self._read_poses()
+            self.no_frames_reason = f"{self.path} has no image messages (an event-only stream)"
+        self._sensor = self._sensor_size()
+        self.camera = self.calibration_file(*self._sensor) or self._read_camera()
+        self.ground_truth = self.ground_truth_file() or self._read_poses()
         self.imu = self._read_imu()
         self._events = None
+
+    def _topic_kinds(self) -> dict[str, tuple[str, ...]]:
+        """Each topic option (a BagConfig field) and the message types it may carry."""
+        return {"events_topic": self.event_types, "image_topic": ("sensor_msgs/msg/Image",),
+                "imu_topic": ("sensor_msgs/msg/Imu",), "pose_topic": ("geometry_msgs/msg/PoseStamped",),
+                "camera_info_topic": ("sensor_msgs/msg/CameraInfo",)}
+
+    def _find_topic(self, key: str, types: tuple[str, ...]) -> str | None:
+        """The topic `config.<key>` names; where its default name is absent, the one topic of the
+        bag carrying one of `types` (a driver's own names), else None. A topic the user named
+        that the bag lacks, or several candidates, raise DataError listing the bag's topics."""
+        named = getattr(self.config, key)
+        if named in self.topic_types:
+            return named
+        if named != getattr(BagConfig, key):
+            raise DataError(self.path, f"has no topic {named} (dataset.{key}); it holds {self._topic_list()}")
+        found = sorted(topic for topic, msgtype in self.topic_types.items() if msgtype in types)
+        if len(found) > 1:
+            raise DataError(self.path, f"has no {named} and {len(found)} topics of its kind ({', '.join(found)}): "
+                                       f"choose one with --set dataset.{key}=TOPIC")
+        return found[0] if found else None
+
+    def _topic_list(self) -> str:
+        return ", ".join(f"{topic} ({msgtype})" for topic, msgtype in sorted(self.topic_types.items())) or "no topics"
+
+    @property
+    def sensor_size(self) -> tuple[int, int]:
+        return self._sensor
+
+    def contents(self) -> list[str]:
+        counts = {}
+        for conn in self.reader.connections:
+            counts[conn.topic] = counts.get(conn.topic, 0) + conn.msgcount
+        lines = [f"topic {topic}: {self.topic_types[topic]}, {n} messages" for topic, n in sorted(counts.items())]
+        encoding = self._event_encoding()
+        if encoding:
+            lines.append(f"event encoding {encoding}")
+        return lines
 
     # -- what a format provides ----------------------------------------------------------
 
@@ -143,11 +185,23 @@ class BagDataset(RecordingReader):
         """What identifies the bag's content for the event cache (file_identity of its files)."""
         raise NotImplementedError
 
+    def _event_encoding(self) -> str:
+        """The packed encoding of the first event message (`mono`, `evt3`), or '' for a type without one."""
+        for _, msgtype, msg in self._messages(self.topic["events_topic"], self.event_types):
+            return getattr(msg, "encoding", "")
+        return ""
+
+    def _event_message_size(self) -> tuple[int, int] | None:
+        """(width, height) [px] the first event message states, or None (no events, or zero)."""
+        for _, _, msg in self._messages(self.topic["events_topic"], self.event_types):
+            return (int(msg.width), int(msg.height)) if msg.width and msg.height else None
+        return None
+
     # -- shared reading ------------------------------------------------------------------
 
-    def _messages(self, topic: str, msgtypes: tuple[str, ...], deserialize: bool = True):
-        """(index, msgtype, message or raw bytes) of a topic; a wrong type, or a message that
-        fails to decode, names the topic and the index."""
+    def _messages(self, topic: str | None, msgtypes: tuple[str, ...], deserialize: bool = True):
+        """(index, msgtype, message or raw bytes) of a topic (none for None); a wrong type, or a
+        message that fails to decode, names the topic and the index."""
         connections = [conn for conn in self.reader.connections if conn.topic == topic]
         if not connections:
             return  # (an empty selection would mean every topic to rosbags)
@@ -165,8 +219,8 @@ class BagDataset(RecordingReader):
 
     def _read_images(self):
         times, frames = [], []
-        where = f"{self.path}:{self.config.image_topic}"
-        for index, _, msg in self._messages(self.config.image_topic, ("sensor_msgs/msg/Image",)):
+        where = f"{self.path}:{self.topic['image_topic']}"
+        for index, _, msg in self._messages(self.topic["image_topic"], ("sensor_msgs/msg/Image",)):
             image = image_gray(where, index, msg)
             t = header_seconds(msg)
             if times and t < times[-1]:
@@ -178,16 +232,39 @@ class BagDataset(RecordingReader):
             frames.append(image)
         return (np.array(times) if frames else None), frames
 
-    def _read_camera(self) -> CameraModel:
-        topic = self.config.camera_info_topic
-        K_name, D_name = self.camera_fields
+    def _camera_infos(self):
+        """(where, message) of the first CameraInfo message, if any."""
+        topic = self.topic["camera_info_topic"]
         for index, _, msg in self._messages(topic, ("sensor_msgs/msg/CameraInfo",)):
-            return camera_from_camera_info(f"{self.path}:{topic}:{index}", int(msg.width), int(msg.height),
-                                           getattr(msg, K_name), getattr(msg, D_name), msg.distortion_model, f"{K_name}/{D_name}")
-        raise DataError(self.path, f"no {topic} message: the camera intrinsics are unknown")
+            return f"{self.path}:{topic}:{index}", msg
+        return None
+
+    def _sensor_size(self) -> tuple[int, int]:
+        """(width, height) [px]: CameraInfo's, else the frames', else what the event messages state."""
+        info = self._camera_infos()
+        if info is not None:
+            return int(info[1].width), int(info[1].height)
+        if self._frames:
+            return self._frames[0].shape[1], self._frames[0].shape[0]
+        size = self._event_message_size()
+        if size is None:
+            raise DataError(self.path, "the sensor size is unknown: no CameraInfo, no images, and the event messages "
+                                       "state none; give a calibration with --set dataset.calibration=FILE")
+        return size
+
+    def _read_camera(self) -> CameraModel | None:
+        info = self._camera_infos()
+        if info is None:
+            self.no_camera_reason = (f"{self.path} holds no CameraInfo message: give the intrinsics with --set "
+                                     f"dataset.calibration=FILE ({CALIBRATION_FORMATS})")
+            return None
+        where, msg = info
+        K_name, D_name = self.camera_fields
+        return camera_from_camera_info(where, int(msg.width), int(msg.height), getattr(msg, K_name), getattr(msg, D_name),
+                                       msg.distortion_model, f"{K_name}/{D_name}")
 
     def _read_poses(self):
-        topic = self.config.pose_topic
+        topic = self.topic["pose_topic"]
         rows = [
             (header_seconds(m), m.pose.position.x, m.pose.position.y, m.pose.position.z,
              m.pose.orientation.x, m.pose.orientation.y, m.pose.orientation.z, m.pose.orientation.w)
@@ -199,7 +276,7 @@ class BagDataset(RecordingReader):
         return pose_series(f"{self.path}:{topic}", np.array(rows), _message_index)
 
     def _read_imu(self):
-        topic = self.config.imu_topic
+        topic = self.topic["imu_topic"]
         rows = [
             (header_seconds(m), m.linear_acceleration.x, m.linear_acceleration.y, m.linear_acceleration.z,
              m.angular_velocity.x, m.angular_velocity.y, m.angular_velocity.z)
@@ -223,13 +300,14 @@ class BagDataset(RecordingReader):
 
     def _load_events(self) -> np.ndarray:
         c = self.config
-        topic = c.events_topic
-        if topic not in self.topics:
+        topic = self.topic["events_topic"]
+        if topic is None:
             return empty_events()
+        width, height = self._sensor
         where = f"{self.path}:{topic}"
 
         def fill(out, warnings):
-            validate = Validator(where, self.camera.width, self.camera.height, c.time_tolerance_s, c.lenient, warnings, "message")
+            validate = Validator(where, width, height, c.time_tolerance_s, c.lenient, warnings, "message")
 
             def checked(messages) -> list[np.ndarray]:
                 """The valid events of (index, msgtype, raw) messages, decoded, in order."""
@@ -260,7 +338,7 @@ class BagDataset(RecordingReader):
 
             return write_behind(out, blocks())
 
-        key = cache_key(self.cache_tag, *self._identity(), topic, self.camera.width, self.camera.height, c.time_tolerance_s)
+        key = cache_key(self.cache_tag, *self._identity(), topic, width, height, c.time_tolerance_s)
         return load_cached(key, c.lenient, self.warnings, fill, where)
 
 

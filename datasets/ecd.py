@@ -239,6 +239,9 @@ class EcdFolderDataset(RecordingReader):
         return image
 
     def _read_calib(self, width: int, height: int) -> CameraModel:
+        given = self.calibration_file(width, height)
+        if given is not None:
+            return given
         where = self.source.label("calib.txt")
         if not self.source.exists("calib.txt"):
             if self.source.exists(CAMCHAIN):
@@ -256,9 +259,12 @@ class EcdFolderDataset(RecordingReader):
         return camera
 
     def _read_ground_truth(self) -> PoseSeries | None:
+        if self.config.ground_truth:
+            return self.ground_truth_file()
         if not self.source.exists("groundtruth.txt"):
             return None
-        return ground_truth_table(self.source.read_bytes("groundtruth.txt"), self.source.label("groundtruth.txt"))
+        return ground_truth_table(self.source.read_bytes("groundtruth.txt"), self.source.label("groundtruth.txt"),
+                                  self.config.ground_truth_time_offset_s)
 
     def _read_imu(self) -> ImuSeries | None:
         if not self.source.exists("imu.txt"):

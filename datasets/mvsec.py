@@ -74,17 +74,14 @@ class MvsecConfig(StreamConfig):
 
     Attributes:
         side: the DAVIS read, `left` or `right` (its group davis/SIDE).
-        calibration: the intrinsics' file (kalibr camchain, or what read_calibration reads);
-            default: the one `*camchain*.yaml` beside the data file.
-        calibration_camera: the kalibr camera in it; default cam0 for left, cam1 for right.
-        ground_truth: the poses' file; default NAME_gt.hdf5 beside NAME_data.hdf5, if it exists.
+        calibration: default: the one `*camchain*.yaml` beside the data file; its camera
+            (calibration_camera) cam0 for left, cam1 for right.
+        ground_truth: an MVSEC `_gt.hdf5` or a TUM file; default NAME_gt.hdf5 beside
+            NAME_data.hdf5, if it exists.
         width, height: sensor size [px] of a recording without frames (default: MVSEC's DAVIS m346).
     """
 
     side: str = "left"
-    calibration: str = ""
-    calibration_camera: str = ""
-    ground_truth: str = ""
     width: int = 346
     height: int = 260
 
@@ -270,9 +267,7 @@ class MvsecDataset(RecordingReader):
                                                       f"(at most {MAX_SENSOR_PX} px a side)")
         return width, height
 
-    def _calibration_file(self) -> Path:
-        if self.config.calibration:
-            return Path(self.config.calibration)
+    def _camchain_beside(self) -> Path:
         found = sorted(self.path.parent.glob("*camchain*.yaml"))
         if len(found) == 1:
             return found[0]
@@ -284,8 +279,11 @@ class MvsecDataset(RecordingReader):
 
     def _read_camera(self) -> CameraModel:
         width, height = self._sensor_size()
-        camera = self.config.calibration_camera or KALIBR_CAMERA[self.config.side]
-        return read_calibration(self._calibration_file(), width=width, height=height, camera=camera)
+        camera = self.calibration_file(width, height, KALIBR_CAMERA[self.config.side])
+        if camera is None:
+            camera = read_calibration(self._camchain_beside(), width=width, height=height,
+                                      camera=self.config.calibration_camera or KALIBR_CAMERA[self.config.side])
+        return camera
 
     def _read_imu(self) -> ImuSeries | None:
         side = self.file[self.group]
@@ -307,6 +305,8 @@ class MvsecDataset(RecordingReader):
         path = self._ground_truth_file()
         if path is None:
             return None
+        if path.suffix.lower() not in (".hdf5", ".h5"):
+            return self.ground_truth_file()
         with self._open(h5py, path) as f:
             if self.group not in f or "pose" not in f[self.group]:
                 if self.config.ground_truth:
@@ -324,7 +324,7 @@ class MvsecDataset(RecordingReader):
             row = int(np.argmax(off))
             raise DataError(where, "is not a rigid transform (rotation not orthonormal with det 1, or last row "
                                    "not 0 0 0 1)", row)
-        return PoseSeries(t=t, p_w_c=T[:, :3, 3].copy(), q_w_c=quats_from_matrices(R))
+        return PoseSeries(t=t + self.config.ground_truth_time_offset_s, p_w_c=T[:, :3, 3].copy(), q_w_c=quats_from_matrices(R))
 
     def _load_events(self) -> np.ndarray:
         c = self.config

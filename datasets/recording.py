@@ -11,10 +11,11 @@ from pathlib import Path
 
 import numpy as np
 
+from eas_vo.datasets.calibration import read_calibration
 from eas_vo.errors import DataError, DataWarnings
 from eas_vo.io import data_line, parse_table
 from eas_vo.plugins import Dataset
-from eas_vo.types import PoseSeries
+from eas_vo.types import CameraModel, PoseSeries
 from eas_vo.validation import check_range
 
 
@@ -28,17 +29,30 @@ class StreamConfig:
         time_tolerance_s: event timestamps may step back this much [s] (clamped); more is an error.
         sample_rate_hz: event-only streams: samples per second...
         sample_every_events: ...or, when > 0, one sample every this many events.
+        calibration: a calibration file (CALIBRATION_FORMATS) used instead of what the
+            recording holds (a bag's CameraInfo, an ECD calib.txt); required where it holds none.
+        calibration_camera: which camera of that file (a kalibr `camN`, a DV XML camera node);
+            empty: the reader's choice (cam0, or the only one).
+        ground_truth: a TUM file of camera-to-world poses (`t px py pz qx qy qz qw`) used instead
+            of what the recording holds; empty: the recording's own, if any.
+        ground_truth_time_offset_s: added to the ground truth's times to put them on the
+            recording's clock [s] (a ground truth from 0 beside a Unix-time recording).
     """
 
     lenient: bool = False
     time_tolerance_s: float = 1e-6
     sample_rate_hz: float = 20.0
     sample_every_events: int = 0
+    calibration: str = ""
+    calibration_camera: str = ""
+    ground_truth: str = ""
+    ground_truth_time_offset_s: float = 0.0
 
     def validate(self) -> None:
         check_range(self, "time_tolerance_s", 0.0, 1.0)
         check_range(self, "sample_rate_hz", 0.0, 1e6, lo_open=True)
         check_range(self, "sample_every_events", 0, 10**9)
+        check_range(self, "ground_truth_time_offset_s", -1e10, 1e10)
 
 
 def event_sample_times(event_t: np.ndarray, rate_hz: float, every_events: int) -> np.ndarray:
@@ -61,6 +75,10 @@ def check_increasing(where: str, t: np.ndarray, line_of=_row_number) -> None:
     if len(bad):
         i = int(bad[0]) + 1
         raise DataError(where, f"timestamp {t[i]:.9f} does not increase (previous {t[i - 1]:.9f})", line_of(i))
+
+
+#: Calibration formats, for messages.
+CALIBRATION_FORMATS = "a DV calibration XML, a kalibr camchain YAML, a ROS camera_info YAML or an ECD calib.txt"
 
 
 #: A quaternion this close to unit norm is kept as read: one written with 9 decimals (the ECD's
@@ -121,6 +139,20 @@ class RecordingReader(Dataset):
 
     warnings: DataWarnings
     _times: np.ndarray | None
+    config: StreamConfig
+
+    def calibration_file(self, width: int | None, height: int | None, default_camera: str | None = None) -> CameraModel | None:
+        """The camera of `config.calibration` for a width x height [px] sensor, or None when no
+        file is given (`default_camera`: the camera read when `calibration_camera` is empty)."""
+        c = self.config
+        if not c.calibration:
+            return None
+        return read_calibration(c.calibration, width=width, height=height, camera=c.calibration_camera or default_camera)
+
+    def ground_truth_file(self) -> PoseSeries | None:
+        """The poses of `config.ground_truth` (a TUM file) on the recording's clock, or None."""
+        c = self.config
+        return read_tum_ground_truth(c.ground_truth, c.ground_truth_time_offset_s) if c.ground_truth else None
 
     def data_warnings(self) -> list[str]:
         return self.warnings.lines()

@@ -16,6 +16,7 @@ Events (configurable topic), in any of:
 
 from __future__ import annotations
 
+import re
 import sqlite3
 import struct
 from pathlib import Path
@@ -102,7 +103,9 @@ def bag_typestore(path: Path, connections):
             else:
                 separator = "=" * 80 + "\n"
                 for block in text.split(separator)[1:] if text.startswith(separator + "IDL: ") else [text]:
-                    store.register(get_types_from_idl(block.split("\n", 1)[1] if text.startswith(separator) else block))
+                    idl = block.split("\n", 1)[1] if text.startswith(separator) else block
+                    # `#include` lines are the C preprocessor's, not IDL: the types they name are blocks of their own
+                    store.register(get_types_from_idl(re.sub(r"(?m)^[ \t]*#.*$", "", idl)))
         except (TypesysError, ValueError, IndexError) as exc:
             raise DataError(path, f"cannot read the bag's definition of {conn.msgtype} ({exc})") from None
     fallback = event_typestore()
@@ -237,7 +240,7 @@ class Rosbag2Dataset(BagDataset):
         if path.is_file() and _storage_of(path) is None:
             raise DataError(path, "not a ROS 2 bag file (neither sqlite3 nor mcap)")
         try:
-            reader = Reader(path)
+            reader = Reader(_storage_file(path) if path.is_dir() else path)
             reader.open()
         except (ReaderError, *DAMAGED_BAG_ERRORS) as exc:
             raise DataError(path, f"not a readable ROS 2 bag ({_said(exc)})") from None
@@ -295,6 +298,35 @@ class Rosbag2Dataset(BagDataset):
             return path.suffix.lower() in (".db3", ".mcap") and _storage_of(path) is not None
         except OSError:
             return False
+
+
+def _storage_file(folder: Path) -> Path:
+    """What to open of a rosbag2 folder: the folder, or where its metadata.yaml names no storage
+    plugin (older rosbag2 wrote `storage_identifier: ""`, as rosbag2 itself then tells the
+    storage by the files), its one bag file; DataError for what cannot be read so."""
+    import yaml
+
+    where = folder / "metadata.yaml"
+    try:
+        info = yaml.safe_load(where.read_text(errors="replace"))["rosbag2_bagfile_information"]
+        storage, files = info.get("storage_identifier"), list(info.get("relative_file_paths") or [])
+    except (OSError, yaml.YAMLError, TypeError, KeyError, AttributeError):
+        return folder  # (rosbags' reader says what is wrong with it)
+    if storage or not isinstance(storage, str):
+        return folder
+    if len(files) != 1 or not isinstance(files[0], str) or _leaves(files[0]):
+        raise DataError(where, f"names no storage plugin (storage_identifier is empty) and {len(files)} bag files: "
+                               "write the storage (sqlite3 or mcap) into it")
+    path = folder / files[0]
+    if not path.is_file() or _storage_of(path) is None:
+        raise DataError(where, f"names no storage plugin, and its file {files[0]} is "
+                               f"{'missing' if not path.is_file() else 'neither sqlite3 nor mcap'}")
+    return path
+
+
+def _leaves(name: str) -> bool:
+    """Whether a file named by metadata.yaml lies outside its folder."""
+    return Path(name).is_absolute() or ".." in Path(name).parts
 
 
 def _storage_of(path: Path) -> str | None:

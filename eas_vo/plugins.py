@@ -38,8 +38,8 @@ class Dataset:
 
     Required: `__init__(location, config)` setting `camera` (and `ground_truth`, `imu`
     when the recording has them); `frame_times()`, `load_frame(k)`, `events()`.
-    Optional (defaults here): `can_open`, `label`, `no_frames_reason`, `data_warnings`,
-    `window`, `samples`; `catalogue` and `fetch` for a plugin whose recordings can be
+    Optional (defaults here): `can_open`, `label`, `no_frames_reason`, `no_camera_reason`,
+    `sensor_size`, `contents`, `data_warnings`, `window`, `samples`; `catalogue` and `fetch` for a plugin whose recordings can be
     downloaded by name (`eas-vo fetch`, `--dataset PLUGIN:NAME`).
     """
 
@@ -47,8 +47,9 @@ class Dataset:
     description: ClassVar[str] = ""
     Config: ClassVar[type] = NoConfig
 
-    #: Intrinsics, distortion and sensor size.
-    camera: CameraModel
+    #: Intrinsics, distortion and sensor size; None when the recording holds no calibration and
+    #: none was given (`registry.open_dataset` then refuses it for anything but a description).
+    camera: CameraModel | None
     #: Camera-to-world poses, or None.
     ground_truth: PoseSeries | None = None
     #: Gyro and accelerometer readings (IMU frame), or None.
@@ -57,6 +58,18 @@ class Dataset:
     label: str = ""
     #: Why `load_frame` returns None, for the error a frame-based frontend gives.
     no_frames_reason: str = "the dataset has no APS frames"
+    #: Why `camera` is None, and what to give instead (one line).
+    no_camera_reason: str = "the dataset has no calibration"
+
+    @property
+    def sensor_size(self) -> tuple[int, int] | None:
+        """(width, height) [px] of the sensor; default: the camera's (None without one)."""
+        return (self.camera.width, self.camera.height) if self.camera is not None else None
+
+    def contents(self) -> list[str]:
+        """What the file holds in its own terms (topics or streams with their types, counts,
+        encodings), one line each, for `eas-vo info`. Default: none."""
+        return []
 
     def __init__(self, location: str, config=None):
         """Open `location` (the part of `--dataset` after `NAME:`, or the whole of it)."""

@@ -57,7 +57,10 @@ class SequenceInfo:
 
     Attributes:
         label, plugin: the dataset as its plugin labels it, and the plugin's name.
-        camera: sensor size, lens model, intrinsics [px] and distortion.
+        sensor: sensor size (width, height) [px], None if the dataset cannot tell it.
+        camera: lens model, intrinsics [px] and distortion; None when the recording holds none
+            (`no_camera_reason` says what to give).
+        contents: what the file holds in its own terms (Dataset.contents), one line each.
         frames: the APS frames' times, or None for an event-only stream (`no_frames_reason`
             says why), whose samples (the times it is processed at) are then `samples`.
         samples: the times the dataset yields samples at (Dataset.frame_times).
@@ -67,13 +70,16 @@ class SequenceInfo:
 
     label: str
     plugin: str
-    camera: CameraModel
+    sensor: tuple[int, int] | None
+    camera: CameraModel | None
+    contents: tuple[str, ...]
     frames: Span | None
     samples: Span
     no_frames_reason: str
     events: Span | None
     imu: Span | None
     ground_truth: Span | None
+    no_camera_reason: str = ""
     warnings: tuple[str, ...] = ()
 
     @property
@@ -84,22 +90,58 @@ class SequenceInfo:
             return Span(0, math.nan, math.nan)
         return Span(len(spans), min(s.t0_s for s in spans), max(s.t1_s for s in spans))
 
+    def overlaps(self) -> list[str]:
+        """How much of the samples' span each other stream covers, one phrase each; a stream that
+        covers none of it is said to, with both spans (a clock in another unit or origin)."""
+        base = self.samples
+        if not base.count:
+            return []
+        out = []
+        for name, other in (("events", self.events), ("IMU", self.imu), ("ground truth", self.ground_truth)):
+            if other is None or not other.count:
+                continue
+            covered = max(0.0, min(base.t1_s, other.t1_s) - max(base.t0_s, other.t0_s))
+            if base.duration_s > 0 and covered > 0:
+                out.append(f"{name} {covered:.3f} s ({100 * covered / base.duration_s:.0f} %)")
+            elif base.t0_s <= other.t1_s and other.t0_s <= base.t1_s:
+                out.append(f"{name} all")
+            else:
+                out.append(f"{name} NONE ({other.t0_s:.3f}-{other.t1_s:.3f} s against {base.t0_s:.3f}-{base.t1_s:.3f} s: "
+                           f"another clock? dataset.ground_truth_time_offset_s or the recording's own)")
+        return out
+
+    def missing(self) -> list[str]:
+        """What a run would need that the recording does not give, one line each."""
+        out = []
+        if self.camera is None:
+            out.append(self.no_camera_reason)
+        if self.frames is None:
+            out.append("no frames: only an event tracker runs on it (--tracker cmax)")
+        if self.ground_truth is None:
+            out.append("no ground truth: runs are not scored (--set dataset.ground_truth=poses.tum)")
+        elif not self.ground_truth.count or (self.samples.count and (self.ground_truth.t1_s < self.samples.t0_s
+                                                                      or self.ground_truth.t0_s > self.samples.t1_s)):
+            out.append("the ground truth overlaps none of the samples: runs cannot be scored")
+        return out
+
     def lines(self) -> list[str]:
-        """The report `eas-vo info` prints."""
-        c = self.camera
-        fx, fy, cx, cy = c.K[0, 0], c.K[1, 1], c.K[0, 2], c.K[1, 2]
-        dist = ", ".join(f"{v:.6g}" for v in c.dist)
+        """The report `eas-vo info` prints: what the file holds, then what a run would miss."""
         present = [name for name, s in (("frames", self.frames), ("events", self.events), ("IMU", self.imu),
                                         ("ground truth", self.ground_truth)) if s is not None and s.count]
         span = self.span
-        out = [
-            f"{self.label} (dataset plugin {self.plugin})",
-            f"  streams       {', '.join(present) or 'none'}",
-            f"  sensor        {c.width} x {c.height} px",
-            f"  camera        {c.model} lens: fx {fx:.6g} fy {fy:.6g} cx {cx:.6g} cy {cy:.6g} px, distortion [{dist}]",
-            f"  duration      {span.duration_s:.3f} s ({span.t0_s:.3f}-{span.t1_s:.3f} s, all streams)" if span.count
-            else "  duration      0 s (no stream holds anything)",
-        ]
+        out = [f"{self.label} (dataset plugin {self.plugin})"]
+        out += [f"  file          {line}" for line in self.contents]
+        out.append(f"  streams       {', '.join(present) or 'none'}")
+        out.append(f"  sensor        {self.sensor[0]} x {self.sensor[1]} px" if self.sensor else "  sensor        unknown")
+        if self.camera is not None:
+            c = self.camera
+            fx, fy, cx, cy = c.K[0, 0], c.K[1, 1], c.K[0, 2], c.K[1, 2]
+            dist = ", ".join(f"{v:.6g}" for v in c.dist)
+            out.append(f"  camera        {c.model} lens: fx {fx:.6g} fy {fy:.6g} cx {cx:.6g} cy {cy:.6g} px, distortion [{dist}]")
+        else:
+            out.append("  camera        unknown (no calibration)")
+        out.append(f"  duration      {span.duration_s:.3f} s ({span.t0_s:.3f}-{span.t1_s:.3f} s, all streams)" if span.count
+                   else "  duration      0 s (no stream holds anything)")
         if self.frames is not None:
             out.append(f"  frames        {self.frames.text('APS frames')}")
         else:
@@ -113,7 +155,11 @@ class SequenceInfo:
             out.append(f"  events        {e.count} events, {e.t0_s:.3f}-{e.t1_s:.3f} s ({e.duration_s:.3f} s){rate}")
         out.append(f"  IMU           {self.imu.text('readings') if self.imu is not None else 'none'}")
         out.append(f"  ground truth  {self.ground_truth.text('poses') if self.ground_truth is not None else 'none'}")
+        overlaps = self.overlaps()
+        if overlaps:
+            out.append(f"  overlap       of the {'frames' if self.frames is not None else 'samples'}: {'; '.join(overlaps)}")
         out += [f"  warning       {line}" for line in self.warnings]
+        out += [f"  to run        {line}" for line in self.missing()]
         return out
 
 
@@ -129,14 +175,17 @@ def describe(config: ResolvedConfig) -> SequenceInfo:
     """Open `config.run.dataset` (with the [dataset] settings) and say what it holds. Reads
     the frame list and at most one frame (whether there are frames at all), and the event
     stream once (its first read caches it)."""
-    dataset = registry.open_dataset(config.run.dataset, config.dataset)
+    dataset = registry.open_dataset(config.run.dataset, config.dataset, need_camera=False)
     samples = dataset.frame_times()
     has_frames = len(samples) > 0 and dataset.load_frame(0) is not None
     events = dataset.events()
     return SequenceInfo(
         label=dataset.label,
         plugin=type(dataset).name,
+        sensor=dataset.sensor_size,
         camera=dataset.camera,
+        contents=tuple(dataset.contents()),
+        no_camera_reason="" if dataset.camera is not None else dataset.no_camera_reason,
         frames=Span.of(samples) if has_frames else None,
         samples=Span.of(samples),
         no_frames_reason="" if has_frames else dataset.no_frames_reason,

@@ -28,8 +28,13 @@ def test_bag_topics_are_configurable(sequence, tmp_path):
     write_bag(sequence, tmp_path / "custom.bag", custom)
     ds = RosbagDataset(tmp_path / "custom.bag", custom)
     assert len(ds.events()) == len(sequence.events()) and len(ds.frame_times()) == len(sequence.frame_times())
-    default = RosbagDataset(tmp_path / "custom.bag")  # default topics: no frames, no events
-    assert len(default.events()) == 0 and default.load_frame(0) is None
+    # The default names are absent: each stream is the bag's one topic of its message type.
+    default = RosbagDataset(tmp_path / "custom.bag")
+    assert default.topic["events_topic"] == "/cam/events" and default.topic["image_topic"] == "/cam/image"
+    assert len(default.events()) == len(sequence.events()) and len(default.frame_times()) == len(sequence.frame_times())
+    # A topic the user names that the bag lacks is refused, listing what the bag holds.
+    with pytest.raises(DataError, match=r"has no topic /wrong \(dataset.events_topic\); it holds .*/cam/events \(dvs_msgs/msg/EventArray\)"):
+        RosbagDataset(tmp_path / "custom.bag", BagConfig(events_topic="/wrong"))
 
 
 def test_not_a_bag(tmp_path):
