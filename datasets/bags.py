@@ -18,7 +18,7 @@ import cv2
 import numpy as np
 
 from eas_vo.datasets.calibration import camera_from_camera_info
-from eas_vo.datasets.recording import CALIBRATION_FORMATS, RecordingReader, StreamConfig, check_increasing, pose_series
+from eas_vo.datasets.recording import CALIBRATION_FORMATS, RecordingReader, StreamConfig, check_increasing, clock_origin_ns, pose_series
 from eas_vo.errors import DataError, DataWarnings
 from eas_vo.eventfile import Validator, cache_key, load_cached, write_behind
 from eas_vo.plugins import Dataset
@@ -46,15 +46,88 @@ class RefusedEncoding(Exception):
     """An event message this reader does not decode (not damage: never dropped under --lenient)."""
 
 
-def ns_seconds(ns) -> np.ndarray:
-    """Integer nanoseconds -> float64 seconds (the nearest double to the decimal `s.nnnnnnnnn`
-    while the count stays below 2**53 ns, about 104 days)."""
-    return np.asarray(ns, np.int64) / 1e9
+#: The fields of event_camera_msgs/msg/EventPacket (and of event_array_msgs/msg/EventArray
+#: before its renaming) after its header, in either ROS version.
+EVENT_PACKET_FIELDS = """
+uint32 height
+uint32 width
+uint64 seq
+uint64 time_base
+string encoding
+bool is_bigendian
+uint8[] events
+"""
+PACKET_TYPES = ("event_camera_msgs/msg/EventPacket", "event_array_msgs/msg/EventArray")
 
 
-def stamp_seconds(sec, nsec) -> np.ndarray:
-    """ROS time (sec, nanosec) -> float64 seconds."""
-    return ns_seconds(np.asarray(sec, np.int64) * 1_000_000_000 + np.asarray(nsec, np.int64))
+def stamp_ns(sec, nsec) -> np.ndarray:
+    """ROS time (sec, nanosec) -> int64 nanoseconds."""
+    return np.asarray(sec, np.int64) * 1_000_000_000 + np.asarray(nsec, np.int64)
+
+
+def decode_mono(base_ns: int, packed: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """event_camera_codecs' `mono` encoding -> (t [ns], x, y, p) columns.
+
+    Each event is one little-endian uint64: bits 0-31 its time dt [ns] after the packet's start,
+    32-47 x, 48-62 y, 63 the polarity (1 = ON); t = base_ns + dt.
+    """
+    if len(packed) % 8:
+        raise ValueError(f"{len(packed)} bytes of mono events, not a multiple of 8")
+    words = np.frombuffer(np.ascontiguousarray(packed, np.uint8), "<u8")
+    t_ns = np.int64(base_ns) + (words & 0xFFFFFFFF).astype(np.int64)
+    return t_ns, (words >> 32) & 0xFFFF, (words >> 48) & 0x7FFF, words >> 63
+
+
+def encode_mono(base_ns: int, events: np.ndarray, origin_ns: int = 0) -> np.ndarray:
+    """Events (EVENT_DTYPE, t [s] after `origin_ns`, at or after base_ns, within 4.29 s of it) -> `mono` bytes."""
+    dt = np.round(events["t"] * 1e9).astype(np.int64) + (origin_ns - base_ns)
+    if len(dt) and not (0 <= dt.min() and dt.max() < 2**32):
+        raise ValueError("mono packets span at most 4.29 s after their time base")
+    words = (dt.astype(np.uint64) | events["x"].astype(np.uint64) << np.uint64(32)
+             | events["y"].astype(np.uint64) << np.uint64(48) | (events["p"] > 0).astype(np.uint64) << np.uint64(63))
+    return words.astype("<u8").view(np.uint8)
+
+
+class PacketStream:
+    """The decoding state of one stream of EventPackets, read in order: a decoder per packed
+    encoding (eventfile.packets), the offset from the sensor's clock to the bag's, and the
+    external trigger edges met (reported, not events)."""
+
+    def __init__(self, width: int, height: int):
+        self.width, self.height = width, height
+        self.decoders = {}
+        self.sensor_to_bag_ns: int | None = None
+        self.triggers = 0
+
+    def decode(self, msg) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """An EventPacket -> (t [ns, the bag's clock], x, y, p); RefusedEncoding for what is not read.
+
+        `mono`: the header stamp + each event's offset (ROS time, the clock of the bag's other
+        topics). Encodings on the sensor's clock (Decoder.host_clock False, e.g. `evt3`): put on
+        the bag's clock by one offset, the first packet's header stamp minus its first event's
+        sensor time, so the sensor's own timing is kept exactly; those whose sensor clock was set
+        to the host's at start (libcaer) are read as they are."""
+        from eas_vo.eventfile.packets import DECODERS, decoder_class
+
+        stamp = stamp_ns(msg.header.stamp.sec, msg.header.stamp.nanosec)
+        if msg.is_bigendian:
+            raise RefusedEncoding(f"big-endian {msg.encoding} events are not read")
+        if msg.encoding == "mono":
+            return decode_mono(int(stamp), msg.events)
+        if msg.encoding not in self.decoders:
+            cls = decoder_class(msg.encoding)
+            if cls is None:
+                what = "holds external trigger events only, not camera events" if msg.encoding == "trigger" else "is not read"
+                raise RefusedEncoding(f"event encoding {msg.encoding!r} {what} (eas-vo reads mono, {', '.join(DECODERS)})")
+            self.decoders[msg.encoding] = cls(self.width, self.height)
+        decoder = self.decoders[msg.encoding]
+        out = decoder.decode(np.asarray(msg.events, np.uint8), int(msg.time_base))
+        self.triggers += len(out.trigger_t_ns)
+        if decoder.host_clock or not len(out.t_ns):
+            return out.t_ns, out.x, out.y, out.p
+        if self.sensor_to_bag_ns is None:
+            self.sensor_to_bag_ns = int(stamp) - int(out.t_ns[0])
+        return out.t_ns + self.sensor_to_bag_ns, out.x, out.y, out.p
 
 
 def image_gray(where: str, index: int, msg) -> np.ndarray:
@@ -67,10 +140,6 @@ def image_gray(where: str, index: int, msg) -> np.ndarray:
     if channels == 3:
         return cv2.cvtColor(image, cv2.COLOR_RGB2GRAY if msg.encoding == "rgb8" else cv2.COLOR_BGR2GRAY)
     return np.ascontiguousarray(image[..., 0])
-
-
-def header_seconds(msg) -> float:
-    return float(stamp_seconds(msg.header.stamp.sec, msg.header.stamp.nanosec))
 
 
 class BagDataset(RecordingReader):
@@ -96,6 +165,7 @@ class BagDataset(RecordingReader):
         self.reader = self._open()
         self.topic_types = {conn.topic: conn.msgtype for conn in self.reader.connections}
         self.topic = {key: self._find_topic(key, types) for key, types in self._topic_kinds().items()}
+        self.clock_origin_ns = clock_origin_ns(self._first_stamp_ns())
         self._times, self._frames = self._read_images()
         if not self._frames:
             self.no_frames_reason = f"{self.path} has no image messages (an event-only stream)"
@@ -125,6 +195,21 @@ class BagDataset(RecordingReader):
             raise DataError(self.path, f"has no {named} and {len(found)} topics of its kind ({', '.join(found)}): "
                                        f"choose one with --set dataset.{key}=TOPIC")
         return found[0] if found else None
+
+    def _first_stamp_ns(self) -> int:
+        """The header stamp [ns] of the first event message, else of the first image, IMU or pose."""
+        for key in ("events_topic", "image_topic", "imu_topic", "pose_topic"):
+            for _, _, msg in self._messages(self.topic[key], self._topic_kinds()[key]):
+                return int(stamp_ns(msg.header.stamp.sec, msg.header.stamp.nanosec))
+        return 0
+
+    def _seconds(self, t_ns) -> np.ndarray:
+        """Times [ns] of the bag's clock -> float64 seconds after its clock_origin_ns."""
+        return (np.asarray(t_ns, np.int64) - self.clock_origin_ns) / 1e9
+
+    def _stamp_s(self, msg) -> float:
+        """A message's header stamp [s after the clock origin]."""
+        return float(self._seconds(stamp_ns(msg.header.stamp.sec, msg.header.stamp.nanosec)))
 
     def _topic_list(self) -> str:
         return ", ".join(f"{topic} ({msgtype})" for topic, msgtype in sorted(self.topic_types.items())) or "no topics"
@@ -176,9 +261,9 @@ class BagDataset(RecordingReader):
     def _deserialize(self, raw: bytes, msgtype: str):
         raise NotImplementedError
 
-    def _decode_events(self, raw: bytes, msgtype: str) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """An event message -> (t [s], x, y, p) columns; ValueError for damaged bytes,
-        RefusedEncoding for what the reader does not decode."""
+    def _decode_events(self, raw: bytes, msgtype: str, packets: PacketStream) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """An event message -> (t [ns, the bag's clock], x, y, p) columns (an EventPacket through
+        `packets.decode`); ValueError for damaged bytes, RefusedEncoding for what the reader does not decode."""
         raise NotImplementedError
 
     def _identity(self) -> tuple:
@@ -222,7 +307,7 @@ class BagDataset(RecordingReader):
         where = f"{self.path}:{self.topic['image_topic']}"
         for index, _, msg in self._messages(self.topic["image_topic"], ("sensor_msgs/msg/Image",)):
             image = image_gray(where, index, msg)
-            t = header_seconds(msg)
+            t = self._stamp_s(msg)
             if times and t < times[-1]:
                 if not self.config.lenient:
                     raise DataError(where, f"timestamp {t:.9f} goes back (previous {times[-1]:.9f})", index)
@@ -266,7 +351,7 @@ class BagDataset(RecordingReader):
     def _read_poses(self):
         topic = self.topic["pose_topic"]
         rows = [
-            (header_seconds(m), m.pose.position.x, m.pose.position.y, m.pose.position.z,
+            (self._stamp_s(m), m.pose.position.x, m.pose.position.y, m.pose.position.z,
              m.pose.orientation.x, m.pose.orientation.y, m.pose.orientation.z, m.pose.orientation.w)
             for _, _, m in self._messages(topic, ("geometry_msgs/msg/PoseStamped",))
         ]
@@ -278,7 +363,7 @@ class BagDataset(RecordingReader):
     def _read_imu(self):
         topic = self.topic["imu_topic"]
         rows = [
-            (header_seconds(m), m.linear_acceleration.x, m.linear_acceleration.y, m.linear_acceleration.z,
+            (self._stamp_s(m), m.linear_acceleration.x, m.linear_acceleration.y, m.linear_acceleration.z,
              m.angular_velocity.x, m.angular_velocity.y, m.angular_velocity.z)
             for _, _, m in self._messages(topic, ("sensor_msgs/msg/Imu",))
         ]
@@ -308,13 +393,14 @@ class BagDataset(RecordingReader):
 
         def fill(out, warnings):
             validate = Validator(where, width, height, c.time_tolerance_s, c.lenient, warnings, "message")
+            packets = PacketStream(width, height)
 
             def checked(messages) -> list[np.ndarray]:
                 """The valid events of (index, msgtype, raw) messages, decoded, in order."""
                 kept = []
                 for index, msgtype, raw in messages:
                     try:
-                        t, x, y, p = self._decode_events(raw, msgtype)
+                        t_ns, x, y, p = self._decode_events(raw, msgtype, packets)
                     except RefusedEncoding as exc:
                         raise DataError(where, str(exc), index) from None
                     except (ValueError, IndexError) as exc:
@@ -322,7 +408,7 @@ class BagDataset(RecordingReader):
                             raise DataError(where, f"cannot decode event message ({exc})", index) from None
                         warnings.add(where, "undecodable event message", f"message {index}")
                         continue
-                    kept.append(validate(t, x, y, p, lambda row: index))
+                    kept.append(validate(self._seconds(t_ns), x, y, p, lambda row: index))
                 return kept  # (not joined: numpy copies the packed records slowly)
 
             def blocks():  # messages grouped by about BLOCK_BYTES, decoded and checked behind the reading
@@ -336,9 +422,13 @@ class BagDataset(RecordingReader):
                 if group:
                     yield functools.partial(checked, group)
 
-            return write_behind(out, blocks())
+            written = write_behind(out, blocks())
+            if packets.triggers:
+                warnings.add(where, "external trigger edges, not camera events (kept out of the event stream)",
+                             "the first packet holding one", packets.triggers)
+            return written
 
-        key = cache_key(self.cache_tag, *self._identity(), topic, width, height, c.time_tolerance_s)
+        key = cache_key(self.cache_tag, *self._identity(), topic, width, height, c.time_tolerance_s, self.clock_origin_ns)
         return load_cached(key, c.lenient, self.warnings, fill, where)
 
 
@@ -350,15 +440,15 @@ def _message_index(row: int) -> int:
 # -- writing: the messages of a recording, for either ROS version ----------------------------
 
 
-def write_messages(writer, messages, store, serialize) -> None:
-    """Write `messages` ((t [s], topic, msgtype, message or its bytes), as recording_messages
-    yields them) with a rosbags writer, one connection per topic; `serialize(msg, msgtype)`
-    turns a message into bytes (ROS 1 or CDR)."""
+def write_messages(writer, messages, store, serialize, origin_ns: int = 0) -> None:
+    """Write `messages` ((t [s after origin_ns], topic, msgtype, message or its bytes), as
+    recording_messages yields them) with a rosbags writer, one connection per topic;
+    `serialize(msg, msgtype)` turns a message into bytes (ROS 1 or CDR)."""
     connections = {}
     for t, topic, msgtype, msg in messages:
         if topic not in connections:
             connections[topic] = writer.add_connection(topic, msgtype, typestore=store)
-        writer.write(connections[topic], bag_time_ns(t), msg if isinstance(msg, bytes) else serialize(msg, msgtype))
+        writer.write(connections[topic], bag_time_ns(t, origin_ns), msg if isinstance(msg, bytes) else serialize(msg, msgtype))
 
 
 def recording_messages(dataset: Dataset, config: BagConfig, store, ros1: bool,
@@ -370,8 +460,10 @@ def recording_messages(dataset: Dataset, config: BagConfig, store, ros1: bool,
     T = store.types
     cam = dataset.camera
 
+    origin_ns = dataset.clock_origin_ns
+
     def header(t: float):
-        sec, nsec = divmod(int(round(t * 1e9)), 1_000_000_000)
+        sec, nsec = divmod(origin_ns + int(round(t * 1e9)), 1_000_000_000)
         stamp = T["builtin_interfaces/msg/Time"](sec=sec, nanosec=nsec)
         return T["std_msgs/msg/Header"](**({"seq": 0} if ros1 else {}), stamp=stamp, frame_id="davis")
 
@@ -418,6 +510,6 @@ def recording_messages(dataset: Dataset, config: BagConfig, store, ros1: bool,
     return sorted(messages, key=lambda m: m[0])
 
 
-def bag_time_ns(t: float) -> int:
-    """A message's bag time [ns] for a stamp t [s] (bags hold no negative times)."""
-    return int(round(max(t, 0.0) * 1e9))
+def bag_time_ns(t: float, origin_ns: int = 0) -> int:
+    """A message's bag time [ns] for a stamp t [s after origin_ns] (bags hold no negative times)."""
+    return max(origin_ns + int(round(t * 1e9)), 0)

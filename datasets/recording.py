@@ -55,6 +55,19 @@ class StreamConfig:
         check_range(self, "ground_truth_time_offset_s", -1e10, 1e10)
 
 
+#: A clock whose first time lies within this of zero [s] is read as it is: float64 seconds keep
+#: 0.12 ns up to 1e6 s (11.6 days). Beyond it (Unix time), times are read after an origin.
+ORIGIN_FREE_S = 1e6
+
+
+def clock_origin_ns(first_ns: int) -> int:
+    """The clock origin [ns] (Dataset.clock_origin_ns) for a recording whose first time is
+    `first_ns` [ns]: 0 within ORIGIN_FREE_S of zero, else that time's whole second (so that
+    relative times keep the recording's own sub-second digits)."""
+    first_ns = int(first_ns)
+    return 0 if abs(first_ns) < ORIGIN_FREE_S * 1e9 else first_ns // 1_000_000_000 * 1_000_000_000
+
+
 def event_sample_times(event_t: np.ndarray, rate_hz: float, every_events: int) -> np.ndarray:
     """Sample times [s] for an event-only stream: every `every_events` events, else at `rate_hz`."""
     if len(event_t) == 0:
@@ -113,23 +126,24 @@ def timed_table(data: bytes, where: str, ncols: int, what: str) -> tuple[np.ndar
     return table, line_of
 
 
-def ground_truth_table(data: bytes, where: str, time_offset_s: float = 0.0) -> PoseSeries:
+def ground_truth_table(data: bytes, where: str, time_offset_s: float = 0.0, origin_ns: int = 0) -> PoseSeries:
     """TUM rows `t px py pz qx qy qz qw` (camera-to-world; t [s], p [m], unit q) -> PoseSeries,
-    `time_offset_s` added to each t (the ground truth's clock -> the recording's)."""
+    `time_offset_s` added to each t (the ground truth's clock -> the recording's), read after
+    the recording's clock origin `origin_ns` (Dataset.clock_origin_ns)."""
     table, line_of = timed_table(data, where, 8, "t px py pz qx qy qz qw")
     poses = pose_series(where, table, line_of)
-    if time_offset_s == 0.0:
+    if time_offset_s == 0.0 and origin_ns == 0:
         return poses
-    return PoseSeries(poses.t + time_offset_s, poses.p_w_c, poses.q_w_c)
+    return PoseSeries((poses.t - origin_ns / 1e9) + time_offset_s, poses.p_w_c, poses.q_w_c)
 
 
-def read_tum_ground_truth(path: str | Path, time_offset_s: float = 0.0) -> PoseSeries:
+def read_tum_ground_truth(path: str | Path, time_offset_s: float = 0.0, origin_ns: int = 0) -> PoseSeries:
     """A TUM ground-truth file (see ground_truth_table), errors naming the file and its line."""
     try:
         data = Path(path).read_bytes()
     except OSError as exc:
         raise DataError(str(path), f"cannot read the ground truth: {exc.strerror or exc}") from None
-    return ground_truth_table(data, str(path), time_offset_s)
+    return ground_truth_table(data, str(path), time_offset_s, origin_ns)
 
 
 class RecordingReader(Dataset):
@@ -150,9 +164,12 @@ class RecordingReader(Dataset):
         return read_calibration(c.calibration, width=width, height=height, camera=c.calibration_camera or default_camera)
 
     def ground_truth_file(self) -> PoseSeries | None:
-        """The poses of `config.ground_truth` (a TUM file) on the recording's clock, or None."""
+        """The poses of `config.ground_truth` (a TUM file) on the recording's clock (after its
+        clock_origin_ns), or None."""
         c = self.config
-        return read_tum_ground_truth(c.ground_truth, c.ground_truth_time_offset_s) if c.ground_truth else None
+        if not c.ground_truth:
+            return None
+        return read_tum_ground_truth(c.ground_truth, c.ground_truth_time_offset_s, self.clock_origin_ns)
 
     def data_warnings(self) -> list[str]:
         return self.warnings.lines()

@@ -15,7 +15,8 @@ from pathlib import Path
 
 import numpy as np
 
-from eas_vo.datasets.bags import BagConfig, BagDataset, recording_messages, stamp_seconds, write_messages
+from eas_vo.datasets.bags import (EVENT_PACKET_FIELDS, PACKET_TYPES, BagConfig, BagDataset, recording_messages, stamp_ns,
+                                  write_messages)
 from eas_vo.errors import DataError
 from eas_vo.eventfile import file_identity
 from eas_vo.plugins import Dataset
@@ -55,6 +56,8 @@ def typestore():
     store = get_typestore(Stores.ROS1_NOETIC)
     store.register(get_types_from_msg(EVENT_MSG, "dvs_msgs/msg/Event"))
     store.register(get_types_from_msg(EVENT_ARRAY_MSG, "dvs_msgs/msg/EventArray"))
+    for msgtype in PACKET_TYPES:
+        store.register(get_types_from_msg("Header header" + EVENT_PACKET_FIELDS, msgtype))
     return store
 
 
@@ -74,7 +77,7 @@ class RosbagDataset(BagDataset):
     name = "rosbag"
     description = "ROS1 .bag (dvs_msgs events, sensor_msgs images/IMU/camera_info, mocap poses)"
     cache_tag = "bag"
-    event_types = ("dvs_msgs/msg/EventArray",)
+    event_types = ("dvs_msgs/msg/EventArray", *PACKET_TYPES)
     camera_fields = ("K", "D")
 
     def _open(self):
@@ -92,9 +95,15 @@ class RosbagDataset(BagDataset):
     def _deserialize(self, raw: bytes, msgtype: str):
         return typestore().deserialize_ros1(raw, msgtype)
 
-    def _decode_events(self, raw: bytes, msgtype: str):
+    def _decode_events(self, raw: bytes, msgtype: str, packets):
+        if msgtype in PACKET_TYPES:
+            try:
+                msg = typestore().deserialize_ros1(raw, msgtype)
+            except Exception as exc:  # rosbags raises assorted errors on damaged data
+                raise ValueError(str(exc) or type(exc).__name__) from None
+            return packets.decode(msg)
         wire = decode_event_array(raw)
-        return stamp_seconds(wire["sec"], wire["nsec"]), wire["x"], wire["y"], wire["p"]
+        return stamp_ns(wire["sec"], wire["nsec"]), wire["x"], wire["y"], wire["p"]
 
     def _identity(self) -> tuple:
         return file_identity(self.path)
@@ -115,11 +124,11 @@ class RosbagDataset(BagDataset):
         return Path(location).suffix.lower() == ".bag"
 
 
-def _serialise_event_array(t_header: float, width: int, height: int, events: np.ndarray) -> bytes:
-    """dvs_msgs/EventArray bytes, built with numpy (millions of events stay fast)."""
-    sec, nsec = divmod(int(round(t_header * 1e9)), 1_000_000_000)
+def _serialise_event_array(t_header: float, width: int, height: int, events: np.ndarray, origin_ns: int = 0) -> bytes:
+    """dvs_msgs/EventArray bytes (times [s] after `origin_ns`), built with numpy (millions of events stay fast)."""
+    sec, nsec = divmod(origin_ns + int(round(t_header * 1e9)), 1_000_000_000)
     wire = np.empty(len(events), _EVENT_WIRE)
-    ns = np.round(events["t"] * 1e9).astype(np.int64)
+    ns = np.round(events["t"] * 1e9).astype(np.int64) + origin_ns
     wire["sec"], wire["nsec"] = np.divmod(ns, 1_000_000_000)
     wire["x"], wire["y"], wire["p"] = events["x"], events["y"], events["p"] > 0
     head = np.array([0, sec, nsec, 0, height, width, len(events)], "<u4").tobytes()
@@ -138,8 +147,9 @@ def write_bag(dataset: Dataset, path: str | Path, config: BagConfig | None = Non
         for start in range(0, len(events), events_per_message):
             chunk = events[start : start + events_per_message]
             t = float(chunk["t"][-1])
-            yield t, "dvs_msgs/msg/EventArray", _serialise_event_array(t, cam.width, cam.height, chunk)
+            yield t, "dvs_msgs/msg/EventArray", _serialise_event_array(t, cam.width, cam.height, chunk, dataset.clock_origin_ns)
 
     Path(path).unlink(missing_ok=True)
     with Writer(Path(path)) as writer:
-        write_messages(writer, recording_messages(dataset, c, store, True, event_messages), store, store.serialize_ros1)
+        write_messages(writer, recording_messages(dataset, c, store, True, event_messages), store, store.serialize_ros1,
+                       dataset.clock_origin_ns)

@@ -9,9 +9,8 @@ Events (configurable topic), in any of:
 - `dvs_msgs/msg/EventArray` (the rpg DVS driver's ROS 2 port): decoded from its CDR bytes
   with numpy;
 - `event_camera_msgs/msg/EventPacket` (ros-event-camera drivers: libcaer_driver,
-  metavision_driver) and its former name `event_array_msgs/msg/EventArray`: the `mono`
-  encoding is decoded (event time: header stamp + each event's offset, ROS time);
-  `evt3`, `libcaer`, `libcaer_cmp` and `trigger` are refused by name.
+  metavision_driver) and its former name `event_array_msgs/msg/EventArray`, in the encodings
+  `mono`, `evt3`, `libcaer` and `libcaer_cmp` (datasets/bags.py PacketStream says on which clock).
 """
 
 from __future__ import annotations
@@ -23,7 +22,8 @@ from pathlib import Path
 
 import numpy as np
 
-from eas_vo.datasets.bags import BagConfig, BagDataset, RefusedEncoding, ns_seconds, recording_messages, stamp_seconds, write_messages
+from eas_vo.datasets.bags import (EVENT_PACKET_FIELDS, PACKET_TYPES, BagConfig, BagDataset, RefusedEncoding, encode_mono,
+                                  recording_messages, stamp_ns, write_messages)
 from eas_vo.errors import DataError
 from eas_vo.eventfile import file_identity
 from eas_vo.plugins import Dataset
@@ -40,26 +40,7 @@ uint32 height
 uint32 width
 dvs_msgs/Event[] events
 """
-#: event_camera_msgs/msg/EventPacket, and event_array_msgs/msg/EventArray before its renaming.
-EVENT_PACKET_MSG = """
-std_msgs/Header header
-uint32 height
-uint32 width
-uint64 seq
-uint64 time_base
-string encoding
-bool is_bigendian
-uint8[] events
-"""
 DVS_ARRAY = "dvs_msgs/msg/EventArray"
-PACKET_TYPES = ("event_camera_msgs/msg/EventPacket", "event_array_msgs/msg/EventArray")
-#: Packed encodings of an EventPacket that carry no camera events, or that are not decoded here.
-REFUSED_ENCODINGS = {
-    "trigger": "holds external trigger events, not camera events",
-    "evt3": "(Prophesee EVT 3.0) is not decoded",
-    "libcaer": "is not decoded",
-    "libcaer_cmp": "is not decoded",
-}
 SQLITE_MAGIC = b"SQLite format 3\x00"
 MCAP_MAGIC = b"\x89MCAP0\r\n"
 #: What rosbags' rosbag2 readers raise on damaged bytes besides ReaderError: sqlite's errors,
@@ -82,7 +63,7 @@ def event_typestore():
     store.register(get_types_from_msg(DVS_EVENT_MSG, "dvs_msgs/msg/Event"))
     store.register(get_types_from_msg(DVS_EVENT_ARRAY_MSG, DVS_ARRAY))
     for msgtype in PACKET_TYPES:
-        store.register(get_types_from_msg(EVENT_PACKET_MSG, msgtype))
+        store.register(get_types_from_msg("std_msgs/Header header" + EVENT_PACKET_FIELDS, msgtype))
     return store
 
 
@@ -177,11 +158,11 @@ def decode_dvs_array(raw: bytes) -> np.ndarray:
     return out
 
 
-def encode_dvs_array(t_header: float, width: int, height: int, events: np.ndarray) -> bytes:
-    """CDR dvs_msgs/msg/EventArray bytes (frame_id "davis"), built with numpy; the inverse of
-    decode_dvs_array, byte for byte what rosbags' serialize_cdr writes."""
-    sec, nsec = divmod(int(round(t_header * 1e9)), 1_000_000_000)
-    ns = np.round(events["t"] * 1e9).astype(np.int64)
+def encode_dvs_array(t_header: float, width: int, height: int, events: np.ndarray, origin_ns: int = 0) -> bytes:
+    """CDR dvs_msgs/msg/EventArray bytes (frame_id "davis"; times [s] after `origin_ns`), built
+    with numpy; the inverse of decode_dvs_array, byte for byte what rosbags' serialize_cdr writes."""
+    sec, nsec = divmod(origin_ns + int(round(t_header * 1e9)), 1_000_000_000)
+    ns = np.round(events["t"] * 1e9).astype(np.int64) + origin_ns
     secs, nsecs = np.divmod(ns, 1_000_000_000)
     frame_id = b"davis\x00"
     head = struct.pack("<iiI", sec, nsec, len(frame_id)) + frame_id
@@ -195,29 +176,6 @@ def encode_dvs_array(t_header: float, width: int, height: int, events: np.ndarra
             rec["x"], rec["y"], rec["sec"], rec["nsec"], rec["p"] = (
                 events["x"][part], events["y"][part], secs[part], nsecs[part], events["p"][part] > 0)
     return b"\x00\x01\x00\x00" + bytes(body)
-
-
-def decode_mono(base_ns: int, packed: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """event_camera_codecs' `mono` encoding -> (t [ns], x, y, p) columns.
-
-    Each event is one little-endian uint64: bits 0-31 its time dt [ns] after the packet's start,
-    32-47 x, 48-62 y, 63 the polarity (1 = ON); t = base_ns + dt.
-    """
-    if len(packed) % 8:
-        raise ValueError(f"{len(packed)} bytes of mono events, not a multiple of 8")
-    words = np.frombuffer(np.ascontiguousarray(packed, np.uint8), "<u8")
-    t_ns = np.int64(base_ns) + (words & 0xFFFFFFFF).astype(np.int64)
-    return t_ns, (words >> 32) & 0xFFFF, (words >> 48) & 0x7FFF, words >> 63
-
-
-def encode_mono(base_ns: int, events: np.ndarray) -> np.ndarray:
-    """Events (EVENT_DTYPE, at or after base_ns, within 4.29 s of it) -> `mono` bytes."""
-    dt = np.round(events["t"] * 1e9).astype(np.int64) - base_ns
-    if len(dt) and not (0 <= dt.min() and dt.max() < 2**32):
-        raise ValueError("mono packets span at most 4.29 s after their time base")
-    words = (dt.astype(np.uint64) | events["x"].astype(np.uint64) << np.uint64(32)
-             | events["y"].astype(np.uint64) << np.uint64(48) | (events["p"] > 0).astype(np.uint64) << np.uint64(63))
-    return words.astype("<u8").view(np.uint8)
 
 
 class Rosbag2Dataset(BagDataset):
@@ -262,25 +220,15 @@ class Rosbag2Dataset(BagDataset):
     def _deserialize(self, raw: bytes, msgtype: str):
         return self.store.deserialize_cdr(raw, msgtype)
 
-    def _decode_events(self, raw: bytes, msgtype: str):
+    def _decode_events(self, raw: bytes, msgtype: str, packets):
         if msgtype == DVS_ARRAY:
             wire = decode_dvs_array(raw)
-            return stamp_seconds(wire["sec"], wire["nsec"]), wire["x"], wire["y"], wire["p"]
+            return stamp_ns(wire["sec"], wire["nsec"]), wire["x"], wire["y"], wire["p"]
         try:
             msg = self.store.deserialize_cdr(raw, msgtype)
         except Exception as exc:  # rosbags raises assorted errors on damaged data
             raise ValueError(str(exc) or type(exc).__name__) from None
-        if msg.encoding in REFUSED_ENCODINGS:
-            raise RefusedEncoding(f"event encoding {msg.encoding!r} {REFUSED_ENCODINGS[msg.encoding]} (eas-vo reads 'mono')")
-        if msg.encoding != "mono":
-            raise RefusedEncoding(f"unknown event encoding {msg.encoding!r} (eas-vo reads 'mono')")
-        if msg.is_bigendian:
-            raise RefusedEncoding("big-endian mono events are not read")
-        # ROS time, the clock of the bag's other topics: the header stamp + dt (time_base + dt
-        # would be the camera's own clock; event_camera_msgs documents both).
-        stamp = msg.header.stamp
-        t_ns, x, y, p = decode_mono(int(stamp.sec) * 1_000_000_000 + int(stamp.nanosec), msg.events)
-        return ns_seconds(t_ns), x, y, p
+        return packets.decode(msg)
 
     def _identity(self) -> tuple:
         if self.path.is_file():
@@ -354,22 +302,23 @@ def write_bag2(dataset: Dataset, path: str | Path, storage: str = "sqlite3", con
     store = event_typestore()
     cam = dataset.camera
     packet_type = PACKET_TYPES[0]
+    origin_ns = dataset.clock_origin_ns
 
     def event_messages(events):
         for start in range(0, len(events), events_per_message):
             chunk = events[start : start + events_per_message]
             t = float(chunk["t"][-1])
             if encoding == "dvs":
-                yield t, DVS_ARRAY, encode_dvs_array(t, cam.width, cam.height, chunk)
+                yield t, DVS_ARRAY, encode_dvs_array(t, cam.width, cam.height, chunk, origin_ns)
                 continue
-            time_base = int(round(float(chunk["t"][0]) * 1e9))
+            time_base = origin_ns + int(round(float(chunk["t"][0]) * 1e9))
             sec, nsec = divmod(time_base, 1_000_000_000)
             header = store.types["std_msgs/msg/Header"](stamp=store.types["builtin_interfaces/msg/Time"](sec=sec, nanosec=nsec),
                                                         frame_id="davis")
             msg = store.types[packet_type](header=header, height=cam.height, width=cam.width, seq=start // events_per_message,
-                                           time_base=time_base, encoding="mono", is_bigendian=False, events=encode_mono(time_base, chunk))
+                                           time_base=time_base, encoding="mono", is_bigendian=False, events=encode_mono(time_base, chunk, origin_ns))
             yield t, packet_type, bytes(store.serialize_cdr(msg, packet_type))
 
     plugin = {"sqlite3": StoragePlugin.SQLITE3, "mcap": StoragePlugin.MCAP}[storage]
     with Writer(Path(path), version=9, storage_plugin=plugin) as writer:
-        write_messages(writer, recording_messages(dataset, c, store, False, event_messages), store, store.serialize_cdr)
+        write_messages(writer, recording_messages(dataset, c, store, False, event_messages), store, store.serialize_cdr, origin_ns)

@@ -23,6 +23,9 @@ from eas_vo.validation import check_range, check_vector
 SECTIONS = ("run", "dataset", "frontend", "tracker", "backend")
 #: The frontend a tracker that reads no images runs with (Tracker.reads_images).
 NO_IMAGES = "no_image"
+#: The largest run.time_offset_s [s]: a latency between two clocks of one rig; a larger gap is
+#: another clock origin (dataset.ground_truth_time_offset_s).
+TIME_OFFSET_LIMIT_S = 10.0
 
 
 @dataclass(frozen=True)
@@ -67,7 +70,7 @@ class RunConfig:
         check_vector(self, "imu_rotvec_cam", 3, "rad")
         check_range(self, "imu_time_offset_s", -1.0, 1.0)
         check_range(self, "start_s", 0.0, math.inf)
-        check_range(self, "time_offset_s", -10.0, 10.0)
+        check_range(self, "time_offset_s", -TIME_OFFSET_LIMIT_S, TIME_OFFSET_LIMIT_S)
         check_range(self, "duration_s", 0.0, math.inf, lo_open=True)
 
 

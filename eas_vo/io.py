@@ -462,6 +462,17 @@ def slug(text: str) -> str:
 # ----------------------------------------------------------------------------- text tables
 
 
+def clock_time(t_s: float, origin_ns: int = 0) -> str:
+    """A time written to a file: `t_s` [s] after the clock origin `origin_ns` [ns]
+    (Dataset.clock_origin_ns), as seconds with 9 decimals, summed in integer nanoseconds so that
+    a Unix-time clock keeps every digit (float64 at 1.7e9 s keeps only about 0.24 us)."""
+    if origin_ns == 0:
+        return f"{t_s:.9f}"
+    ns = origin_ns + round(float(t_s) * 1e9)
+    whole, frac = divmod(abs(ns), 1_000_000_000)
+    return f"{'-' if ns < 0 else ''}{whole}.{frac:09d}"
+
+
 def read_tum(path: str | Path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """A TUM trajectory `t tx ty tz qx qy qz qw` -> (t [s], p [m] (N, 3), q_xyzw (N, 4))."""
     rows = np.loadtxt(path, ndmin=2)

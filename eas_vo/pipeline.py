@@ -17,13 +17,13 @@ from pathlib import Path
 import numpy as np
 
 from eas_vo import concurrency, registry
-from eas_vo.config import ResolvedConfig
+from eas_vo.config import TIME_OFFSET_LIMIT_S, ResolvedConfig
 from eas_vo.errors import EasVoError, Interrupted
 from eas_vo.evaluation import (OFFSET_SEARCH_S, ImuAgreement, RotationErrors, estimate_time_offset, imu_agreement,
                                motion_errors, rotation_errors)
 from eas_vo.geometry.rotations import geodesic_angle, matrix_to_rotvec, quats_from_matrices, rotvec_to_matrix
 from eas_vo.imu_check import GyroVerdict, check_readings, judge_gyro
-from eas_vo.io import atomic_path, json_text, output_folder, write_text_atomic
+from eas_vo.io import atomic_path, clock_time, json_text, output_folder, write_text_atomic
 from eas_vo.orb import OrbStats
 from eas_vo.plugins import Backend, Dataset, Frontend, Tracker
 from eas_vo.types import FrameRecord, ImuSeries, RelativeRotation
@@ -71,6 +71,7 @@ class RunResult:
     errors: RotationErrors | None
     metrics: dict = field(default_factory=dict)
     causal_R_w_c: np.ndarray | None = None  # an online backend's estimate of each frame when it arrived
+    clock_origin_ns: int = 0  # the recording's clock at t = 0 (Dataset.clock_origin_ns), added back in files
 
 
 RUN_FILES = ("config.toml", "identity.json", "frames.csv", "trajectory.tum", "metrics.json", "rotation.png")
@@ -111,7 +112,8 @@ def _run_into(parts: Pipeline, config: ResolvedConfig, out: Path | None, progres
         metrics = summarise(config, parts.dataset, tracked, errors, offset, offset_estimated,
                             time.perf_counter() - started, load_s, agreement, imu_offset, verdict, retracked)
         metrics["data_warnings"] = parts.imu_warnings + metrics["data_warnings"] + list(parts.backend.solver_warnings)
-        result = RunResult(t, R_w_c, tracked.records, tracked.edges, errors, metrics, parts.backend.causal_R_w_c)
+        result = RunResult(t, R_w_c, tracked.records, tracked.edges, errors, metrics, parts.backend.causal_R_w_c,
+                           parts.dataset.clock_origin_ns)
         if out is not None:
             write_outputs(out, result, parts.dataset.label, config.origin)
     except KeyboardInterrupt as exc:  # before there was anything to evaluate, or while writing
@@ -263,10 +265,13 @@ def _check_ground_truth_overlap(dataset: Dataset, rc, n_window: int) -> None:
         return
     t = dataset.frame_times()[dataset.window(rc.start_s, rc.duration_s)] + rc.time_offset_s
     if not np.any((t >= gt.t[0]) & (t <= gt.t[-1])):
+        gap_s = float(dataset.frame_times()[0] - gt.t[0])
+        hint = ("check --time-offset, --start and --duration" if abs(gap_s) <= TIME_OFFSET_LIMIT_S else
+                f"its clock is not the recording's: put it there with --set dataset.ground_truth_time_offset_s=S "
+                f"(S = {gap_s:.6f} would start both together)")
         raise EasVoError(
             f"{dataset.label}: the ground truth ({gt.t[0]:.3f}-{gt.t[-1]:.3f} s) covers none of the {n_window} frame "
-            f"times of the window ({t[0]:.3f}-{t[-1]:.3f} s with the time offset {rc.time_offset_s:+g} s); "
-            "check --time-offset, --start and --duration"
+            f"times of the window ({t[0]:.3f}-{t[-1]:.3f} s with the time offset {rc.time_offset_s:+g} s); {hint}"
         )
 
 
@@ -291,7 +296,7 @@ def track(parts: Pipeline, config: ResolvedConfig, frames_csv: Path | None = Non
         if record.index % 10 == 0:
             bar.set_postfix(nc=record.nc, refresh=False)
 
-    with _FrameLog(frames_csv) as log, _progress(n_window, progress, rc) as bar:
+    with _FrameLog(frames_csv, parts.dataset.clock_origin_ns) as log, _progress(n_window, progress, rc) as bar:
         try:
             for sample in concurrency.ahead(parts.dataset.samples(rc.start_s, rc.duration_s)):  # the next one read meanwhile
                 image = None
@@ -567,12 +572,13 @@ def write_outputs(out: Path, result: RunResult, label: str, origin: str = "") ->
     """trajectory.tum, groundtruth.tum, metrics.json and rotation.png (each written atomically);
     `label` names the dataset and `origin` the configuration (ResolvedConfig.origin) in its title."""
     zeros = np.zeros((len(result.t), 3))
-    write_text_atomic(out / "trajectory.tum", format_tum(result.t, zeros, result.R_w_c))
+    origin_ns = result.clock_origin_ns
+    write_text_atomic(out / "trajectory.tum", format_tum(result.t, zeros, result.R_w_c, origin_ns))
     if result.causal_R_w_c is not None:
-        write_text_atomic(out / "trajectory_causal.tum", format_tum(result.t, zeros, result.causal_R_w_c))
+        write_text_atomic(out / "trajectory_causal.tum", format_tum(result.t, zeros, result.causal_R_w_c, origin_ns))
     errors = result.errors
     if errors is not None and errors.valid.any():
-        write_text_atomic(out / "groundtruth.tum", format_tum(result.t[errors.valid], errors.p_w_c_gt, errors.R_w_c_gt))
+        write_text_atomic(out / "groundtruth.tum", format_tum(result.t[errors.valid], errors.p_w_c_gt, errors.R_w_c_gt, origin_ns))
     write_text_atomic(out / "metrics.json", json_text(result.metrics))
     from eas_vo.plots import plot_rotation
 
@@ -581,13 +587,13 @@ def write_outputs(out: Path, result: RunResult, label: str, origin: str = "") ->
         plot_rotation(tmp, result, title=f"{m['frontend']} + {m['tracker']} + {m['backend']} ({origin or 'defaults'}): {label}")
 
 
-def format_tum(t: np.ndarray, p: np.ndarray, R: np.ndarray) -> str:
-    """TUM lines `t tx ty tz qx qy qz qw` (camera-to-world)."""
+def format_tum(t: np.ndarray, p: np.ndarray, R: np.ndarray, origin_ns: int = 0) -> str:
+    """TUM lines `t tx ty tz qx qy qz qw` (camera-to-world); t [s] after the clock origin `origin_ns`."""
     q = quats_from_matrices(R) if len(R) else np.empty((0, 4))
-    rows = np.column_stack([t, p, q])
+    rows = np.column_stack([p, q])
     return "".join(
-        f"{r[0]:.9f} {r[1]:.9f} {r[2]:.9f} {r[3]:.9f} {r[4]:.12f} {r[5]:.12f} {r[6]:.12f} {r[7]:.12f}\n"
-        for r in rows
+        f"{clock_time(ti, origin_ns)} {r[0]:.9f} {r[1]:.9f} {r[2]:.9f} {r[3]:.12f} {r[4]:.12f} {r[5]:.12f} {r[6]:.12f}\n"
+        for ti, r in zip(t, rows)
     )
 
 
@@ -608,8 +614,9 @@ def check_image(image, camera, frontend: str, sample) -> None:
 class _FrameLog:
     """frames.csv, one row per frame, flushed as it goes so an interrupted run keeps its rows."""
 
-    def __init__(self, path: Path | None):
+    def __init__(self, path: Path | None, origin_ns: int = 0):
         self.path = path
+        self.origin_ns = origin_ns
 
     def __enter__(self):
         self._fh = open(self.path, "w", newline="") if self.path else None
@@ -620,7 +627,7 @@ class _FrameLog:
 
     def write(self, r: FrameRecord) -> None:
         if self._fh:
-            self._writer.writerow([r.index, f"{r.t:.9f}", r.nc, r.inliers, r.status, int(r.redetected),
+            self._writer.writerow([r.index, clock_time(r.t, self.origin_ns), r.nc, r.inliers, r.status, int(r.redetected),
                                    f"{r.inlier_ratio:.4f}", f"{r.residual_px:.4f}", r.reason, r.events,
                                    f"{r.contrast_gain:.4f}"])
             self._fh.flush()

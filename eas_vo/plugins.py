@@ -38,7 +38,7 @@ class Dataset:
 
     Required: `__init__(location, config)` setting `camera` (and `ground_truth`, `imu`
     when the recording has them); `frame_times()`, `load_frame(k)`, `events()`.
-    Optional (defaults here): `can_open`, `label`, `no_frames_reason`, `no_camera_reason`,
+    Optional (defaults here): `can_open`, `label`, `no_frames_reason`, `no_camera_reason`, `clock_origin_ns`,
     `sensor_size`, `contents`, `data_warnings`, `window`, `samples`; `catalogue` and `fetch` for a plugin whose recordings can be
     downloaded by name (`eas-vo fetch`, `--dataset PLUGIN:NAME`).
     """
@@ -60,6 +60,11 @@ class Dataset:
     no_frames_reason: str = "the dataset has no APS frames"
     #: Why `camera` is None, and what to give instead (one line).
     no_camera_reason: str = "the dataset has no calibration"
+    #: The recording's clock at t = 0 [ns]: every time the dataset gives (frames, events, IMU,
+    #: ground truth) is relative to it, and output files add it back. 0 for clocks that start
+    #: near zero; a reader of a Unix-time clock sets it (datasets.recording.clock_origin_ns),
+    #: since float64 seconds at 1.7e9 keep only about 0.24 us.
+    clock_origin_ns: int = 0
 
     @property
     def sensor_size(self) -> tuple[int, int] | None:

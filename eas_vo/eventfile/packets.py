@@ -45,9 +45,30 @@ class PacketDecoder:
 
     #: The encoding's name, as event_camera_msgs spells it.
     encoding: str = ""
+    #: Whether the sensor's clock was set to the host's when the driver started (libcaer), so
+    #: that its times are on the bag's clock already; else (evt3) they count from the sensor's start.
+    host_clock: bool = False
 
     def __init__(self, width: int, height: int):
         self.width, self.height = width, height
 
     def decode(self, data: np.ndarray, time_base_ns: int) -> Decoded:
         raise NotImplementedError
+
+
+#: Each encoding's decoder class, as "module:Class" (imported when first met).
+DECODERS = {
+    "evt3": "eas_vo.eventfile.prophesee:Evt3Decoder",
+    "libcaer": "eas_vo.eventfile.libcaer:LibcaerDecoder",
+    "libcaer_cmp": "eas_vo.eventfile.libcaer:LibcaerCmpDecoder",
+}
+
+
+def decoder_class(encoding: str) -> type[PacketDecoder] | None:
+    """The decoder of a packed encoding's name, or None for one not read."""
+    import importlib
+
+    if encoding not in DECODERS:
+        return None
+    module, name = DECODERS[encoding].split(":")
+    return getattr(importlib.import_module(module), name)

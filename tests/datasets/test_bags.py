@@ -5,7 +5,8 @@ message, and ROS time."""
 import numpy as np
 import pytest
 
-from eas_vo.datasets.bags import ns_seconds, stamp_seconds
+from eas_vo.datasets.bags import stamp_ns
+from eas_vo.datasets.recording import clock_origin_ns
 from eas_vo.datasets.calibration import camera_from_camera_info
 from eas_vo.errors import DataError
 
@@ -55,6 +56,13 @@ def test_intrinsics_of_another_sensor_are_refused():
         camera_from_camera_info(f"{WHERE}:3", 100, 80, K_of(240, 180, 0.5), [], "plumb_bob")
 
 
-def test_stamps_to_seconds_are_the_nearest_double():
-    assert stamp_seconds(1403636580, 13555) == 1403636580.000013555
-    assert ns_seconds(np.array([1, 999_999_999, 12_345_678_901])).tolist() == [1e-9, 0.999999999, 12.345678901]
+def test_stamps_are_integer_nanoseconds_read_after_the_clock_origin():
+    """ROS time stays integer ns; a Unix-time clock is read after its first whole second, so
+    relative times are the nearest doubles to the stamps' own digits (as float64 seconds at 1.4e9
+    they would keep only about 0.24 us)."""
+    assert stamp_ns(1403636580, 13555) == 1403636580_000013555
+    assert stamp_ns(np.array([0, 12]), np.array([1, 345_678_901])).tolist() == [1, 12_345_678_901]
+    assert clock_origin_ns(12_345_678_901) == 0 and clock_origin_ns(-5) == 0  # a clock near zero is read as it is
+    origin = clock_origin_ns(1403636580_000013555)
+    assert origin == 1403636580 * 10**9
+    assert (1403636580_000013555 - origin) / 1e9 == 1.3555e-05
