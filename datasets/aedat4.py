@@ -24,7 +24,7 @@ import numpy as np
 
 from eas_vo.concurrency import in_order
 from eas_vo.datasets.aedat4_packets import MAGIC, EventPackets, Scratch
-from eas_vo.datasets.recording import CALIBRATION_FORMATS, RecordingReader, StreamConfig, check_increasing
+from eas_vo.datasets.recording import CALIBRATION_FORMATS, RecordingReader, StreamConfig, check_increasing, clock_origin_ns
 from eas_vo.errors import DataError, DataWarnings
 from eas_vo.eventfile import Validator, cache_key, file_identity, load_cached
 from eas_vo.eventfile.kernels import check_and_pack_dv
@@ -119,7 +119,10 @@ class Aedat4Dataset(RecordingReader):
             raise DataError(self.path, "dv-processing opens AEDAT4 files only under a name ending in '.aedat4' "
                                        "(lower case): rename or link it")
         self.recording = self._dv(lambda: dv.io.MonoCameraRecording(str(self.path)), "the file's header or index")
+        start_us, _ = self._dv(self.recording.getTimeRange, "the file's time range")
+        self.clock_origin_ns = clock_origin_ns(int(start_us) * 1000)
         width, height = self._sensor_size()
+        self._origin_us = self.clock_origin_ns // 1000
         if not c.calibration:
             raise DataError(self.path, f"an AEDAT4 file holds no lens calibration: give one with --set "
                                        f"dataset.calibration=FILE ({CALIBRATION_FORMATS})")
@@ -195,7 +198,7 @@ class Aedat4Dataset(RecordingReader):
             self._frame_index.append(index)
             self._frame_at.append((start, rank))
         self.recording.resetSequentialRead()
-        return np.array(middles) / 1e6 if middles else None
+        return (np.array(middles) - self._origin_us) / 1e6 if middles else None
 
     def _check_frame(self, frame, index: int) -> None:
         image = frame.image
@@ -240,7 +243,7 @@ class Aedat4Dataset(RecordingReader):
         if len(rows) < 2:
             return None
         table = np.array(rows, dtype=float)
-        t = table[:, 0] / 1e6
+        t = (np.array([row[0] for row in rows], np.int64) - self._origin_us) / 1e6
         check_increasing(f"{self.path}:imu", t, lambda row: row)
         return ImuSeries(t=t, acc=table[:, 1:4] * STANDARD_GRAVITY, gyro=np.deg2rad(table[:, 4:7]))
 
@@ -268,8 +271,8 @@ class Aedat4Dataset(RecordingReader):
             for k in groups[g]:
                 records = packets.decode(k, slot.scratch)
                 packed = slot.room(used + len(records))[used : used + len(records)]
-                bad, last_t = check_and_pack_dv(records.view(np.int64).reshape(-1, 2), -np.inf, width, height,
-                                                c.time_tolerance_s, packed)
+                bad, last_t = check_and_pack_dv(records.view(np.int64).reshape(-1, 2), self._origin_us, -np.inf, width,
+                                                height, c.time_tolerance_s, packed)
                 verdicts.append((k, used, len(records), bad, last_t))
                 used += len(records)
                 if len(records):
@@ -302,7 +305,7 @@ class Aedat4Dataset(RecordingReader):
                             out.write(slot.packed[run[0] : run[1]].data)
                             run = None
                         records = packets.decode(k)  # again, on its own: the stream's check row by row
-                        events = validate(records["t"], records["x"], records["y"], records["p"],
+                        events = validate(records["t"] - self._origin_us, records["x"], records["y"], records["p"],
                                           lambda row, before=read: before + row, per_second=1e6)
                         out.write(events.data)
                         kept += len(events)
@@ -311,7 +314,7 @@ class Aedat4Dataset(RecordingReader):
                     out.write(slot.packed[run[0] : run[1]].data)
             return kept
 
-        key = cache_key("aedat4", *file_identity(self.path), width, height, c.time_tolerance_s)
+        key = cache_key("aedat4", *file_identity(self.path), width, height, c.time_tolerance_s, self._origin_us)
         return load_cached(key, c.lenient, self.warnings, fill, where)
 
     # -- plugin contract ---------------------------------------------------------------

@@ -30,7 +30,7 @@ from typing import Callable
 import numpy as np
 
 from eas_vo.datasets.calibration import read_calibration
-from eas_vo.datasets.recording import RecordingReader, StreamConfig, check_increasing
+from eas_vo.datasets.recording import RecordingReader, StreamConfig, check_increasing, clock_origin_ns
 from eas_vo.errors import DataError, DataWarnings
 from eas_vo.eventfile import (Validator, cache_key, file_identity, load_cached, pack_rows, pack_table,
                               write_behind)
@@ -130,6 +130,10 @@ class MvsecDataset(RecordingReader):
         if self._events_dset is None and self._images is None:
             raise DataError(self.path, f"{self.group} holds neither events nor image_raw")
         self._times, self._frame_rows = self._read_frame_times()
+        self.clock_origin_ns = clock_origin_ns(self._first_time_ns())
+        self._origin_s = self.clock_origin_ns / 1e9  # whole seconds: subtracting it is exact
+        if self._times is not None:
+            self._times = self._times - self._origin_s
         if not self._frame_rows:
             self.no_frames_reason = f"{self.path} has no frames in {self.group}/image_raw (an event-only stream)"
         self.camera = self._read_camera()
@@ -290,7 +294,7 @@ class MvsecDataset(RecordingReader):
         if "imu" not in side:
             return None
         table, t = self._timed(side, "imu", 2, 6)
-        return ImuSeries(t=t, acc=table[:, :3], gyro=table[:, 3:])
+        return ImuSeries(t=t - self._origin_s, acc=table[:, :3], gyro=table[:, 3:])
 
     def _ground_truth_file(self) -> Path | None:
         if self.config.ground_truth:
@@ -324,7 +328,24 @@ class MvsecDataset(RecordingReader):
             row = int(np.argmax(off))
             raise DataError(where, "is not a rigid transform (rotation not orthonormal with det 1, or last row "
                                    "not 0 0 0 1)", row)
-        return PoseSeries(t=t + self.config.ground_truth_time_offset_s, p_w_c=T[:, :3, 3].copy(), q_w_c=quats_from_matrices(R))
+        return PoseSeries(t=(t - self._origin_s) + self.config.ground_truth_time_offset_s, p_w_c=T[:, :3, 3].copy(), q_w_c=quats_from_matrices(R))
+
+    def _first_time_ns(self) -> int:
+        """The first frame's or event's time [ns] on the file's clock (0 with neither)."""
+        firsts = [self._times[0]] if self._times is not None and len(self._times) else []
+        if self._events_dset is not None and len(self._events_dset):
+            try:
+                firsts.append(float(self._events_dset[0, 2]))
+            except H5_ERRORS as exc:
+                raise DataError(self._where("events"), f"unreadable ({_said(exc)})", 0) from None
+        firsts = [t for t in firsts if np.isfinite(t)]
+        return int(min(firsts) * 1e9) if firsts else 0
+
+    def _after_origin(self, events: np.ndarray) -> np.ndarray:
+        """Packed events (checked on the file's clock) with their times after the clock origin, in place."""
+        if self._origin_s:
+            events["t"] -= self._origin_s
+        return events
 
     def _load_events(self) -> np.ndarray:
         c = self.config
@@ -335,12 +356,14 @@ class MvsecDataset(RecordingReader):
             validate = Validator(where, self.camera.width, self.camera.height, c.time_tolerance_s, c.lenient, warnings, "row")
             mapped = self._map_events(dset) if MAP_EVENTS else None
             if mapped is not None:
-                return pack_table(mapped[0], (2, 0, 1, 3), validate, out.write, MAP_BLOCK_ROWS, group_rows=BLOCK_ROWS,
-                                  touch=mapped[1])
-            return write_behind(out, self._h5py_blocks(dset, where, validate))
+                return pack_table(mapped[0], (2, 0, 1, 3), validate, lambda events: out.write(self._after_origin(events)),
+                                  MAP_BLOCK_ROWS, group_rows=BLOCK_ROWS, touch=mapped[1])
+            blocks = (functools.partial(lambda block: self._after_origin(block()), block)
+                      for block in self._h5py_blocks(dset, where, validate))
+            return write_behind(out, blocks)
 
         key = cache_key("mvsec", *file_identity(self.path), self.group, self.camera.width, self.camera.height,
-                        c.time_tolerance_s)
+                        c.time_tolerance_s, self.clock_origin_ns)
         return load_cached(key, c.lenient, self.warnings, fill, where, len(dset))
 
     def _map_events(self, dset) -> tuple[np.ndarray, Callable[[int, int], None] | None] | None:

@@ -134,7 +134,8 @@ def ground_truth_table(data: bytes, where: str, time_offset_s: float = 0.0, orig
     poses = pose_series(where, table, line_of)
     if time_offset_s == 0.0 and origin_ns == 0:
         return poses
-    return PoseSeries((poses.t - origin_ns / 1e9) + time_offset_s, poses.p_w_c, poses.q_w_c)
+    # offset and origin first: a ground truth from 0 beside a Unix-time recording loses no digits
+    return PoseSeries(poses.t + (time_offset_s - origin_ns / 1e9), poses.p_w_c, poses.q_w_c)
 
 
 def read_tum_ground_truth(path: str | Path, time_offset_s: float = 0.0, origin_ns: int = 0) -> PoseSeries:

@@ -224,11 +224,11 @@ def check_and_pack_rows(rows, col_t, col_x, col_y, col_p, last_t, width, height,
 
 
 @numba.njit(cache=True, nogil=True)
-def check_and_pack_dv(words, last_t, width, height, tolerance_s, events):
+def check_and_pack_dv(words, origin_us, last_t, width, height, tolerance_s, events):
     """check_and_pack for DV's 16-byte `Event` records (AEDAT4) seen as int64 word pairs
     (`words`, shape (n, 2), little-endian): word 0 the timestamp [us], word 1 x (int16, bits
-    0-15), y (int16, bits 16-31), polarity (uint8, bits 32-39). Times [s] are ticks / 1e6 as
-    numpy divides them. Returns (index of the first row with any problem or -1, the last
+    0-15), y (int16, bits 16-31), polarity (uint8, bits 32-39). Times [s] are (ticks - origin_us)
+    / 1e6 as numpy computes them (the clock origin: Dataset.clock_origin_ns). Returns (index of the first row with any problem or -1, the last
     timestamp); rows before a problem are packed.
 
     The same verdicts and records as check_and_pack on the records' fields, 2-3x faster: each
@@ -241,7 +241,7 @@ def check_and_pack_dv(words, last_t, width, height, tolerance_s, events):
         bad = False
         prev = last_t
         for i in range(a, e):
-            t = words[i, 0] / 1e6
+            t = (words[i, 0] - origin_us) / 1e6
             w = words[i, 1]
             x, y, p = w & 0xFFFF, (w >> 16) & 0xFFFF, (w >> 32) & 0xFF
             r = events[i]
@@ -254,7 +254,7 @@ def check_and_pack_dv(words, last_t, width, height, tolerance_s, events):
         for i in range(a, e):
             w = words[i, 1]
             x, y, p = np.int16(w & 0xFFFF), np.int16((w >> 16) & 0xFFFF), (w >> 32) & 0xFF
-            ok, t = _accept(words[i, 0] / 1e6, x, y, p, last_t, width, height, tolerance_s)
+            ok, t = _accept((words[i, 0] - origin_us) / 1e6, x, y, p, last_t, width, height, tolerance_s)
             if not ok:
                 return i, last_t
             last_t = t

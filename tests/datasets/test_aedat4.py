@@ -83,8 +83,10 @@ def test_a_missing_calibration_says_what_to_pass(tmp_path):
 
 
 def test_events_frames_imu_in_the_projects_units_and_instants(tmp_path):
-    """Known answers: events [us] -> s; a frame's time is the middle of its exposure (as the ECD's
-    frames are stamped by the DAVIS ROS driver); 1 g -> 9.80665 m/s^2, 180 deg/s -> pi rad/s."""
+    """Known answers: events [us] -> s after the clock origin (DV's Unix clock: its first whole
+    second, subtracted in integer microseconds, so nothing of the microseconds is lost); a
+    frame's time is the middle of its exposure (as the ECD's frames are stamped by the DAVIS ROS
+    driver); 1 g -> 9.80665 m/s^2, 180 deg/s -> pi rad/s."""
     events = random_stream(5000)
     t0 = int(events[0][0])
     image = np.random.default_rng(1).integers(0, 256, (HEIGHT, WIDTH), dtype=np.uint8)
@@ -95,15 +97,17 @@ def test_events_frames_imu_in_the_projects_units_and_instants(tmp_path):
     ds = Aedat4Dataset(path, Aedat4Config(calibration=str(write_calib(tmp_path))))
 
     assert (ds.camera.width, ds.camera.height) == (WIDTH, HEIGHT)
+    origin = t0 // 1_000_000 * 1_000_000  # [us]
+    assert ds.clock_origin_ns == origin * 1000
     ev = ds.events()
-    np.testing.assert_array_equal(np.round(ev["t"] * 1e6).astype(np.int64), events[0])
-    np.testing.assert_array_equal(ev["t"], events[0] / 1e6)
+    np.testing.assert_array_equal(np.round(ev["t"] * 1e6).astype(np.int64) + origin, events[0])
+    np.testing.assert_array_equal(ev["t"], (events[0] - origin) / 1e6)
     for k, name in ((1, "x"), (2, "y"), (3, "p")):
         np.testing.assert_array_equal(ev[name], events[k])
-    np.testing.assert_array_equal(ds.frame_times(), [(t0 + 1000 + 4000) / 1e6, (t0 + 51_000 + 1500.5) / 1e6])
+    np.testing.assert_array_equal(ds.frame_times(), [(t0 - origin + 1000 + 4000) / 1e6, (t0 - origin + 51_000 + 1500.5) / 1e6])
     np.testing.assert_array_equal(ds.load_frame(0), image)
     np.testing.assert_array_equal(ds.load_frame(1), image[::-1])
-    np.testing.assert_array_equal(ds.imu.t, [t0 / 1e6, (t0 + 5000) / 1e6])
+    np.testing.assert_array_equal(ds.imu.t, [(t0 - origin) / 1e6, (t0 - origin + 5000) / 1e6])
     np.testing.assert_allclose(ds.imu.acc, [[0.0, -9.80665, 0.5 * 9.80665], [9.80665, 0.0, 0.0]], rtol=1e-7)
     np.testing.assert_allclose(ds.imu.gyro, [[np.pi, 0.0, -np.pi / 2], [0.0, 2 * np.pi, 0.0]], rtol=1e-7)
     samples = list(ds.samples())
@@ -135,7 +139,8 @@ def test_every_compression_reads_what_dv_processing_reads(tmp_path, monkeypatch,
     monkeypatch.setattr(aedat4, "GROUP_BYTES", group_bytes)
     path = tmp_path / "rec.aedat4"
     write_aedat4(path, events=random_stream(25_000, seed=7), kind="events", compression=compression, packet=1000)
-    ours = Aedat4Dataset(path, Aedat4Config(calibration=str(write_calib(tmp_path)))).events()
+    ds = Aedat4Dataset(path, Aedat4Config(calibration=str(write_calib(tmp_path))))
+    ours = ds.events()
     packets, scratch = EventPackets(path), Scratch(64)
     for k in range(len(packets)):
         assert packets.decode(k, scratch).tobytes() == packets.decode(k).tobytes()
@@ -145,7 +150,7 @@ def test_every_compression_reads_what_dv_processing_reads(tmp_path, monkeypatch,
         batches.append(batch.numpy())
     theirs = np.concatenate(batches)
     assert len(batches) == 25 and len(ours) == len(theirs) == 25_000
-    np.testing.assert_array_equal(ours["t"], theirs["timestamp"] / 1e6)
+    np.testing.assert_array_equal(ours["t"], (theirs["timestamp"] - ds.clock_origin_ns // 1000) / 1e6)
     np.testing.assert_array_equal(ours["x"], theirs["x"])
     np.testing.assert_array_equal(ours["y"], theirs["y"])
     np.testing.assert_array_equal(ours["p"], theirs["polarity"] != 0)
@@ -187,7 +192,7 @@ def test_bad_events_name_the_event_and_lenient_drops_and_counts(tmp_path, damage
     ev = ds.events()
     keep = np.arange(len(t)) != row
     np.testing.assert_array_equal(ev["x"], x[keep])
-    np.testing.assert_array_equal(ev["t"], t[keep] / 1e6)
+    np.testing.assert_array_equal(ev["t"], (t[keep] - ds.clock_origin_ns // 1000) / 1e6)
     assert ds.data_warnings() == [f"{path}:events: 1 dropped: {what} (first at event {row})"]
 
 
@@ -239,7 +244,8 @@ def test_ground_truth_from_a_tum_file_with_a_clock_offset(tmp_path):
     tum.write_text("# t px py pz qx qy qz qw\n10.0 1 2 3 0 0 0 1\n10.5 1 2 4 0 0 0.6 0.8\n")
     ds = Aedat4Dataset(path, Aedat4Config(calibration=str(write_calib(tmp_path)), ground_truth=str(tum),
                                           ground_truth_time_offset_s=1_700_000_000.0 - 10.0))
-    np.testing.assert_array_equal(ds.ground_truth.t, [1_700_000_000.0, 1_700_000_000.5])
+    assert ds.clock_origin_ns == 1_700_000_000 * 10**9  # DV's Unix clock: times after its first second
+    np.testing.assert_array_equal(ds.ground_truth.t, [0.0, 0.5])
     np.testing.assert_array_equal(ds.ground_truth.q_w_c[1], [0, 0, 0.6, 0.8])
     tum.write_text("10.0 1 2 3 0 0 0 1\n9.0 1 2 3 0 0 0 1\n")
     with pytest.raises(DataError, match=r"gt.tum:2: timestamp 9.000000000 does not increase"):

@@ -132,7 +132,7 @@ def test_big_endian_datasets_read_alike(tmp_path):
     native = MvsecDataset(write_file(tmp_path / "n_data.hdf5", **{**GOOD, "davis/left/events": table}))
     swapped = {name: np.asarray(value).astype(np.asarray(value).dtype.newbyteorder(">")) for name, value in GOOD.items()}
     big = MvsecDataset(write_file(tmp_path / "b_data.hdf5", **{**swapped, "davis/left/events": table.astype(">f8")}))
-    assert big.events().tobytes() == native.events().tobytes() == expected_events(table).tobytes()
+    assert big.events().tobytes() == native.events().tobytes() == expected_events(table, native.clock_origin_ns).tobytes()
     np.testing.assert_array_equal(big.imu.t, native.imu.t)
 
 
@@ -198,11 +198,12 @@ def write_file(path: Path, **datasets) -> Path:
     return path
 
 
-def expected_events(rows: np.ndarray) -> np.ndarray:
+def expected_events(rows: np.ndarray, origin_ns: int = 0) -> np.ndarray:
+    """The records of MVSEC rows, their times after the reader's clock origin [ns]."""
     from eas_vo.types import EVENT_DTYPE
 
     ev = np.empty(len(rows), EVENT_DTYPE)
-    ev["x"], ev["y"], ev["t"], ev["p"] = rows[:, 0], rows[:, 1], rows[:, 2], rows[:, 3] > 0
+    ev["x"], ev["y"], ev["t"], ev["p"] = rows[:, 0], rows[:, 1], rows[:, 2] - origin_ns / 1e9, rows[:, 3] > 0
     return ev
 
 
@@ -240,7 +241,7 @@ def test_damaged_event_rows_are_named_or_dropped_exactly(tmp_path_factory, monke
     assert "\n" not in message
     lenient = MvsecDataset(path, MvsecConfig(lenient=True))
     keep = np.setdiff1d(np.arange(3000), [r for r, _ in rows])
-    assert lenient.events().tobytes() == expected_events(table[keep]).tobytes()
+    assert lenient.events().tobytes() == expected_events(table[keep], lenient.clock_origin_ns).tobytes()
     assert sum(int(line.split(": ")[1].split()[0]) for line in lenient.data_warnings()) == len(rows)
 
 
@@ -248,8 +249,10 @@ def test_a_small_step_back_is_clamped_not_dropped(tmp_path):
     table = event_table(100)
     table[50, 2] = table[49, 2] - 1e-7
     camchain(tmp_path)
-    events = MvsecDataset(write_file(tmp_path / "x_data.hdf5", **{"davis/left/events": table})).events()
-    assert len(events) == 100 and events["t"][50] == table[49, 2]
+    ds = MvsecDataset(write_file(tmp_path / "x_data.hdf5", **{"davis/left/events": table}))
+    events = ds.events()
+    assert ds.clock_origin_ns == 1_504_645_177 * 10**9  # MVSEC's Unix clock, read after its first second
+    assert len(events) == 100 and events["t"][50] == table[49, 2] - 1_504_645_177
 
 
 GOOD = {"davis/left/events": event_table(50), "davis/left/image_raw": np.zeros((3, 260, 346), np.uint8),
@@ -366,7 +369,7 @@ def test_truncated_or_damaged_file_is_named_or_read_exactly(tmp_path_factory, cu
     # accepted: only with every byte there, or one flipped where it changes no event, frame or time
     assert len(events) <= len(table) and len(frames) <= 3
     if not flip % 2:
-        assert events.tobytes() == expected_events(table).tobytes()
+        assert events.tobytes() == expected_events(table, ds.clock_origin_ns).tobytes()
 
 
 @pytest.mark.parametrize("bad_row", [None, 150, 250, 450])

@@ -55,7 +55,7 @@ def read(path: Path, cache: Path, monkeypatch, mapped: bool, lenient: bool = Fal
     except DataError as exc:
         return str(exc)
     files = {p.name: p.read_bytes() for p in sorted((cache / "events").iterdir()) if not p.name.startswith(".")}
-    return events, ds.data_warnings(), files
+    return events, ds.data_warnings(), files, ds.clock_origin_ns
 
 
 def took_the_map(path: Path, monkeypatch) -> bool:
@@ -65,9 +65,10 @@ def took_the_map(path: Path, monkeypatch) -> bool:
     return ds._map_events(ds._events_dset) is not None
 
 
-def expected_events(rows: np.ndarray) -> np.ndarray:
+def expected_events(rows: np.ndarray, origin_ns: int = 0) -> np.ndarray:
+    """The records of MVSEC rows, their times after the reader's clock origin [ns]."""
     ev = np.empty(len(rows), EVENT_DTYPE)
-    ev["x"], ev["y"], ev["t"], ev["p"] = rows[:, 0], rows[:, 1], rows[:, 2], rows[:, 3] > 0
+    ev["x"], ev["y"], ev["t"], ev["p"] = rows[:, 0], rows[:, 1], rows[:, 2] - origin_ns / 1e9, rows[:, 3] > 0
     return ev
 
 
@@ -90,8 +91,8 @@ def test_the_map_and_h5py_give_the_same_cache_byte_for_byte(tmp_path, monkeypatc
     mapped = read(path, tmp_path / "a", monkeypatch, True)
     through_h5py = read(path, tmp_path / "b", monkeypatch, False)
     assert mapped[2] == through_h5py[2] and len(mapped[2]) == 1  # one cache file, the same bytes
-    want = expected_events(table)
-    want["t"][2999:3001] = table[2998, 2]
+    want = expected_events(table, mapped[3])
+    want["t"][2999:3001] = table[2998, 2] - mapped[3] / 1e9
     assert mapped[0].tobytes() == want.tobytes()
 
 
@@ -112,8 +113,8 @@ def test_what_the_map_must_not_take_goes_through_h5py(tmp_path, monkeypatch):
         f.create_dataset("davis/left/events", shape=table.shape, dtype="<f8",
                          external=[(str(external / "rows.bin"), 0, table.nbytes)])
     assert not took_the_map(external / "x_data.hdf5", monkeypatch)
-    events = read(external / "x_data.hdf5", tmp_path / "b", monkeypatch, True)[0]
-    assert events.tobytes() == expected_events(table).tobytes()
+    events, _, _, origin_ns = read(external / "x_data.hdf5", tmp_path / "b", monkeypatch, True)
+    assert events.tobytes() == expected_events(table, origin_ns).tobytes()
 
 
 def test_a_file_cut_inside_the_events_after_opening_is_named_not_mapped(tmp_path, monkeypatch):

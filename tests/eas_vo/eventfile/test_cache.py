@@ -326,7 +326,7 @@ def test_the_dv_record_check_agrees_with_the_field_check(data):
     want_bad, want_last = check_and_pack(records["t"], 1e6, records["x"], records["y"], records["p"], last_t,
                                          width, height, 1e-6, want)
     got = np.zeros(n, EVENT_DTYPE)
-    bad, got_last = check_and_pack_dv(records.view(np.int64).reshape(-1, 2), last_t, width, height, 1e-6, got)
+    bad, got_last = check_and_pack_dv(records.view(np.int64).reshape(-1, 2), 0, last_t, width, height, 1e-6, got)
     assert (bad, got_last) == (want_bad, want_last)
     kept = n if bad < 0 else bad
     assert got[:kept].tobytes() == want[:kept].tobytes()
