@@ -222,6 +222,7 @@ class LibcaerDecoder(PacketDecoder):
     """`libcaer`: libcaer's uncompressed polarity events (8 bytes each)."""
 
     encoding = "libcaer"
+    host_clock = True
 
     def decode(self, data: np.ndarray, time_base_ns: int) -> Decoded:
         data = _packet(data, 8, self.encoding)
@@ -238,6 +239,7 @@ class LibcaerCmpDecoder(PacketDecoder):
     address, base y and polarity from one packet to the next (a damaged packet leaves them)."""
 
     encoding = "libcaer_cmp"
+    host_clock = True
 
     def __init__(self, width: int, height: int):
         super().__init__(width, height)
