@@ -17,6 +17,7 @@ Modules (each imports only those above it):
 - `convert`: the streaming text -> cache converter tying the above together.
 - `cache`: the cache file format: naming, writing, mapping, loading event text through it.
 - `text`: writing event text (and priming its cache).
+- `libcaer`: the decoders of iniVation's `libcaer` and `libcaer_cmp` packets (a `packets.PacketDecoder` each).
 """
 
 from eas_vo.eventfile.blocks import BLOCK_BYTES, BlockParser, iter_blocks, parse_block
