@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from datetime import datetime, timezone
 from pathlib import Path
 
 import numpy as np
@@ -65,6 +66,7 @@ class SequenceInfo:
             says why), whose samples (the times it is processed at) are then `samples`.
         samples: the times the dataset yields samples at (Dataset.frame_times).
         events, imu, ground_truth: each stream's span, None when the dataset has none.
+        clock_origin_ns: the recording's clock at 0 s of the spans (Dataset.clock_origin_ns).
         warnings: what the reader tolerated (--lenient), one line per kind.
     """
 
@@ -80,6 +82,7 @@ class SequenceInfo:
     imu: Span | None
     ground_truth: Span | None
     no_camera_reason: str = ""
+    clock_origin_ns: int = 0
     warnings: tuple[str, ...] = ()
 
     @property
@@ -140,6 +143,10 @@ class SequenceInfo:
             out.append(f"  camera        {c.model} lens: fx {fx:.6g} fy {fy:.6g} cx {cx:.6g} cy {cy:.6g} px, distortion [{dist}]")
         else:
             out.append("  camera        unknown (no calibration)")
+        if self.clock_origin_ns:
+            when = datetime.fromtimestamp(self.clock_origin_ns // 10**9, timezone.utc).strftime("%Y-%m-%d %H:%M:%S UTC")
+            out.append(f"  clock         times below are after {self.clock_origin_ns // 10**9} s of the recording's clock "
+                       f"({when} as Unix time); files written add it back")
         out.append(f"  duration      {span.duration_s:.3f} s ({span.t0_s:.3f}-{span.t1_s:.3f} s, all streams)" if span.count
                    else "  duration      0 s (no stream holds anything)")
         if self.frames is not None:
@@ -186,6 +193,7 @@ def describe(config: ResolvedConfig) -> SequenceInfo:
         camera=dataset.camera,
         contents=tuple(dataset.contents()),
         no_camera_reason="" if dataset.camera is not None else dataset.no_camera_reason,
+        clock_origin_ns=dataset.clock_origin_ns,
         frames=Span.of(samples) if has_frames else None,
         samples=Span.of(samples),
         no_frames_reason="" if has_frames else dataset.no_frames_reason,

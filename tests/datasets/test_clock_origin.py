@@ -1,0 +1,98 @@
+"""No result depends on where a recording's clock starts: the same recording with its times at
+0 s and at Unix time (1.7e9 s, where float64 seconds keep only about 0.24 us) gives the same
+`info`, the same trajectory, and files whose times are the recording's own."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from helpers import write_mvsec
+
+from eas_vo import config, pipeline
+from eas_vo.datasets.ecd import EcdFolderDataset
+from eas_vo.datasets.rosbag import write_bag
+from eas_vo.datasets.rosbag2 import write_bag2
+from eas_vo.plugins import Dataset
+from eas_vo.sequence import describe
+
+#: 2023-11-14 22:13:20 UTC [ns].
+UNIX_NS = 1_700_000_000 * 10**9
+#: Times are put on a grid of 2**-22 s: float64 holds them exactly both near 0 and at 1.7e9 s
+#: (its spacing there), so the shifted file holds the same instants and not rounded ones.
+GRID_S = 2.0**-22
+
+
+def on_grid(t: np.ndarray) -> np.ndarray:
+    return np.round(np.asarray(t) / GRID_S) * GRID_S
+
+
+class OnClock(Dataset):
+    """A recording with its times on the grid, after the clock origin `origin_ns`; with
+    `absolute`, the same instants as float64 seconds of that clock itself (origin 0), as a file
+    format without an origin of its own (MVSEC) holds them."""
+
+    def __init__(self, base: Dataset, origin_ns: int, absolute: bool = False):
+        shift = origin_ns / 1e9 if absolute else 0.0
+        self.clock_origin_ns = 0 if absolute else origin_ns
+        self.camera, self.label = base.camera, base.label
+        self._times = on_grid(base.frame_times()) + shift
+        self._frames = [base.load_frame(k) for k in range(len(self._times))]
+        self._events = np.array(base.events())
+        self._events["t"] = on_grid(self._events["t"]) + shift
+        imu, gt = base.imu, base.ground_truth
+        self.imu = type(imu)(on_grid(imu.t) + shift, imu.acc, imu.gyro)
+        self.ground_truth = type(gt)(on_grid(gt.t) + shift, gt.p_w_c, gt.q_w_c)
+
+    def frame_times(self):
+        return self._times
+
+    def load_frame(self, k):
+        return self._frames[k]
+
+    def events(self):
+        return self._events
+
+
+WRITERS = {
+    "rosbag": lambda ds, folder: (write_bag(ds, folder / "rec.bag"), folder / "rec.bag")[1],
+    "rosbag2-sqlite3-dvs": lambda ds, folder: (write_bag2(ds, folder / "bag", "sqlite3"), folder / "bag")[1],
+    "rosbag2-mcap-mono": lambda ds, folder: (write_bag2(ds, folder / "bag", "mcap", encoding="mono"), folder / "bag")[1],
+    "mvsec": lambda ds, folder: write_mvsec(folder, ds),
+}
+
+
+@pytest.fixture(scope="module")
+def base(short_sequence):
+    return EcdFolderDataset(short_sequence)
+
+
+def _written(base, fmt: str, origin_ns: int, folder):
+    absolute = fmt == "mvsec"
+    folder.mkdir()
+    path = WRITERS[fmt](OnClock(base, origin_ns, absolute), folder)
+    extra = [f"dataset.calibration={base.label}/calib.txt"] if fmt == "mvsec" else []
+    return str(path), extra
+
+
+@pytest.mark.parametrize("fmt", sorted(WRITERS))
+def test_a_unix_clock_gives_the_same_info_and_trajectory(base, fmt, tmp_path):
+    runs, infos = {}, {}
+    for name, origin_ns in (("zero", 0), ("unix", UNIX_NS)):
+        spec, extra = _written(base, fmt, origin_ns, tmp_path / name)
+        resolved = config.resolve("paper", {"dataset": spec, "frontend": "eas"}, extra)
+        info = describe(resolved)
+        assert info.clock_origin_ns == origin_ns
+        infos[name] = [line for line in info.lines()[1:] if not line.lstrip().startswith(("clock", "to run", "file"))]
+        runs[name] = pipeline.run(resolved, tmp_path / f"{name}_run")
+    assert infos["unix"] == infos["zero"]
+    zero, unix = runs["zero"], runs["unix"]
+    assert len(zero.t) == len(unix.t) > 10
+    np.testing.assert_array_equal(unix.t, zero.t)
+    np.testing.assert_allclose(unix.R_w_c, zero.R_w_c, rtol=0, atol=1e-6)
+    assert unix.metrics["ape_mean_rad"] == pytest.approx(zero.metrics["ape_mean_rad"], abs=1e-6)
+    # The files hold the recording's own times: the Unix run's are the other's + 1.7e9 s, to the digit.
+    zero_t, unix_t = ([line.split()[0] for line in (tmp_path / f"{name}_run" / "trajectory.tum").read_text().splitlines()]
+                      for name in ("zero", "unix"))
+    for a, b in zip(zero_t, unix_t):
+        whole, frac = a.split(".")
+        assert b == f"{int(whole) + 1_700_000_000}.{frac}"
