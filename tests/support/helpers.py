@@ -14,6 +14,8 @@ from eas_vo.types import EVENT_DTYPE, CameraModel, ImuSeries, PoseSeries
 SHARED_DATA = Path(__file__).resolve().parents[3] / "shared" / "data"
 SHAPES_ROTATION = SHARED_DATA / "ecd" / "shapes_rotation_0-30s"
 EVENT_WINDOWS = SHARED_DATA / "ecd" / "event_windows"
+#: Recordings written by real cameras and tools (the ROS event_camera_py package's test bags).
+EVENT_CAMERA_PY = SHARED_DATA / "real_files" / "event_camera_py"
 REPOSITORY = Path(__file__).resolve().parents[2]
 
 
