@@ -5,18 +5,21 @@ The readings are taken in the camera frame on the frames' clock (ImuSeries.in_ca
 What the readings alone can show is refused with one line: rates no gyro measures, a sensor
 that reads one value throughout, fewer readings than frames, no frame interval measured.
 What only the images can show (axes, sign, scale or clock wrong) is judged from the
-confidently measured frame-to-frame rotations: a gyro they contradict is not used.
+confidently measured frame-to-frame rotations: a gyro they contradict is not used. Where the
+gyro reads no rotation beyond its noise and an estimator's rotation (with its own sigma) turns
+beyond both noises, the scene moved, not the camera (still_gyro_pairs): such pairs judge nothing.
 """
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
 
 from eas_vo.errors import EasVoError
 from eas_vo.geometry.rotations import geodesic_angle, gyro_rotation, matrix_to_rotvec
-from eas_vo.types import MAX_GAP_READINGS, ImuSeries
+from eas_vo.types import MAX_GAP_READINGS, ImuSeries, RelativeRotation
 
 #: No MEMS gyro measures faster [rad/s]: the widest full scale sold is +-4000 deg/s (e.g.
 #: TDK InvenSense ICM-20649; the DAVIS240's MPU-6150 and the DAVIS346's MPU-6500 reach 2000).
@@ -106,6 +109,18 @@ MAX_SCALE_ERROR = 0.2
 #: so a smaller bias cannot be told from it.
 MAX_BIAS_RAD_S = 0.15
 FIT_SIGMAS = 4.0
+#: The gyro's white-noise density [rad/s/sqrt(Hz)] and the sigma of the constant bias it may keep
+#: [rad/s], for an IMU whose own calibration is not given: the MPU-6150-like DAVIS IMU the
+#: simulator models (datasets.simulator ImuModel) and the gtsam backend assumes (backend.gyro_noise,
+#: backend.gyro_bias_sigma). Over an interval dt the integrated rotation's per-axis sigma is then
+#: sqrt(GYRO_NOISE_DENSITY^2 dt + (GYRO_BIAS_RAD_S dt)^2): the white noise's angle random walk and
+#: the bias times the interval.
+GYRO_NOISE_DENSITY = 0.003
+GYRO_BIAS_RAD_S = 0.01
+#: The 0.999 quantile of the chi-square distribution with 3 degrees of freedom
+#: (scipy.stats.chi2.ppf(0.999, 3)): a 3-vector of independent unit Gaussians is this long
+#: squared once in a thousand draws.
+CHI2_3_999 = 16.266
 
 
 @dataclass(frozen=True)
@@ -114,13 +129,16 @@ class GyroVerdict:
 
     Attributes:
         judged: confident frame-to-frame rotations (CONFIDENT_INLIERS) over intervals the gyro
-            measures, where either turned at least MIN_TURN_RAD.
+            measures, where either turned at least MIN_TURN_RAD, less the `still` ones.
         disagreeing: those whose angle to the gyro's exceeds DISAGREEMENT of the larger rotation.
         median_off_deg: the median angle [deg] between the two rotations over the judged pairs.
         scale, scale_se: the gyro's rotation vectors over the judged pairs fitted as scale times
             the images' plus a constant bias times the interval (least squares), and its
             standard error.
         bias_rad_s, bias_se_rad_s: that bias's norm [rad/s] and its standard error.
+        still: (frame j, angle [rad] between the two rotations) of each consecutive pair (j - 1,
+            j) over which the edge turns while the gyro reads still (still_gyro_pairs), of the
+            `compared` pairs with an estimator's own sigma that the gyro measures.
     """
 
     judged: int
@@ -130,6 +148,8 @@ class GyroVerdict:
     scale_se: float = 0.0
     bias_rad_s: float = 0.0
     bias_se_rad_s: float = 0.0
+    still: tuple[tuple[int, float], ...] = ()
+    compared: int = 0
 
     @property
     def scale_off(self) -> bool:
@@ -171,10 +191,21 @@ class GyroVerdict:
             if not findings:
                 return [f"{said}. Check its units (rad/s), signs, axes (run.imu_rotvec_cam) and clock (run.imu_time_offset_s)"]
             return [f"{said}; {findings[0]}"] + findings[1:]
+        findings = self._still_warnings() + findings
         if not self.can_tell:
             return [f"the gyro is used unchecked: the images measured {self.judged} turning frame pairs confidently, "
                     f"at least {MIN_JUDGED_PAIRS} are needed to check it"] + findings
         return findings
+
+    def _still_warnings(self) -> list[str]:
+        """One line when the events turned over pairs where the gyro reads still."""
+        if not self.still:
+            return []
+        frames, off = zip(*self.still)
+        return [f"the events' rotation turns while the gyro reads still, beyond the noise of both, over {len(frames)} "
+                f"of {self.compared} frame pairs (frames {frames[0]}-{frames[-1]}, up to {np.degrees(max(off)):.2f} deg "
+                "apart): the scene moves before a still camera (independent motion), or the gyro measures nothing; "
+                "those frames are weak"]
 
     def _why(self) -> str:
         if self.disagreeing > self.judged / 2:
@@ -203,14 +234,79 @@ def confident_steps(t: np.ndarray, edges, imu: ImuSeries) -> tuple[list, np.ndar
 
 def judge_gyro(t: np.ndarray, edges, imu: ImuSeries) -> GyroVerdict:
     """Compare the confident consecutive edges' rotations (confident_steps) with the gyro's over
-    the same intervals, as configured (no axes or clock fitted): GyroVerdict."""
-    steps, R_vision, R_gyro = confident_steps(t, edges, imu)
+    the same intervals, as configured (no axes or clock fitted), less the pairs over which the
+    gyro reads still while the edge turns (still_gyro_pairs: a moving scene convicts no gyro):
+    GyroVerdict."""
+    compared, still = still_gyro_pairs(t, edges, imu)
+    noted = {"still": tuple((e.j, off) for e, off in still), "compared": compared}
+    steps, R_vision, R_gyro = confident_steps(t, without(edges, {e.j for e, _ in still}), imu)
     judged, disagree, off = disagreement(R_gyro, R_vision)
     if not judged.any():
-        return GyroVerdict(0, 0, float("nan"))
+        return GyroVerdict(0, 0, float("nan"), **noted)
     dt = np.array([t[e.j] - t[e.i] for e in steps])[judged]
     fitted = _scale_and_bias(matrix_to_rotvec(R_vision[judged]), matrix_to_rotvec(R_gyro[judged]), dt)
-    return GyroVerdict(int(judged.sum()), int(disagree.sum()), float(np.degrees(np.median(off[judged]))), *fitted)
+    return GyroVerdict(int(judged.sum()), int(disagree.sum()), float(np.degrees(np.median(off[judged]))), *fitted, **noted)
+
+
+def still_gyro_pairs(t: np.ndarray, edges, imu: ImuSeries) -> tuple[int, list[tuple[RelativeRotation, float]]]:
+    """The consecutive, non-loop edges over frame times `t` [s] whose estimator states its own
+    sigma (RelativeRotation.estimated_sigma_rad, e.g. cmax's curvature sigma) over intervals the
+    gyro measures: how many there are, and those over which the gyro reads still while the
+    edge turns, with the angle [rad] between the two rotations.
+
+    The gyro reads still over a pair when its rotation vector is within CHI2_3_999 of its own
+    noise (GYRO_NOISE_DENSITY, GYRO_BIAS_RAD_S, per axis). An edge there turns when its
+    rotation differs from the gyro's by more than CHI2_3_999 of both noises added (its sigma
+    and the gyro's), alone or over the stretch of consecutive still pairs it belongs to (their
+    chained rotations against the gyro's over the stretch, the edges' variances summed and the
+    gyro's taken over the whole span, its bias growing with it), where it then differs by more
+    than both noises' mean (3 variances: a slow turn beyond noise over a stretch, not within
+    each pair). Both the gyro's stillness and the turn are needed: an estimator's sigma holds
+    its errors' RMS but not their tails (docs/imu.md measures cmax's on a turning camera),
+    while a gyro's noise is what its model says, so only where the gyro says still is an edge
+    turning beyond both no error of its own."""
+    steps = [e for e in edges if e.j == e.i + 1 and not e.loop and e.estimated_sigma_rad > 0]
+    steps = [e for e in steps if t[e.j] > t[e.i] and imu.covered(t[e.i], t[e.j])]
+    still = []  # (edge, R_gyro, gyro variance per axis [rad^2], rotation vector apart [rad])
+    for e in steps:
+        R_gyro = gyro_rotation(imu, t[e.i], t[e.j])
+        variance = _gyro_variance(t[e.j] - t[e.i])
+        g = matrix_to_rotvec(R_gyro)
+        if g @ g <= CHI2_3_999 * variance:
+            still.append((e, R_gyro, variance, matrix_to_rotvec(R_gyro.T @ e.R_i_j)))
+    found = []
+    for stretch in _consecutive(still):
+        first, last = stretch[0][0], stretch[-1][0]
+        R_edges = functools.reduce(np.matmul, [e.R_i_j for e, *_ in stretch])
+        apart = matrix_to_rotvec(gyro_rotation(imu, t[first.i], t[last.j]).T @ R_edges)
+        variance = _gyro_variance(t[last.j] - t[first.i]) + sum(e.estimated_sigma_rad**2 for e, *_ in stretch)
+        turned = apart @ apart > CHI2_3_999 * variance
+        for e, _, gyro_var, d in stretch:
+            noise = gyro_var + e.estimated_sigma_rad**2
+            if d @ d > (3.0 if turned else CHI2_3_999) * noise:
+                found.append((e, float(np.linalg.norm(d))))
+    return len(steps), found
+
+
+def _gyro_variance(dt: float) -> float:
+    """The per-axis variance [rad^2] of the gyro's rotation over dt [s] (GYRO_NOISE_DENSITY, GYRO_BIAS_RAD_S)."""
+    return GYRO_NOISE_DENSITY**2 * dt + (GYRO_BIAS_RAD_S * dt) ** 2
+
+
+def _consecutive(pairs: list) -> list[list]:
+    """`pairs` ((edge, ...) in frame order) cut where one does not start at the frame the previous ends."""
+    stretches = []
+    for pair in pairs:
+        if stretches and stretches[-1][-1][0].j == pair[0].i:
+            stretches[-1].append(pair)
+        else:
+            stretches.append([pair])
+    return stretches
+
+
+def without(edges, frames) -> list:
+    """`edges` less the consecutive, non-loop ones ending at `frames` (a set of j)."""
+    return [e for e in edges if not (e.j == e.i + 1 and not e.loop and e.j in frames)]
 
 
 def _scale_and_bias(v: np.ndarray, g: np.ndarray, dt: np.ndarray) -> tuple[float, float, float, float]:

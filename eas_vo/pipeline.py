@@ -7,6 +7,7 @@ dataset --Sample--> frontend --uint8 image--> tracker --records, edges--> backen
 from __future__ import annotations
 
 import csv
+import dataclasses
 import functools
 import itertools
 import time
@@ -22,7 +23,7 @@ from eas_vo.errors import EasVoError, Interrupted
 from eas_vo.evaluation import (OFFSET_SEARCH_S, ImuAgreement, RotationErrors, estimate_time_offset, imu_agreement,
                                motion_errors, rotation_errors)
 from eas_vo.geometry.rotations import geodesic_angle, matrix_to_rotvec, quats_from_matrices, rotvec_to_matrix
-from eas_vo.imu_check import GyroVerdict, check_readings, judge_gyro
+from eas_vo.imu_check import GyroVerdict, check_readings, judge_gyro, without
 from eas_vo.io import atomic_path, clock_time, json_text, output_folder, write_text_atomic
 from eas_vo.orb import OrbStats
 from eas_vo.plugins import Backend, Dataset, Frontend, Tracker
@@ -103,8 +104,10 @@ def _run_into(parts: Pipeline, config: ResolvedConfig, out: Path | None, progres
         write_text_atomic(out / "identity.json", json_text(run_identity(config)))
     try:
         tracked, verdict, retracked = _track_judging_the_gyro(parts, config, out, progress)
+        still = _weaken_where_the_gyro_is_still(tracked, verdict, out / "frames.csv" if out else None,
+                                                parts.dataset.clock_origin_ns)
         t = tracked.times
-        agreement = None if parts.imu is None else imu_agreement(t, tracked.edges, parts.imu)
+        agreement = None if parts.imu is None else imu_agreement(t, without(tracked.edges, still), parts.imu)
         fused = None if verdict is None or verdict.contradicts else parts.imu
         imu, imu_offset = _backend_imu(config, parts.backend, fused, agreement)
         R_w_c = parts.backend.solve(len(t), tracked.edges, times=t, imu=imu)
@@ -248,6 +251,30 @@ def _track_judging_the_gyro(parts: Pipeline, config: ResolvedConfig, out: Path |
     if second_csv:
         second_csv.replace(out / "frames.csv")
     return second, verdict if verdict.contradicts else second_verdict, True
+
+
+def _weaken_where_the_gyro_is_still(tracked: Tracked, verdict: GyroVerdict | None, frames_csv: Path | None,
+                                    origin_ns: int = 0) -> set[int]:
+    """Where the tracker's rotation turned while a gyro the images do not contradict read still
+    (GyroVerdict.still): those frames become `weak` with that reason (frames.csv rewritten) and
+    their edges' sigma at least the angle apart per axis (over sqrt(3)), so that a backend
+    weighing edges by it trusts the gyro there. Returns those frames (none when the gyro is not used)."""
+    if verdict is None or verdict.contradicts or not verdict.still:
+        return set()
+    apart = dict(verdict.still)
+    for k, r in enumerate(tracked.records):
+        if r.index in apart:
+            reason = f"turns while the gyro reads still ({np.degrees(apart[r.index]):.2f} deg apart)"
+            tracked.records[k] = dataclasses.replace(r, status="weak", reason=reason)
+    for k, e in enumerate(tracked.edges):
+        if e.j == e.i + 1 and not e.loop and e.j in apart:
+            sigma = max(e.estimated_sigma_rad, apart[e.j] / np.sqrt(3.0))
+            tracked.edges[k] = dataclasses.replace(e, estimated_sigma_rad=sigma)
+    if frames_csv is not None:
+        with atomic_path(frames_csv) as tmp, _FrameLog(tmp, origin_ns) as log:
+            for r in tracked.records:
+                log.write(r)
+    return set(apart)
 
 
 def _without_imu(parts: Pipeline, config: ResolvedConfig) -> Pipeline:

@@ -130,3 +130,78 @@ def test_a_gyro_turning_too_far_or_reading_a_constant_bias_is_contradicted(scale
     assert judged.bias_rad_s == pytest.approx(bias, abs=0.01)
     if verdict == "not used":
         assert ("times as far" if scale != 1.0 else "rad/s (+-") in judged.warnings(False, [])[0]
+
+
+def still_gyro(seed=1) -> ImuSeries:
+    """A 200 Hz gyro on a still camera: the noise model's white noise and a constant bias."""
+    from eas_vo.imu_check import GYRO_BIAS_RAD_S, GYRO_NOISE_DENSITY
+
+    t = np.arange(-0.1, 2.1, 0.005)
+    rng = np.random.default_rng(seed)
+    rates = rng.normal(0, GYRO_BIAS_RAD_S, 3) + rng.normal(0, GYRO_NOISE_DENSITY * np.sqrt(200.0), (len(t), 3))
+    return ImuSeries(t, np.zeros_like(rates), rates)
+
+
+def sigma_edges(imu: ImuSeries, omega, sigma_rad: float, seed=2, noise=0.0) -> list:
+    """Consecutive edges over FRAMES turning at `omega` [rad/s] past the gyro's rotation, with
+    per-axis Gaussian errors of `noise` times their stated sigma."""
+    rng = np.random.default_rng(seed)
+    out = []
+    for i, (t0, t1) in enumerate(zip(FRAMES[:-1], FRAMES[1:])):
+        turn = np.asarray(omega) * (t1 - t0) + rng.normal(0, noise * sigma_rad, 3)
+        R = gyro_rotation(imu, t0, t1) @ Rotation.from_rotvec(turn).as_matrix()
+        out.append(RelativeRotation(i, i + 1, R, inliers=40000, estimated_sigma_rad=sigma_rad))
+    return out
+
+
+def test_the_noise_model_is_the_simulated_imus_and_the_pose_graphs_and_the_quantile_chi_squares():
+    from scipy.stats import chi2
+
+    from eas_vo.backends.gtsam_graph import GtsamConfig
+    from eas_vo.datasets.simulator.sensor import ImuModel
+    from eas_vo.imu_check import CHI2_3_999, GYRO_BIAS_RAD_S, GYRO_NOISE_DENSITY
+
+    assert (GYRO_NOISE_DENSITY, GYRO_BIAS_RAD_S) == (ImuModel().gyro_noise, ImuModel().gyro_bias)
+    assert (GYRO_NOISE_DENSITY, GYRO_BIAS_RAD_S) == (GtsamConfig().gyro_noise, GtsamConfig().gyro_bias_sigma)
+    assert CHI2_3_999 == pytest.approx(chi2.ppf(0.999, 3), abs=1e-3)
+
+
+@pytest.mark.parametrize("omega_deg_s, sigma_deg, flagged", [
+    ((0.0, 12.0, 0.0), 0.05, 39),  # 0.6 deg a pair against sigma 0.05: each pair alone
+    ((0.0, 6.0, 0.0), 0.1, 39),  # 0.3 deg a pair, under 3 sigma each, all in one direction: the stretch
+    ((0.0, 0.0, 0.0), 0.1, 0),  # the events agree with the still gyro
+])
+def test_edges_turning_while_the_gyro_reads_still_are_found_alone_or_over_a_stretch(omega_deg_s, sigma_deg, flagged):
+    from eas_vo.imu_check import still_gyro_pairs
+
+    imu = still_gyro()
+    compared, still = still_gyro_pairs(FRAMES, sigma_edges(imu, np.radians(omega_deg_s), np.radians(sigma_deg)), imu)
+    assert compared == len(FRAMES) - 1 and len(still) == flagged
+
+
+def test_edges_erring_by_their_own_sigma_are_rarely_flagged():
+    """Per-axis Gaussian errors of the stated sigma: under 1 % of the pairs (the per-pair test's
+    rate is 0.1 %; over a stretch, a pair must also exceed the noise's mean)."""
+    from eas_vo.imu_check import still_gyro_pairs
+
+    counts = []
+    for seed in range(10):
+        imu = still_gyro(seed)
+        counts.append(len(still_gyro_pairs(FRAMES, sigma_edges(imu, np.zeros(3), np.radians(0.1), seed, 1.0), imu)[1]))
+    assert sum(counts) <= 0.01 * 10 * (len(FRAMES) - 1), counts
+
+
+def test_a_turning_gyro_is_never_still_and_edges_without_a_sigma_are_not_compared():
+    from eas_vo.imu_check import still_gyro_pairs
+
+    imu = gyro()
+    assert still_gyro_pairs(FRAMES, sigma_edges(imu, np.radians([0, 30.0, 0]), np.radians(0.05)), imu)[1] == []
+    assert still_gyro_pairs(FRAMES, edges_from(still_gyro()), still_gyro()) == (0, [])
+
+
+def test_a_moving_scene_before_a_still_gyro_judges_nothing_and_is_said_in_one_line():
+    imu = still_gyro()
+    verdict = judge_gyro(FRAMES, sigma_edges(imu, np.radians([0, 30.0, 0]), np.radians(0.05)), imu)
+    assert verdict.judged == 0 and not verdict.contradicts and len(verdict.still) == len(FRAMES) - 1
+    lines = [w for w in verdict.warnings(False, []) if "gyro reads still" in w]
+    assert len(lines) == 1 and "frames 1-39" in lines[0] and "1.50 deg apart" in lines[0]
