@@ -121,12 +121,12 @@ class Aedat4Dataset(RecordingReader):
         self.recording = self._dv(lambda: dv.io.MonoCameraRecording(str(self.path)), "the file's header or index")
         start_us, _ = self._dv(self.recording.getTimeRange, "the file's time range")
         self.clock_origin_ns = clock_origin_ns(int(start_us) * 1000)
-        width, height = self._sensor_size()
+        self._sensor = width, height = self._sensor_size()
         self._origin_us = self.clock_origin_ns // 1000
-        if not c.calibration:
-            raise DataError(self.path, f"an AEDAT4 file holds no lens calibration: give one with --set "
-                                       f"dataset.calibration=FILE ({CALIBRATION_FORMATS})")
         self.camera = self.calibration_file(width, height)
+        if self.camera is None:
+            self.no_camera_reason = (f"{self.path}: an AEDAT4 file holds no lens calibration: give one with --set "
+                                     f"dataset.calibration=FILE ({CALIBRATION_FORMATS})")
         self._frame_times = self._read_frame_times()
         self._times = self._frame_times
         if self._frame_times is None:
@@ -203,7 +203,7 @@ class Aedat4Dataset(RecordingReader):
     def _check_frame(self, frame, index: int) -> None:
         image = frame.image
         size = (image.shape[1], image.shape[0]) if image is not None and image.ndim >= 2 else (0, 0)
-        expected = self.camera.width, self.camera.height
+        expected = self._sensor
         if size != expected or frame.positionX or frame.positionY:
             raise DataError(f"{self.path}:frames", f"frame is {size[0]}x{size[1]} px at ({frame.positionX}, "
                                                    f"{frame.positionY}), not the {expected[0]}x{expected[1]} sensor", index)
@@ -256,7 +256,7 @@ class Aedat4Dataset(RecordingReader):
         c = self.config
         where = f"{self.path}:events"
         packets = EventPackets(self.path)
-        width, height = self.camera.width, self.camera.height
+        width, height = self._sensor
         groups = _groups(packets.sizes, GROUP_BYTES)
         slots = [_Slot() for _ in range(GROUPS_AHEAD)]  # in_order keeps GROUPS_AHEAD groups at most, the one taken included
 

@@ -170,8 +170,9 @@ class BagDataset(RecordingReader):
         if not self._frames:
             self.no_frames_reason = f"{self.path} has no image messages (an event-only stream)"
         self._sensor = self._sensor_size()
-        self.camera = self.calibration_file(*self._sensor) or self._read_camera()
-        self.ground_truth = self.ground_truth_file() or self._read_poses()
+        given = self.calibration_file(*self._sensor)
+        self.camera = given if given is not None else self._read_camera()
+        self.ground_truth = self._read_poses() if not self.config.ground_truth else self.ground_truth_file()
         self.imu = self._read_imu()
         self._events = None
 
@@ -213,10 +214,6 @@ class BagDataset(RecordingReader):
 
     def _topic_list(self) -> str:
         return ", ".join(f"{topic} ({msgtype})" for topic, msgtype in sorted(self.topic_types.items())) or "no topics"
-
-    @property
-    def sensor_size(self) -> tuple[int, int]:
-        return self._sensor
 
     def contents(self) -> list[str]:
         counts = {}

@@ -87,7 +87,7 @@ class EcdFolderDataset(RecordingReader):
         self._times, self._frame_names = self._read_image_list()
         if not self._frame_names and not self.source.exists("events.txt"):
             raise DataError(self.source.label("images.txt"), "file not found, and there is no events.txt either")
-        width, height = self._sensor_size()
+        self._sensor = width, height = self._sensor_size()
         self.camera = self._read_calib(width, height)
         self.ground_truth = self._read_ground_truth()
         self.imu = self._read_imu()
@@ -113,7 +113,7 @@ class EcdFolderDataset(RecordingReader):
     def load_frame(self, k: int) -> np.ndarray | None:
         if not self._frame_names:
             return None
-        expected = self.camera.width, self.camera.height
+        expected = self._sensor
         size = self._png_size(k)  # a PNG of the wrong size is refused before it is decoded
         if size is None or size == expected:
             image = self._decode_frame(k)
@@ -133,8 +133,7 @@ class EcdFolderDataset(RecordingReader):
                     lambda: self.source.open("events.txt"),
                     self.source.identity("events.txt"),
                     self.source.label("events.txt"),
-                    self.camera.width,
-                    self.camera.height,
+                    *self._sensor,
                     c.time_tolerance_s,
                     c.lenient,
                     self.warnings,
@@ -238,7 +237,7 @@ class EcdFolderDataset(RecordingReader):
             raise DataError(self.source.label(name), f"cannot decode frame {k}{empty} (images.txt line {self._frame_lines[k]})")
         return image
 
-    def _read_calib(self, width: int, height: int) -> CameraModel:
+    def _read_calib(self, width: int, height: int) -> CameraModel | None:
         given = self.calibration_file(width, height)
         if given is not None:
             return given
@@ -246,8 +245,10 @@ class EcdFolderDataset(RecordingReader):
         if not self.source.exists("calib.txt"):
             if self.source.exists(CAMCHAIN):
                 return self._read_camchain(width, height)
-            raise DataError(where, f"file not found: calib.txt holds the intrinsics 'fx fy cx cy k1 k2 p1 p2 k3' "
-                                   f"(or {CAMCHAIN}, a kalibr camchain, those of a fisheye)")
+            self.no_camera_reason = (f"{where}: file not found: calib.txt holds the intrinsics 'fx fy cx cy k1 k2 p1 p2 "
+                                     f"k3' (or {CAMCHAIN}, a kalibr camchain, those of a fisheye; or give one with "
+                                     "--set dataset.calibration=FILE)")
+            return None
         return parse_ecd_calib(self.source.read_bytes("calib.txt"), where, width, height)
 
     def _read_camchain(self, width: int, height: int) -> CameraModel:

@@ -271,23 +271,23 @@ class MvsecDataset(RecordingReader):
                                                       f"(at most {MAX_SENSOR_PX} px a side)")
         return width, height
 
-    def _camchain_beside(self) -> Path:
+    def _read_camera(self) -> CameraModel | None:
+        """`dataset.calibration`, else the one kalibr camchain beside the file; None (with the
+        reason) for none, or several to choose from."""
+        self._sensor = width, height = self._sensor_size()
+        side_camera = KALIBR_CAMERA[self.config.side]
+        camera = self.calibration_file(width, height, side_camera)
+        if camera is not None:
+            return camera
         found = sorted(self.path.parent.glob("*camchain*.yaml"))
         if len(found) == 1:
-            return found[0]
-        if not found:
-            raise DataError(self.path, "the intrinsics are unknown: an MVSEC HDF5 file holds none; give its kalibr "
-                                       "camchain YAML with --set dataset.calibration=FILE")
-        raise DataError(self.path, f"{len(found)} camchain YAMLs beside it ({', '.join(p.name for p in found)}); "
-                                   "choose one with --set dataset.calibration=FILE")
-
-    def _read_camera(self) -> CameraModel:
-        width, height = self._sensor_size()
-        camera = self.calibration_file(width, height, KALIBR_CAMERA[self.config.side])
-        if camera is None:
-            camera = read_calibration(self._camchain_beside(), width=width, height=height,
-                                      camera=self.config.calibration_camera or KALIBR_CAMERA[self.config.side])
-        return camera
+            return read_calibration(found[0], width=width, height=height, camera=self.config.calibration_camera or side_camera)
+        self.no_camera_reason = (
+            f"{self.path}: the intrinsics are unknown: an MVSEC HDF5 file holds none; give its kalibr camchain YAML "
+            "with --set dataset.calibration=FILE" if not found else
+            f"{self.path}: {len(found)} camchain YAMLs beside it ({', '.join(p.name for p in found)}); choose one with "
+            "--set dataset.calibration=FILE")
+        return None
 
     def _read_imu(self) -> ImuSeries | None:
         side = self.file[self.group]
@@ -353,7 +353,7 @@ class MvsecDataset(RecordingReader):
         where = self._where("events")
 
         def fill(out, warnings):
-            validate = Validator(where, self.camera.width, self.camera.height, c.time_tolerance_s, c.lenient, warnings, "row")
+            validate = Validator(where, *self._sensor, c.time_tolerance_s, c.lenient, warnings, "row")
             mapped = self._map_events(dset) if MAP_EVENTS else None
             if mapped is not None:
                 return pack_table(mapped[0], (2, 0, 1, 3), validate, lambda events: out.write(self._after_origin(events)),
@@ -362,7 +362,7 @@ class MvsecDataset(RecordingReader):
                       for block in self._h5py_blocks(dset, where, validate))
             return write_behind(out, blocks)
 
-        key = cache_key("mvsec", *file_identity(self.path), self.group, self.camera.width, self.camera.height,
+        key = cache_key("mvsec", *file_identity(self.path), self.group, *self._sensor,
                         c.time_tolerance_s, self.clock_origin_ns)
         return load_cached(key, c.lenient, self.warnings, fill, where, len(dset))
 

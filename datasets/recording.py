@@ -154,7 +154,13 @@ class RecordingReader(Dataset):
 
     warnings: DataWarnings
     _times: np.ndarray | None
+    _sensor: tuple[int, int]
     config: StreamConfig
+
+    @property
+    def sensor_size(self) -> tuple[int, int]:
+        """(width, height) [px], known with or without a calibration."""
+        return self._sensor
 
     def calibration_file(self, width: int | None, height: int | None, default_camera: str | None = None) -> CameraModel | None:
         """The camera of `config.calibration` for a width x height [px] sensor, or None when no

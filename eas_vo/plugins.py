@@ -58,7 +58,7 @@ class Dataset:
     label: str = ""
     #: Why `load_frame` returns None, for the error a frame-based frontend gives.
     no_frames_reason: str = "the dataset has no APS frames"
-    #: Why `camera` is None, and what to give instead (one line).
+    #: Why `camera` is None, and what to give instead (one line naming the file).
     no_camera_reason: str = "the dataset has no calibration"
     #: The recording's clock at t = 0 [ns]: every time the dataset gives (frames, events, IMU,
     #: ground truth) is relative to it, and output files add it back. 0 for clocks that start

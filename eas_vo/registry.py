@@ -15,7 +15,7 @@ import warnings
 from importlib.metadata import entry_points
 from pathlib import Path
 
-from eas_vo.errors import DataError, EasVoError
+from eas_vo.errors import EasVoError
 
 KINDS = ("datasets", "frontends", "trackers", "backends")
 _BUILTIN_PREFIX = "eas_vo."
@@ -153,11 +153,11 @@ def _claims(cls: type, location: str) -> bool:
 def open_dataset(spec: str, config=None, *, need_camera: bool = True):
     """Open a `--dataset` value with its plugin (and that plugin's config, default if None).
     A dataset that sets no `label` is labelled with the spec. `need_camera`: refuse a dataset
-    without a camera (DataError with its `no_camera_reason`); False only to describe it."""
+    without a camera (its `no_camera_reason`, which names the file); False only to describe it."""
     cls, location = resolve_dataset(spec)
     dataset = cls(location, config if config is not None else cls.Config())
     if not dataset.label:
         dataset.label = spec
     if need_camera and dataset.camera is None:
-        raise DataError(dataset.label, dataset.no_camera_reason)
+        raise EasVoError(dataset.no_camera_reason)
     return dataset

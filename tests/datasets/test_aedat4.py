@@ -10,7 +10,8 @@ import numpy as np
 import pytest
 
 from eas_vo.datasets.aedat4 import Aedat4Config, Aedat4Dataset
-from eas_vo.errors import DataError
+from eas_vo.errors import DataError, EasVoError
+from eas_vo.registry import open_dataset
 from eas_vo.types import ImuSeries
 
 dv = pytest.importorskip("dv_processing", reason="dv-processing (the AEDAT4 reader's library) is not installed")
@@ -77,9 +78,11 @@ def test_can_open_wants_the_suffix_and_the_magic(tmp_path):
 def test_a_missing_calibration_says_what_to_pass(tmp_path):
     path = tmp_path / "rec.aedat4"
     write_aedat4(path, events=random_stream(10), kind="events")
-    with pytest.raises(DataError, match=r"rec.aedat4: an AEDAT4 file holds no lens calibration: give one with "
-                                        r"--set dataset.calibration=FILE"):
-        Aedat4Dataset(path)
+    ds = Aedat4Dataset(path)  # described by info all the same
+    assert ds.camera is None and ds.sensor_size == (WIDTH, HEIGHT) and len(ds.events()) == 10
+    with pytest.raises(EasVoError, match=r"rec.aedat4: an AEDAT4 file holds no lens calibration: give one with "
+                                         r"--set dataset.calibration=FILE"):
+        open_dataset(str(path))
 
 
 def test_events_frames_imu_in_the_projects_units_and_instants(tmp_path):

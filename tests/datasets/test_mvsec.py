@@ -16,7 +16,7 @@ from scipy.spatial.transform import Rotation
 from eas_vo.cli import main
 from eas_vo.datasets import mvsec
 from eas_vo.datasets.mvsec import MvsecConfig, MvsecDataset
-from eas_vo.errors import DataError
+from eas_vo.errors import DataError, EasVoError
 from eas_vo.registry import open_dataset, resolve_dataset
 
 #: An equidistant camchain as MVSEC publishes them (values of its indoor_flying cam0, 346x260).
@@ -129,8 +129,11 @@ def test_side_selects_the_right_davis_and_its_kalibr_camera(ecd, tmp_path):
 
 
 def test_without_a_calibration_the_error_says_how_to_give_one(h5_path):
-    with pytest.raises(DataError, match=r"seq_data.hdf5: the intrinsics are unknown.*--set dataset.calibration=FILE"):
-        MvsecDataset(h5_path)
+    """The file opens (info describes it); a run is refused in one line naming the key."""
+    ds = MvsecDataset(h5_path)
+    assert ds.camera is None and ds.sensor_size == (346, 260) and len(ds.events()) > 0
+    with pytest.raises(EasVoError, match=r"seq_data.hdf5: the intrinsics are unknown.*--set dataset.calibration=FILE"):
+        open_dataset(str(h5_path))
 
 
 def test_can_open_looks_at_suffix_signature_and_davis_group(h5_path, tmp_path):
