@@ -98,9 +98,11 @@ class PacketStream:
         self.decoders = {}
         self.sensor_to_bag_ns: int | None = None
         self.triggers = 0
+        self.first_trigger: int | None = None
 
-    def decode(self, msg) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """An EventPacket -> (t [ns, the bag's clock], x, y, p); RefusedEncoding for what is not read.
+    def decode(self, msg, index: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """EventPacket `index` of the stream -> (t [ns, the bag's clock], x, y, p); RefusedEncoding
+        for what is not read.
 
         `mono`: the header stamp + each event's offset (ROS time, the clock of the bag's other
         topics). Encodings on the sensor's clock (Decoder.host_clock False, e.g. `evt3`): put on
@@ -122,6 +124,8 @@ class PacketStream:
             self.decoders[msg.encoding] = cls(self.width, self.height)
         decoder = self.decoders[msg.encoding]
         out = decoder.decode(np.asarray(msg.events, np.uint8), int(msg.time_base))
+        if len(out.trigger_t_ns) and self.first_trigger is None:
+            self.first_trigger = index
         self.triggers += len(out.trigger_t_ns)
         if decoder.host_clock or not len(out.t_ns):
             return out.t_ns, out.x, out.y, out.p
@@ -258,9 +262,10 @@ class BagDataset(RecordingReader):
     def _deserialize(self, raw: bytes, msgtype: str):
         raise NotImplementedError
 
-    def _decode_events(self, raw: bytes, msgtype: str, packets: PacketStream) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """An event message -> (t [ns, the bag's clock], x, y, p) columns (an EventPacket through
-        `packets.decode`); ValueError for damaged bytes, RefusedEncoding for what the reader does not decode."""
+    def _decode_events(self, raw: bytes, msgtype: str, packets: PacketStream, index: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Event message `index` -> (t [ns, the bag's clock], x, y, p) columns (an EventPacket
+        through `packets.decode`); ValueError for damaged bytes, RefusedEncoding for what the
+        reader does not decode."""
         raise NotImplementedError
 
     def _identity(self) -> tuple:
@@ -397,7 +402,7 @@ class BagDataset(RecordingReader):
                 kept = []
                 for index, msgtype, raw in messages:
                     try:
-                        t_ns, x, y, p = self._decode_events(raw, msgtype, packets)
+                        t_ns, x, y, p = self._decode_events(raw, msgtype, packets, index)
                     except RefusedEncoding as exc:
                         raise DataError(where, str(exc), index) from None
                     except (ValueError, IndexError) as exc:
@@ -421,8 +426,13 @@ class BagDataset(RecordingReader):
 
             written = write_behind(out, blocks())
             if packets.triggers:
-                warnings.add(where, "external trigger edges, not camera events (kept out of the event stream)",
-                             "the first packet holding one", packets.triggers)
+                warnings.add(where, "external trigger edges, not camera events (kept apart)", f"message {packets.first_trigger}",
+                             packets.triggers)
+            for decoder in packets.decoders.values():
+                for n, what in ((decoder.outside, "events outside the sensor"),
+                                (decoder.skipped, "events before the stream's first full timestamp")):
+                    if n:
+                        warnings.add(where, f"{what} ({decoder.encoding})", "the decoder's count", n)
             return written
 
         key = cache_key(self.cache_tag, *self._identity(), topic, width, height, c.time_tolerance_s, self.clock_origin_ns)

@@ -95,13 +95,13 @@ class RosbagDataset(BagDataset):
     def _deserialize(self, raw: bytes, msgtype: str):
         return typestore().deserialize_ros1(raw, msgtype)
 
-    def _decode_events(self, raw: bytes, msgtype: str, packets):
+    def _decode_events(self, raw: bytes, msgtype: str, packets, index: int):
         if msgtype in PACKET_TYPES:
             try:
                 msg = typestore().deserialize_ros1(raw, msgtype)
             except Exception as exc:  # rosbags raises assorted errors on damaged data
                 raise ValueError(str(exc) or type(exc).__name__) from None
-            return packets.decode(msg)
+            return packets.decode(msg, index)
         wire = decode_event_array(raw)
         return stamp_ns(wire["sec"], wire["nsec"]), wire["x"], wire["y"], wire["p"]
 

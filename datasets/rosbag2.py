@@ -220,7 +220,7 @@ class Rosbag2Dataset(BagDataset):
     def _deserialize(self, raw: bytes, msgtype: str):
         return self.store.deserialize_cdr(raw, msgtype)
 
-    def _decode_events(self, raw: bytes, msgtype: str, packets):
+    def _decode_events(self, raw: bytes, msgtype: str, packets, index: int):
         if msgtype == DVS_ARRAY:
             wire = decode_dvs_array(raw)
             return stamp_ns(wire["sec"], wire["nsec"]), wire["x"], wire["y"], wire["p"]
@@ -228,7 +228,7 @@ class Rosbag2Dataset(BagDataset):
             msg = self.store.deserialize_cdr(raw, msgtype)
         except Exception as exc:  # rosbags raises assorted errors on damaged data
             raise ValueError(str(exc) or type(exc).__name__) from None
-        return packets.decode(msg)
+        return packets.decode(msg, index)
 
     def _identity(self) -> tuple:
         if self.path.is_file():

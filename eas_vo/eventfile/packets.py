@@ -45,6 +45,9 @@ class PacketDecoder:
 
     #: The encoding's name, as event_camera_msgs spells it.
     encoding: str = ""
+    #: Events dropped so far: outside the sensor, and before the stream's first full time.
+    outside: int = 0
+    skipped: int = 0
     #: Whether the sensor's clock was set to the host's when the driver started (libcaer), so
     #: that its times are on the bag's clock already; else (evt3) they count from the sensor's start.
     host_clock: bool = False
