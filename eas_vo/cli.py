@@ -154,8 +154,8 @@ def _seconds(allow_zero: bool):
 
 
 def _assignments(args) -> list[str]:
-    """The --set assignments, with --lenient's."""
-    return args.assignments + (["dataset.lenient=true"] if args.lenient else [])
+    """The --set assignments after --lenient's (an option: --set overrides it)."""
+    return (["dataset.lenient=true"] if args.lenient else []) + args.assignments
 
 
 def _window_overrides(args) -> dict:
