@@ -271,6 +271,20 @@ def test_nonsense_values_and_usage_errors_are_one_line(argv, says, tmp_path, cap
     assert not any(tmp_path.iterdir())
 
 
+def test_evaluate_names_the_origin_alignment_for_a_rotation_only_trajectory(short_sequence, tmp_path, capsys):
+    """eas-vo's own trajectory.tum: positions 0, which the default sim3 alignment cannot align."""
+    from eas_vo.datasets.ecd import EcdFolderDataset
+    from eas_vo.geometry.rotations import matrices_from_quats
+    from eas_vo.pipeline import format_tum
+
+    gt = EcdFolderDataset(short_sequence).ground_truth
+    (tmp_path / "rotation_only.tum").write_text(format_tum(gt.t, np.zeros_like(gt.p_w_c), matrices_from_quats(gt.q_w_c)))
+    argv = ["evaluate", "--dataset", str(short_sequence), "--estimate", str(tmp_path / "rotation_only.tum")]
+    err = one_line_failure(argv, capsys)
+    assert "sim3 alignment needs them to span a plane" in err and "--align origin" in err
+    assert main([*argv, "--align", "origin"]) == 0 and "rotation APE mean 0.0000 rad" in capsys.readouterr().out
+
+
 @pytest.mark.parametrize("option", [["--backend", "gtsam", "--set", "backend.gyro=true"], ["--set", "tracker.predict='gyro'"]])
 def test_an_option_that_needs_an_imu_refuses_a_dataset_without_one(sequence_copy, tmp_path, capsys, option):
     (sequence_copy / "imu.txt").unlink()
