@@ -62,8 +62,12 @@ def build_parser() -> argparse.ArgumentParser:
 
 # ----------------------------------------------------------------------------- shared options
 
-DATASET_HELP = ("a recording (Event Camera Dataset folder or .zip, ROS1 .bag, or what a dataset plugin opens), "
-                "PLUGIN:LOCATION, or synthetic:NAME (default: synthetic:default, simulated once)")
+def _installed(kind: str) -> str:
+    """The installed plugins of `kind` (registry.KINDS), for a help text: from their entry
+    points, so that a third party's are listed and `--help` imports none of them."""
+    from eas_vo import registry
+
+    return ", ".join(registry.names(kind))
 
 
 def _add_dataset(parser, help: str = "as for run (default: synthetic:default)", required: bool = False) -> None:
@@ -245,11 +249,18 @@ def _parse_run(sub) -> None:
         epilog=EPILOG_RUN,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    _add_dataset(run, help=DATASET_HELP)
+    from eas_vo.config import RunConfig
+
+    _add_dataset(run, help=f"a recording (a folder or file) one of the installed dataset plugins opens, or "
+                 f"PLUGIN:LOCATION, PLUGIN one of {_installed('datasets')}; synthetic:NAME is simulated once "
+                 f"(default {RunConfig.dataset}; eas-vo list says what each plugin reads)")
     run.add_argument("--frontend", metavar="NAME",
-                     help="image source: original, histeq, slice, ts, sits, eas or a plugin's (eas-vo list; default eas)")
-    run.add_argument("--tracker", metavar="NAME", help="relative rotations from the images: klt (the paper; default) or a plugin's")
-    run.add_argument("--backend", metavar="NAME", help="relative -> absolute rotations: chain or gtsam (default chain)")
+                     help=f"image source, one of {_installed('frontends')} (default {RunConfig.frontend})")
+    run.add_argument("--tracker", metavar="NAME",
+                     help=f"relative rotations between frames, one of {_installed('trackers')} "
+                     f"(default {RunConfig.tracker}, the paper's)")
+    run.add_argument("--backend", metavar="NAME",
+                     help=f"relative -> absolute rotations, one of {_installed('backends')} (default {RunConfig.backend})")
     _add_config(run)
     _add_window(run)
     _add_time_offset(run)

@@ -142,6 +142,20 @@ def test_subprocess_entry_point_help_and_error():
     assert bad.returncode == 2 and bad.stderr.count("\n") == 1 and "dataset not found" in bad.stderr
 
 
+def test_run_help_lists_the_installed_plugins_of_every_kind(monkeypatch, capsys):
+    """From the registry's entry points, a third party's too: no hand-kept list."""
+    from eas_vo import registry
+
+    real = registry.names
+    monkeypatch.setattr(registry, "names", lambda kind: real(kind) + [f"thirdparty_{kind}"])
+    with pytest.raises(SystemExit):
+        main(["run", "--help"])
+    shown = " ".join(capsys.readouterr().out.split())
+    for option, kind in (("--dataset", "datasets"), ("--frontend", "frontends"), ("--tracker", "trackers"),
+                         ("--backend", "backends")):
+        assert re.search(rf"{option} \S+ (?:(?! --[a-z]).)*one of {', '.join(real(kind))}, thirdparty_{kind}\b", shown), (option, shown)
+
+
 def test_simulate_command(tmp_path, capsys):
     """A sequence is written; with --speed 3 the camera turns three times as far in the ground
     truth's first 5 ms (the same path, faster: test_motion has the exact relation)."""
