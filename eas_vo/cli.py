@@ -302,7 +302,7 @@ def cmd_run(args) -> int:
     statuses = _status_text(m["status_counts"], m["status_reasons"])
     meaning = f" [{WEAK_MEANS}]" if m["status_counts"].get("weak") else ""
     loops = f"{m['loop_count']} loop(s) closed, " if m["loop_count"] is not None else ""
-    gyro = f"gyro {m['gyro']}, " if m["gyro"] else ""
+    gyro = f"gyro {' '.join(filter(None, (m['gyro'], m['gyro_use'])))}, " if m["gyro"] else ""
     print(
         f"{rc.frontend}+{rc.tracker}+{rc.backend} on {rc.dataset}: {m['frames']} frames ({statuses}){meaning}, "
         f"average NC {m['nc_mean']:.1f}, {loops}{gyro}"
