@@ -62,8 +62,12 @@ def build_parser() -> argparse.ArgumentParser:
 
 # ----------------------------------------------------------------------------- shared options
 
-DATASET_HELP = ("a recording (Event Camera Dataset folder or .zip, ROS1 .bag, or what a dataset plugin opens), "
-                "PLUGIN:LOCATION, or synthetic:NAME (default: synthetic:default, simulated once)")
+def _installed(kind: str) -> str:
+    """The installed plugins of `kind` (registry.KINDS), for a help text: from their entry
+    points, so that a third party's are listed and `--help` imports none of them."""
+    from eas_vo import registry
+
+    return ", ".join(registry.names(kind))
 
 
 def _add_dataset(parser, help: str = "as for run (default: synthetic:default)", required: bool = False) -> None:
@@ -154,8 +158,8 @@ def _seconds(allow_zero: bool):
 
 
 def _assignments(args) -> list[str]:
-    """The --set assignments, with --lenient's."""
-    return args.assignments + (["dataset.lenient=true"] if args.lenient else [])
+    """The --set assignments after --lenient's (an option: --set overrides it)."""
+    return (["dataset.lenient=true"] if args.lenient else []) + args.assignments
 
 
 def _window_overrides(args) -> dict:
@@ -245,11 +249,18 @@ def _parse_run(sub) -> None:
         epilog=EPILOG_RUN,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    _add_dataset(run, help=DATASET_HELP)
+    from eas_vo.config import RunConfig
+
+    _add_dataset(run, help=f"a recording (a folder or file) one of the installed dataset plugins opens, or "
+                 f"PLUGIN:LOCATION, PLUGIN one of {_installed('datasets')}; synthetic:NAME is simulated once "
+                 f"(default {RunConfig.dataset}; eas-vo list says what each plugin reads)")
     run.add_argument("--frontend", metavar="NAME",
-                     help="image source: original, histeq, slice, ts, sits, eas or a plugin's (eas-vo list; default eas)")
-    run.add_argument("--tracker", metavar="NAME", help="relative rotations from the images: klt (the paper; default) or a plugin's")
-    run.add_argument("--backend", metavar="NAME", help="relative -> absolute rotations: chain or gtsam (default chain)")
+                     help=f"image source, one of {_installed('frontends')} (default {RunConfig.frontend})")
+    run.add_argument("--tracker", metavar="NAME",
+                     help=f"relative rotations between frames, one of {_installed('trackers')} "
+                     f"(default {RunConfig.tracker}, the paper's)")
+    run.add_argument("--backend", metavar="NAME",
+                     help=f"relative -> absolute rotations, one of {_installed('backends')} (default {RunConfig.backend})")
     _add_config(run)
     _add_window(run)
     _add_time_offset(run)
@@ -291,7 +302,7 @@ def cmd_run(args) -> int:
     statuses = _status_text(m["status_counts"], m["status_reasons"])
     meaning = f" [{WEAK_MEANS}]" if m["status_counts"].get("weak") else ""
     loops = f"{m['loop_count']} loop(s) closed, " if m["loop_count"] is not None else ""
-    gyro = f"gyro {m['gyro']}, " if m["gyro"] else ""
+    gyro = f"gyro {' '.join(filter(None, (m['gyro'], m['gyro_use'])))}, " if m["gyro"] else ""
     print(
         f"{rc.frontend}+{rc.tracker}+{rc.backend} on {rc.dataset}: {m['frames']} frames ({statuses}){meaning}, "
         f"average NC {m['nc_mean']:.1f}, {loops}{gyro}"

@@ -9,6 +9,7 @@ import hashlib
 import io
 import itertools
 import json
+import math
 import os
 import signal
 import sys
@@ -425,16 +426,23 @@ def sweep_curves(cells: list[Cell], rows: list[dict]) -> tuple[str, dict] | None
 
 
 def _best(rows: list[dict], key: str, lower: bool) -> dict:
-    """Per (dataset, method) column: the best value of `key`."""
+    """Per (dataset, method) column: the best value of `key` among its measurements (_measured);
+    a column without one has none."""
     best = {}
     for r in rows:
         v = r.get(key)
-        if v is None or v != v:
+        if not _measured(key, v):
             continue
         col = (r["dataset"], r["method"])
         if col not in best or (v < best[col] if lower else v > best[col]):
             best[col] = v
     return best
+
+
+def _measured(key: str, value) -> bool:
+    """Whether `value` of the figure `key` measured something: a finite number, and an NC above
+    0 (NC 0: no correspondence counted, as with nothing tracked or an event tracker's)."""
+    return value is not None and math.isfinite(value) and (key != "nc_mean" or value > 0)
 
 
 #: Table 1's figures: (row key, column title, format, lower is better).

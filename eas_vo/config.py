@@ -3,7 +3,10 @@
 Sections: `[run]` (what to run), `[dataset]`, `[frontend]`, `[tracker]`, `[backend]`.
 Each plugin section holds the keys of the chosen plugin; per-plugin tables such as
 `[frontend.eas]` apply only when that plugin is chosen, so one file can configure
-every frontend. Precedence: dataclass defaults < file < CLI flags < `--set`.
+every frontend. Precedence is by source: dataclass defaults < file < CLI options < `--set`,
+whether a key is written flat (`[tracker] threshold2`) or in the plugin's table; within one
+source the two spellings are one key (a file giving both two values is refused; among `--set`
+assignments the later wins).
 """
 
 from __future__ import annotations
@@ -207,13 +210,18 @@ def read_config_file(path: str | Path) -> dict:
     return raw
 
 
+def _installed(section: str) -> dict:
+    """The installed plugins whose tables a section may hold ([run] holds none)."""
+    return registry.available(f"{section}s") if section != "run" else {}
+
+
 def _check_tables(raw: dict, where: str) -> None:
     """Each section in `raw` a table, and so is each plugin table in one ([tracker.klt]: a key
     named after an installed plugin of the section's kind); else a one-line error from `where`."""
     for section, table in raw.items():
         if not isinstance(table, dict):
             raise ConfigError(f"{where}: {section} must be a table ([{section}] and its keys), found {_found(table)}")
-        installed = registry.available(f"{section}s") if section != "run" else {}
+        installed = _installed(section)
         for key, value in table.items():
             if key in installed and not isinstance(value, dict):
                 raise ConfigError(f"{where}: {section}.{key} must be a table (the {key} {section}'s keys, "
@@ -227,15 +235,100 @@ def _found(value) -> str:
     return _toml_value(value)
 
 
+@dataclass(frozen=True)
+class _Source:
+    """The values one source of configuration gives, in the order given.
+
+    Attributes:
+        where: the source in messages (a config file's path, `--set`, `options`).
+        entries: (section, plugin or None, key, value): `[tracker.klt] threshold2` is
+            ("tracker", "klt", "threshold2", v); a flat `[tracker] threshold2`, plugin None.
+        ordered: a later value for a key wins over an earlier one (`--set`, whose order is the
+            user's); otherwise two that differ are refused (a file: a flat key and its twin in
+            the chosen plugin's table).
+    """
+
+    where: str
+    entries: tuple
+    ordered: bool
+
+
+def _file_source(config_file: str | Path) -> _Source:
+    entries = []
+    for section, table in read_config_file(config_file).items():
+        installed = _installed(section)
+        for key, value in table.items():
+            if key in installed:  # a plugin table: read_config_file saw to it
+                entries += [(section, key, k, v) for k, v in value.items()]
+            else:
+                entries.append((section, None, key, value))
+    return _Source(str(config_file), tuple(entries), ordered=False)
+
+
+def _set_source(assignments) -> _Source:
+    entries = []
+    for assignment in assignments:
+        keys, value = parse_set(assignment)
+        _check_tables({keys[0]: {keys[1]: value if len(keys) == 2 else {}}}, f"--set {assignment}")
+        section, rest = keys[0], keys[1:]
+        plugin = rest.pop(0) if len(rest) > 1 and rest[0] in _installed(section) else None
+        for key in reversed(rest[1:]):  # section.key.sub=v: a table under key, for build to refuse by the key's type
+            value = {key: value}
+        entries.append((section, plugin, rest[0], value))
+    return _Source("--set", tuple(entries), ordered=True)
+
+
+def _sources(config_file, run_overrides: dict | None, assignments) -> list[_Source]:
+    """The sources in rising precedence: the config file, the command's options (`run_overrides`,
+    None meaning not given), `--set`; the dataclass defaults lie under them all."""
+    options = tuple(("run", None, k, v) for k, v in (run_overrides or {}).items() if v is not None)
+    return [*([_file_source(config_file)] if config_file else []), _Source("options", options, ordered=True),
+            _set_source(assignments)]
+
+
+def _values(source: _Source, section: str, plugin: type | None = None) -> dict[str, tuple[str, Any]]:
+    """What `source` gives the chosen `plugin` of `section` (None for [run]): key -> (the key as
+    written, value); flat keys and the plugin's own table alike, other plugins' tables dropped.
+
+    A table must be named after an installed plugin of the section's kind, so that a typo
+    (`[frontend.eass]`) is an error rather than silently ignored; a table under one of the
+    plugin's own keys is kept, for `build` to say what that key takes.
+    """
+    own_keys = {f.name for f in fields(plugin.Config)} if plugin is not None else set()
+    own_table = plugin.name if plugin is not None else None
+    found: dict[str, tuple[str, Any]] = {}
+    for entry_section, table, key, value in source.entries:
+        if entry_section != section or table not in (None, own_table):
+            continue
+        if plugin is not None and table is None and isinstance(value, dict) and key not in own_keys:
+            installed = ", ".join(_installed(section)) or "none"
+            raise ConfigError(f"{source.where}: unknown table {section}.{key}: not an installed {section} plugin ({installed})")
+        written = ".".join(filter(None, (section, table, key)))
+        if key in found and not source.ordered and not _same(found[key][1], value):
+            raise ConfigError(f"{source.where}: {found[key][0]} = {_toml_value(found[key][1])} and {written} = "
+                              f"{_toml_value(value)} both set the {plugin.name} {section}'s {key}; keep one")
+        if key not in found or source.ordered:
+            found[key] = (written, value)
+    return found
+
+
+def _run_config(sources: list[_Source], moved: list[dict] | None = None) -> RunConfig:
+    """[run] from the sources (each with the keys `_move_to_run` found in it), the frontend
+    `no_image` when the tracker reads no images (nothing would look at them)."""
+    values = {}
+    for i, source in enumerate(sources):
+        given = {**(moved[i] if moved else {}), **_values(source, "run")}  # a source's [run] over its old places
+        values.update((key, value) for key, (_, value) in given.items())
+    run = build(RunConfig, values, "run")
+    if not registry.get("trackers", run.tracker).reads_images:
+        run = dataclasses.replace(run, frontend=NO_IMAGES)
+    return run
+
+
 def run_section(config_file: str | Path | None = None, assignments: list[str] = ()) -> RunConfig:
     """The [run] section alone: defaults, the config file's [run], `--set run.KEY=V` (what
     `compare` takes its default tracker and backend from)."""
-    raw = dict((read_config_file(config_file) if config_file else {}).get("run", {}))
-    for assignment in assignments:
-        keys, value = parse_set(assignment)
-        if keys[0] == "run" and len(keys) == 2:
-            raw[keys[1]] = value
-    return build(RunConfig, raw, "run")
+    return _run_config(_sources(config_file, None, assignments))
 
 
 def resolve(
@@ -243,24 +336,16 @@ def resolve(
     run_overrides: dict | None = None,
     assignments: list[str] = (),
 ) -> ResolvedConfig:
-    """Merge defaults, a config file, CLI flags and `--set` assignments; validate everything."""
-    raw: dict = read_config_file(config_file) if config_file else {}
-    raw = {s: dict(raw.get(s, {})) for s in SECTIONS}
-    raw["run"].update({k: v for k, v in (run_overrides or {}).items() if v is not None})
-    for assignment in assignments:
-        keys, value = parse_set(assignment)
-        _check_tables({keys[0]: {keys[1]: value if len(keys) == 2 else {}}}, f"--set {assignment}")
-        table = raw[keys[0]]
-        for k in keys[1:-1]:
-            table = table.setdefault(k, {})
-            if not isinstance(table, dict):
-                raise ConfigError(f"--set {assignment!r}: {k} is not a table")
-        table[keys[-1]] = value
+    """Merge defaults, a config file, CLI options and `--set` assignments; validate everything.
 
-    _move_to_run(raw)
-    run = build(RunConfig, raw["run"], "run")
-    if not registry.get("trackers", run.tracker).reads_images:  # nothing would look at the images
-        run = dataclasses.replace(run, frontend=NO_IMAGES)
+    Precedence is by source, whatever the spelling of a key: dataclass defaults < the config
+    file < the command's options (`run_overrides`: `--frontend`, `--start`, ...) < `--set`.
+    Within one source a flat key (`[tracker] threshold2`) and its twin in the chosen plugin's
+    table (`[tracker.klt] threshold2`) are one key: in a file, two values that differ are
+    refused; among `--set` assignments the later wins.
+    """
+    sources = _sources(config_file, run_overrides, assignments)
+    run = _run_config(sources)
     dataset_cls, _ = registry.resolve_dataset(run.dataset)
     chosen = {
         "dataset": dataset_cls,
@@ -268,30 +353,36 @@ def resolve(
         "tracker": registry.get("trackers", run.tracker),
         "backend": registry.get("backends", run.backend),
     }
-    sections = {name: build(cls.Config, _plugin_table(raw[name], name, cls), f"{name}.{cls.name}") for name, cls in chosen.items()}
+    given = [{name: _values(source, name, cls) for name, cls in chosen.items()} for source in sources]
+    moved = [_move_to_run(values, source.where) for values, source in zip(given, sources)]
+    run = _run_config(sources, moved)
+    sections = {}
+    for name, cls in chosen.items():
+        values = {k: v for source_values in given for k, (_, v) in source_values[name].items()}
+        sections[name] = build(cls.Config, values, f"{name}.{cls.name}")
     origin = " ".join([Path(config_file).name if config_file else "defaults"] + [f"--set {a}" for a in assignments])
     return ResolvedConfig(run=run, **sections, origin=origin)
 
 
-def _move_to_run(raw: dict) -> None:
-    """Move MOVED_TO_RUN keys found in [tracker] or [backend] (or the chosen plugin's table
-    there), as every config.toml written before they moved holds them, into [run] unless [run]
-    (or --set run.KEY) sets them; old places that disagree (the rig has one IMU) are an error
-    naming them. Other plugins' tables lose the keys unread."""
+def _move_to_run(given: dict[str, dict], where: str) -> dict[str, tuple[str, Any]]:
+    """Take the MOVED_TO_RUN keys out of one source's [tracker] and [backend] values (as every
+    config.toml written before they moved holds them) and return them as [run] values, which
+    that source's own [run] overrides; two that disagree (the rig has one IMU) are an error
+    naming both."""
+    moved = {}
     for key in MOVED_TO_RUN:
-        found = {}
-        for section in ("tracker", "backend"):
-            chosen = raw["run"].get(section, getattr(RunConfig, section))
-            for name, table in [(section, raw[section])] + [(f"{section}.{k}", t) for k, t in raw[section].items()
-                                                            if isinstance(t, dict)]:
-                if key in table and name in (section, f"{section}.{chosen}"):
-                    found[f"{name}.{key}"] = table.pop(key)
-                table.pop(key, None)
-        if len({repr(_as_numbers(v)) for v in found.values()}) > 1:
-            places = ", ".join(f"{where} = {_toml_value(v)}" for where, v in found.items())
-            raise ConfigError(f"{places}: the rig has one IMU; set run.{key} only")
-        if found and key not in raw["run"]:
-            raw["run"][key] = next(iter(found.values()))
+        found = [given[section].pop(key) for section in ("tracker", "backend") if key in given[section]]
+        if any(not _same(found[0][1], value) for _, value in found[1:]):
+            places = ", ".join(f"{written} = {_toml_value(v)}" for written, v in found)
+            raise ConfigError(f"{where}: {places}: the rig has one IMU; set run.{key} only")
+        if found:
+            moved[key] = found[0]
+    return moved
+
+
+def _same(a, b) -> bool:
+    """Whether two values of one key are the same (numbers compared as numbers: 1 and 1.0)."""
+    return repr(_as_numbers(a)) == repr(_as_numbers(b))
 
 
 def _as_numbers(value):
@@ -300,22 +391,3 @@ def _as_numbers(value):
         return tuple(float(x) for x in value) if isinstance(value, (list, tuple)) else float(value)
     except (TypeError, ValueError):
         return value
-
-
-def _plugin_table(table: dict, section: str, plugin: type) -> dict:
-    """Flat keys of a section, over its `[section.<name>]` table; other plugins' tables dropped.
-
-    A table must be named after an installed plugin of the section's kind, so that a typo
-    (`[frontend.eass]`) is an error rather than silently ignored; a table under one of the
-    plugin's own keys is kept, for `build` to say what that key takes.
-    """
-    installed = registry.available(f"{section}s")
-    own_keys = {f.name for f in fields(plugin.Config)}
-    for key, value in table.items():
-        if isinstance(value, dict) and key not in installed and key not in own_keys:
-            raise ConfigError(
-                f"unknown table {section}.{key}: not an installed {section} plugin ({', '.join(installed) or 'none'})"
-            )
-    merged = dict(table.get(plugin.name, {}))  # a table: _check_tables saw to it
-    merged.update({k: v for k, v in table.items() if k in own_keys or not isinstance(v, dict)})
-    return merged

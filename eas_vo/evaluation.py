@@ -381,6 +381,10 @@ COLLINEAR = 1e-9
 #: The largest standard uncertainty [rad] of a sim3 / se3 alignment's rotation (about 3
 #: degrees) that still measures a rotation APE (alignment_uncertainty).
 ALIGN_UNCERTAINTY_RAD = 0.05
+#: What a sim3 / se3 alignment that the estimate's positions cannot fix says to do instead:
+#: the origin alignment takes only the first pose, so it scores a rotation-only trajectory
+#: (eas-vo's own, positions 0).
+ORIGIN_INSTEAD = "; to score the rotations alone (e.g. a rotation-only trajectory), align at the first pose: --align origin"
 
 
 @dataclass(frozen=True)
@@ -466,17 +470,19 @@ def trajectory_ape(ground_truth: PoseSeries, estimate: PoseSeries, align: str = 
     sim3 (Umeyama with scale: evo_ape -as, for monocular SLAM), se3 (-a) or origin (first
     poses made equal: --align_origin).
 
-    What each alignment needs, else ValueError: origin, 2 matched poses (the first one's error
-    is 0 by construction); sim3 and se3, 3 matched poses whose positions span a plane in both
-    trajectories (umeyama) and fix the alignment's rotation to within ALIGN_UNCERTAINTY_RAD
-    (alignment_uncertainty, with the position noise the best similarity leaves: a wrong scale
-    under se3 is an error to measure, not noise); and every figure finite.
+    What each alignment needs, else ValueError (for sim3 and se3 naming origin instead: a
+    rotation-only trajectory has no positions to align): origin, 2 matched poses (the first
+    one's error is 0 by construction); sim3 and se3, 3 matched poses whose positions span a
+    plane in both trajectories (umeyama) and fix the alignment's rotation to within
+    ALIGN_UNCERTAINTY_RAD (alignment_uncertainty, with the position noise the best similarity
+    leaves: a wrong scale under se3 is an error to measure, not noise); and every figure finite.
     """
     i_gt, i_est = associate(ground_truth.t, estimate.t, max_diff_s)
     least = 2 if align == "origin" else 3
     if len(i_gt) < least:
+        instead = ORIGIN_INSTEAD if len(i_gt) >= 2 else ""
         raise ValueError(f"{len(i_gt)} estimate pose(s) within {max_diff_s} s of a ground-truth pose; "
-                         f"{align} alignment needs at least {least}")
+                         f"{align} alignment needs at least {least}{instead}")
     p_gt, R_gt = ground_truth.p_w_c[i_gt], matrices_from_quats(ground_truth.q_w_c[i_gt])
     p_est, R_est = estimate.p_w_c[i_est], matrices_from_quats(estimate.q_w_c[i_est])
     if align == "origin":
@@ -486,14 +492,14 @@ def trajectory_ape(ground_truth: PoseSeries, estimate: PoseSeries, align: str = 
         similar = umeyama(p_est, p_gt, with_scale=True)
         if similar is None:
             raise ValueError(f"the positions of the {len(i_gt)} matched poses lie on a line or a point; "
-                             f"{align} alignment needs them to span a plane")
+                             f"{align} alignment needs them to span a plane{ORIGIN_INSTEAD}")
         with np.errstate(over="ignore", invalid="ignore"):  # an overflow is refused below
             shape_error_m = np.linalg.norm(p_gt - similarity_transform(*similar, p_est, R_est)[0], axis=1)
         uncertainty = alignment_uncertainty(p_gt, shape_error_m, dof=7)
         if uncertainty > ALIGN_UNCERTAINTY_RAD:
             raise ValueError(f"the {len(i_gt)} matched positions fix the {align} alignment's rotation only to about "
                              f"{uncertainty:.2g} rad ({ALIGN_UNCERTAINTY_RAD:g} at most): they spread too little across "
-                             "their main direction for how far they miss the ground truth")
+                             f"their main direction for how far they miss the ground truth{ORIGIN_INSTEAD}")
         R_a, t_a, s = similar if align == "sim3" else umeyama(p_est, p_gt, with_scale=False)
     with np.errstate(over="ignore", invalid="ignore"):  # an overflow is refused below
         p_aligned, R_aligned = similarity_transform(R_a, t_a, s, p_est, R_est)

@@ -115,6 +115,7 @@ def _run_into(parts: Pipeline, config: ResolvedConfig, out: Path | None, progres
         metrics = summarise(config, parts.dataset, tracked, errors, offset, offset_estimated,
                             time.perf_counter() - started, load_s, agreement, imu_offset, verdict, retracked)
         metrics["data_warnings"] = parts.imu_warnings + metrics["data_warnings"] + list(parts.backend.solver_warnings)
+        metrics["gyro_use"] = _gyro_use(parts, config, verdict, retracked)
         result = RunResult(t, R_w_c, tracked.records, tracked.edges, errors, metrics, parts.backend.causal_R_w_c,
                            parts.dataset.clock_origin_ns)
         if out is not None:
@@ -275,6 +276,29 @@ def _weaken_where_the_gyro_is_still(tracked: Tracked, verdict: GyroVerdict | Non
             for r in tracked.records:
                 log.write(r)
     return set(apart)
+
+
+def _gyro_use(parts: Pipeline, config: ResolvedConfig, verdict: GyroVerdict | None, retracked: bool) -> str | None:
+    """What read the gyro, for the run's summary (metrics.json `gyro_use`): the tracker (its
+    Tracker.imu_use) unless the frames were tracked again without it, the backend (its
+    Backend.imu_use) unless the images contradict it; None when nothing did."""
+    if verdict is None or verdict.contradicts:
+        return None
+    uses = []
+    if parts.tracker.uses_imu and not retracked:
+        uses.append(f"by the {config.run.tracker} tracker as {parts.tracker.imu_use} "
+                    f"(the rotations measured from {_tracked_from(config)})")
+    if parts.backend.uses_imu:
+        uses.append(f"by the {config.run.backend} backend as {parts.backend.imu_use}")
+    return " and ".join(uses) or None
+
+
+def _tracked_from(config: ResolvedConfig) -> str:
+    """What the tracker measures its rotations from, for a message: the frontend's images, or
+    the events for a tracker that reads no images (Tracker.reads_images)."""
+    if registry.get("trackers", config.run.tracker).reads_images:
+        return f"the {config.run.frontend} images"
+    return "the events"
 
 
 def _without_imu(parts: Pipeline, config: ResolvedConfig) -> Pipeline:
@@ -565,7 +589,7 @@ def _imu_clock_warning(config: ResolvedConfig, agreement: ImuAgreement) -> str:
     if _images_lag(config):
         return (f"{found}: the {config.run.frontend} images show the past, so this is taken for their lag and the "
                 f"IMU's clock is kept; to check the clock itself, run a frontend of the present (e.g. eas)")
-    return (f"{found}: the IMU's clock, or the time the {config.run.frontend} images show, is off by that; "
+    return (f"{found}: the IMU's clock, or the time {_tracked_from(config)} show, is off by that; "
             f"run.imu_time_offset_s = {at_least}{configured + shift:.4f} would match them, not {configured:.10g}")
 
 

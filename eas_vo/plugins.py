@@ -190,7 +190,7 @@ class Tracker:
 
     Required: `process(image, t)`. Optional: `reset()`, which `__init__` calls last, so a
     tracker sets up its per-sequence state there, `submit` (overlap with the next image),
-    `needs_imu`, `uses_imu`, `closes_loops`,
+    `needs_imu`, `uses_imu`, `imu_use`, `closes_loops`,
     `needs_events` (default False) and `reads_images` (default True). It never knows which
     frontend made the images. Frame indices count the images given since construction (or reset), from 0.
     """
@@ -207,6 +207,10 @@ class Tracker:
     #: `no_image` frontend whatever run.frontend says (no image is made; `image` is None), so an
     #: event-only dataset needs no frontend choice.
     reads_images: ClassVar[bool] = True
+    #: What the tracker reads the gyro for when `uses_imu`, for the run's summary ("gyro used by
+    #: the NAME tracker as ..."): the built-ins start their search from it (klt: where the
+    #: features move; cmax: each window's first rotation) and measure the rotation themselves.
+    imu_use: ClassVar[str] = "the start of its search for each rotation"
 
     def __init__(self, config=None, camera: CameraModel | None = None, *, imu: ImuSeries | None = None):
         """`camera`: the images' intrinsics and distortion; `imu`: the dataset's, when it has one,
@@ -264,7 +268,7 @@ class Backend:
     """Turns relative rotations into absolute camera-to-world rotations, one per frame.
 
     Required: `solve(n_frames, edges, *, times, imu)`. Optional: `causal_R_w_c`, `solver_warnings`, `needs_imu`,
-    `uses_imu`.
+    `uses_imu`, `imu_use`.
     """
 
     name: ClassVar[str] = "backend"
@@ -277,6 +281,9 @@ class Backend:
     #: Set by `solve`: one line per way the solution falls short (a solver that did not
     #: converge, measurements it left out), which the run prints as warnings. Empty by default.
     solver_warnings: tuple[str, ...] = ()
+    #: What the backend reads the gyro for when `uses_imu`, for the run's summary ("gyro used
+    #: ... by the NAME backend as ...").
+    imu_use: ClassVar[str] = "measurements fused with the tracker's rotations"
 
     def __init__(self, config=None):
         self.config = config if config is not None else self.Config()

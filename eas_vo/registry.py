@@ -54,6 +54,14 @@ def _load(kind: str) -> tuple[dict[str, type], dict[str, str]]:
     return loaded, failed
 
 
+def names(kind: str) -> list[str]:
+    """The names of the installed plugins of `kind` (one of KINDS), sorted, from their entry
+    points alone: nothing is imported (for help texts; `available` says which import)."""
+    if kind not in KINDS:
+        raise ValueError(f"unknown plugin kind {kind!r}")
+    return sorted(_entry_points(kind))
+
+
 def available(kind: str) -> dict[str, type]:
     """Every importable plugin of `kind` (one of KINDS), by name."""
     return _load(kind)[0]

@@ -281,7 +281,10 @@ def _simulate_events(config, sim: EventSimulator, steps, inputs, progress) -> tu
     chunks, truths = [], []
     pixel_s = np.zeros(2)  # dark, bright
     white = config.dvs.white_radiance
-    with tqdm(total=round(config.duration_s, 3), disable=not progress, unit="s", desc="simulating events") as bar:
+    # simulated time counted in whole microseconds, so that the bar ends exactly at its total
+    # (a sum of float steps passes it: tqdm warns), and shown in seconds
+    with tqdm(total=round(config.duration_s * 1e6), unit_scale=1e-6, disable=not progress, desc="simulating events",
+              bar_format="{desc}: {percentage:3.0f}%|{bar}| {n:.2f}/{total:.2f} s simulated [{elapsed}<{remaining}]") as bar:
         for t, t1 in zip(steps, steps[1:]):
             given = next(inputs)
             events, truth = sim.step(t, t1, given)
@@ -289,7 +292,7 @@ def _simulate_events(config, sim: EventSimulator, steps, inputs, progress) -> tu
             truths.append(truth)
             radiance = given.radiance
             pixel_s += (t1 - t) * np.array([np.count_nonzero(radiance < DARK * white), np.count_nonzero(radiance > BRIGHT * white)])
-            bar.update(round(t1 - t, 6))
+            bar.update(round(t1 * 1e6) - bar.n)
     events = np.concatenate(chunks) if chunks else np.empty(0, EVENT_DTYPE)
     return events, _stats(config.duration_s, truths, pixel_s, white)
 

@@ -142,6 +142,20 @@ def test_subprocess_entry_point_help_and_error():
     assert bad.returncode == 2 and bad.stderr.count("\n") == 1 and "dataset not found" in bad.stderr
 
 
+def test_run_help_lists_the_installed_plugins_of_every_kind(monkeypatch, capsys):
+    """From the registry's entry points, a third party's too: no hand-kept list."""
+    from eas_vo import registry
+
+    real = registry.names
+    monkeypatch.setattr(registry, "names", lambda kind: real(kind) + [f"thirdparty_{kind}"])
+    with pytest.raises(SystemExit):
+        main(["run", "--help"])
+    shown = " ".join(capsys.readouterr().out.split())
+    for option, kind in (("--dataset", "datasets"), ("--frontend", "frontends"), ("--tracker", "trackers"),
+                         ("--backend", "backends")):
+        assert re.search(rf"{option} \S+ (?:(?! --[a-z]).)*one of {', '.join(real(kind))}, thirdparty_{kind}\b", shown), (option, shown)
+
+
 def test_simulate_command(tmp_path, capsys):
     """A sequence is written; with --speed 3 the camera turns three times as far in the ground
     truth's first 5 ms (the same path, faster: test_motion has the exact relation)."""
@@ -269,6 +283,20 @@ def test_nonsense_values_and_usage_errors_are_one_line(argv, says, tmp_path, cap
     err = one_line_failure([a.replace("{tmp}", str(tmp_path)) for a in argv], capsys)
     assert says in err
     assert not any(tmp_path.iterdir())
+
+
+def test_evaluate_names_the_origin_alignment_for_a_rotation_only_trajectory(short_sequence, tmp_path, capsys):
+    """eas-vo's own trajectory.tum: positions 0, which the default sim3 alignment cannot align."""
+    from eas_vo.datasets.ecd import EcdFolderDataset
+    from eas_vo.geometry.rotations import matrices_from_quats
+    from eas_vo.pipeline import format_tum
+
+    gt = EcdFolderDataset(short_sequence).ground_truth
+    (tmp_path / "rotation_only.tum").write_text(format_tum(gt.t, np.zeros_like(gt.p_w_c), matrices_from_quats(gt.q_w_c)))
+    argv = ["evaluate", "--dataset", str(short_sequence), "--estimate", str(tmp_path / "rotation_only.tum")]
+    err = one_line_failure(argv, capsys)
+    assert "sim3 alignment needs them to span a plane" in err and "--align origin" in err
+    assert main([*argv, "--align", "origin"]) == 0 and "rotation APE mean 0.0000 rad" in capsys.readouterr().out
 
 
 @pytest.mark.parametrize("option", [["--backend", "gtsam", "--set", "backend.gyro=true"], ["--set", "tracker.predict='gyro'"]])

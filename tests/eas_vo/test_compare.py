@@ -1,6 +1,7 @@
 """`eas-vo compare`: the grid, its Table 1, resuming, failing cells, sweeps, parallel runs."""
 
 import contextlib
+import csv
 import io
 import json
 import os
@@ -212,6 +213,21 @@ def test_markdown_marks_the_best_of_each_column():
     ]
     md = table_markdown(rows)
     assert "| original | 20 | 0.600 |" in md and "| eas | **60** | **0.200** |" in md
+
+
+@pytest.mark.parametrize("ncs", [(0.0, 0.0), (0.0, None), (0.0, float("nan"))])
+def test_an_nc_of_zero_is_never_the_best(ncs):
+    """NC 0 counts no correspondence (nothing tracked, or an event tracker's): nothing to bold,
+    in table.md or table.csv; the best of the real values still is."""
+    from eas_vo.compare import table_csv
+
+    rows = [{"dataset": "d", "method": "cmax+chain", "frontend": f, "sweep": "", "status": "ok", "nc_mean": nc,
+             "ape_mean_rad": ape, "same_as": ""} for f, nc, ape in (("no_image", ncs[0], 0.05), ("other", ncs[1], 0.08))]
+    rows += [{**rows[0], "method": "klt+chain", "frontend": f, "nc_mean": nc} for f, nc in (("eas", 60.0), ("histeq", 0.0))]
+    lines = table_markdown(rows).splitlines()
+    assert lines[2].startswith("| no_image | 0 | **0.050** |") and "**0**" not in "".join(lines)
+    assert lines[4] == "| eas |  |  | **60** | **0.050** |" and lines[5].startswith("| histeq |  |  | 0 |")
+    assert [r["best_nc"] for r in csv.DictReader(io.StringIO(table_csv(rows)))] == ["0", "0", "1", "0"]
 
 
 def test_the_motion_table_gives_angular_velocity_and_rpe_with_the_best_in_bold():

@@ -29,6 +29,76 @@ def test_precedence_file_then_flags_then_set(tmp_path):
     assert cfg.run.frontend == "eas" and cfg.frontend.n == 100
 
 
+def _spelled(dotted: str, value) -> str:
+    """`tracker.klt.threshold2`, 150 -> the TOML that sets it."""
+    table, key = dotted.rsplit(".", 1)
+    return f"[{table}]\n{key} = {value}\n"
+
+
+#: A family of spellings of one key: a plugin's key flat or in its table; the IMU's clock in
+#: [run] or in the places older config files hold it.
+SPELLINGS = {
+    "threshold2": ("tracker", ["tracker.threshold2", "tracker.klt.threshold2"], 150, 100),
+    "imu_time_offset_s": ("run", ["run.imu_time_offset_s", "tracker.imu_time_offset_s", "tracker.klt.imu_time_offset_s",
+                                  "backend.chain.imu_time_offset_s"], 0.004, 0.009),
+}
+
+
+@pytest.mark.parametrize("key,in_file,in_set", [
+    (key, in_file, in_set) for key, (_, spellings, _, _) in SPELLINGS.items()
+    for in_file in [None, *spellings] for in_set in [None, *spellings]
+])
+def test_precedence_is_by_source_whatever_the_spelling(tmp_path, key, in_file, in_set):
+    """--set beats the file and the file beats the defaults, flat key or plugin table alike."""
+    section, _, file_value, set_value = SPELLINGS[key]
+    path = tmp_path / "c.toml"
+    path.write_text(_spelled(in_file, file_value) if in_file else "")
+    cfg = resolve(path, {}, [f"{in_set}={set_value}"] if in_set else [])
+    default = getattr(getattr(resolve(), section), key)
+    assert getattr(getattr(cfg, section), key) == (set_value if in_set else file_value if in_file else default)
+
+
+@pytest.mark.parametrize("in_file", [False, True])
+@pytest.mark.parametrize("in_options", [False, True])
+@pytest.mark.parametrize("in_set", [False, True])
+def test_precedence_of_the_file_the_options_and_set(tmp_path, in_file, in_options, in_set):
+    path = tmp_path / "c.toml"
+    path.write_text("[run]\nstart_s = 1.0\n" if in_file else "")
+    cfg = resolve(path, {"start_s": 2.0 if in_options else None}, ["run.start_s=3.0"] if in_set else [])
+    assert cfg.run.start_s == (3.0 if in_set else 2.0 if in_options else 1.0 if in_file else 0.0)
+
+
+def test_a_file_giving_a_key_flat_and_in_its_plugin_table_is_refused_unless_they_agree(tmp_path):
+    path = tmp_path / "c.toml"
+    path.write_text("[tracker]\nthreshold2 = 150\n[tracker.klt]\nthreshold2 = 100\n")
+    with pytest.raises(ConfigError, match=rf"^{path}: tracker.threshold2 = 150 and tracker.klt.threshold2 = 100 "
+                                          r"both set the klt tracker's threshold2; keep one$"):
+        resolve(path)
+    path.write_text("[tracker]\nthreshold2 = 150\n[tracker.klt]\nthreshold2 = 150\n")
+    assert resolve(path).tracker.threshold2 == 150
+    path.write_text("[frontend]\nn = 3000\n[frontend.slice]\nn = 5000\n")  # another plugin's table: no twin
+    assert resolve(path, {"frontend": "eas"}).frontend.n == 3000
+    with pytest.raises(ConfigError, match=r"frontend.n = 3000 and frontend.slice.n = 5000 both set the slice frontend's n"):
+        resolve(path, {"frontend": "slice"})
+
+
+@pytest.mark.parametrize("first,then", [("tracker.threshold2", "tracker.klt.threshold2"),
+                                        ("tracker.klt.threshold2", "tracker.threshold2")])
+def test_among_set_assignments_the_later_wins_whatever_the_spelling(first, then):
+    assert resolve(None, {}, [f"{first}=120", f"{then}=130"]).tracker.threshold2 == 130
+
+
+def test_the_lenient_option_is_an_option_that_set_overrides(short_sequence):
+    from argparse import Namespace
+
+    from eas_vo.cli import _assignments
+
+    args = Namespace(assignments=["dataset.lenient=false"], lenient=True)
+    assert not resolve(None, {"dataset": str(short_sequence)}, _assignments(args)).dataset.lenient
+    args = Namespace(assignments=[], lenient=True)
+    assert resolve(None, {"dataset": str(short_sequence)}, _assignments(args)).dataset.lenient
+
+
 def test_per_plugin_tables_apply_only_to_their_plugin(tmp_path):
     path = tmp_path / "c.toml"
     path.write_text("[frontend.eas]\nbeta = 40.0\n[frontend.slice]\nn = 123\n")
@@ -143,20 +213,26 @@ def test_hostile_config_files_are_one_line_errors_or_taken_exactly(tmp_path_fact
 
 def test_a_config_written_before_the_imu_moved_to_run_still_resolves(tmp_path):
     """config.toml files written before run.imu_* existed hold the IMU's place in [tracker]
-    and [backend] (or the chosen plugin's table): it moves to [run] unless [run] or --set
-    run.KEY says otherwise; two old places that disagree are one error naming both."""
+    and [backend] (or the chosen plugin's table): it moves to [run] unless the same source's
+    [run] says otherwise, and a later source (--set) wins however it spells the key; two old
+    places in one source that disagree are one error naming both."""
     old = tmp_path / "old.toml"
-    old.write_text('[run]\ntracker = "klt"\nbackend = "gtsam"\n[tracker]\nimu_rotvec_cam = [0.0, 0.0, 1.5]\n'
-                   'imu_time_offset_s = 0.004\n[backend.gtsam]\nimu_rotvec_cam = [0, 0, 1.5]\nimu_time_offset_s = 0.004\n')
+    text = ('[run]\ntracker = "klt"\nbackend = "gtsam"\n[tracker]\nimu_rotvec_cam = [0.0, 0.0, 1.5]\n'
+            'imu_time_offset_s = 0.004\n[backend.gtsam]\nimu_rotvec_cam = [0, 0, 1.5]\nimu_time_offset_s = 0.004\n')
+    old.write_text(text)
     cfg = resolve(old)
     assert cfg.run.imu_rotvec_cam == (0.0, 0.0, 1.5) and cfg.run.imu_time_offset_s == 0.004
     assert not any("imu_" in f.name for f in fields(cfg.tracker))
-    with pytest.raises(ConfigError, match=r"tracker.imu_time_offset_s = 0.004, backend.gtsam.imu_time_offset_s = 0.005: "
-                                          r"the rig has one IMU; set run.imu_time_offset_s only"):
-        resolve(old, assignments=["backend.gtsam.imu_time_offset_s=0.005"])
     # what the run's IMU warning asks for wins over the old places; other plugins' tables are not read
     assert resolve(old, assignments=["run.imu_time_offset_s=0.009"]).run.imu_time_offset_s == 0.009
+    assert resolve(old, assignments=["backend.gtsam.imu_time_offset_s=0.005"]).run.imu_time_offset_s == 0.005
     assert resolve(old, assignments=["backend.chain.imu_time_offset_s=0.5"]).run.imu_time_offset_s == 0.004
+    old.write_text(text.replace("tracker = \"klt\"\n", "tracker = \"klt\"\nimu_time_offset_s = 0.001\n"))
+    assert resolve(old).run.imu_time_offset_s == 0.001  # the file's [run] over its old places
+    old.write_text(text.replace("imu_time_offset_s = 0.004\n", "imu_time_offset_s = 0.005\n", 1))
+    with pytest.raises(ConfigError, match=rf"^{old}: tracker.imu_time_offset_s = 0.005, backend.gtsam.imu_time_offset_s = "
+                                          r"0.004: the rig has one IMU; set run.imu_time_offset_s only$"):
+        resolve(old, assignments=["run.imu_time_offset_s=0.009"])
 
 
 @pytest.mark.parametrize("text,says", [

@@ -271,6 +271,23 @@ def test_an_alignment_the_positions_cannot_fix_is_refused(align, positions, says
         trajectory_ape(gt, PoseSeries(gt.t, positions(gt.p_w_c), gt.q_w_c), align)
 
 
+@pytest.mark.parametrize("align", ["sim3", "se3"])
+@pytest.mark.parametrize("positions", [
+    lambda p: np.zeros_like(p),  # eas-vo's own trajectories: rotation only
+    lambda p: np.array([[10.0, 20, 30], [11, 22, 33], [12, 24, 36 + 1e-9]]),  # on a line
+    lambda p: p + np.random.default_rng(1).normal(0, 0.01, p.shape),  # too little spread
+    lambda p: p[:2],  # too few poses
+])
+def test_an_alignment_the_positions_cannot_fix_names_the_origin_alignment(align, positions):
+    from eas_vo.evaluation import trajectory_ape
+
+    gt = _path_of_three()
+    p = positions(gt.p_w_c)
+    with pytest.raises(ValueError, match=f"{align} alignment.*; to score the rotations alone .*: --align origin$"):
+        trajectory_ape(gt, PoseSeries(gt.t[:len(p)], p, gt.q_w_c[:len(p)]), align)
+    assert trajectory_ape(gt, PoseSeries(gt.t[:len(p)], p, gt.q_w_c[:len(p)]), "origin").summary()["ape_rot_mean_rad"] < 1e-9
+
+
 def test_an_alignment_needs_its_least_poses_and_reaches_any_finite_scale():
     from eas_vo.evaluation import trajectory_ape
 

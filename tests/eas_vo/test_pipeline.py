@@ -161,3 +161,37 @@ def test_the_gyro_is_reclocked_only_for_a_backend_that_reads_it_and_a_shift_foun
             assert "run.imu_time_offset_s" not in said[0]
         else:
             assert f"run.imu_time_offset_s = {limit}0.0170 would match them, not 0.005" in said[0]
+
+
+@pytest.mark.parametrize("tracker,backend,retracked,says", [
+    ("cmax", "chain", False, "by the cmax tracker as the start of its search for each rotation (the rotations measured "
+                             "from the events)"),
+    ("klt", "gtsam", False, "by the klt tracker as the start of its search for each rotation (the rotations measured "
+                            "from the eas images) and by the gtsam backend as measurements fused with the tracker's rotations"),
+    ("klt", "gtsam", True, "by the gtsam backend as measurements fused with the tracker's rotations"),
+    ("klt", "chain", True, None),
+])
+def test_the_summary_says_what_the_gyro_is_used_for(tracker, backend, retracked, says):
+    """An event-only run's gyro is its tracker's start point, not a measurement: the summary
+    says so from each plugin's own word (Tracker.imu_use, Backend.imu_use)."""
+    from types import SimpleNamespace
+
+    from eas_vo.pipeline import _gyro_use
+
+    cfg = config.resolve(None, {"tracker": tracker, "backend": backend})
+    parts = SimpleNamespace(tracker=SimpleNamespace(uses_imu=True, imu_use=registry.get("trackers", tracker).imu_use),
+                            backend=SimpleNamespace(uses_imu=backend == "gtsam", imu_use=registry.get("backends", backend).imu_use))
+    assert _gyro_use(parts, cfg, SimpleNamespace(contradicts=False), retracked) == says
+    assert _gyro_use(parts, cfg, SimpleNamespace(contradicts=True), retracked) is None
+    assert _gyro_use(parts, cfg, None, retracked) is None
+
+
+@pytest.mark.parametrize("tracker,frontend,names", [("cmax", "eas", "the time the events show"),
+                                                    ("klt", "histeq", "the time the histeq images show")])
+def test_the_imu_clock_warning_names_what_the_tracker_measured(tracker, frontend, names):
+    from eas_vo.evaluation import ImuAgreement
+    from eas_vo.pipeline import _imu_disagrees
+
+    cfg = config.resolve(None, {"tracker": tracker, "frontend": frontend})
+    (said,) = _imu_disagrees(cfg, ImuAgreement(np.eye(3), 100, 90, 0.6, 0.012, False, 0.004, 0.008, 0.5), reclocked=False)
+    assert f"the IMU's clock, or {names}, is off by that" in said and "no_image" not in said

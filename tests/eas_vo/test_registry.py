@@ -1,6 +1,7 @@
 """Plugin discovery through entry points, dataset resolution, and a broken installation."""
 
 import importlib
+import subprocess
 import sys
 
 import pytest
@@ -83,3 +84,15 @@ def test_datasets_folder_refuses_to_be_a_top_level_package(monkeypatch):
     monkeypatch.delitem(sys.modules, "datasets", raising=False)
     with pytest.raises(ImportError, match="installs as 'eas_vo.datasets'"):
         importlib.import_module("datasets")
+
+
+def test_names_are_the_installed_plugins_without_importing_them(tmp_path):
+    for kind in registry.KINDS:
+        assert registry.names(kind) == sorted(registry.available(kind)) == sorted(registry._entry_points(kind))
+    with pytest.raises(ValueError, match="unknown plugin kind 'frontend'"):
+        registry.names("frontend")
+    check = ("import sys; from eas_vo import registry; [registry.names(k) for k in registry.KINDS]; "
+             "print(sorted(m for m in sys.modules if m.startswith(('eas_vo.frontends', 'eas_vo.trackers', 'eas_vo.backends', "
+             "'eas_vo.datasets'))))")
+    assert subprocess.run([sys.executable, "-c", check], capture_output=True, text=True, check=True,
+                          cwd=tmp_path).stdout.strip() == "[]"

@@ -1,6 +1,9 @@
 """The simulated sequence as written: determinism, event times, ground truth and IMU, any
 sensor size and lens."""
 
+import dataclasses
+import re
+
 import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
@@ -104,3 +107,16 @@ def test_a_translation_scale_of_one_keeps_every_earlier_sequences_cache_key():
     assert "translation_scale" not in SimConfig().fingerprint()
     assert SimConfig(translation_scale=1).fingerprint() == SimConfig().fingerprint()
     assert SimConfig(translation_scale=2.0).fingerprint() != SimConfig().fingerprint()
+
+
+def test_the_progress_bar_counts_simulated_seconds_to_its_end(tmp_path, capsys):
+    """0.5 s: a duration whose float steps overshoot it (tqdm warned and clamped)."""
+    import warnings
+
+    camera = dataclasses.replace(SENSORS["davis240"], width=48, height=36, cx=23.5, cy=17.5, fx=40.0, fy=40.0)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        simulate(SimConfig(duration_s=0.5, seed=1, camera=camera), tmp_path / "s", progress=True)
+    shown = capsys.readouterr().err.replace("\r", "\n").strip().splitlines()
+    assert re.search(r"100%\|.*\| 0\.50/0\.50 s simulated \[", shown[-1]), shown[-1]
+    assert all(re.search(r"\d\.\d\d/0\.50 s simulated", line) for line in shown), shown
