@@ -11,7 +11,7 @@ from typing import BinaryIO, Iterator
 
 import numpy as np
 
-from eas_vo.eventfile.kernels import POW10, parse_and_pack
+from eas_vo.eventfile.kernels import parse_and_pack
 from eas_vo.types import EVENT_DTYPE
 
 BLOCK_BYTES = 64 << 20
@@ -120,7 +120,7 @@ class BlockParser:
         def run(k):
             piece = pieces[k]
             out = self._buffer((parity, k), len(piece) // 8 + 1)  # a line has at least 8 bytes
-            n, bad, lines, first_t, last_t = parse_and_pack(piece, POW10, *self.limits, -np.inf, out.view(np.uint8))
+            n, bad, lines, first_t, last_t = parse_and_pack(piece, *self.limits, -np.inf, out.view(np.uint8))
             return piece, (None if bad >= 0 else (out[:n], lines, first_t, last_t))
 
         return list(self.pool.map(run, range(len(pieces)))) if len(pieces) > 1 else [run(0)]

@@ -6,10 +6,22 @@ Compiled with `cache=True`: the machine code is kept on disk beside this file.
 
 from __future__ import annotations
 
+import math
+
 import numba
 import numpy as np
 
-POW10 = 10.0 ** np.arange(19)
+#: 10**k, k = 0..22: each exact in float64 (5**22 < 2**53).
+POW10 = np.array([float(10**k) for k in range(23)])
+_TWO53_INT = 1 << 53
+#: Integer seconds s with s * 10**k + (k fraction digits) < 2**53, for k = 0..15: below
+#: _SECONDS_EXACT[k], a time's whole decimal mantissa is an exact float64.
+_SECONDS_EXACT = np.array([_TWO53_INT // 10**k for k in range(16)], np.int64)
+_IPOW10 = np.array([10**k for k in range(16)], np.int64)
+#: The integer part of a time the compiled parser takes: below this, s * 10 + 9 < 2**53.
+_SECONDS_MAX = (_TWO53_INT - 10) // 10
+#: Fraction digits are kept while the kept ones are below this (at most 18 digits: an int64).
+_FRACTION_KEPT = 10**17
 #: Rows a table kernel checks at once: the block's rows stay in the L1 cache between its two passes.
 TABLE_CHUNK_ROWS = 1024
 
@@ -41,14 +53,48 @@ def _pack(out, n, t, x, y, p, scratch):
     out[o + 12] = 1 if p > 0 else 0
 
 
+@numba.njit(cache=True, nogil=True, inline="always")
+def _decimal_time(sec, frac, dec, truncated):
+    """The float64 nearest to the time `sec` + `frac` / 10**dec [s] (`truncated`: nonzero digits
+    beyond the dec-th were dropped), or NaN where this cannot be sure of the nearest (a text
+    path decides those lines). sec < 2**53, dec <= 22.
+
+    Whole mantissa below 2**53: one exact division (correctly rounded). Else (Unix times with
+    nanoseconds): S = sec exact, F = frac / 10**dec correctly rounded (error at most F 2**-53,
+    taken as F 2**-51; plus 10**-dec when truncated), s = S + F and its exact error e
+    (Fast2Sum: |S| >= |F|); s is the nearest double to the decimal unless the exact value may
+    lie at or beyond the midpoint between s and a neighbour, which is when |e| plus that bound
+    reaches half a unit in the last place of s."""
+    if not truncated and frac < _TWO53_INT:
+        if sec == 0:
+            return frac / POW10[dec]
+        if dec < 16 and sec < _SECONDS_EXACT[dec]:
+            return (sec * _IPOW10[dec] + frac) / POW10[dec]
+    big = float(sec)
+    small = frac / POW10[dec]
+    s = big + small
+    err = small - (s - big)
+    bound = small * 4.440892098500626e-16 + (2.0 / POW10[dec] if truncated else 0.0)
+    m, e = math.frexp(s)
+    half_up = math.ldexp(1.0, e - 54)
+    half_down = half_up * 0.5 if m == 0.5 else half_up
+    if err + bound < half_up and bound - err < half_down:
+        return s
+    return np.nan
+
+
 @numba.njit(cache=True, nogil=True, error_model="numpy")
-def parse_and_pack(buf, pow10, width, height, tolerance_s, last_t, out):
+def parse_and_pack(buf, width, height, tolerance_s, last_t, out):
     """Parse, validate and pack `t x y p` lines of `buf` (which ends with a newline: it stops
     every scan) into EVENT_DTYPE records in the bytes `out`, after a previous time `last_t`.
 
-    Returns (rows, byte offset of the first line that is not in the plain form or not valid,
-    or -1, newlines before it, first time, last time). A time is the nearest double to its
-    decimal text (an exact integer mantissa over an exact power of ten).
+    A time has any number of digits before and after its point (the integer part below
+    2**53 / 10 s); it is the float64 nearest to its decimal text (_decimal_time), whatever
+    its clock's origin (Unix times with nanoseconds too). A pixel coordinate or polarity is a
+    whole number, written with or without a fraction of zeros (`120`, `120.`, `120.000`).
+
+    Returns (rows, byte offset of the first line that is not in that form or not valid, or
+    -1, newlines before it, first time, last time).
 
     The digit loops are written out on purpose: factored into an inlined helper they ran
     at half the speed. The scan index is unsigned to spare numba's negative-index checks.
@@ -70,23 +116,33 @@ def parse_and_pack(buf, pow10, width, height, tolerance_s, last_t, out):
             lines += 1
             continue
         start = i
-        mant = 0
+        sec = 0
         nd = 0
         while 48 <= c <= 57:
-            mant = mant * 10 + (c - 48)
+            if sec > _SECONDS_MAX:
+                return n, np.int64(start), lines, first_t, last_t
+            sec = sec * 10 + (c - 48)
             nd += 1
             i += one
             c = buf[i]
+        frac = 0
         dec = 0
+        truncated = False
         if c == 46:
             i += one
             c = buf[i]
             while 48 <= c <= 57:
-                mant = mant * 10 + (c - 48)
-                dec += 1
+                if frac < _FRACTION_KEPT:
+                    frac = frac * 10 + (c - 48)
+                    dec += 1
+                elif c != 48:
+                    truncated = True
                 i += one
                 c = buf[i]
-        if nd + dec == 0 or nd + dec > 15 or not (c == 32 or c == 9):
+        if nd + dec == 0 or dec > 22 or not (c == 32 or c == 9):
+            return n, np.int64(start), lines, first_t, last_t
+        t = _decimal_time(sec, frac, dec, truncated)
+        if t != t:
             return n, np.int64(start), lines, first_t, last_t
         x = y = p = 0
         for k in range(3):
@@ -105,7 +161,13 @@ def parse_and_pack(buf, pow10, width, height, tolerance_s, last_t, out):
                 m += 1
                 i += one
                 c = buf[i]
-            if m == 0 or m > 6:
+            if c == 46:  # a whole number written with a fraction of zeros
+                i += one
+                c = buf[i]
+                while c == 48:
+                    i += one
+                    c = buf[i]
+            if m == 0 or m > 6 or 48 <= c <= 57:
                 return n, np.int64(start), lines, first_t, last_t
             if k == 0:
                 x = v
@@ -118,7 +180,7 @@ def parse_and_pack(buf, pow10, width, height, tolerance_s, last_t, out):
             c = buf[i]
         if c != 10:
             return n, np.int64(start), lines, first_t, last_t
-        ok, t = _accept(mant / pow10[dec], x, y, p, last_t, width, height, tolerance_s)
+        ok, t = _accept(t, x, y, p, last_t, width, height, tolerance_s)
         if not ok:
             return n, np.int64(start), lines, first_t, last_t
         if n == 0:
