@@ -6,14 +6,15 @@ dataset plugin. Not a plugin.
                            node (named after it) or the top level holds camera_matrix,
                            distortion_coefficients, image_width, image_height; the lens model is
                            `distortion_model` (RadialTangential / Equidistant) or, in older files,
-                           `use_fisheye_model`
+                           `use_fisheye_model`, in the camera's node or at the top level
     kalibr camchain YAML   camN: camera_model pinhole, intrinsics [fu fv pu pv],
                            distortion_model radtan / equidistant, distortion_coeffs, resolution [w h]
     ROS camera_info YAML   image_width, image_height, camera_matrix, distortion_model
                            plumb_bob / equidistant, distortion_coefficients (camera_calibration_parsers)
 
-`read_calibration` tells them apart by content. Every error is one line naming the file and
-the key (or line) at fault.
+`read_calibration` tells them apart by content. Every value is checked (sizes whole numbers of
+pixels up to MAX_SENSOR_PX, everything finite, focal lengths, principal point and distortion in
+range); every error is one line naming the file and the key (or line) at fault.
 """
 
 from __future__ import annotations
@@ -28,56 +29,94 @@ from eas_vo.errors import DataError
 from eas_vo.types import LENS_MODELS, CameraModel
 
 
-def camera_problem(values, width: int, height: int, model: str = "radtan") -> str | None:
-    """What makes `fx fy cx cy` [px] and distortion coefficients (in `model`'s order) impossible
-    for a width x height camera, or None: focal lengths between 0.1 and 100 sensor widths
-    (fields of view of about 160 down to 0.6 degrees), the principal point on the sensor; radtan:
-    |k1|, |k2|, |k3| <= 10 and |p1|, |p2| <= 1; equidistant: |k1..k4| <= 10 (beyond, the model no
-    longer maps the sensor)."""
-    fx, fy, cx, cy = values[:4]
+#: The largest sensor side [px] a calibration or a dataset may have (the largest event sensors
+#: are a few thousand).
+MAX_SENSOR_PX = 16384
+
+
+def _intrinsics_problem(fx, fy, cx, cy, width: int, height: int) -> str | None:
     side = max(width, height)
     if not (0.1 * side <= fx <= 100 * side and 0.1 * side <= fy <= 100 * side):
         return f"focal lengths fx = {fx:g}, fy = {fy:g} px are not those of a {width}x{height} camera " \
                f"({0.1 * side:g} to {100 * side:g} px)"
     if not (0 <= cx <= width and 0 <= cy <= height):
         return f"principal point cx = {cx:g}, cy = {cy:g} px lies off the {width}x{height} sensor"
-    dist = (list(values[4:]) + [0.0] * len(LENS_MODELS[model]))[: len(LENS_MODELS[model])]
+    return None
+
+
+def _distortion_problem(dist, model: str) -> str | None:
+    dist = (list(dist) + [0.0] * len(LENS_MODELS[model]))[: len(LENS_MODELS[model])]
     if model == "equidistant":
-        if max(map(abs, dist)) > 10:
+        if not max(map(abs, dist)) <= 10:
             return f"distortion k1 k2 k3 k4 = {' '.join(f'{d:g}' for d in dist)} out of range (|k| <= 10)"
-    elif max(abs(dist[0]), abs(dist[1]), abs(dist[4])) > 10 or max(abs(dist[2]), abs(dist[3])) > 1:
+    elif not (max(abs(dist[0]), abs(dist[1]), abs(dist[4])) <= 10 and max(abs(dist[2]), abs(dist[3])) <= 1):
         return f"distortion k1 k2 p1 p2 k3 = {' '.join(f'{d:g}' for d in dist)} out of range (|k| <= 10, |p| <= 1)"
     return None
 
 
-def camera_model(where: str, width: int, height: int, K, dist, model: str = "radtan", key: str = "") -> CameraModel:
+def camera_problem(values, width: int, height: int, model: str = "radtan") -> str | None:
+    """What makes `fx fy cx cy` [px] and distortion coefficients (in `model`'s order) impossible
+    for a width x height camera, or None: focal lengths between 0.1 and 100 sensor widths
+    (fields of view of about 160 down to 0.6 degrees), the principal point on the sensor; radtan:
+    |k1|, |k2|, |k3| <= 10 and |p1|, |p2| <= 1; equidistant: |k1..k4| <= 10 (beyond, the model no
+    longer maps the sensor). NaN fails every range."""
+    return _intrinsics_problem(*values[:4], width, height) or _distortion_problem(values[4:], model)
+
+
+def sensor_size(where: str, value, key: str) -> tuple[int, int]:
+    """(width, height) [px] from a calibration's two size values (ints, or floats holding whole
+    numbers), each 1 to MAX_SENSOR_PX; else one DataError naming the file and `key`."""
+    ok = len(value) == 2 and all(
+        isinstance(v, (int, float, np.integer, np.floating)) and not isinstance(v, bool) and math.isfinite(v)
+        and v == int(v) and 1 <= v <= MAX_SENSOR_PX for v in value)
+    if not ok:
+        found = ", ".join(f"{v!r:.20}" for v in value)
+        raise DataError(where, f"{key}: the sensor size must be two whole numbers of pixels, 1 to {MAX_SENSOR_PX} "
+                               f"(found {found})")
+    return int(value[0]), int(value[1])
+
+
+def check_frame_size(camera: CameraModel, width: int, height: int, where: str, what: str = "the frames are",
+                     key: str = "") -> None:
+    """One DataError naming both sizes when images of width x height [px] (`what` they are: the
+    frames, frame k, the recording's sensor) are not the size `camera` was calibrated for:
+    its intrinsics describe another sensor (or a crop of one), whatever else fits."""
+    if (camera.width, camera.height) != (width, height):
+        at = f"{key}: " if key else ""
+        raise DataError(where, f"{at}the calibration is for {camera.width}x{camera.height} px, {what} {width}x{height}")
+
+
+def camera_model(where: str, width: int, height: int, K, dist, model: str = "radtan",
+                 keys: tuple[str, str, str] = ("", "", "")) -> CameraModel:
     """A checked CameraModel from a 3x3 intrinsic matrix [px] and distortion coefficients in
     `model`'s order: radtan takes up to 5 (k1 k2 p1 p2 k3, those left out zero; more only if the
-    extra rational terms are zero), equidistant exactly 4. `key` names where they came from in the file."""
-    at = f"{key}: " if key else ""
+    extra rational terms are zero), equidistant exactly 4. `keys` name where the sensor size,
+    the matrix and the coefficients came from in the file, for the messages."""
+    K_key, dist_key = (f"{k}: " if k else "" for k in keys[1:])
     K, dist = np.asarray(K, float).ravel(), np.asarray(dist, float).ravel()
+    width, height = sensor_size(where, (width, height), keys[0] or "sensor size")
     if len(K) != 9:
-        raise DataError(where, f"{at}camera matrix has {len(K)} values, not 9")
+        raise DataError(where, f"{K_key}camera matrix has {len(K)} values, not 9")
+    for at, values in ((K_key, K), (dist_key, dist)):
+        if not np.isfinite(values).all():
+            raise DataError(where, f"{at}intrinsics and distortion must be finite (found {' '.join(f'{v:g}' for v in values)})")
     K = K.reshape(3, 3)
-    if not (1 <= width <= 1 << 16 and 1 <= height <= 1 << 16):
-        raise DataError(where, f"{at}sensor size {width}x{height} px is not a camera's")
-    if not (np.isfinite(K).all() and np.isfinite(dist).all()):
-        raise DataError(where, f"{at}intrinsics and distortion must be finite (found NaN or infinity)")
     n = len(LENS_MODELS[model])
     if model == "equidistant" and len(dist) != n:
-        raise DataError(where, f"{at}the equidistant lens model takes 4 distortion coefficients (k1 k2 k3 k4), found {len(dist)}")
+        raise DataError(where, f"{dist_key}the equidistant lens model takes 4 distortion coefficients (k1 k2 k3 k4), "
+                               f"found {len(dist)}")
     if model == "radtan":
         if len(dist) > 5 and dist[5:].any():
-            raise DataError(where, f"{at}{len(dist)} radial-tangential distortion coefficients: k1 k2 p1 p2 [k3] are read "
-                                   "(the rational and thin-prism terms of OpenCV's longer forms are not supported)")
+            raise DataError(where, f"{dist_key}{len(dist)} radial-tangential distortion coefficients: k1 k2 p1 p2 [k3] are "
+                                   "read (the rational and thin-prism terms of OpenCV's longer forms are not supported)")
         dist = np.concatenate([dist, np.zeros(n)])[:n]
     if K[0, 1] != 0 or K[1, 0] != 0 or K[2, 0] != 0 or K[2, 1] != 0 or K[2, 2] != 1:
-        raise DataError(where, f"{at}camera matrix is not [[fx 0 cx] [0 fy cy] [0 0 1]] (skew is not supported)")
-    values = [K[0, 0], K[1, 1], K[0, 2], K[1, 2], *dist]
-    problem = camera_problem(values, width, height, model)
-    if problem:
-        raise DataError(where, f"{at}{problem}")
-    return CameraModel(int(width), int(height), K, dist, model)
+        raise DataError(where, f"{K_key}camera matrix is not [[fx 0 cx] [0 fy cy] [0 0 1]] (skew is not supported)")
+    for at, problem in ((K_key, _intrinsics_problem(K[0, 0], K[1, 1], K[0, 2], K[1, 2], width, height)),
+                        (dist_key, _distortion_problem(dist, model))):
+        if problem:
+            raise DataError(where, f"{at}{problem}")
+    return CameraModel(width, height, K, dist, model)
 
 
 def _intrinsic_matrix(fx, fy, cx, cy) -> np.ndarray:
@@ -121,10 +160,11 @@ def read_dv_xml(path: str | Path, camera: str | None = None) -> CameraModel:
     YAML form too).
 
     Newer files keep each camera's camera_matrix, distortion_coefficients, image_width and
-    image_height in a node named after the camera (e.g. `DVXplorer_DXA00093`) and the lens model
-    in the top-level `distortion_model`; older ones keep them all at the top level, the lens
-    model in `use_fisheye_model` (cv::fisheye, i.e. equidistant, when 1). `camera` picks the
-    node when there are several.
+    image_height in a node named after the camera (e.g. `DVXplorer_DXA00093`), the lens model in
+    `distortion_model` at the top level or (as cv2.FileStorage writes a camera's struct) in the
+    camera's node; older ones keep them all at the top level, the lens model in
+    `use_fisheye_model` (cv::fisheye, i.e. equidistant, when 1). `camera` picks the node when
+    there are several. The lens: _dv_lens_model.
     """
     import cv2
 
@@ -158,10 +198,11 @@ def read_dv_xml(path: str | Path, camera: str | None = None) -> CameraModel:
         K = _fs_matrix(where, node, prefix, "camera_matrix", 9)
         dist = _fs_matrix(where, node, prefix, "distortion_coefficients", None)
         width, height = (_fs_int(where, node, prefix, key) for key in ("image_width", "image_height"))
-        model = _dv_lens_model(where, root)
+        model = _dv_lens_model(where, root, node, prefix, cameras)
     finally:
         fs.release()
-    return camera_model(where, width, height, K, dist, model, f"{prefix}camera_matrix/distortion_coefficients")
+    return camera_model(where, width, height, K, dist, model,
+                        (f"{prefix}image_width, image_height", f"{prefix}camera_matrix", f"{prefix}distortion_coefficients"))
 
 
 def _fs_matrix(where: str, node, prefix: str, key: str, size: int | None) -> np.ndarray:
@@ -186,15 +227,55 @@ def _fs_int(where: str, node, prefix: str, key: str) -> int:
     return int(value.real())
 
 
-def _dv_lens_model(where: str, root) -> str:
-    named = root.getNode("distortion_model")
-    if not named.empty():
-        name = named.string() if named.isString() else ""
-        if name.lower() not in DV_LENS_MODELS:
-            raise DataError(where, f"distortion_model: {name or 'not a name'!r} is not read (RadialTangential or Equidistant)")
-        return DV_LENS_MODELS[name.lower()]
-    fisheye = root.getNode("use_fisheye_model")
-    return "equidistant" if not fisheye.empty() and fisheye.isInt() and fisheye.real() != 0 else "radtan"
+#: The keys that decide a DV calibration's lens model.
+DV_LENS_KEYS = ("distortion_model", "use_fisheye_model")
+
+
+def _dv_lens_model(where: str, root, node, prefix: str, cameras: list[str]) -> str:
+    """The lens model of the camera in `node` (`root` in the older layout; `prefix` its path):
+    `distortion_model` (a name) or `use_fisheye_model` (0 or 1), each read in the camera's node
+    and at the top level. Both places holding a key must agree, and so must the two keys, except
+    that use_fisheye_model 0 says nothing beside a distortion_model (DV's camera calibration
+    writes 0 whatever the model). A lens key anywhere else is an error, never ignored."""
+    _no_lens_keys_elsewhere(where, root, "", set(cameras))
+    names, flags = {}, {}
+    for at, place in [(prefix, node)] + ([("", root)] if prefix else []):
+        named, flag = place.getNode("distortion_model"), place.getNode("use_fisheye_model")
+        if not named.empty():
+            name = named.string() if named.isString() else ""
+            if name.lower() not in DV_LENS_MODELS:
+                raise DataError(where, f"{at}distortion_model: {name or 'not a name'!r} is not read "
+                                       "(RadialTangential or Equidistant)")
+            names[f"{at}distortion_model"] = DV_LENS_MODELS[name.lower()]
+        if not flag.empty():
+            if not (flag.isInt() and flag.real() in (0, 1)):
+                raise DataError(where, f"{at}use_fisheye_model: expected 0 or 1")
+            flags[f"{at}use_fisheye_model"] = "equidistant" if flag.real() else "radtan"
+    for said in (names, flags):
+        if len(set(said.values())) > 1:
+            raise DataError(where, "; ".join(f"{key} says {model}" for key, model in said.items()) + ": which lens?")
+    fisheye = [key for key, model in flags.items() if model == "equidistant"]
+    if names:
+        key, model = next(iter(names.items()))
+        if fisheye and model != "equidistant":
+            raise DataError(where, f"{key} says {model}; {fisheye[0]} says equidistant (a fisheye): which lens?")
+        return model
+    return "equidistant" if fisheye else "radtan"
+
+
+def _no_lens_keys_elsewhere(where: str, node, path: str, cameras: set[str]) -> None:
+    """A DataError for a lens key (DV_LENS_KEYS) at any depth of `node` but the top level and
+    the camera nodes (`cameras`), where _dv_lens_model reads them."""
+    if node.isMap():
+        for key in node.keys():
+            at = f"{path}{key}"
+            if key in DV_LENS_KEYS and path and path[:-1] not in cameras:
+                raise DataError(where, f"{at}: a lens model key where it is not read (it is read at the top level "
+                                       "and in a camera's node)")
+            _no_lens_keys_elsewhere(where, node.getNode(key), f"{at}/", cameras)
+    elif node.isSeq():
+        for k in range(node.size()):
+            _no_lens_keys_elsewhere(where, node.at(k), f"{path}{k}/", cameras)
 
 
 # -- YAML: kalibr camchain and ROS camera_info ----------------------------------------------
@@ -257,13 +338,13 @@ def parse_kalibr_camchain(data: bytes, where: str, camera: str = "cam0") -> Came
     if cam.get("camera_model") != "pinhole":
         raise DataError(where, f"{camera}.camera_model: {cam.get('camera_model')!r} is not read (pinhole only)")
     fu, fv, pu, pv = _numbers(where, cam, "intrinsics", 4, f"{camera}.intrinsics")
-    width, height = _numbers(where, cam, "resolution", 2, f"{camera}.resolution")
+    width, height = sensor_size(where, _numbers(where, cam, "resolution", 2, f"{camera}.resolution"), f"{camera}.resolution")
     model = _lens(where, cam, "distortion_model")
     dist = _numbers(where, cam, "distortion_coeffs", None, f"{camera}.distortion_coeffs")
     if cam["distortion_model"] == "none" and any(dist):
         raise DataError(where, f"{camera}.distortion_coeffs: distortion_model none with non-zero coefficients")
-    return camera_model(where, int(width), int(height), _intrinsic_matrix(fu, fv, pu, pv), dist, model,
-                        f"{camera}.distortion_coeffs")
+    return camera_model(where, width, height, _intrinsic_matrix(fu, fv, pu, pv), dist, model,
+                        (f"{camera}.resolution", f"{camera}.intrinsics", f"{camera}.distortion_coeffs"))
 
 
 def read_camera_info_yaml(path: str | Path) -> CameraModel:
@@ -284,17 +365,20 @@ def read_camera_info_yaml(path: str | Path) -> CameraModel:
             raise DataError(where, f"{key}: expected a matrix (rows, cols, data), found {'missing' if table is None else repr(table)}")
         matrices[key] = _numbers(where, table, "data", 9 if key == "camera_matrix" else None, f"{key}.data")
     return camera_from_camera_info(where, size[0], size[1], matrices["camera_matrix"], matrices["distortion_coefficients"],
-                                   content.get("distortion_model"), "camera_matrix/distortion_coefficients")
+                                   content.get("distortion_model"), "camera_matrix/distortion_coefficients",
+                                   "image_width, image_height")
 
 
-def camera_from_camera_info(where: str, width: int, height: int, K, D, distortion_model, key: str = "K/D") -> CameraModel:
+def camera_from_camera_info(where: str, width: int, height: int, K, D, distortion_model, key: str = "K/D",
+                            size_key: str = "width, height") -> CameraModel:
     """sensor_msgs/CameraInfo fields (a message or its YAML) -> CameraModel: K row-major [px], D in
     the order of `distortion_model` (plumb_bob, rational_polynomial with k4..k6 zero, or
-    equidistant; an empty name, as old drivers leave it, is plumb_bob)."""
+    equidistant; an empty name, as old drivers leave it, is plumb_bob). `key` names the K and D
+    fields together (`K/D`), `size_key` the size's, for the messages."""
     if distortion_model == "":
         distortion_model = "plumb_bob"
     model = _lens(where, {"distortion_model": distortion_model}, "distortion_model")
-    return camera_model(where, width, height, K, D, model, key)
+    return camera_model(where, width, height, K, D, model, (size_key, key, key))
 
 
 # -- any of them -------------------------------------------------------------------------
@@ -337,9 +421,8 @@ def read_calibration(path: str | Path, *, width: int | None = None, height: int 
         model, size_keys = read_camera_info_yaml(path), "image_width, image_height"
     else:
         model, size_keys = read_kalibr_camchain(path, camera or "cam0"), f"{camera or 'cam0'}.resolution"
-    if width is not None and height is not None and (model.width, model.height) != (width, height):
-        raise DataError(where, f"{size_keys}: the calibration is for {model.width}x{model.height} px, "
-                               f"the recording's sensor is {width}x{height}")
+    if width is not None and height is not None:
+        check_frame_size(model, width, height, where, "the recording's sensor is", size_keys)
     return model
 
 

@@ -25,7 +25,7 @@ import cv2
 import numpy as np
 
 from eas_vo.datasets import ecd_catalogue
-from eas_vo.datasets.calibration import parse_ecd_calib, parse_kalibr_camchain
+from eas_vo.datasets.calibration import MAX_SENSOR_PX, check_frame_size, parse_ecd_calib, parse_kalibr_camchain
 from eas_vo.datasets.recording import RecordingReader, StreamConfig, ground_truth_table, timed_table
 from eas_vo.datasets.sources import MARKERS, open_source
 from eas_vo.errors import DataError, DataWarnings
@@ -38,10 +38,6 @@ from eas_vo.validation import check_range
 #: The calibration of a fisheye sequence in this layout: calib.txt has only the radial-tangential
 #: model, so (as fisheye datasets in this layout ship, e.g. UZH-FPV's DAVIS) it is kalibr's camchain.
 CAMCHAIN = "camchain.yaml"
-
-#: The largest sensor side [px] a dataset may have (the largest event sensors are a few thousand).
-MAX_SENSOR_PX = 16384
-
 
 @dataclass(frozen=True)
 class EcdConfig(StreamConfig):
@@ -255,8 +251,8 @@ class EcdFolderDataset(RecordingReader):
         """cam0 of the folder's kalibr camchain (calibration.parse_kalibr_camchain), for the frames' size."""
         where = self.source.label(CAMCHAIN)
         camera = parse_kalibr_camchain(self.source.read_bytes(CAMCHAIN), where)
-        if (camera.width, camera.height) != (width, height):
-            raise DataError(where, f"cam0.resolution {camera.width}x{camera.height} is not the frames' {width}x{height}")
+        check_frame_size(camera, width, height, where, "the frames are" if self._frame_names else "dataset.width x dataset.height is",
+                         "cam0.resolution")
         return camera
 
     def _read_ground_truth(self) -> PoseSeries | None:

@@ -29,7 +29,7 @@ from typing import Callable
 
 import numpy as np
 
-from eas_vo.datasets.calibration import read_calibration
+from eas_vo.datasets.calibration import MAX_SENSOR_PX, read_calibration
 from eas_vo.datasets.recording import RecordingReader, StreamConfig, check_increasing, clock_origin_ns
 from eas_vo.errors import DataError, DataWarnings
 from eas_vo.eventfile import (Validator, cache_key, file_identity, load_cached, pack_rows, pack_table,
@@ -53,8 +53,6 @@ MAP_EVENTS = True
 #: madvise(2)'s MADV_POPULATE_READ (Linux 5.14; Python's mmap module names it from 3.12 on):
 #: a block's pages of the map faulted in with one call. None elsewhere.
 MADV_POPULATE_READ = getattr(mmap, "MADV_POPULATE_READ", 22 if sys.platform.startswith("linux") else None)
-#: The largest sensor side [px] a recording may have (as for the ECD reader).
-MAX_SENSOR_PX = 16384
 #: MVSEC's kalibr camera of each DAVIS.
 KALIBR_CAMERA = {"left": "cam0", "right": "cam1"}
 #: What h5py raises on a damaged file or an unreadable dataset (a truncated file, a filter

@@ -11,8 +11,8 @@ import sys
 from dataclasses import dataclass
 from pathlib import Path
 
-from eas_vo.datasets.ecd import MAX_SENSOR_PX, EcdFolderDataset
-from eas_vo.datasets.calibration import camera_problem
+from eas_vo.datasets.calibration import MAX_SENSOR_PX, camera_problem
+from eas_vo.datasets.ecd import EcdFolderDataset
 from eas_vo.datasets.simulator import SimConfig, simulate
 from eas_vo.datasets.simulator.generate import SENSORS, SimCamera
 from eas_vo.datasets.simulator.sensor import DvsModel

@@ -19,6 +19,7 @@ import numpy as np
 
 from eas_vo import concurrency, registry
 from eas_vo.config import TIME_OFFSET_LIMIT_S, ResolvedConfig
+from eas_vo.datasets.calibration import check_frame_size
 from eas_vo.errors import EasVoError, Interrupted
 from eas_vo.evaluation import (OFFSET_SEARCH_S, ImuAgreement, RotationErrors, estimate_time_offset, imu_agreement,
                                motion_errors, rotation_errors)
@@ -198,8 +199,11 @@ def open_pipeline(config: ResolvedConfig) -> Pipeline:
     rc = config.run
     dataset = registry.open_dataset(rc.dataset, config.dataset)
     frontend_cls = registry.get("frontends", rc.frontend)
-    if frontend_cls.needs_frames and dataset.load_frame(0) is None:
+    first_frame = dataset.load_frame(0)
+    if frontend_cls.needs_frames and first_frame is None:
         raise EasVoError(f"frontend {rc.frontend!r} needs APS frames: {dataset.no_frames_reason}")
+    if first_frame is not None:  # a frame of another size than the camera's: said before any work
+        check_frame(first_frame, dataset, 0, float(dataset.frame_times()[0]))
     if not frontend_cls.makes_images and registry.get("trackers", rc.tracker).reads_images:
         raise EasVoError(f"frontend {rc.frontend!r} makes no images and tracker {rc.tracker!r} reads them; choose an image frontend")
     n_window = len(dataset.window(rc.start_s, rc.duration_s))
@@ -350,6 +354,7 @@ def track(parts: Pipeline, config: ResolvedConfig, frames_csv: Path | None = Non
     with _FrameLog(frames_csv, parts.dataset.clock_origin_ns) as log, _progress(n_window, progress, rc) as bar:
         try:
             for sample in concurrency.ahead(parts.dataset.samples(rc.start_s, rc.duration_s)):  # the next one read meanwhile
+                check_frame(sample.frame, parts.dataset, sample.index, sample.t)
                 image = None
                 if parts.frontend.makes_images:
                     image = parts.frontend(sample)
@@ -646,6 +651,18 @@ def format_tum(t: np.ndarray, p: np.ndarray, R: np.ndarray, origin_ns: int = 0) 
         f"{clock_time(ti, origin_ns)} {r[0]:.9f} {r[1]:.9f} {r[2]:.9f} {r[3]:.12f} {r[4]:.12f} {r[5]:.12f} {r[6]:.12f}\n"
         for ti, r in zip(t, rows)
     )
+
+
+def check_frame(frame, dataset: Dataset, index: int, t: float) -> None:
+    """A dataset's frame `index` (at `t` [s]) must be None or a grayscale uint8 (H, W) image of
+    its camera's size: else one error line, before a frontend sees it."""
+    if frame is None:
+        return
+    where = f"{dataset.label}: frame {index} (t={t:.6f} s)"
+    if not isinstance(frame, np.ndarray) or frame.ndim != 2 or frame.dtype != np.uint8:
+        got = f"{frame.dtype} {frame.shape}" if isinstance(frame, np.ndarray) else type(frame).__name__
+        raise EasVoError(f"{where}: the dataset gave {got}; frames are grayscale uint8 (height, width)")
+    check_frame_size(dataset.camera, frame.shape[1], frame.shape[0], where, "the frame is")
 
 
 def check_image(image, camera, frontend: str, sample) -> None:

@@ -270,3 +270,147 @@ def test_camera_info_fields_as_a_bag_gives_them():
     assert_camera(radtan, RADTAN)
     with pytest.raises(DataError, match=r"^x.bag:/dvs/camera_info:0: K/D: the equidistant lens model takes 4"):
         camera_from_camera_info("x.bag:/dvs/camera_info:0", 346, 260, K, RADTAN["dist"], "equidistant")
+
+
+# -- the lens model of a DV XML, wherever DV and OpenCV put it ---------------------------
+
+
+def _dv_camera_struct(fs, cam, node, **inside):
+    fs.startWriteStruct(node, cv2.FILE_NODE_MAP)
+    fs.write("camera_matrix", K_of(cam))
+    fs.write("distortion_coefficients", np.array([cam["dist"]]))
+    fs.write("image_width", cam["width"])
+    fs.write("image_height", cam["height"])
+    for key, value in inside.items():
+        fs.write(key, value)
+    fs.endWriteStruct()
+
+
+def write_dv_xml_model_in_node(path, cam):
+    """As cv2.FileStorage writes a camera's struct holding its own lens model."""
+    fs = cv2.FileStorage(str(path), cv2.FILE_STORAGE_WRITE)
+    _dv_camera_struct(fs, cam, "DVXplorer_DXA00093",
+                      distortion_model="Equidistant" if cam["model"] == "equidistant" else "RadialTangential")
+    fs.write("use_fisheye_model", 0)
+    fs.release()
+
+
+def write_dv_xml_flag_in_node(path, cam):
+    """The older flag, in the camera's node."""
+    fs = cv2.FileStorage(str(path), cv2.FILE_STORAGE_WRITE)
+    _dv_camera_struct(fs, cam, "DVXplorer_DXA00093", use_fisheye_model=int(cam["model"] == "equidistant"))
+    fs.release()
+
+
+def write_dv_xml_by_hand(path, cam):
+    """As DV's C++ module writes it, text by hand (two cameras' worth of layout: the model at the top)."""
+    (fx, fy), (cx, cy) = cam["f"], cam["c"]
+    dist = " ".join(repr(d) for d in cam["dist"])
+    path.write_text(
+        '<?xml version="1.0"?>\n<opencv_storage>\n<DAVIS346_00000499>\n'
+        '  <camera_matrix type_id="opencv-matrix">\n    <rows>3</rows>\n    <cols>3</cols>\n    <dt>d</dt>\n'
+        f"    <data>\n      {fx!r} 0. {cx!r} 0. {fy!r} {cy!r} 0. 0. 1.</data></camera_matrix>\n"
+        '  <distortion_coefficients type_id="opencv-matrix">\n    <rows>1</rows>\n'
+        f"    <cols>{len(cam['dist'])}</cols>\n    <dt>d</dt>\n    <data>\n      {dist}</data></distortion_coefficients>\n"
+        f"  <image_width>{cam['width']}</image_width>\n  <image_height>{cam['height']}</image_height>\n"
+        "</DAVIS346_00000499>\n<use_fisheye_model>0</use_fisheye_model>\n<type>camera</type>\n"
+        f"<distortion_model>{'Equidistant' if cam['model'] == 'equidistant' else 'RadialTangential'}</distortion_model>\n"
+        "</opencv_storage>\n")
+
+
+@pytest.mark.parametrize("write, suffix", [
+    (write, suffix) for write in (write_dv_xml, write_dv_legacy_xml, write_dv_xml_model_in_node, write_dv_xml_flag_in_node)
+    for suffix in (".xml", ".yaml")] + [(write_dv_xml_by_hand, ".xml")])
+@pytest.mark.parametrize("cam", [FISHEYE, RADTAN], ids=lambda c: c["model"])
+def test_every_dv_layout_gives_its_lens(tmp_path, write, suffix, cam):
+    """The lens model read where each writer puts it (a fisheye's k3 k4 are never taken for p1 p2),
+    in FileStorage's XML and YAML forms (DV's own C++ writes XML)."""
+    path = tmp_path / f"calibration{suffix}"
+    write(path, cam)
+    assert_camera(read_calibration(path), cam)
+
+
+def _write_dv(path, top: dict, **inside):
+    fs = cv2.FileStorage(str(path), cv2.FILE_STORAGE_WRITE)
+    _dv_camera_struct(fs, FISHEYE, "DVXplorer_DXA00093", **inside)
+    for key, value in top.items():
+        fs.write(key, value)
+    fs.release()
+
+
+@pytest.mark.parametrize("top, inside, message", [
+    ({"distortion_model": "RadialTangential"}, {"distortion_model": "Equidistant"},
+     r"DVXplorer_DXA00093/distortion_model says equidistant; distortion_model says radtan: which lens\?"),
+    ({"use_fisheye_model": 1}, {"distortion_model": "RadialTangential"},
+     r"DVXplorer_DXA00093/distortion_model says radtan; use_fisheye_model says equidistant \(a fisheye\)"),
+    ({}, {"use_fisheye_model": 2}, r"DVXplorer_DXA00093/use_fisheye_model: expected 0 or 1"),
+    ({}, {"lens": {"distortion_model": "Equidistant"}},
+     r"DVXplorer_DXA00093/lens/distortion_model: a lens model key where it is not read"),
+    ({"settings": {"use_fisheye_model": 1}}, {}, r"settings/use_fisheye_model: a lens model key where it is not read"),
+])
+def test_a_dv_lens_key_is_read_or_refused_never_ignored(tmp_path, top, inside, message):
+    path = tmp_path / "calibration.xml"
+    nested = {k: v for k, v in {**top, **inside}.items() if isinstance(v, dict)}
+    fs = cv2.FileStorage(str(path), cv2.FILE_STORAGE_WRITE)
+    _dv_camera_struct(fs, FISHEYE, "DVXplorer_DXA00093", **{k: v for k, v in inside.items() if k not in nested})
+    for key, value in top.items():
+        if key not in nested:
+            fs.write(key, value)
+    fs.release()
+    for key, table in nested.items():  # a struct inside the camera's node or at the top level
+        text = path.read_text()
+        body = "".join(f"<{k}>{v}</{k}>" for k, v in table.items())
+        anchor = "</DVXplorer_DXA00093>" if key in inside else "</opencv_storage>"
+        path.write_text(text.replace(anchor, f"<{key}>{body}</{key}>\n{anchor}"))
+    with pytest.raises(DataError, match=rf"^{path}: {message}") as info:
+        read_calibration(path)
+    assert "\n" not in str(info.value)
+
+
+# -- every value checked ------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("fmt, damage, message", [
+    ("kalibr", lambda t: t.replace("[346, 260]", "[.nan, 260]"), r"cam0.resolution: the sensor size must be two whole numbers"),
+    ("kalibr", lambda t: t.replace("[346, 260]", "[346, .inf]"), r"cam0.resolution: the sensor size must be two whole numbers"),
+    ("kalibr", lambda t: t.replace("[346, 260]", "[346.5, 260]"), r"cam0.resolution: the sensor size must be two whole numbers"),
+    ("kalibr", lambda t: t.replace("[346, 260]", "[0, 260]"), r"cam0.resolution: the sensor size must be two whole numbers"),
+    ("kalibr", lambda t: t.replace("[346, 260]", "[1.0e+300, 260]"), r"cam0.resolution: the sensor size must be two whole numbers"),
+    ("kalibr", lambda t: t.replace("[346, 260]", "[100000, 260]"), r"cam0.resolution: the sensor size must be two whole numbers"),
+    ("kalibr", lambda t: t.replace("intrinsics: [259.351", "intrinsics: [.nan"), r"cam0.intrinsics: intrinsics and distortion must be finite"),
+    ("kalibr", lambda t: t.replace("intrinsics: [259.351", "intrinsics: [-259.351"), r"cam0.intrinsics: focal lengths fx = -259.351"),
+    ("kalibr", lambda t: t.replace("176.201, 131.517", ".inf, 131.517"), r"cam0.intrinsics: intrinsics and distortion must be finite"),
+    ("kalibr", lambda t: t.replace("-0.3605", "-.inf"), r"cam0.distortion_coeffs: intrinsics and distortion must be finite"),
+    ("camera_info", lambda t: t.replace("image_width: 346", "image_width: 0"), r"image_width, image_height: the sensor size must be"),
+    ("camera_info", lambda t: t.replace("image_height: 260", "image_height: 99999"), r"image_width, image_height: the sensor size"),
+    ("camera_info", lambda t: t.replace("data: [259.351, 0,", "data: [.nan, 0,"), r"camera_matrix/distortion_coefficients: intrinsics and"),
+    ("dv_xml", lambda t: t.replace("<image_width>346</image_width>", "<image_width>0</image_width>"),
+     r"DAVIS346_00000499/image_width, image_height: the sensor size must be"),
+    ("dv_xml", lambda t: t.replace("259.351 0.", ".Nan 0.", 1), r"DAVIS346_00000499/camera_matrix: intrinsics and"),
+    ("dv_xml", lambda t: t.replace("-0.36049999999999999", "-.Inf"), r"DAVIS346_00000499/distortion_coefficients: intrinsics and"),
+])
+def test_every_value_is_checked_naming_the_file_and_key(tmp_path, fmt, damage, message):
+    path = tmp_path / NAMES[fmt]
+    WRITERS[fmt](path, RADTAN)
+    damaged = damage(path.read_text())
+    assert damaged != path.read_text()
+    path.write_text(damaged)
+    with pytest.raises(DataError, match=message) as info:
+        read_calibration(path, width=346, height=260)
+    assert str(info.value).startswith(f"{path}: ") and "\n" not in str(info.value)
+
+
+# -- frames of another size than the calibration's ----------------------------------------
+
+
+def test_check_frame_size_names_both_sizes(tmp_path):
+    from eas_vo.datasets.calibration import check_frame_size
+
+    path = tmp_path / NAMES["kalibr"]
+    write_kalibr(path, RADTAN)
+    camera = read_calibration(path)
+    check_frame_size(camera, 346, 260, "x")
+    for width, height in ((240, 180), (640, 480), (260, 346)):
+        with pytest.raises(DataError, match=rf"^rec.bag:/dvs/image_raw:7: the calibration is for 346x260 px, "
+                                            rf"the frames are {width}x{height}$"):
+            check_frame_size(camera, width, height, "rec.bag:/dvs/image_raw:7")

@@ -162,11 +162,11 @@ def test_the_ecd_calib_txt_takes_no_fisheye(tmp_path):
     (lambda t: t.replace("equidistant", "omni"), r"distortion_model: 'omni' is not read \(one of radtan, plumb_bob"),
     (lambda t: t.replace("pinhole", "ds"), r"cam0.camera_model: 'ds' is not read \(pinhole only\)"),
     (lambda t: t.replace("  resolution: [240, 180]\n", ""), r"cam0.resolution: expected a list of 2 numbers, found missing"),
-    (lambda t: t.replace("[240, 180]", "[346, 260]"), r"cam0.resolution 346x260 is not the frames' 240x180"),
+    (lambda t: t.replace("[240, 180]", "[346, 260]"), r"cam0.resolution: the calibration is for 346x260 px, the frames are 240x180"),
     (lambda t: t.replace("-0.048, ", ""), r"cam0.distortion_coeffs: the equidistant lens model takes 4 distortion coefficients"),
     (lambda t: t.replace("-0.048", ".nan"), r"cam0.distortion_coeffs: intrinsics and distortion must be finite"),
     (lambda t: t.replace("-0.048", "-48.0"), r"cam0.distortion_coeffs: distortion k1 k2 k3 k4 = -48 .* out of range"),
-    (lambda t: t.replace("150.5", "1.5"), r"cam0.distortion_coeffs: focal lengths fx = 1.5"),
+    (lambda t: t.replace("150.5", "1.5"), r"cam0.intrinsics: focal lengths fx = 1.5"),
     (lambda t: t.replace("cam0:", "cam1:"), r"no camera 'cam0'; found cam1"),
     (lambda t: t + "  [: oops", r"not valid YAML"),
 ])

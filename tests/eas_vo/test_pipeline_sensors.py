@@ -56,3 +56,23 @@ def test_a_fisheye_is_tracked_through_its_own_lens(sequences, tmp_path):
     K = SENSORS["davis346"].model().K
     (pinhole / "calib.txt").write_text(" ".join(repr(float(v)) for v in (K[0, 0], K[1, 1], K[0, 2], K[1, 2])) + "\n")
     assert _run("paper", pinhole)["ape_mean_rad"] > 1.5 * fisheye
+
+
+@pytest.mark.parametrize("bad_from", [0, 5])
+@pytest.mark.parametrize("size", [(346, 260), (640, 480)])
+def test_a_dataset_frame_of_another_size_than_the_camera_is_one_line(monkeypatch, short_sequence, bad_from, size):
+    """A plugin dataset whose frames are not its camera's size: one line naming the frame and
+    both sizes (before any work when it is the first frame), not a traceback in a frontend."""
+    import cv2
+
+    from eas_vo import registry
+    from eas_vo.errors import EasVoError
+
+    dataset = registry.open_dataset(str(short_sequence))
+    load_frame = dataset.load_frame
+    monkeypatch.setattr(dataset, "load_frame", lambda k: cv2.resize(load_frame(k), size) if k >= bad_from else load_frame(k))
+    monkeypatch.setattr(registry, "open_dataset", lambda spec, config=None: dataset)
+    cfg = config.resolve(None, {"dataset": str(short_sequence), "frontend": "eas", "backend": "chain"})
+    with pytest.raises(EasVoError, match=rf"^{short_sequence}: frame {bad_from} \(t=[0-9.]+ s\): the calibration is for "
+                                         rf"240x180 px, the frame is {size[0]}x{size[1]}$"):
+        pipeline.run(cfg)
