@@ -7,6 +7,7 @@ import numpy as np
 from eas_vo import config as config_mod
 from eas_vo import registry
 from eas_vo.errors import EasVoError
+from eas_vo.pipeline import check_frame
 
 #: The paper's order of image sources (Fig. 1, Table 1); other frontends follow by name.
 PAPER_ORDER = ("original", "histeq", "slice", "ts", "sits", "eas")
@@ -52,6 +53,7 @@ def frontend_images(
     for sample in dataset.samples():
         if sample.index > max(frame_indices):
             break
+        check_frame(sample.frame, dataset, sample.index, sample.t)
         for name, frontend in built.items():
             image = frontend(sample)
             if sample.index in wanted:
