@@ -17,7 +17,7 @@ from typing import Callable, ClassVar, Iterator
 import cv2
 import numpy as np
 
-from eas_vo.datasets.calibration import camera_from_camera_info
+from eas_vo.datasets.calibration import camera_from_camera_info, check_frame_size
 from eas_vo.datasets.recording import CALIBRATION_FORMATS, RecordingReader, StreamConfig, check_increasing, clock_origin_ns, pose_series
 from eas_vo.errors import DataError, DataWarnings
 from eas_vo.eventfile import Validator, cache_key, load_cached, write_behind
@@ -176,6 +176,9 @@ class BagDataset(RecordingReader):
         self._sensor = self._sensor_size()
         given = self.calibration_file(*self._sensor)
         self.camera = given if given is not None else self._read_camera()
+        if self.camera is not None and self._frames:
+            height, width = self._frames[0].shape
+            check_frame_size(self.camera, width, height, f"{self.path}:{self.topic['image_topic']}:0", "its frames are")
         self.ground_truth = self._read_poses() if not self.config.ground_truth else self.ground_truth_file()
         self.imu = self._read_imu()
         self._events = None

@@ -192,7 +192,7 @@ def read_dv_xml(path: str | Path, camera: str | None = None) -> CameraModel:
             node, prefix = nodes[cameras[0]], f"{cameras[0]}/"
         elif cameras:
             raise DataError(where, f"holds {len(cameras)} cameras ({', '.join(cameras)}): choose one with camera=NAME "
-                                   "(--set dataset.camera=NAME)")
+                                   "(--set dataset.calibration_camera=NAME)")
         else:
             raise DataError(where, "no camera_matrix, neither at the top level nor in a camera node: not a DV calibration")
         K = _fs_matrix(where, node, prefix, "camera_matrix", 9)

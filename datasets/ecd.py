@@ -26,11 +26,11 @@ import numpy as np
 
 from eas_vo.datasets import ecd_catalogue
 from eas_vo.datasets.calibration import MAX_SENSOR_PX, check_frame_size, parse_ecd_calib, parse_kalibr_camchain
-from eas_vo.datasets.recording import RecordingReader, StreamConfig, ground_truth_table, timed_table
+from eas_vo.datasets.recording import RecordingReader, StreamConfig, clock_origin_ns, ground_truth_table, timed_table
 from eas_vo.datasets.sources import MARKERS, open_source
 from eas_vo.errors import DataError, DataWarnings
 from eas_vo.eventfile import load_event_text, write_events_text
-from eas_vo.io import atomic_path, silenced_stderr, write_text_atomic
+from eas_vo.io import atomic_path, clock_time, silenced_stderr, write_text_atomic
 from eas_vo.types import CameraModel, ImuSeries, PoseSeries, empty_events
 from eas_vo.validation import check_range
 
@@ -83,6 +83,10 @@ class EcdFolderDataset(RecordingReader):
         self._times, self._frame_names = self._read_image_list()
         if not self._frame_names and not self.source.exists("events.txt"):
             raise DataError(self.source.label("images.txt"), "file not found, and there is no events.txt either")
+        self.clock_origin_ns = clock_origin_ns(self._first_second() * 10**9)
+        self._origin_s = self.clock_origin_ns / 1e9  # whole seconds: subtracting it is exact
+        if self._times is not None:
+            self._times = self._times - self._origin_s
         self._sensor = width, height = self._sensor_size()
         self.camera = self._read_calib(width, height)
         self.ground_truth = self._read_ground_truth()
@@ -134,12 +138,30 @@ class EcdFolderDataset(RecordingReader):
                     c.lenient,
                     self.warnings,
                     self.source.size("events.txt"),
+                    self._origin_s,
                 )
             else:
                 self._events = empty_events()
         return self._events
 
     # -- readers -----------------------------------------------------------------------
+
+    def _first_second(self) -> int:
+        """The whole second [s] of the first frame time or event time, whichever is earlier (0
+        when neither can be read: the readers then name what is wrong)."""
+        firsts = [math.floor(self._times[0])] if self._times is not None and len(self._times) else []
+        if self.source.exists("events.txt"):
+            with self.source.open("events.txt") as fh:
+                head = fh.read(1 << 16)
+            for line in head.splitlines()[:-1] or head.splitlines():
+                token = line.split(maxsplit=1)[0] if line.split() else b""
+                if token and not token.startswith(b"#"):
+                    try:
+                        firsts.append(math.floor(float(token)))
+                    except (ValueError, OverflowError):
+                        pass
+                    break
+        return min(firsts) if firsts else 0
 
     def _read_image_list(self) -> tuple[np.ndarray | None, list[str]]:
         self._frame_lines: list[int] = []
@@ -261,13 +283,13 @@ class EcdFolderDataset(RecordingReader):
         if not self.source.exists("groundtruth.txt"):
             return None
         return ground_truth_table(self.source.read_bytes("groundtruth.txt"), self.source.label("groundtruth.txt"),
-                                  self.config.ground_truth_time_offset_s)
+                                  self.config.ground_truth_time_offset_s, self.clock_origin_ns)
 
     def _read_imu(self) -> ImuSeries | None:
         if not self.source.exists("imu.txt"):
             return None
         table, _ = timed_table(self.source.read_bytes("imu.txt"), self.source.label("imu.txt"), 7, "t ax ay az gx gy gz")
-        return ImuSeries(t=table[:, 0], acc=table[:, 1:4], gyro=table[:, 4:7])
+        return ImuSeries(t=table[:, 0] - self._origin_s, acc=table[:, 1:4], gyro=table[:, 4:7])
 
 
 def write_ecd_folder(
@@ -278,9 +300,11 @@ def write_ecd_folder(
     events: np.ndarray,
     ground_truth: PoseSeries | None = None,
     imu: ImuSeries | None = None,
+    origin_ns: int = 0,
 ) -> None:
     """Write a sequence in the Event Camera Dataset text layout (each file atomically); the
-    calibration as calib.txt, or for a fisheye as CAMCHAIN.
+    calibration as calib.txt, or for a fisheye as CAMCHAIN. Times [s] are after the clock origin
+    `origin_ns` (Dataset.clock_origin_ns), written as the recording's own.
 
     `frames`: the uint8 frame at each of `frame_times` [s], taken one at a time (a generator
     keeps one in memory); None for an event-only stream (no images/ nor images.txt)."""
@@ -291,17 +315,17 @@ def write_ecd_folder(
         name = f"images/frame_{k:08d}.png"
         with atomic_path(root / name) as tmp:
             tmp.write_bytes(cv2.imencode(".png", frame)[1].tobytes())
-        lines.append(f"{t:.9f} {name}")
+        lines.append(f"{clock_time(t, origin_ns)} {name}")
     if camera.model == "radtan":
         write_text_atomic(root / "calib.txt", " ".join(f"{v:.12g}" for v in camera.calib_values()) + "\n")
     else:
         write_text_atomic(root / CAMCHAIN, camchain_yaml(camera))
     if ground_truth is not None:
-        table = np.column_stack([ground_truth.t, ground_truth.p_w_c, ground_truth.q_w_c])
-        write_text_atomic(root / "groundtruth.txt", _format_rows(table))
+        table = np.column_stack([ground_truth.p_w_c, ground_truth.q_w_c])
+        write_text_atomic(root / "groundtruth.txt", _format_rows(ground_truth.t, table, origin_ns))
     if imu is not None:
-        write_text_atomic(root / "imu.txt", _format_rows(np.column_stack([imu.t, imu.acc, imu.gyro])))
-    write_events_text(root / "events.txt", events, camera.width, camera.height)
+        write_text_atomic(root / "imu.txt", _format_rows(imu.t, np.column_stack([imu.acc, imu.gyro]), origin_ns))
+    write_events_text(root / "events.txt", events, camera.width, camera.height, origin_ns=origin_ns)
     if frames is not None:  # images.txt last: a folder is complete only once its frame list exists.
         write_text_atomic(root / "images.txt", "\n".join(lines) + "\n")
 
@@ -320,5 +344,6 @@ def camchain_yaml(camera: CameraModel) -> str:
             f"  resolution: [{camera.width}, {camera.height}]\n")
 
 
-def _format_rows(table: np.ndarray) -> str:
-    return "".join(" ".join(f"{v:.9f}" for v in row) + "\n" for row in table)
+def _format_rows(t: np.ndarray, table: np.ndarray, origin_ns: int) -> str:
+    """Rows `t v1 v2 ...`, t [s] after the clock origin written as the recording's own time."""
+    return "".join(" ".join([clock_time(ti, origin_ns), *(f"{v:.9f}" for v in row)]) + "\n" for ti, row in zip(t, table))

@@ -26,6 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
+from eas_vo.datasets.calibration import MAX_SENSOR_PX
 from eas_vo.datasets.recording import CALIBRATION_FORMATS, RecordingReader, StreamConfig
 from eas_vo.errors import DataError, DataWarnings
 from eas_vo.eventfile import Validator, cache_key, cache_path, file_identity, load_cached, write_behind
@@ -37,8 +38,6 @@ from eas_vo.validation import check_range
 HEADER_LIMIT = 1 << 20
 #: Bytes of words (or records) decoded at a time: memory bounded by it.
 BLOCK_BYTES = 4 << 20
-#: The largest sensor side [px] the formats address (11-bit EVT coordinates; .dat's 14 bits).
-MAX_SENSOR_PX = 16384
 #: A `.raw` header's older `% evt` values, as format names.
 EVT_VERSIONS = {"3.0": "EVT3", "2.0": "EVT2", "2.1": "EVT21"}
 #: `.dat` event types of CD events (OpenEB's Event2D and EventCD), with their record size [bytes].

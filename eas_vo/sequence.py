@@ -257,7 +257,7 @@ def convert(config: ResolvedConfig, out: str | Path, progress: bool = False, rep
         frames = (dataset.load_frame(int(k)) for k in tqdm(window, disable=not progress, unit="frame",
                                                               desc=f"convert {dataset.label}"))
     with output_folder(out, replace, keep_partial=False) as staging:
-        write_ecd_folder(staging, dataset.camera, times[window], frames, events, poses, imu)
+        write_ecd_folder(staging, dataset.camera, times[window], frames, events, poses, imu, dataset.clock_origin_ns)
     return Converted(
         label=dataset.label,
         sensor=(dataset.camera.width, dataset.camera.height),

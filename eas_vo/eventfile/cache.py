@@ -232,18 +232,20 @@ def load_event_text(
     lenient: bool = False,
     warnings: DataWarnings | None = None,
     text_size: int | None = None,
+    origin_s: float = 0.0,
 ) -> np.ndarray:
-    """Events of a text source (`t x y p` lines, `text_size` bytes if known), through the cache."""
+    """Events of a text source (`t x y p` lines, `text_size` bytes if known), through the cache,
+    their times after the clock origin `origin_s` (whole seconds: Dataset.clock_origin_ns)."""
 
     def fill(out, local):
         with open_text() as fh:
-            return convert_text_to_cache(fh, where, out, width, height, tolerance_s, lenient, local)
+            return convert_text_to_cache(fh, where, out, width, height, tolerance_s, lenient, local, origin_s=origin_s)
 
-    key = cache_key("text", *identity, width, height, tolerance_s)
+    key = cache_key("text", *identity, width, height, tolerance_s, origin_s)
     size = text_size or 0  # a line is at least 8 bytes: at most size // 8 events
     return load_cached(key, lenient, warnings if warnings is not None else DataWarnings(), fill, where, size // 8 + 1 if size else 0)
 
 
 def prime_text_cache(source: Path, events: np.ndarray, width: int, height: int, tolerance_s: float = 1e-6) -> None:
     """Store events already in memory as the cache of text file `source` (they must equal its parse)."""
-    write_cache(cache_path(cache_key("text", *file_identity(source), width, height, tolerance_s)), events)
+    write_cache(cache_path(cache_key("text", *file_identity(source), width, height, tolerance_s, 0.0)), events)

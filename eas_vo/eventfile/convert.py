@@ -22,8 +22,11 @@ def convert_text_to_cache(
     lenient: bool = False,
     warnings: DataWarnings | None = None,
     block_bytes: int = BLOCK_BYTES,
+    origin_s: float = 0.0,
 ) -> int:
-    """Stream event text from `fh` into cache records written to `out`; returns the event count."""
+    """Stream event text from `fh` into cache records written to `out`; returns the event count.
+    Times are checked as the text states them, then written after the clock origin `origin_s`
+    (whole seconds: the subtraction is exact)."""
     warnings = warnings if warnings is not None else DataWarnings()
     validate = Validator(where, width, height, tolerance_s, lenient, warnings)
     total, first_line = 0, 1
@@ -38,6 +41,8 @@ def convert_text_to_cache(
                     events, newlines, _, validate.last_t = packed
                 else:
                     events, newlines = sequential_piece(piece, first_line, validate, where, lenient, warnings)
+                if origin_s:
+                    events["t"] -= origin_s
                 records.append(events.data)
                 total += len(events)
                 first_line += newlines

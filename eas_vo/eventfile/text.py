@@ -25,12 +25,13 @@ def _ascii_digits(values: np.ndarray, width: int, pad: bool) -> np.ndarray:
     return out
 
 
-def format_events(events: np.ndarray) -> bytes:
-    """EVENT_DTYPE -> ECD text lines `t x y p` (t with 9 decimals), vectorised."""
+def format_events(events: np.ndarray, origin_ns: int = 0) -> bytes:
+    """EVENT_DTYPE -> ECD text lines `t x y p` (t [s] after the clock origin `origin_ns`, written
+    as the recording's own time with 9 decimals, summed in integer ns), vectorised."""
     n = len(events)
     if n == 0:
         return b""
-    t_ns = np.round(events["t"] * 1e9).astype(np.int64)
+    t_ns = np.round(events["t"] * 1e9).astype(np.int64) + origin_ns
     sec, frac = np.divmod(t_ns, 1_000_000_000)
     int_width = max(1, len(str(int(sec.max()))))
     sp = np.full((n, 1), 32, np.uint8)
@@ -52,11 +53,11 @@ def format_events(events: np.ndarray) -> bytes:
     return flat[flat != 0].tobytes()
 
 
-def write_events_text(path: str | Path, events: np.ndarray, width: int, height: int, chunk: int = 1_000_000) -> None:
-    """Write events as ECD `events.txt` atomically, and prime the binary cache.
-
-    The cache holds the times as the text will parse back (rounded to 1 ns).
-    """
+def write_events_text(path: str | Path, events: np.ndarray, width: int, height: int, chunk: int = 1_000_000,
+                      origin_ns: int = 0) -> None:
+    """Write events (t [s] after the clock origin `origin_ns`) as ECD `events.txt` atomically,
+    and prime the binary cache with the times as the text will parse back (rounded to 1 ns;
+    not primed after an origin, where the parse rounds at the absolute time's magnitude)."""
     path = Path(path)
     events = np.array(events, dtype=EVENT_DTYPE)
     events["t"] = np.round(events["t"] * 1e9) / 1e9
@@ -64,5 +65,6 @@ def write_events_text(path: str | Path, events: np.ndarray, width: int, height: 
         raise ValueError("write_events_text needs events sorted by time")
     with atomic_file(path) as fh:
         for start in range(0, len(events), chunk):
-            fh.write(format_events(events[start : start + chunk]))
-    prime_text_cache(path, events, width, height)
+            fh.write(format_events(events[start : start + chunk], origin_ns))
+    if origin_ns == 0:
+        prime_text_cache(path, events, width, height)

@@ -34,7 +34,7 @@ def test_a_rewrite_with_the_old_size_and_mtime_is_seen(tmp_path):
 def cached_file(path):
     from eas_vo.eventfile import cache_key, cache_path, file_identity
 
-    return cache_path(cache_key("text", *file_identity(path), 240, 180, 1e-6))
+    return cache_path(cache_key("text", *file_identity(path), 240, 180, 1e-6, 0.0))
 
 
 @given(st.data())
@@ -101,7 +101,7 @@ def test_a_lenient_caches_missing_or_damaged_warnings_rebuild_it(tmp_path, damag
     load_event_file(path, lenient=True, warnings=first)
     from eas_vo.eventfile import cache_key, cache_path, file_identity
 
-    key = cache_key("text", *file_identity(path), 240, 180, 1e-6)
+    key = cache_key("text", *file_identity(path), 240, 180, 1e-6, 0.0)
     sidecar = cache_path(key).with_name(cache_path(key).stem + "-lenient.warnings")
     assert sidecar.exists()
     if damage is None:

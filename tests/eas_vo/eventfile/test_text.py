@@ -19,7 +19,7 @@ def test_round_trip_through_text_and_cache(tmp_path):
     path = tmp_path / "events.txt"
     write_events_text(path, ev, 240, 180)  # primes the cache
     primed = load_event_file(path)
-    os.unlink(cache_path(cache_key("text", *file_identity(path), 240, 180, 1e-6)))
+    os.unlink(cache_path(cache_key("text", *file_identity(path), 240, 180, 1e-6, 0.0)))
     parsed = load_event_file(path)  # parsed from text this time
     assert isinstance(parsed, np.memmap)
     np.testing.assert_array_equal(parsed, primed)  # the primed cache equals a fresh parse, bit for bit
