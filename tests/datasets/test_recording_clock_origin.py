@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from helpers import write_mvsec
+from helpers import InMemoryDataset, write_mvsec
 
 from eas_vo import config, pipeline
 from eas_vo.datasets.ecd import EcdFolderDataset, write_ecd_folder
@@ -26,31 +26,18 @@ def on_grid(t: np.ndarray) -> np.ndarray:
     return np.round(np.asarray(t) / GRID_S) * GRID_S
 
 
-class OnClock(Dataset):
-    """A recording with its times on the grid, after the clock origin `origin_ns`; with
-    `absolute`, the same instants as float64 seconds of that clock itself (origin 0), as a file
-    format without an origin of its own (MVSEC) holds them."""
-
-    def __init__(self, base: Dataset, origin_ns: int, absolute: bool = False):
-        shift = origin_ns / 1e9 if absolute else 0.0
-        self.clock_origin_ns = 0 if absolute else origin_ns
-        self.camera, self.label = base.camera, base.label
-        self._times = on_grid(base.frame_times()) + shift
-        self._frames = [base.load_frame(k) for k in range(len(self._times))]
-        self._events = np.array(base.events())
-        self._events["t"] = on_grid(self._events["t"]) + shift
-        imu, gt = base.imu, base.ground_truth
-        self.imu = type(imu)(on_grid(imu.t) + shift, imu.acc, imu.gyro)
-        self.ground_truth = type(gt)(on_grid(gt.t) + shift, gt.p_w_c, gt.q_w_c)
-
-    def frame_times(self):
-        return self._times
-
-    def load_frame(self, k):
-        return self._frames[k]
-
-    def events(self):
-        return self._events
+def on_clock(base: Dataset, origin_ns: int, absolute: bool = False) -> InMemoryDataset:
+    """`base` with its times on the grid, after the clock origin `origin_ns`; with `absolute`,
+    the same instants as float64 seconds of that clock itself (origin 0), as a file format
+    without an origin of its own (MVSEC) holds them."""
+    shift = origin_ns / 1e9 if absolute else 0.0
+    events = np.array(base.events())
+    events["t"] = on_grid(events["t"]) + shift
+    imu, gt = base.imu, base.ground_truth
+    times = on_grid(base.frame_times()) + shift
+    return InMemoryDataset(base.camera, times, [base.load_frame(k) for k in range(len(times))], events,
+                           type(imu)(on_grid(imu.t) + shift, imu.acc, imu.gyro),
+                           type(gt)(on_grid(gt.t) + shift, gt.p_w_c, gt.q_w_c), 0 if absolute else origin_ns)
 
 
 def ecd_folder(ds, folder):
@@ -77,7 +64,7 @@ def base(short_sequence):
 def _written(base, fmt: str, origin_ns: int, folder):
     absolute = fmt == "mvsec"
     folder.mkdir()
-    path = WRITERS[fmt](OnClock(base, origin_ns, absolute), folder)
+    path = WRITERS[fmt](on_clock(base, origin_ns, absolute), folder)
     extra = [f"dataset.calibration={base.label}/calib.txt"] if fmt == "mvsec" else []
     return str(path), extra
 

@@ -9,6 +9,7 @@ import cv2
 import numpy as np
 import pytest
 
+from eas_vo.plugins import Dataset
 from eas_vo.types import EVENT_DTYPE, CameraModel, ImuSeries, PoseSeries
 
 SHARED_DATA = Path(__file__).resolve().parents[3] / "shared" / "data"
@@ -256,3 +257,20 @@ def write_mvsec(folder: Path, seq, name: str = "seq", side: str = "left", **even
         g["pose"] = T
         g["pose_ts"] = gt.t
     return data
+
+
+class InMemoryDataset(Dataset):
+    """A recording held in memory (a Dataset's arrays, as a test changed them)."""
+
+    def __init__(self, camera, times, frames, events, imu=None, ground_truth=None, clock_origin_ns: int = 0):
+        self.camera, self._times, self._frames, self._events = camera, times, list(frames), events
+        self.imu, self.ground_truth, self.clock_origin_ns = imu, ground_truth, clock_origin_ns
+
+    def frame_times(self):
+        return self._times
+
+    def load_frame(self, k):
+        return self._frames[k]
+
+    def events(self):
+        return self._events
