@@ -198,6 +198,26 @@ def test_can_open_looks_at_the_header(small_bags, tmp_path):
         Rosbag2Dataset(tmp_path)
 
 
+@pytest.mark.parametrize("storage", sorted(STORAGES))
+def test_metadata_that_names_no_storage_plugin_is_read_from_its_one_file(small_bags, excerpt, tmp_path, storage):
+    """Older rosbag2 releases wrote `storage_identifier: ""` and an empty `files` list (version
+    5): the folder is read from the one file its metadata names, as rosbag2 tells the storage
+    by the file; what cannot be read so is one line saying what is wrong with the folder."""
+    import yaml
+
+    bag = shutil.copytree(small_bags[storage], tmp_path / "bag")
+    meta = yaml.safe_load((bag / "metadata.yaml").read_text())
+    info = meta["rosbag2_bagfile_information"]
+    info.update(version=5, storage_identifier="", files=[])
+    (bag / "metadata.yaml").write_text(yaml.safe_dump(meta))
+    assert Rosbag2Dataset(bag).events().tobytes() == excerpt.events().tobytes()
+    info["relative_file_paths"] = [*info["relative_file_paths"], "second.db3"]
+    (bag / "metadata.yaml").write_text(yaml.safe_dump(meta))
+    with pytest.raises(DataError, match=r"metadata.yaml: names no storage plugin \(storage_identifier is empty\) and 2 bag "
+                                        r"files: write the storage \(sqlite3 or mcap\) into it$"):
+        Rosbag2Dataset(bag)
+
+
 def test_metadata_yaml_of_text_is_named(small_bags, tmp_path):
     bag = shutil.copytree(small_bags["sqlite3"], tmp_path / "bag")
     (bag / "metadata.yaml").write_text("these are my notes: [unclosed\n")

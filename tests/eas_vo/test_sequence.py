@@ -183,3 +183,25 @@ def test_convert_of_the_real_excerpt_keeps_its_events_and_frames_and_its_poses_t
     half_ninth_decimal = 5.01e-10  # its 11-12 decimals rounded to 9 (and the parse's own 1e-16)
     np.testing.assert_allclose(b.ground_truth.q_w_c, a.ground_truth.q_w_c[kept], rtol=0, atol=half_ninth_decimal)
     np.testing.assert_allclose(b.ground_truth.p_w_c, a.ground_truth.p_w_c[kept], rtol=0, atol=half_ninth_decimal)
+
+
+def test_a_ground_truth_on_another_clock_is_said_to_overlap_nothing_and_a_run_names_the_key(sequence_copy, tmp_path):
+    """Poses stamped in Unix seconds beside frames from 0: info says the ground truth covers none
+    of the frames (both spans), and a run stops before any work naming
+    dataset.ground_truth_time_offset_s and the offset that starts both together."""
+    from helpers import run_eas_vo
+
+    gt = sequence_copy / "groundtruth.txt"
+    lines = gt.read_text().splitlines()
+    first = float(lines[0].split()[0])
+    gt.write_text("".join(f"{int(t.split('.')[0]) + 1_700_000_000}.{t.split('.')[1]} {rest}\n"
+                          for t, rest in (line.split(" ", 1) for line in lines)))
+    info = describe(resolve(None, {"dataset": str(sequence_copy)}))
+    overlap = next(line for line in info.lines() if line.lstrip().startswith("overlap"))
+    assert "ground truth NONE (1700000000." in overlap and "another clock? dataset.ground_truth_time_offset_s" in overlap
+    assert any("the ground truth overlaps none of the samples" in line for line in info.lines())
+    done = run_eas_vo("run", "--dataset", str(sequence_copy), "--out", str(tmp_path / "run"), "--quiet")
+    assert done.returncode == 2 and done.stderr.count("\n") == 1, done.stderr
+    offset = float(done.stderr.split("S = ")[1].split()[0])
+    assert "--set dataset.ground_truth_time_offset_s=S" in done.stderr and not (tmp_path / "run").exists()
+    assert offset == pytest.approx(EcdFolderDataset(sequence_copy).frame_times()[0] - (first + 1_700_000_000), abs=1e-5)
