@@ -187,8 +187,8 @@ def track_sequence(images, times, vocabulary: Path, settings: Path, folder: Path
                 for k, (image, t) in enumerate(tqdm(zip(images, times), total=len(times), disable=not progress,
                                                     unit="frame", desc=label)):
                     state, points, pose = slam.track(image, t)
-                    label = relabel([previous, state])[1]
-                    r = FrameResult(k, float(t), label, points, pose if label in TRACKED else None)
+                    shown = relabel([previous, state])[1]
+                    r = FrameResult(k, float(t), shown, points, pose if shown in TRACKED else None)
                     previous = state
                     results.append(r)
                     writer.writerow(_frames_row(r))
