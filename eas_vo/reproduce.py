@@ -273,15 +273,15 @@ def _vocabulary(progress: bool) -> Path:
 def _slam_cell(cell: compare.Cell, config: str, overrides: dict, folder: Path, vocabulary: str, runs: int,
                progress: bool) -> dict:
     """`eas-vo slam` on one cell (its summary.json reused when it holds `runs` runs with
-    `vocabulary`); the summary with its median keyframe APE as `ape_trans_mean_m` (None when
-    no run tracked and scored)."""
+    `vocabulary` made under slam.run.PROTOCOL); the summary with its median keyframe APE as
+    `ape_trans_mean_m` (None when no run tracked and scored)."""
     import json
 
-    from eas_vo.slam.run import run_slam
+    from eas_vo.slam.run import PROTOCOL, run_slam
 
     summary_path = folder / "summary.json"
     summary = json.loads(summary_path.read_text()) if summary_path.is_file() else {}
-    if summary.get("runs") != runs or summary.get("vocabulary") != vocabulary:
+    if summary.get("runs") != runs or summary.get("vocabulary") != vocabulary or summary.get("protocol") != PROTOCOL:
         summary = run_slam(compare.cell_config(cell, config, [], overrides), folder, vocabulary, runs, progress, replace=True)
         summary.pop("crashed")
     median = (summary.get("ape_keyframes.ape_trans_mean_m") or {}).get("median")
@@ -318,6 +318,8 @@ def table2_markdown(rows: list[dict], slam: dict, duration_s: float | None, fron
     """The paper's Table 2 layout, each of our figures followed by the paper's (a source the
     paper has not: -); with ORB-SLAM3, its rotation scored by Eq. 3 beside eas-vo's on the same
     images (the configuration asked for, and `best_rows`: configs/best.toml's)."""
+    from eas_vo.slam.run import MIN_TRACKED_FRACTION
+
     by_key = {(r["dataset_name"], r["frontend"]): r for r in rows}
     columns = [(seq, source) for seq in SEQUENCES for source in frontends]
     head = ["", *[f"{seq} {source}" for seq, source in columns]]
@@ -364,8 +366,9 @@ def table2_markdown(rows: list[dict], slam: dict, duration_s: float | None, fron
             best = {(r["dataset_name"], r["frontend"]): r for r in best_rows}
             lines.append("| " + " | ".join(["rotation APE, Eq. 3 [rad] (eas-vo best.toml, every frame)",
                                             *[ours_eq3(best, s, f) for s, f in columns]]) + " |")
-    system = ("ORB-SLAM3 (monocular, pyorbslam3): the median over its runs that initialised and never lost track "
-              "(runs scored / runs), an --estimate's ORB-SLAM2 keyframes as given" if with_slam else "ORB-SLAM2")
+    system = (f"ORB-SLAM3 (monocular, pyorbslam3): the median over its runs whose status is ok (from its first "
+              f"initialisation on it tracked at least {MIN_TRACKED_FRACTION:.0%} of the frames, the last one among them; "
+              "runs scored / runs), an --estimate's ORB-SLAM2 keyframes as given" if with_slam else "ORB-SLAM2")
     lines += ["", f"APE: {system}; keyframes after Sim(3) Umeyama alignment (evo_ape -as). ORB features and matches: "
               "per image and matched (cross-checked Hamming) per adjacent pair, OpenCV ORB with ORB-SLAM2's settings "
               "(1000 features, scale 1.2, 8 levels, FAST 20) but not its grid-bucketed extractor (eas-vo compare --orb).", ""]

@@ -4,10 +4,12 @@ process: slam.worker), scored as the paper's Table 2 scores ORB-SLAM2.
 OUT/run_R/ (one per run, R = 1..N):
     settings.yaml   ORB-SLAM3's settings (the dataset's calibration, as `export` writes them)
     frames.csv      per frame: index, t [s], tracking state, tracked map points, the pose ORB-SLAM3
-                    gave when it tracked the frame (camera-to-world, its map's frame, up to scale)
+                    gave when it tracked the frame (camera-to-world, its map's frame, up to scale;
+                    empty for a frame it did not track)
     keyframes.tum   the keyframe trajectory (ORB-SLAM3's SaveKeyFrameTrajectoryTUM)
-    trajectory.tum  every tracked frame after ORB-SLAM3's final optimisation (SaveTrajectoryEuRoC,
-                    written as TUM); absent when it never initialised or its map was reset
+    trajectory.tum  each frame ORB-SLAM3 tracked (TRACKED), once, at its own time, posed after
+                    the final optimisation (SaveTrajectoryEuRoC, written as TUM; frames it did not
+                    track have no line); absent when it never initialised or its map was reset
                     (a lost track) and holds no keyframe
     keyframes_aligned.tum, trajectory_aligned.tum   both after the Sim(3) alignment, in the
                     ground truth's world (when they could be scored)
@@ -37,6 +39,12 @@ EXTRA_HINT = "monocular ORB-SLAM3 runs through the optional extra: pip install '
 FRAMES_FIELDS = ("index", "t", "state", "tracked_points", "tx", "ty", "tz", "qx", "qy", "qz", "qw")
 #: States in which ORB-SLAM3 tracked the frame against its map.
 TRACKED = ("ok", "relocalised")
+#: A run is `ok` when ORB-SLAM3 tracked at least this share of the frames from its first
+#: initialisation on, the last frame among them; else `lost` (or `never_initialised`).
+MIN_TRACKED_FRACTION = 0.9
+#: What makes a run's figures comparable: the pacing (slam.worker) and the status rule.
+#: reproduce's Table 2 reuses a cell's runs only when they were made under this protocol.
+PROTOCOL = f"paced by mapping idle; ok: >= {MIN_TRACKED_FRACTION:.0%} tracked after init and the last frame"
 #: How often [s] the parent looks whether a silent child is still alive.
 POLL_S = 0.5
 
@@ -179,7 +187,8 @@ def track_sequence(images, times, vocabulary: Path, settings: Path, folder: Path
                 for k, (image, t) in enumerate(tqdm(zip(images, times), total=len(times), disable=not progress,
                                                     unit="frame", desc=label)):
                     state, points, pose = slam.track(image, t)
-                    r = FrameResult(k, float(t), relabel([previous, state])[1], points, pose)
+                    shown = relabel([previous, state])[1]
+                    r = FrameResult(k, float(t), shown, points, pose if shown in TRACKED else None)
                     previous = state
                     results.append(r)
                     writer.writerow(_frames_row(r))
@@ -192,37 +201,67 @@ def track_sequence(images, times, vocabulary: Path, settings: Path, folder: Path
     finally:
         slam.close()
     if (folder / "frames.euroc").exists():
-        _euroc_to_tum(folder / "frames.euroc", folder / "trajectory.tum")
+        _euroc_to_tum(folder / "frames.euroc", folder / "trajectory.tum", results)
     return counts(results)
 
 
 def counts(results: list[FrameResult]) -> dict:
-    """A run's status (ok / never_initialised / lost), time to first initialisation [s] and the
-    fractions of frames tracked (of all, and of those from the first initialisation on)."""
+    """A run's status, time to first initialisation [s], the fractions of frames tracked (of
+    all, and of those from the first initialisation on) and the first frame after it that was
+    not tracked. Status: `never_initialised` without a tracked frame; `ok` when the frames from
+    the first initialisation on were tracked at least MIN_TRACKED_FRACTION of the time and the
+    last frame was; else `lost`."""
     states = [r.state for r in results]
     tracked = np.array([s in TRACKED for s in states])
     first = int(np.argmax(tracked)) if tracked.any() else None
-    lost = [k for k, s in enumerate(states) if s == "lost" and first is not None and k > first]
+    after = tracked[first:] if first is not None else tracked[:0]
+    untracked = np.flatnonzero(~after)
+    ok = first is not None and after.mean() >= MIN_TRACKED_FRACTION and bool(after[-1])
     return {
-        "status": "never_initialised" if first is None else "lost" if lost else "ok",
+        "status": "never_initialised" if first is None else "ok" if ok else "lost",
         "frames": len(states),
         "first_initialised_frame": first,
         "time_to_init_s": results[first].t - results[0].t if first is not None else None,
         "tracked_fraction": float(tracked.mean()) if len(tracked) else 0.0,
-        "tracked_fraction_after_init": float(tracked[first:].mean()) if first is not None else None,
-        "first_lost_frame": lost[0] if lost else None,
+        "tracked_fraction_after_init": float(after.mean()) if first is not None else None,
+        "first_lost_frame": int(first + untracked[0]) if len(untracked) else None,
+        "last_state": states[-1] if states else None,
         "states": {s: states.count(s) for s in sorted(set(states))},
     }
 
 
-def _euroc_to_tum(src: Path, dst: Path) -> None:
-    """ORB-SLAM3's EuRoC trajectory (`t_ns tx ty tz qx qy qz qw`) as TUM (`t_s ...`), then removed."""
+def _euroc_to_tum(src: Path, dst: Path, results: list[FrameResult]) -> None:
+    """ORB-SLAM3's EuRoC trajectory (`t_ns tx ty tz qx qy qz qw`) as TUM, then removed: the
+    line of each frame of `results` that ORB-SLAM3 tracked, once, at the frame's own time.
+    ORB-SLAM3 writes a line per frame since its initialisation, and for a frame it could not
+    pose the previous frame's time and pose again (Tracking::Track, "This can happen if
+    tracking is lost"), so its file can hold one time twice and poses of frames it lost."""
     from eas_vo.io import read_table
 
     rows = read_table(src, 8, "ORB-SLAM3 EuRoC pose 't_ns tx ty tz qx qy qz qw'") if src.stat().st_size else np.empty((0, 8))
-    rows[:, 0] *= 1e-9
-    write_text_atomic(dst, "".join(f"{r[0]:.9f} " + " ".join(f"{v:.9f}" for v in r[1:]) + "\n" for r in rows))
+    t = np.array([r.t for r in results])
+    tracked = np.array([r.state in TRACKED for r in results])
+    frame = _frame_of(rows[:, 0] * 1e-9, t)
+    keep = frame >= 0
+    keep[keep] = tracked[frame[keep]]
+    _, first = np.unique(frame[keep], return_index=True)
+    rows, frame = rows[keep][first], frame[keep][first]
+    write_text_atomic(dst, "".join(f"{t[k]:.9f} " + " ".join(f"{v:.9f}" for v in r[1:]) + "\n" for k, r in zip(frame, rows)))
     src.unlink()
+
+
+def _frame_of(t_row: np.ndarray, t_frame: np.ndarray) -> np.ndarray:
+    """The index of the frame (times `t_frame` [s], increasing) each time of `t_row` [s] is, or
+    -1: the nearest frame, within a quarter of the smallest gap between frames (the times went
+    through ORB-SLAM3's double and its writer's text)."""
+    if not len(t_frame):
+        return np.full(len(t_row), -1)
+    gaps = np.diff(t_frame)
+    tolerance = 0.25 * float(gaps[gaps > 0].min()) if (gaps > 0).any() else np.inf
+    right = np.clip(np.searchsorted(t_frame, t_row), 0, len(t_frame) - 1)
+    left = np.maximum(right - 1, 0)
+    k = np.where(np.abs(t_frame[left] - t_row) <= np.abs(t_frame[right] - t_row), left, right)
+    return np.where(np.abs(t_frame[k] - t_row) <= tolerance, k, -1)
 
 
 def score(ground_truth, path: Path, shown_as: Path, max_diff_s: float = 0.01) -> dict:
@@ -277,7 +316,7 @@ def summarise(runs: list[dict]) -> dict:
     """Median, min and max of each SUMMARISED figure over the runs whose status is ok; the
     count of each status."""
     good = [m for m in runs if m["status"] == "ok"]
-    out = {"runs": len(runs), "statuses": {s: sum(m["status"] == s for m in runs) for s in sorted({m["status"] for m in runs})}}
+    out = {"runs": len(runs), "protocol": PROTOCOL, "statuses": {s: sum(m["status"] == s for m in runs) for s in sorted({m["status"] for m in runs})}}
     for key, _ in SUMMARISED:
         values = [v for m in good if (v := _value(m, key)) is not None]
         out[key] = ({"median": float(np.median(values)), "min": float(np.min(values)), "max": float(np.max(values)),
@@ -295,7 +334,8 @@ def summary_markdown(label: str, frontend: str, summary: dict, orb: dict) -> str
                                       if s else "- | - | - | 0 |"))
     lines += [f"| ORB features per image | {orb['orb_keypoints_mean']:.0f} | | | |",
               f"| ORB matches per adjacent pair | {orb['orb_matches_mean']:.0f} | | | |", "",
-              "Figures over the runs whose status is ok (initialised, never lost); the others are counted, not scored. "
+              f"Figures over the runs whose status is ok (from its first initialisation on, ORB-SLAM3 tracked at least "
+              f"{MIN_TRACKED_FRACTION:.0%} of the frames, the last one among them); the others are counted, not scored. "
               "APE after Sim(3) Umeyama alignment (evo_ape -as).", ""]
     return "\n".join(lines)
 

@@ -275,3 +275,30 @@ def test_table2_runs_orbslam3_on_each_cell_beside_the_papers(walk_site, walk_voc
     before = (out / "slam" / "hdr_boxes_eas" / "summary.json").stat().st_mtime_ns
     assert main(argv) == 0
     assert (out / "slam" / "hdr_boxes_eas" / "summary.json").stat().st_mtime_ns == before
+
+
+def test_a_table2_cell_reruns_slam_runs_made_under_another_protocol(tmp_path, monkeypatch):
+    """A cell's summary.json is reused only when its runs were paced and judged as slam runs
+    now are (slam.run.PROTOCOL): an older folder, whose statuses followed another rule, reruns."""
+    from eas_vo import compare, reproduce
+    from eas_vo.slam import run as slam_run
+
+    calls = []
+
+    def run_slam(config, folder, vocabulary, runs, progress, replace):
+        calls.append(folder)
+        return {"runs": runs, "vocabulary": vocabulary, "protocol": slam_run.PROTOCOL, "crashed": [],
+                "ape_keyframes.ape_trans_mean_m": {"median": 0.02}}
+
+    monkeypatch.setattr(slam_run, "run_slam", run_slam)
+    monkeypatch.setattr(compare, "cell_config", lambda *a: None)
+    folder = tmp_path / "slam" / "hdr_boxes_eas"
+    folder.mkdir(parents=True)
+    old = {"runs": 2, "vocabulary": "voc.txt", "statuses": {"ok": 2}, "ape_keyframes.ape_trans_mean_m": {"median": 0.5}}
+    (folder / "summary.json").write_text(json.dumps(old))
+    cell = compare.Cell("ecd:hdr_boxes", "eas", "klt", "chain", (), "hdr_boxes")
+    got = reproduce._slam_cell(cell, "paper", {}, folder, "voc.txt", 2, False)
+    assert calls == [folder] and got["ape_trans_mean_m"] == 0.02
+    (folder / "summary.json").write_text(json.dumps({**old, "protocol": slam_run.PROTOCOL}))
+    assert reproduce._slam_cell(cell, "paper", {}, folder, "voc.txt", 2, False)["ape_trans_mean_m"] == 0.5
+    assert calls == [folder]

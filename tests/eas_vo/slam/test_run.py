@@ -1,13 +1,18 @@
 """Monocular ORB-SLAM3 in the loop, for real (the `slam` extra): on the simulated hand-held walk
-it initialises, tracks and scores within a bound derived from the scene; on a black sequence
-it never initialises and says so; a killed ORB-SLAM3 ends its run in one line, keeping the
-frames done; a missing extra or vocabulary is one line."""
+it initialises, tracks and scores within a bound derived from the scene; beside busy processes
+a run tracks as a quiet one; on a black sequence it never initialises and says so; a killed
+ORB-SLAM3 ends its run in one line, keeping the frames done; a missing extra or vocabulary is
+one line; a run's status follows what ORB-SLAM3 reported over it and its trajectory holds each
+tracked frame once."""
 
 import csv
 import json
 import math
 import os
 import signal
+import subprocess
+import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -138,15 +143,118 @@ def test_a_missing_extra_is_one_line_naming_it(tmp_path, capsys, monkeypatch):
     assert "pip install 'eas-vo[slam]'" in err and "GPL-3.0" in err
 
 
+def _results(states):
+    return [slam_run.FrameResult(k, 0.05 * k, s, 0, None) for k, s in enumerate(slam_run.relabel(states))]
+
+
 def test_states_and_counts():
     """An ok right after a lost frame is a relocalisation; the fractions count tracked frames."""
     states = ["not_initialised", "ok", "recently_lost", "ok", "lost", "ok"]
     assert slam_run.relabel(states) == ["not_initialised", "ok", "recently_lost", "relocalised", "lost", "relocalised"]
-    results = [slam_run.FrameResult(k, 0.1 * k, s, 0, None) for k, s in enumerate(slam_run.relabel(states))]
-    got = slam_run.counts(results)
-    assert got["status"] == "lost" and got["first_lost_frame"] == 4 and got["first_initialised_frame"] == 1
-    assert got["time_to_init_s"] == pytest.approx(0.1)
+    got = slam_run.counts(_results(states))
+    assert got["status"] == "lost" and got["first_lost_frame"] == 2 and got["first_initialised_frame"] == 1
+    assert got["time_to_init_s"] == pytest.approx(0.05)
     assert got["tracked_fraction"] == pytest.approx(3 / 6) and got["tracked_fraction_after_init"] == pytest.approx(3 / 5)
+
+
+@pytest.mark.parametrize(("states", "status"), [
+    # the issue's run: 4 frames tracked after initialising, then recently lost to the end
+    (["not_initialised"] * 66 + ["ok"] * 4 + ["recently_lost"] * 30, "lost"),
+    (["not_initialised"] * 10 + ["ok"] * 89 + ["recently_lost"], "lost"),  # ends lost
+    (["not_initialised"] * 10 + ["ok"] * 80 + ["recently_lost"] * 11 + ["ok"] * 9, "lost"),  # 89 % tracked
+    (["not_initialised"] * 10 + ["ok"] * 88 + ["recently_lost"] * 2 + ["ok"] * 10, "ok"),  # relocalised, 98 %
+    (["not_initialised"] * 10 + ["ok"] * 90, "ok"),
+    (["not_initialised"] * 100, "never_initialised"),
+])
+def test_a_run_is_ok_only_when_it_tracked_most_frames_after_initialising_and_the_last(states, status):
+    got = slam_run.counts(_results(states))
+    assert got["status"] == status, got
+    assert got["last_state"] == slam_run.relabel(states)[-1]
+
+
+class ScriptedOrbSlam3:
+    """Stands in for OrbSlam3Process: answers each frame with the next scripted state and, on
+    finish, writes the EuRoC trajectory as ORB-SLAM3's SaveTrajectoryEuRoC does: a line per
+    frame since initialisation, a frame it could not pose repeating the previous frame's time
+    and pose (Tracking::Track), times in ns."""
+
+    script: list = []
+
+    def __init__(self, vocabulary, settings, log):
+        self.seen = []
+
+    def track(self, image, t):
+        state = self.script[len(self.seen)]
+        self.seen.append((t, state))
+        return state, 50 if state == "ok" else 0, np.eye(4) if state != "not_initialised" else None
+
+    def finish(self, keyframes, frames):
+        Path(keyframes).write_text("".join(f"{t:.6f} 0 0 0 0 0 0 1\n" for t, s in self.seen if s == "ok"))
+        lines, last = [], None
+        for k, (t, state) in enumerate(self.seen):
+            if state == "ok":
+                last = f"{t * 1e9:.6f} {0.01 * k:.9f} 0 0 0 0 0 1\n"
+            if last is not None:
+                lines.append(last)
+        Path(frames).write_text("".join(lines))
+
+    def close(self):
+        pass
+
+
+def test_the_trajectory_holds_each_tracked_frame_once(tmp_path, monkeypatch):
+    """ORB-SLAM3's own file repeats the last pose for frames it lost; trajectory.tum holds the
+    tracked frames only, each once at its own time, and `evaluate`'s reader takes it."""
+    from eas_vo.orbslam import read_estimate
+
+    states = ["not_initialised"] * 3 + ["ok"] * 4 + ["recently_lost"] * 2 + ["ok"] * 3
+    monkeypatch.setattr(ScriptedOrbSlam3, "script", states)
+    monkeypatch.setattr(slam_run, "OrbSlam3Process", ScriptedOrbSlam3)
+    times = 1.7e9 + 0.05 * np.arange(len(states))  # a Unix clock: the times survive ORB-SLAM3's ns text
+    images = [np.zeros((4, 4), np.uint8)] * len(states)
+    got = slam_run.track_sequence(images, times, tmp_path / "voc", tmp_path / "settings", tmp_path, False, "test")
+    estimate = read_estimate(tmp_path / "trajectory.tum")
+    tracked = [k for k, s in enumerate(slam_run.relabel(states)) if s in slam_run.TRACKED]
+    np.testing.assert_allclose(estimate.t, times[tracked], rtol=0, atol=1e-6)
+    np.testing.assert_allclose(estimate.p_w_c[:, 0], 0.01 * np.array(tracked), atol=1e-9)
+    rows = read_frames(tmp_path / "frames.csv")
+    assert [r["qw"] != "" for r in rows] == [k in tracked for k in range(len(states))]  # no pose for an untracked frame
+    assert got["status"] == "lost" and got["tracked_fraction_after_init"] == pytest.approx(7 / 9)
+
+
+def _burners(n):
+    """n processes that keep a CPU busy (killed by the caller)."""
+    return [subprocess.Popen([sys.executable, "-c", "while True: pass"]) for _ in range(n)]
+
+
+def test_a_run_beside_busy_processes_tracks_as_a_quiet_one(walk_vocabulary, tmp_path):
+    """ORB-SLAM3 gets each frame once its mapping threads are idle, so CPU-burning processes
+    beside it (two, as many as this machine's cores, on top of whatever else runs) change no
+    frame's tracking state: the issue's EAS images of the walk, quiet and busy, give the same
+    states frame by frame, an `ok` status by the stated rule, and trajectories `evaluate` takes.
+    ORB-SLAM3 is not bit-deterministic even so (paced runs' poses differ by up to centimetres,
+    docs/slam.md), so the runs are compared state by state, not pose by pose."""
+    def run(name):
+        out = tmp_path / name
+        assert main(["slam", "--dataset", WALK, "--frontend", "eas", "--vocabulary", str(walk_vocabulary), "--runs", "1",
+                     "--quiet", "--out", str(out)]) == 0
+        return out / "run_1"
+
+    quiet = run("quiet")
+    burners = _burners(2)
+    try:
+        busy = run("busy")
+    finally:
+        for p in burners:
+            p.kill()
+            p.wait()
+    states = [[r["state"] for r in read_frames(folder / "frames.csv")] for folder in (quiet, busy)]
+    assert states[0] == states[1]
+    for folder in (quiet, busy):
+        metrics = json.loads((folder / "metrics.json").read_text())
+        assert metrics["tracked_fraction_after_init"] >= 0.9 and metrics["status"] == "ok", metrics
+        assert main(["evaluate", "--dataset", WALK, "--estimate", str(folder / "trajectory.tum"), "--align", "origin"]) == 0
+        assert len((folder / "trajectory.tum").read_text().splitlines()) == sum(s in slam_run.TRACKED for s in states[0])
 
 
 def test_the_summary_is_over_the_runs_that_tracked():
