@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import csv
 import importlib.util
+import io
 import multiprocessing
 import os
 import signal
@@ -250,6 +251,28 @@ def _euroc_to_tum(src: Path, dst: Path, results: list[FrameResult]) -> None:
     src.unlink()
 
 
+def on_recording_clock(folder: Path, origin_ns: int) -> None:
+    """A run folder's times (ORB-SLAM3 is fed, and its files and frames.csv first hold, times
+    after the dataset's clock origin) written as the recording's own: the origin added back in
+    integer ns (io.clock_time), as every eas-vo output holds them."""
+    from eas_vo.io import clock_time
+
+    if not origin_ns:
+        return
+    for path in sorted(folder.glob("*.tum")):
+        lines = path.read_text().splitlines(keepends=True)
+        write_text_atomic(path, "".join(line if not line.strip() or line.startswith("#") else
+                                        clock_time(float(line.split(maxsplit=1)[0]), origin_ns) + " " + line.split(maxsplit=1)[1]
+                                        for line in lines))
+    frames = folder / "frames.csv"
+    if frames.exists():
+        rows = list(csv.reader(frames.read_text().splitlines()))
+        rows[1:] = [[row[0], clock_time(float(row[1]), origin_ns), *row[2:]] for row in rows[1:]]
+        text = io.StringIO()
+        csv.writer(text).writerows(rows)  # (the dialect frames.csv is written in)
+        write_text_atomic(frames, text.getvalue())
+
+
 def _frame_of(t_row: np.ndarray, t_frame: np.ndarray) -> np.ndarray:
     """The index of the frame (times `t_frame` [s], increasing) each time of `t_row` [s] is, or
     -1: the nearest frame, within a quarter of the smallest gap between frames (the times went
@@ -380,6 +403,7 @@ def run_slam(config, out: str | Path, vocabulary: str | None = None, runs: int =
                 metrics = {"status": "crashed", "message": message}
                 crashed.append(f"run {r} of {runs}: {message}")
             except KeyboardInterrupt as exc:  # the folder is kept, marked partial by this run's status
+                on_recording_clock(folder, dataset.clock_origin_ns)
                 write_text_atomic(folder / "metrics.json", json_text({"status": "interrupted", "run": r}))
                 raise Interrupted.keeping(exc, f"{final} keeps the runs so far, run {r} marked interrupted "
                                                "(its frames.csv up to the interrupt)") from None
@@ -388,6 +412,7 @@ def run_slam(config, out: str | Path, vocabulary: str | None = None, runs: int =
                     metrics[key] = score(gt, folder / name, final / folder.name / name)
                 metrics["rotation_eq3"] = rotation_score(gt, folder / "trajectory.tum", rc.time_offset_s or 0.0)
             metrics.update(run=r, dataset=dataset.label, frontend=rc.frontend, vocabulary=str(vocabulary))
+            on_recording_clock(folder, dataset.clock_origin_ns)
             write_text_atomic(folder / "metrics.json", json_text(metrics))
             results.append(metrics)
         summary = {**summarise(results), **orb.summary(), "dataset": dataset.label, "frontend": rc.frontend,

@@ -283,3 +283,20 @@ def test_the_eq3_rotation_ape_of_a_trajectory_in_another_world_frame_is_zero(sho
     got = slam_run.rotation_score(gt, path, 0.0)
     assert got["frames"] == len(rows) and got["ape_max_rad"] < 1e-6
     assert slam_run.rotation_score(gt, tmp_path / "absent.tum", 0.0) is None
+
+
+def test_a_run_folder_holds_the_recordings_own_times(tmp_path):
+    """ORB-SLAM3 is fed times after the dataset's clock origin; the run folder's files end on
+    the recording's own clock (a Unix-time bag's), to the nanosecond, other columns untouched."""
+    from eas_vo.slam.run import on_recording_clock
+
+    (tmp_path / "trajectory.tum").write_text("0.250000000 1 2 3 0 0 0 1\n1.000000001 1 2 3 0 0 0 1\n")
+    (tmp_path / "keyframes.tum").write_text("# ORB-SLAM3's\n0.250000 1 2 3 0 0 0 1\n")
+    (tmp_path / "frames.csv").write_bytes(b"index,t,state\r\n0,0.250000000,ok\r\n")
+    on_recording_clock(tmp_path, 1_700_000_000 * 10**9)
+    assert (tmp_path / "trajectory.tum").read_text() == ("1700000000.250000000 1 2 3 0 0 0 1\n"
+                                                         "1700000001.000000001 1 2 3 0 0 0 1\n")
+    assert (tmp_path / "keyframes.tum").read_text() == "# ORB-SLAM3's\n1700000000.250000000 1 2 3 0 0 0 1\n"
+    assert (tmp_path / "frames.csv").read_bytes() == b"index,t,state\r\n0,1700000000.250000000,ok\r\n"
+    on_recording_clock(tmp_path, 0)  # a clock from zero: nothing to do
+    assert (tmp_path / "frames.csv").read_bytes() == b"index,t,state\r\n0,1700000000.250000000,ok\r\n"
