@@ -8,7 +8,7 @@ from pathlib import Path
 import h5py
 import numpy as np
 import pytest
-from helpers import hostile_settings
+from helpers import hostile_settings, mvsec_rows, write_mvsec
 from hypothesis import given
 from hypothesis import strategies as st
 from scipy.spatial.transform import Rotation
@@ -36,34 +36,6 @@ cam1:
   resolution: [346, 260]
   rostopic: /davis/right/image_raw
 """
-
-
-def mvsec_rows(events: np.ndarray) -> np.ndarray:
-    """EVENT_DTYPE -> MVSEC's (N, 4) float64 rows x y t p, p in {-1, 1}."""
-    return np.column_stack([events["x"], events["y"], events["t"], np.where(events["p"] > 0, 1.0, -1.0)])
-
-
-def write_mvsec(folder: Path, seq, name: str = "seq", side: str = "left", **events_options) -> Path:
-    """Write `seq` (a Dataset) as MVSEC's NAME_data.hdf5 and NAME_gt.hdf5 with plain h5py."""
-    folder.mkdir(parents=True, exist_ok=True)
-    frames = np.stack([seq.load_frame(k) for k in range(len(seq.frame_times()))])
-    data = folder / f"{name}_data.hdf5"
-    with h5py.File(data, "w") as f:
-        g = f.create_group(f"davis/{side}")
-        g.create_dataset("events", data=mvsec_rows(np.asarray(seq.events())), **events_options)
-        g.create_dataset("image_raw", data=frames, compression="lzf", chunks=(1, *frames.shape[1:]))
-        g["image_raw_ts"] = seq.frame_times()
-        g["imu"] = np.column_stack([seq.imu.acc, seq.imu.gyro])
-        g["imu_ts"] = seq.imu.t
-    gt = seq.ground_truth
-    T = np.tile(np.eye(4), (len(gt.t), 1, 1))
-    T[:, :3, :3] = Rotation.from_quat(gt.q_w_c).as_matrix()
-    T[:, :3, 3] = gt.p_w_c
-    with h5py.File(folder / f"{name}_gt.hdf5", "w") as f:
-        g = f.create_group(f"davis/{side}")
-        g["pose"] = T
-        g["pose_ts"] = gt.t
-    return data
 
 
 @pytest.fixture(scope="module")

@@ -7,7 +7,7 @@ import shutil
 
 import numpy as np
 import pytest
-from helpers import hostile_settings, random_events, run_eas_vo
+from helpers import InMemoryDataset, hostile_settings, random_events, run_eas_vo
 from hypothesis import given
 from hypothesis import strategies as st
 
@@ -25,35 +25,24 @@ from eas_vo.datasets.rosbag2 import (
     write_bag2,
 )
 from eas_vo.errors import DataError
-from eas_vo.plugins import Dataset
 from eas_vo.registry import open_dataset, resolve_dataset
 from eas_vo.types import ImuSeries, PoseSeries
 
 STORAGES = {"sqlite3": "db3", "mcap": "mcap"}
 
 
-class Excerpt(Dataset):
+class Excerpt(InMemoryDataset):
     """The first `n_frames` frames of a dataset, with its events, IMU and poses until the last."""
 
     def __init__(self, dataset, n_frames: int):
-        self.camera = dataset.camera
-        self._times = dataset.frame_times()[:n_frames]
-        self._frames = [dataset.load_frame(k) for k in range(n_frames)]
-        end = self._times[-1]
+        times = dataset.frame_times()[:n_frames]
+        end = times[-1]
         events = dataset.events()
-        self._events = np.asarray(events[events["t"] <= end])
         imu, gt = dataset.imu, dataset.ground_truth
-        self.imu = ImuSeries(imu.t[imu.t <= end], imu.acc[imu.t <= end], imu.gyro[imu.t <= end])
-        self.ground_truth = PoseSeries(gt.t[gt.t <= end], gt.p_w_c[gt.t <= end], gt.q_w_c[gt.t <= end])
-
-    def frame_times(self):
-        return self._times
-
-    def load_frame(self, k):
-        return self._frames[k]
-
-    def events(self):
-        return self._events
+        super().__init__(dataset.camera, times, [dataset.load_frame(k) for k in range(n_frames)],
+                         np.asarray(events[events["t"] <= end]),
+                         ImuSeries(imu.t[imu.t <= end], imu.acc[imu.t <= end], imu.gyro[imu.t <= end]),
+                         PoseSeries(gt.t[gt.t <= end], gt.p_w_c[gt.t <= end], gt.q_w_c[gt.t <= end]))
 
 
 @pytest.fixture(scope="module")

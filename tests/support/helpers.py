@@ -9,6 +9,7 @@ import cv2
 import numpy as np
 import pytest
 
+from eas_vo.plugins import Dataset
 from eas_vo.types import EVENT_DTYPE, CameraModel, ImuSeries, PoseSeries
 
 SHARED_DATA = Path(__file__).resolve().parents[3] / "shared" / "data"
@@ -225,7 +226,57 @@ def known_sequence(folder: Path, width: int = 346, height: int = 260, frames: bo
     return folder
 
 
-# ----------------------------------------------------------------------------- damaged files
+# ----------------------------------------------------------------------------- writers and damage
+
+class InMemoryDataset(Dataset):
+    """A recording held in memory (what the formats' writers take): the camera, frame times [s]
+    with their uint8 frames, EVENT_DTYPE events, IMU and ground truth (or None)."""
+
+    def __init__(self, camera: CameraModel, times, frames, events, imu: ImuSeries | None = None,
+                 ground_truth: PoseSeries | None = None):
+        self.camera, self._times, self._frames, self._events = camera, np.asarray(times), list(frames), events
+        self.imu, self.ground_truth = imu, ground_truth
+
+    def frame_times(self):
+        return self._times
+
+    def load_frame(self, k):
+        return self._frames[k]
+
+    def events(self):
+        return self._events
+
+
+def mvsec_rows(events: np.ndarray) -> np.ndarray:
+    """EVENT_DTYPE -> MVSEC's (N, 4) float64 rows x y t p, p in {-1, 1}."""
+    return np.column_stack([events["x"], events["y"], events["t"], np.where(events["p"] > 0, 1.0, -1.0)])
+
+
+def write_mvsec(folder: Path, seq, name: str = "seq", side: str = "left", **events_options) -> Path:
+    """Write `seq` (a Dataset) as MVSEC's NAME_data.hdf5 and NAME_gt.hdf5 with plain h5py."""
+    import h5py
+    from scipy.spatial.transform import Rotation
+
+    folder.mkdir(parents=True, exist_ok=True)
+    frames = np.stack([seq.load_frame(k) for k in range(len(seq.frame_times()))])
+    data = folder / f"{name}_data.hdf5"
+    with h5py.File(data, "w") as f:
+        g = f.create_group(f"davis/{side}")
+        g.create_dataset("events", data=mvsec_rows(np.asarray(seq.events())), **events_options)
+        g.create_dataset("image_raw", data=frames, compression="lzf", chunks=(1, *frames.shape[1:]))
+        g["image_raw_ts"] = seq.frame_times()
+        g["imu"] = np.column_stack([seq.imu.acc, seq.imu.gyro])
+        g["imu_ts"] = seq.imu.t
+    gt = seq.ground_truth
+    T = np.tile(np.eye(4), (len(gt.t), 1, 1))
+    T[:, :3, :3] = Rotation.from_quat(gt.q_w_c).as_matrix()
+    T[:, :3, 3] = gt.p_w_c
+    with h5py.File(folder / f"{name}_gt.hdf5", "w") as f:
+        g = f.create_group(f"davis/{side}")
+        g["pose"] = T
+        g["pose_ts"] = gt.t
+    return data
+
 
 def seeded_flips(source: Path, count: int, seed: int) -> list[tuple[str, int, int]]:
     """`count` (file, byte, bit) places to flip in `source` (a file: file "", or a folder: a
