@@ -213,7 +213,8 @@ class Aedat4File:
     def __init__(self, path: Path):
         self.path = Path(path)
         with open(self.path, "rb") as fh:
-            self._map = mmap.mmap(fh.fileno(), 0, access=mmap.ACCESS_READ) if fh.seek(0, 2) else b""
+            empty = fh.seek(0, 2) == 0  # mmap refuses an empty file
+            self._map = b"" if empty else mmap.mmap(fh.fileno(), 0, access=mmap.ACCESS_READ)
         self._data = memoryview(self._map)
         size = len(self._map)
         if self._map[: len(MAGIC)] != MAGIC or size < len(MAGIC) + 4:
