@@ -1,5 +1,6 @@
-"""AEDAT4 recordings (iniVation's DV software): frames, IMU and the sensor size read with
-dv-processing, events decoded by datasets/aedat4_packets.py on both cores.
+"""AEDAT4 recordings (iniVation's DV software), decoded by datasets/aedat4_packets.py (not by
+dv-processing, which spins or crashes on a damaged packet): events on both cores, frames, IMU
+and the sensor size.
 
 From the file: the `events` stream (x, y, polarity, microsecond timestamps), the `frames`
 stream (APS frames with their start-of-exposure timestamp and exposure duration), the `imu`
@@ -16,14 +17,13 @@ Dataset and the `ecd` reader, gives a frame; units: g -> m/s^2 (standard gravity
 from __future__ import annotations
 
 from dataclasses import dataclass
-from datetime import timedelta
 from pathlib import Path
 
 import cv2
 import numpy as np
 
 from eas_vo.concurrency import in_order
-from eas_vo.datasets.aedat4_packets import MAGIC, EventPackets, Scratch
+from eas_vo.datasets.aedat4_packets import MAGIC, Aedat4File, DvFrame, Scratch
 from eas_vo.datasets.recording import CALIBRATION_FORMATS, RecordingReader, StreamConfig, check_increasing, clock_origin_ns
 from eas_vo.errors import DataError, DataWarnings
 from eas_vo.eventfile import Validator, cache_key, file_identity, load_cached
@@ -37,19 +37,6 @@ STANDARD_GRAVITY = 9.80665
 @dataclass(frozen=True)
 class Aedat4Config(StreamConfig):
     """StreamConfig; `calibration` is required (an AEDAT4 file holds no lens calibration)."""
-
-
-def _said(exc: Exception) -> str:
-    """What dv-processing said, without its C++ location and stack trace."""
-    lines = [line.strip() for line in str(exc).splitlines() if line.strip()]
-    if lines and lines[0].startswith("/") and len(lines) > 1:  # "/project/include/...hpp(313): void ...()"
-        lines = lines[1:]
-    kept = []
-    for line in lines:
-        if line.startswith("Stacktrace:"):
-            break
-        kept.append(line.replace("Error info: ", ""))
-    return " ".join(kept) or type(exc).__name__
 
 
 def is_aedat4(path: Path) -> bool:
@@ -105,9 +92,7 @@ class Aedat4Dataset(RecordingReader):
     Config = Aedat4Config
 
     def __init__(self, location: str | Path, config: Aedat4Config | None = None):
-        import dv_processing as dv
-
-        self.config = c = config or Aedat4Config()
+        self.config = config or Aedat4Config()
         self.path = Path(location)
         self.label = str(self.path)
         self.warnings = DataWarnings()
@@ -115,14 +100,10 @@ class Aedat4Dataset(RecordingReader):
             raise DataError(self.path, "AEDAT4 file not found")
         if not is_aedat4(self.path):
             raise DataError(self.path, f"not an AEDAT4 file (it does not start with {MAGIC.decode().strip()!r})")
-        if self.path.suffix != ".aedat4":
-            raise DataError(self.path, "dv-processing opens AEDAT4 files only under a name ending in '.aedat4' "
-                                       "(lower case): rename or link it")
-        self.recording = self._dv(lambda: dv.io.MonoCameraRecording(str(self.path)), "the file's header or index")
-        start_us, _ = self._dv(self.recording.getTimeRange, "the file's time range")
-        self.clock_origin_ns = clock_origin_ns(int(start_us) * 1000)
-        self._sensor = width, height = self._sensor_size()
+        self.file = Aedat4File(self.path)
+        self.clock_origin_ns = clock_origin_ns(self._first_time_us() * 1000)
         self._origin_us = self.clock_origin_ns // 1000
+        self._sensor = width, height = self._sensor_size()
         self.camera = self.calibration_file(width, height)
         if self.camera is None:
             self.no_camera_reason = (f"{self.path}: an AEDAT4 file holds no lens calibration: give one with --set "
@@ -135,23 +116,24 @@ class Aedat4Dataset(RecordingReader):
         self.ground_truth = self.ground_truth_file()
         self._events: np.ndarray | None = None
 
-    def _dv(self, call, what: str, stream: str = ""):
-        """`call()`, dv-processing's errors turned into a one-line DataError naming `what` was read."""
-        try:
-            return call()
-        except (RuntimeError, ValueError, IndexError, OSError) as exc:  # what pybind11 makes of std:: exceptions
-            where = f"{self.path}:{stream}" if stream else str(self.path)
-            raise DataError(where, f"damaged or truncated AEDAT4 data, reading {what} ({_said(exc)})") from None
+    def _first_time_us(self) -> int:
+        """The earliest of the first event's, frame's and IMU reading's timestamps [us] (0 with none)."""
+        firsts = []
+        streams = self.file.streams
+        if "events" in streams and streams["events"].packets:
+            records = self.file.event_records(0)
+            firsts += [int(records["t"][0])] if len(records) else []
+        if "frames" in streams and streams["frames"].packets:
+            firsts.append(int(self.file.frame(0).start_us))
+        if "imu" in streams:
+            rows = self.file.imu_rows()
+            firsts += [int(rows[0, 0])] if len(rows) else []
+        return min(firsts) if firsts else 0
 
     def _sensor_size(self) -> tuple[int, int]:
-        """(width, height) [px] from the events' or the frames' stream metadata (equal if both)."""
-        r = self.recording
-        sizes = {}
-        if r.isEventStreamAvailable():
-            sizes["events"] = r.getEventResolution()
-        if r.isFrameStreamAvailable():
-            sizes["frames"] = r.getFrameResolution()
-        sizes = {k: tuple(map(int, v)) for k, v in sizes.items() if v is not None}
+        """(width, height) [px] from the events' or the frames' stream description (equal if both)."""
+        sizes = {kind: self.file.streams[kind].size for kind in ("events", "frames") if kind in self.file.streams}
+        sizes = {kind: size for kind, size in sizes.items() if size is not None}
         if not sizes:
             raise DataError(self.path, "neither an events nor a frames stream with a resolution: the sensor size is unknown")
         if len(set(sizes.values())) > 1:
@@ -161,32 +143,17 @@ class Aedat4Dataset(RecordingReader):
 
     # -- frames --------------------------------------------------------------------------
 
-    def _frames(self):
-        """(index, dv.Frame) of the frames stream in order, read from its start."""
-        r = self.recording
-        index = 0
-        while True:
-            frame = self._dv(r.getNextFrame, f"frame {index}", "frames")
-            if frame is None:
-                return
-            yield index, frame
-            index += 1
-
     def _read_frame_times(self) -> np.ndarray | None:
         """Frame times [s] (mid-exposure) of the frames kept, None without frames; frames going
-        back in time are errors (dropped and counted with --lenient). Notes where to find each
-        kept frame again: its start-of-exposure timestamp [us] and its rank among the frames
-        that start then."""
-        if not self.recording.isFrameStreamAvailable():
+        back in time are errors (dropped and counted with --lenient). Notes each kept frame's
+        packet."""
+        if "frames" not in self.file.streams:
             return None
         where = f"{self.path}:frames"
-        middles, self._frame_index, self._frame_at = [], [], []
-        starting: dict[int, int] = {}
-        for index, frame in self._frames():
-            start = int(frame.timestamp)
-            rank = starting.get(start, 0)
-            starting[start] = rank + 1
-            middle_us = start + (frame.exposure // timedelta(microseconds=1)) / 2
+        middles, self._frame_index = [], []
+        for index in range(len(self.file.streams["frames"].packets)):
+            frame = self.file.frame(index)
+            middle_us = frame.start_us + frame.exposure_us / 2
             if middles and middle_us < middles[-1]:
                 if not self.config.lenient:
                     raise DataError(where, f"frame time {middle_us / 1e6:.6f} s goes back (previous {middles[-1] / 1e6:.6f})",
@@ -196,66 +163,46 @@ class Aedat4Dataset(RecordingReader):
             self._check_frame(frame, index)
             middles.append(middle_us)
             self._frame_index.append(index)
-            self._frame_at.append((start, rank))
-        self.recording.resetSequentialRead()
         return (np.array(middles) - self._origin_us) / 1e6 if middles else None
 
-    def _check_frame(self, frame, index: int) -> None:
-        image = frame.image
-        size = (image.shape[1], image.shape[0]) if image is not None and image.ndim >= 2 else (0, 0)
+    def _check_frame(self, frame: DvFrame, index: int) -> None:
+        size = frame.image.shape[1], frame.image.shape[0]
         expected = self._sensor
-        if size != expected or frame.positionX or frame.positionY:
-            raise DataError(f"{self.path}:frames", f"frame is {size[0]}x{size[1]} px at ({frame.positionX}, "
-                                                   f"{frame.positionY}), not the {expected[0]}x{expected[1]} sensor", index)
-        if image.dtype != np.uint8 or (image.ndim == 3 and image.shape[2] not in (1, 3, 4)):
-            raise DataError(f"{self.path}:frames", f"frame of {image.dtype} with shape {image.shape}: 8-bit grey, "
-                                                   "BGR or BGRA are read", index)
+        if size != expected or any(frame.position):
+            raise DataError(f"{self.path}:frames", f"frame is {size[0]}x{size[1]} px at {frame.position}, "
+                                                   f"not the {expected[0]}x{expected[1]} sensor", index)
 
     def load_frame(self, k: int) -> np.ndarray | None:
         if self._frame_times is None:
             return None
-        (start, rank), index = self._frame_at[k], self._frame_index[k]
-        batch = self._dv(lambda: self.recording.getFramesTimeRange(start, start + 1), f"frame {index}", "frames")
-        if batch is None or rank >= len(batch):
-            raise DataError(f"{self.path}:frames", "frame unreadable on a second read (did the file change?)", index)
-        image = batch[rank].image
-        if image.ndim == 3:
-            image = image[..., 0] if image.shape[2] == 1 else cv2.cvtColor(
-                image, cv2.COLOR_BGR2GRAY if image.shape[2] == 3 else cv2.COLOR_BGRA2GRAY)
-        return np.ascontiguousarray(image)
+        image = self.file.frame(self._frame_index[k]).image  # a view of the packet's bytes: copied
+        if image.ndim == 2:
+            return image.copy()
+        return cv2.cvtColor(image, cv2.COLOR_BGR2GRAY if image.shape[2] == 3 else cv2.COLOR_BGRA2GRAY)
 
     # -- IMU, events -------------------------------------------------------------------------
 
     def _read_imu(self) -> ImuSeries | None:
         """The imu stream in the project's units, or None without one (or with fewer than 2
         readings: nothing to interpolate between)."""
-        r = self.recording
-        if not r.isImuStreamAvailable():
+        if "imu" not in self.file.streams:
             return None
-        rows = []
-        while True:
-            batch = self._dv(r.getNextImuBatch, f"IMU reading {len(rows)}", "imu")
-            if batch is None:
-                break
-            rows.extend((m.timestamp, m.accelerometerX, m.accelerometerY, m.accelerometerZ,
-                         m.gyroscopeX, m.gyroscopeY, m.gyroscopeZ) for m in batch)
-        r.resetSequentialRead()
-        if len(rows) < 2:
+        table = self.file.imu_rows()
+        if len(table) < 2:
             return None
-        table = np.array(rows, dtype=float)
-        t = (np.array([row[0] for row in rows], np.int64) - self._origin_us) / 1e6
+        t = (table[:, 0] - self._origin_us) / 1e6
         check_increasing(f"{self.path}:imu", t, lambda row: row)
         return ImuSeries(t=t, acc=table[:, 1:4] * STANDARD_GRAVITY, gyro=np.deg2rad(table[:, 4:7]))
 
     def events(self) -> np.ndarray:
         if self._events is None:
-            self._events = self._load_events() if self.recording.isEventStreamAvailable() else empty_events()
+            self._events = self._load_events() if "events" in self.file.streams else empty_events()
         return self._events
 
     def _load_events(self) -> np.ndarray:
         c = self.config
         where = f"{self.path}:events"
-        packets = EventPackets(self.path)
+        packets = self.file
         width, height = self._sensor
         groups = _groups(packets.sizes, GROUP_BYTES)
         slots = [_Slot() for _ in range(GROUPS_AHEAD)]  # in_order keeps GROUPS_AHEAD groups at most, the one taken included
@@ -269,7 +216,7 @@ class Aedat4Dataset(RecordingReader):
             slot, verdicts, used = slots[g % len(slots)], [], 0
             first_t, latest, plain = np.inf, -np.inf, True
             for k in groups[g]:
-                records = packets.decode(k, slot.scratch)
+                records = packets.event_records(k, slot.scratch)
                 packed = slot.room(used + len(records))[used : used + len(records)]
                 bad, last_t = check_and_pack_dv(records.view(np.int64).reshape(-1, 2), self._origin_us, -np.inf, width,
                                                 height, c.time_tolerance_s, packed)
@@ -304,7 +251,7 @@ class Aedat4Dataset(RecordingReader):
                         if run:
                             out.write(slot.packed[run[0] : run[1]].data)
                             run = None
-                        records = packets.decode(k)  # again, on its own: the stream's check row by row
+                        records = packets.event_records(k)  # again, on its own: the stream's check row by row
                         events = validate(records["t"] - self._origin_us, records["x"], records["y"], records["p"],
                                           lambda row, before=read: before + row, per_second=1e6)
                         out.write(events.data)

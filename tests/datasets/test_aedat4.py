@@ -5,7 +5,10 @@ sequence giving the same data and the same trajectory as its ECD folder."""
 from __future__ import annotations
 
 import json
+import re
+from datetime import timedelta
 
+import cv2
 import numpy as np
 import pytest
 
@@ -71,8 +74,7 @@ def test_can_open_wants_the_suffix_and_the_magic(tmp_path):
     shouting = tmp_path / "REC.AEDAT4"
     shouting.write_bytes(good.read_bytes())
     assert Aedat4Dataset.can_open(str(shouting))
-    with pytest.raises(DataError, match=r"REC.AEDAT4: dv-processing opens AEDAT4 files only under a name ending in '.aedat4'"):
-        Aedat4Dataset(shouting, Aedat4Config(calibration=str(write_calib(tmp_path))))
+    assert len(Aedat4Dataset(shouting, Aedat4Config(calibration=str(write_calib(tmp_path)))).events()) == 10
 
 
 def test_a_missing_calibration_says_what_to_pass(tmp_path):
@@ -137,16 +139,16 @@ def test_every_compression_reads_what_dv_processing_reads(tmp_path, monkeypatch,
     packet per task (the tasks' buffers reused around their ring) or all in one; decompressed
     into a buffer too small for a packet (it grows) the same as into memory of its own."""
     from eas_vo.datasets import aedat4
-    from eas_vo.datasets.aedat4_packets import EventPackets, Scratch
+    from eas_vo.datasets.aedat4_packets import Aedat4File, Scratch
 
     monkeypatch.setattr(aedat4, "GROUP_BYTES", group_bytes)
     path = tmp_path / "rec.aedat4"
     write_aedat4(path, events=random_stream(25_000, seed=7), kind="events", compression=compression, packet=1000)
     ds = Aedat4Dataset(path, Aedat4Config(calibration=str(write_calib(tmp_path))))
     ours = ds.events()
-    packets, scratch = EventPackets(path), Scratch(64)
+    packets, scratch = Aedat4File(path), Scratch(64)
     for k in range(len(packets)):
-        assert packets.decode(k, scratch).tobytes() == packets.decode(k).tobytes()
+        assert packets.event_records(k, scratch).tobytes() == packets.event_records(k).tobytes()
     assert len(scratch.buffer) >= 16_000 if compression != "NONE" else len(scratch.buffer) == 64
     recording, batches = dv.io.MonoCameraRecording(str(path)), []
     while (batch := recording.getNextEventBatch()) is not None:
@@ -159,13 +161,44 @@ def test_every_compression_reads_what_dv_processing_reads(tmp_path, monkeypatch,
     np.testing.assert_array_equal(ours["p"], theirs["polarity"] != 0)
 
 
+@pytest.mark.parametrize("compression", ["NONE", "LZ4", "ZSTD"])
+def test_frames_and_imu_read_what_dv_processing_reads(tmp_path, compression):
+    """Frames (grey, BGR, BGRA) and IMU readings decoded by eas-vo against dv-processing's own
+    reading of the same file: the same times, exposures, pixels and values."""
+    rng = np.random.default_rng(5)
+    t0 = 1_700_000_000_000_000
+    grey = rng.integers(0, 256, (HEIGHT, WIDTH), dtype=np.uint8)
+    images = [grey, rng.integers(0, 256, (HEIGHT, WIDTH, 3), dtype=np.uint8), rng.integers(0, 256, (HEIGHT, WIDTH, 4), dtype=np.uint8)]
+    frames = [(t0 + 30_000 * k, 1000 + 7 * k, image) for k, image in enumerate(images)]
+    imu = [(t0 + 1000 * k, *rng.normal(size=6)) for k in range(50)]
+    path = tmp_path / "rec.aedat4"
+    write_aedat4(path, events=random_stream(100), frames=frames, imu=imu, compression=compression)
+    ours = Aedat4Dataset(path, Aedat4Config(calibration=str(write_calib(tmp_path))))
+    recording, theirs, readings = dv.io.MonoCameraRecording(str(path)), [], []
+    while (frame := recording.getNextFrame()) is not None:
+        theirs.append(frame)
+    while (batch := recording.getNextImuBatch()) is not None:
+        readings.extend(batch)
+    assert len(theirs) == len(ours.frame_times()) == 3
+    for k, frame in enumerate(theirs):
+        middle_us = frame.timestamp + frame.exposure / timedelta(microseconds=1) / 2
+        assert ours.frame_times()[k] == (middle_us - ours.clock_origin_ns // 1000) / 1e6
+        conversion = {2: None, 3: cv2.COLOR_BGR2GRAY, 4: cv2.COLOR_BGRA2GRAY}[frame.image.ndim if frame.image.ndim == 2 else frame.image.shape[2]]
+        expected = frame.image if conversion is None else cv2.cvtColor(frame.image, conversion)
+        np.testing.assert_array_equal(ours.load_frame(k), expected)
+    np.testing.assert_array_equal(ours.imu.t, [(m.timestamp - ours.clock_origin_ns // 1000) / 1e6 for m in readings])
+    np.testing.assert_array_equal(ours.imu.gyro, np.deg2rad([[m.gyroscopeX, m.gyroscopeY, m.gyroscopeZ] for m in readings]))
+    np.testing.assert_array_equal(ours.imu.acc, 9.80665 * np.array([[m.accelerometerX, m.accelerometerY, m.accelerometerZ]
+                                                                   for m in readings]))
+
+
 def test_a_damaged_event_packet_is_named(tmp_path):
-    from eas_vo.datasets.aedat4_packets import EventPackets
+    from eas_vo.datasets.aedat4_packets import Aedat4File
 
     path = tmp_path / "rec.aedat4"
     write_aedat4(path, events=random_stream(5000, seed=8), kind="events", packet=1000)
-    packets = EventPackets(path)
-    offset, size = packets._packets[3]
+    packets = Aedat4File(path)
+    offset, size = packets.streams["events"].packets[3]
     data = bytearray(path.read_bytes())
     data[offset + size // 2 : offset + size // 2 + 64] = bytes(64)  # zeros over the middle of packet 3's LZ4 frame
     path.write_bytes(bytes(data))
@@ -291,6 +324,104 @@ def test_truncated_files_are_named_errors_or_read_whole(tmp_path):
     check()
 
 
+def structure_bytes(data: bytes, seed: int) -> list[int]:
+    """Where an AEDAT4 file's structure is (found without the reader under test): each packet's
+    8-byte header and the first and last 12 bytes of its body (a compressed frame's header and
+    end, a FlatBuffer's offsets), 32 bytes of the index after the last packet, and 24 more
+    anywhere; seeded."""
+    import random
+    import struct
+
+    rng = random.Random(seed)
+    at = 18 + struct.unpack_from("<i", data, 14)[0]  # magic (14 bytes), int32 header size, header
+    places = set()
+    while at + 8 <= len(data):
+        size = struct.unpack_from("<ii", data, at)[1]
+        if size < 0 or at + 8 + size > len(data):
+            break  # the index: not a packet
+        body = range(at + 8, at + 8 + size)
+        places.update(range(at, at + 8), body[:12], body[-12:])
+        at += 8 + size
+    places.update(rng.sample(range(at, len(data)), min(32, len(data) - at)))
+    places.update(rng.sample(range(len(data)), 24))
+    return sorted(places)
+
+
+@pytest.mark.parametrize("compression", ["LZ4", "ZSTD", "NONE"])
+def test_a_flipped_bit_is_a_one_line_error_naming_the_packet_or_a_read(tmp_path, compression):
+    """One bit flipped in an AEDAT4's structure (packet headers, the ends of every packet of
+    every stream, the index) and anywhere: a one-line error naming the file (and for a packet,
+    the stream and the packet) or a whole read, each within seconds, never a spin or a crash
+    (dv-processing, given such files, spun for minutes holding the GIL, so that Ctrl-C and
+    SIGTERM were never seen, or crashed)."""
+    from helpers import flipped_copies, read_each_bounded
+
+    rng = np.random.default_rng(2)
+    t, x, y, p = random_stream(200, seed=11)
+    image = rng.integers(0, 256, (HEIGHT, WIDTH), dtype=np.uint8)
+    path = tmp_path / "rec.aedat4"
+    write_aedat4(path, events=(t, x, y, p), frames=[(t[0] + 40_000 * k, 5000, image) for k in range(2)],
+                 imu=[(t[0] + 5000 * k, 0.0, -1.0, 0.0, 1.0, 2.0, 3.0) for k in range(4)],
+                 compression=compression, packet=100)
+    rng_bits = np.random.default_rng(3)
+    flips = [("", at, int(rng_bits.integers(8))) for at in structure_bytes(path.read_bytes(), seed=4)]
+    copies = flipped_copies(path, tmp_path / "flips", flips)
+    outcomes = read_each_bounded([path, *copies], [f"dataset.calibration={write_calib(tmp_path)}"])
+    assert outcomes[str(path)] == "ok"
+    for copy in copies:
+        outcome = outcomes[str(copy)]
+        assert outcome == "ok" or outcome.startswith(str(copy)), (copy, outcome)
+        if " packet " in outcome and "AEDAT4" in outcome:
+            assert re.match(rf"{re.escape(str(copy))}:(events|frames|imu)(:\d+)?: damaged AEDAT4 "
+                            r"(event|frame|IMU) packet \d+ \(at byte \d+\): ", outcome), outcome
+
+
+#: A CLI run whose event packets each take 0.3 s to decode (a sleep, which releases the GIL as
+#: cramjam's decoders do), one packet a task, saying on stderr when the first starts.
+SLOW_READ = """
+import sys, time
+from eas_vo.datasets import aedat4, aedat4_packets
+aedat4.GROUP_BYTES = 1
+decode = aedat4_packets.Aedat4File.event_records
+def slow(self, k, scratch=None):
+    sys.stderr.write("decoding\\n")  # one write: the two threads' lines never interleave
+    time.sleep(0.3)
+    return decode(self, k, scratch)
+aedat4_packets.Aedat4File.event_records = slow
+from eas_vo.cli import main
+sys.exit(main(sys.argv[1:]))
+"""
+
+
+@pytest.mark.parametrize("signum, status", [("SIGTERM", 143), ("SIGINT", 130)])
+def test_sigterm_and_ctrl_c_end_a_long_read_at_once(tmp_path, signum, status):
+    """`eas-vo info` reading an AEDAT4's events (40 packets, 12 s here) ends within seconds of
+    SIGTERM or Ctrl-C with the usual line, its exit status saying which: the reader's waits on
+    its worker threads are interruptible and no task outlives the interrupt by more than its
+    own packet."""
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    path = tmp_path / "rec.aedat4"
+    write_aedat4(path, events=random_stream(4000, seed=12), kind="events", packet=100)
+    child = subprocess.Popen([sys.executable, "-c", SLOW_READ, "info", "--dataset", str(path), "--set",
+                              f"dataset.calibration={write_calib(tmp_path)}"], cwd=tmp_path,
+                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        assert child.stderr.readline() == "decoding\n"
+        sent = time.monotonic()
+        child.send_signal(getattr(signal, signum))
+        _, err = child.communicate(timeout=60)
+        took = time.monotonic() - sent
+    finally:
+        child.kill()
+    assert child.returncode == status, err
+    assert [line for line in err.splitlines() if line != "decoding"] == ["eas-vo info: interrupted; nothing was written"], err
+    assert took < 5, f"{took:.1f} s from the signal to the end"  # 12 s if the read went on
+
+
 def test_damaged_event_packets_are_read_within_their_bytes(tmp_path, monkeypatch):
     """The compiled FlatBuffer walk of an event packet (_event_vector), run as plain Python
     (numpy's indexing raises on any read outside the bytes), on real packets cut short, with
@@ -300,14 +431,14 @@ def test_damaged_event_packets_are_read_within_their_bytes(tmp_path, monkeypatch
     from hypothesis import given, strategies as st
 
     from eas_vo.datasets import aedat4_packets
-    from eas_vo.datasets.aedat4_packets import PACKET_EVENT, EventPackets, _event_vector
+    from eas_vo.datasets.aedat4_packets import PACKET_EVENT, Aedat4File, _event_vector
     from helpers import hostile_settings
 
     path = tmp_path / "rec.aedat4"
     events = random_stream(300, seed=9)
     write_aedat4(path, events=events, kind="events", compression="NONE", packet=300)
-    packets = EventPackets(path)
-    offset, size = packets._packets[0]
+    packets = Aedat4File(path)
+    offset, size = packets.streams["events"].packets[0]
     body = np.array(np.frombuffer(path.read_bytes()[offset : offset + size], np.uint8))
     status, start, count = _event_vector(body)
     assert status == 0 and count == 300

@@ -29,16 +29,18 @@ from eas_vo.types import ImuSeries, PoseSeries
 STORAGES = {"sqlite3": "db3", "mcap": "mcap"}
 
 
-def excerpt_of(dataset, n_frames: int) -> InMemoryDataset:
+class Excerpt(InMemoryDataset):
     """The first `n_frames` frames of a dataset, with its events, IMU and poses until the last."""
-    times = dataset.frame_times()[:n_frames]
-    end = times[-1]
-    events = dataset.events()
-    imu, gt = dataset.imu, dataset.ground_truth
-    return InMemoryDataset(dataset.camera, times, [dataset.load_frame(k) for k in range(n_frames)],
-                           np.asarray(events[events["t"] <= end]),
-                           ImuSeries(imu.t[imu.t <= end], imu.acc[imu.t <= end], imu.gyro[imu.t <= end]),
-                           PoseSeries(gt.t[gt.t <= end], gt.p_w_c[gt.t <= end], gt.q_w_c[gt.t <= end]))
+
+    def __init__(self, dataset, n_frames: int):
+        times = dataset.frame_times()[:n_frames]
+        end = times[-1]
+        events = dataset.events()
+        imu, gt = dataset.imu, dataset.ground_truth
+        super().__init__(dataset.camera, times, [dataset.load_frame(k) for k in range(n_frames)],
+                         np.asarray(events[events["t"] <= end]),
+                         ImuSeries(imu.t[imu.t <= end], imu.acc[imu.t <= end], imu.gyro[imu.t <= end]),
+                         PoseSeries(gt.t[gt.t <= end], gt.p_w_c[gt.t <= end], gt.q_w_c[gt.t <= end]))
 
 
 @pytest.fixture(scope="module")
@@ -52,7 +54,7 @@ def simulated(tmp_path_factory):
 
 @pytest.fixture(scope="module")
 def excerpt(simulated):
-    return excerpt_of(open_dataset(str(simulated)), 3)
+    return Excerpt(open_dataset(str(simulated)), 3)
 
 
 @pytest.fixture(scope="module")
@@ -169,7 +171,7 @@ def test_equidistant_camera_and_custom_topics(excerpt, tmp_path):
 
     fisheye = CameraModel(excerpt.camera.width, excerpt.camera.height, excerpt.camera.K, np.array([0.1, -0.02, 0.003, -0.0004]),
                           model="equidistant")
-    excerpt_fisheye = excerpt_of(excerpt, 3)
+    excerpt_fisheye = Excerpt(excerpt, 3)
     excerpt_fisheye.camera = fisheye
     custom = BagConfig(events_topic="/cam/events", image_topic="/cam/image", camera_info_topic="/cam/info")
     write_bag2(excerpt_fisheye, tmp_path / "b", "mcap", custom)

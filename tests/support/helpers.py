@@ -228,6 +228,28 @@ def known_sequence(folder: Path, width: int = 346, height: int = 260, frames: bo
     return folder
 
 
+# ----------------------------------------------------------------------------- writers and damage
+
+class InMemoryDataset(Dataset):
+    """A recording held in memory (what the formats' writers take): the camera, frame times [s]
+    with their uint8 frames, EVENT_DTYPE events, IMU and ground truth (or None), all after the
+    clock origin `clock_origin_ns`."""
+
+    def __init__(self, camera: CameraModel, times, frames, events, imu: ImuSeries | None = None,
+                 ground_truth: PoseSeries | None = None, clock_origin_ns: int = 0):
+        self.camera, self._times, self._frames, self._events = camera, np.asarray(times), list(frames), events
+        self.imu, self.ground_truth, self.clock_origin_ns = imu, ground_truth, clock_origin_ns
+
+    def frame_times(self):
+        return self._times
+
+    def load_frame(self, k):
+        return self._frames[k]
+
+    def events(self):
+        return self._events
+
+
 def mvsec_rows(events: np.ndarray) -> np.ndarray:
     """EVENT_DTYPE -> MVSEC's (N, 4) float64 rows x y t p, p in {-1, 1}."""
     return np.column_stack([events["x"], events["y"], events["t"], np.where(events["p"] > 0, 1.0, -1.0)])
@@ -259,18 +281,71 @@ def write_mvsec(folder: Path, seq, name: str = "seq", side: str = "left", **even
     return data
 
 
-class InMemoryDataset(Dataset):
-    """A recording held in memory (a Dataset's arrays, as a test changed them)."""
+def seeded_flips(source: Path, count: int, seed: int) -> list[tuple[str, int, int]]:
+    """`count` (file, byte, bit) places to flip in `source` (a file: file "", or a folder: a
+    file of it drawn by size), at seeded random bytes."""
+    import random
 
-    def __init__(self, camera, times, frames, events, imu=None, ground_truth=None, clock_origin_ns: int = 0):
-        self.camera, self._times, self._frames, self._events = camera, times, list(frames), events
-        self.imu, self.ground_truth, self.clock_origin_ns = imu, ground_truth, clock_origin_ns
+    rng = random.Random(seed)
+    names = tuple(sorted(str(p.relative_to(source)) for p in source.rglob("*") if p.is_file())) if source.is_dir() else ("",)
+    sizes = [(source / name).stat().st_size for name in names]
+    flips = []
+    for _ in range(count):
+        name = rng.choices(names, weights=sizes)[0]
+        flips.append((name, rng.randrange(sizes[names.index(name)]), rng.randrange(8)))
+    return flips
 
-    def frame_times(self):
-        return self._times
 
-    def load_frame(self, k):
-        return self._frames[k]
+def flipped_copies(source: Path, out: Path, flips: list[tuple[str, int, int]]) -> list[Path]:
+    """A copy of `source` (a file, or a folder: copied whole) under `out` for each (file, byte,
+    bit) of `flips` (file "" for `source` itself), that bit flipped, named by the flip."""
+    import shutil
 
-    def events(self):
-        return self._events
+    copies = []
+    for k, (name, at, bit) in enumerate(flips):
+        data = bytearray((source / name).read_bytes())
+        data[at] ^= 1 << bit
+        copy = out / f"flip{k}_{name.replace('/', '_')}_byte{at}_bit{bit}" / source.name
+        copy.parent.mkdir(parents=True)
+        if source.is_dir():
+            shutil.copytree(source, copy)
+        (copy / name if name else copy).write_bytes(bytes(data))
+        copies.append(copy)
+    return copies
+
+
+def read_each_bounded(locations: list[Path], assignments: list[str] = (), per_read_s: float = 20.0) -> dict[str, str]:
+    """Open each location with its dataset plugin and read everything (events, every frame,
+    IMU, ground truth) in one child process (read_damaged.py), one after the other; the test
+    fails, naming the location, if a read has no answer within `per_read_s` (a spin; the
+    child is killed) or the child dies (a crash). Returns {location: "ok" or the error's line}."""
+    import json
+    import select
+    import subprocess
+    import sys
+    import time
+
+    script = Path(__file__).with_name("read_damaged.py")
+    child = subprocess.Popen([sys.executable, str(script), json.dumps([str(p) for p in locations]), *assignments],
+                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, bufsize=1)
+    outcomes, pending, current = {}, "", "(starting)"
+    deadline = time.monotonic() + 3 * per_read_s  # the first read also imports the readers
+    try:
+        while True:
+            ready, _, _ = select.select([child.stdout], [], [], max(0.0, deadline - time.monotonic()))
+            if not ready:
+                pytest.fail(f"{current}: no answer within {per_read_s} s: the read spins")
+            line = child.stdout.readline()
+            if not line:
+                break
+            kind, _, rest = line.rstrip("\n").partition("\t")
+            if kind == "start":
+                current, deadline = rest, time.monotonic() + per_read_s
+            else:
+                outcomes[current] = rest
+    finally:
+        child.kill()
+        stderr = child.communicate()[1]
+    if child.returncode not in (0, -9) or len(outcomes) < len(locations):
+        pytest.fail(f"{current}: the reading process died ({child.returncode}): {stderr[-2000:]}")
+    return outcomes
