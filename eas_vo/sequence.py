@@ -94,24 +94,33 @@ class SequenceInfo:
         return Span(len(spans), min(s.t0_s for s in spans), max(s.t1_s for s in spans))
 
     def overlaps(self) -> list[str]:
-        """How much of the samples' span each other stream covers, one phrase each; a stream that
-        covers none of it is said to, with both spans (a clock in another unit or origin)."""
-        base = self.samples
-        if not base.count:
-            return []
-        out = []
-        for name, other in (("events", self.events), ("IMU", self.imu), ("ground truth", self.ground_truth)):
-            if other is None or not other.count:
+        """One phrase per pair of streams: how much of the samples' span (frames, or samples from
+        the events) each other stream covers, then of the ground truth's; a stream that covers
+        none of it is said to, with both spans and the setting that moves its clock."""
+        hints = {"events": "the events' clock is not the frames'", "IMU": "run.imu_time_offset_s",
+                 "ground truth": "dataset.ground_truth_time_offset_s"}
+        bases = [("frames" if self.frames is not None else "samples", self.samples), ("ground truth", self.ground_truth)]
+        others = [("events", self.events), ("IMU", self.imu), ("ground truth", self.ground_truth), (bases[0][0], self.samples)]
+        lines = []
+        for base_name, base in bases:
+            if base is None or not base.count:
                 continue
-            covered = max(0.0, min(base.t1_s, other.t1_s) - max(base.t0_s, other.t0_s))
-            if base.duration_s > 0 and covered > 0:
-                out.append(f"{name} {covered:.3f} s ({100 * covered / base.duration_s:.0f} %)")
-            elif base.t0_s <= other.t1_s and other.t0_s <= base.t1_s:
-                out.append(f"{name} all")
-            else:
-                out.append(f"{name} NONE ({other.t0_s:.3f}-{other.t1_s:.3f} s against {base.t0_s:.3f}-{base.t1_s:.3f} s: "
-                           f"another clock? dataset.ground_truth_time_offset_s or the recording's own)")
-        return out
+            out = []
+            for name, other in others:
+                if name == base_name or other is None or not other.count:
+                    continue
+                covered = max(0.0, min(base.t1_s, other.t1_s) - max(base.t0_s, other.t0_s))
+                if base.duration_s > 0 and covered > 0:
+                    out.append(f"{name} {covered:.3f} s ({100 * covered / base.duration_s:.0f} %)")
+                elif base.t0_s <= other.t1_s and other.t0_s <= base.t1_s:
+                    out.append(f"{name} all")
+                else:
+                    hint = hints["ground truth"] if "ground truth" in (name, base_name) else hints.get(name, "")
+                    out.append(f"{name} NONE ({other.t0_s:.3f}-{other.t1_s:.3f} s against {base.t0_s:.3f}-{base.t1_s:.3f} s: "
+                               f"another clock? {hint})")
+            if out:
+                lines.append(f"of the {base_name}: {'; '.join(out)}")
+        return lines
 
     def missing(self) -> list[str]:
         """What a run would need that the recording does not give, one line each."""
@@ -162,9 +171,7 @@ class SequenceInfo:
             out.append(f"  events        {e.count} events, {e.t0_s:.3f}-{e.t1_s:.3f} s ({e.duration_s:.3f} s){rate}")
         out.append(f"  IMU           {self.imu.text('readings') if self.imu is not None else 'none'}")
         out.append(f"  ground truth  {self.ground_truth.text('poses') if self.ground_truth is not None else 'none'}")
-        overlaps = self.overlaps()
-        if overlaps:
-            out.append(f"  overlap       of the {'frames' if self.frames is not None else 'samples'}: {'; '.join(overlaps)}")
+        out += [f"  overlap       {line}" for line in self.overlaps()]
         out += [f"  warning       {line}" for line in self.warnings]
         out += [f"  to run        {line}" for line in self.missing()]
         return out
