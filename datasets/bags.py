@@ -162,7 +162,7 @@ class BagDataset(RecordingReader):
     camera_fields: ClassVar[tuple[str, str]]
 
     def __init__(self, location: str | Path, config: BagConfig | None = None):
-        self.config = c = config or BagConfig()
+        self.config = config or BagConfig()
         self.path = Path(location)
         self.label = str(self.path)
         self.warnings = DataWarnings()

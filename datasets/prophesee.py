@@ -113,7 +113,7 @@ class PropheseeDataset(RecordingReader):
     Config = PropheseeConfig
 
     def __init__(self, location: str | Path, config: PropheseeConfig | None = None):
-        self.config = c = config or PropheseeConfig()
+        self.config = config or PropheseeConfig()
         self.path = Path(location)
         self.label = str(self.path)
         self.warnings = DataWarnings()

@@ -10,7 +10,6 @@ import pytest
 from eas_vo.datasets.calibration import (
     calibration_format,
     read_calibration,
-    read_camera_info_yaml,
     read_dv_xml,
     read_kalibr_camchain,
 )

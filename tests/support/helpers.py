@@ -328,7 +328,7 @@ def read_each_bounded(locations: list[Path], assignments: list[str] = (), per_re
     script = Path(__file__).with_name("read_damaged.py")
     child = subprocess.Popen([sys.executable, str(script), json.dumps([str(p) for p in locations]), *assignments],
                              stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, bufsize=1)
-    outcomes, pending, current = {}, "", "(starting)"
+    outcomes, current = {}, "(starting)"
     deadline = time.monotonic() + 3 * per_read_s  # the first read also imports the readers
     try:
         while True:
