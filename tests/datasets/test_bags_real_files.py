@@ -48,7 +48,7 @@ def test_info_says_what_the_file_holds_then_what_a_run_misses(name):
     assert ds.clock_origin_ns == origin_s * 10**9 and ds.camera is None and ds.sensor_size == sensor
 
 
-@pytest.mark.parametrize("name", sorted(RECORDINGS))
+@pytest.mark.parametrize("name", ["test_events_1", "test_events_2"])  # (the .bag holds test_events_1's packets)
 def test_without_a_calibration_a_run_is_one_line_with_one_a_run_goes_through(name, tmp_path):
     path = require(EVENT_CAMERA_PY / name)
     sensor = RECORDINGS[name][0]
@@ -57,9 +57,9 @@ def test_without_a_calibration_a_run_is_one_line_with_one_a_run_goes_through(nam
     assert "--set dataset.calibration=FILE" in refused.stderr and not (tmp_path / "no").exists()
     calib = pinhole_calib(tmp_path, *sensor)
     done = run_eas_vo("run", "--dataset", str(path), "--tracker", "cmax", "--set", f"dataset.calibration={calib}",
-                      "--set", "run.duration_s=0.3", "--out", str(tmp_path / "run"), "--quiet")
+                      "--set", "run.duration_s=0.15", "--out", str(tmp_path / "run"), "--quiet")
     assert done.returncode == 0, done.stderr
     metrics = json.loads((tmp_path / "run" / "metrics.json").read_text())
-    assert metrics["frames"] >= 5
+    assert metrics["frames"] >= 3
     first = (tmp_path / "run" / "trajectory.tum").read_text().split()[0]
     assert first.startswith(str(RECORDINGS[name][3])[:9])  # the file's times are the recording's own (Unix)
