@@ -205,11 +205,21 @@ class BagDataset(RecordingReader):
         return found[0] if found else None
 
     def _first_stamp_ns(self) -> int:
-        """The header stamp [ns] of the first event message, else of the first image, IMU or pose."""
+        """The header stamp [ns] of the first message of the events, else images, IMU or poses
+        (read from its bytes: every one of these types starts with its header)."""
         for key in ("events_topic", "image_topic", "imu_topic", "pose_topic"):
-            for _, _, msg in self._messages(self.topic[key], self._topic_kinds()[key]):
-                return int(stamp_ns(msg.header.stamp.sec, msg.header.stamp.nanosec))
+            for index, _, raw in self._messages(self.topic[key], self._topic_kinds()[key], deserialize=False):
+                if len(raw) < 12:
+                    raise DataError(f"{self.path}:{self.topic[key]}", "message too short for its header", index)
+                try:
+                    return self._header_stamp_ns(raw)
+                except RefusedEncoding as exc:
+                    raise DataError(f"{self.path}:{self.topic[key]}", str(exc), index) from None
         return 0
+
+    def _header_stamp_ns(self, raw: bytes) -> int:
+        """A serialised message's header stamp [ns] (its first field)."""
+        raise NotImplementedError
 
     def _seconds(self, t_ns) -> np.ndarray:
         """Times [ns] of the bag's clock -> float64 seconds after its clock_origin_ns."""
@@ -322,7 +332,8 @@ class BagDataset(RecordingReader):
             frames.append(image)
         return (np.array(times) if frames else None), frames
 
-    def _camera_infos(self):
+    @functools.cached_property
+    def _camera_info(self):
         """(where, message) of the first CameraInfo message, if any."""
         topic = self.topic["camera_info_topic"]
         for index, _, msg in self._messages(topic, ("sensor_msgs/msg/CameraInfo",)):
@@ -331,7 +342,7 @@ class BagDataset(RecordingReader):
 
     def _sensor_size(self) -> tuple[int, int]:
         """(width, height) [px]: CameraInfo's, else the frames', else what the event messages state."""
-        info = self._camera_infos()
+        info = self._camera_info
         if info is not None:
             return int(info[1].width), int(info[1].height)
         if self._frames:
@@ -343,7 +354,7 @@ class BagDataset(RecordingReader):
         return size
 
     def _read_camera(self) -> CameraModel | None:
-        info = self._camera_infos()
+        info = self._camera_info
         if info is None:
             self.no_camera_reason = (f"{self.path} holds no CameraInfo message: give the intrinsics with --set "
                                      f"dataset.calibration=FILE ({CALIBRATION_FORMATS})")

@@ -108,6 +108,10 @@ class RosbagDataset(BagDataset):
     def _identity(self) -> tuple:
         return file_identity(self.path)
 
+    def _header_stamp_ns(self, raw: bytes) -> int:
+        seq, sec, nsec = struct.unpack_from("<III", raw)  # ROS 1 Header: seq, then time
+        return sec * 1_000_000_000 + nsec
+
     def _damage_errors(self) -> tuple[type[BaseException], ...]:
         from rosbags.rosbag1 import ReaderError
 

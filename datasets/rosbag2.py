@@ -230,6 +230,12 @@ class Rosbag2Dataset(BagDataset):
             raise ValueError(str(exc) or type(exc).__name__) from None
         return packets.decode(msg, index)
 
+    def _header_stamp_ns(self, raw: bytes) -> int:
+        if raw[:2] != b"\x00\x01":
+            raise RefusedEncoding("big-endian CDR is not read")
+        sec, nsec = struct.unpack_from("<iI", raw, 4)  # after the CDR encapsulation: Header.stamp
+        return sec * 1_000_000_000 + nsec
+
     def _identity(self) -> tuple:
         if self.path.is_file():
             return file_identity(self.path)
@@ -256,7 +262,11 @@ def _storage_file(folder: Path) -> Path:
 
     where = folder / "metadata.yaml"
     try:
-        info = yaml.safe_load(where.read_text(errors="replace"))["rosbag2_bagfile_information"]
+        text = where.read_text(errors="replace")
+        named = re.search(r"^\s*storage_identifier:\s*(\S*)", text, re.M)
+        if named and named.group(1) not in ("", "''", '""'):
+            return folder  # (the common case, without parsing the YAML twice)
+        info = yaml.safe_load(text)["rosbag2_bagfile_information"]
         storage, files = info.get("storage_identifier"), list(info.get("relative_file_paths") or [])
     except (OSError, yaml.YAMLError, TypeError, KeyError, AttributeError):
         return folder  # (rosbags' reader says what is wrong with it)
