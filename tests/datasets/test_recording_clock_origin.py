@@ -6,12 +6,13 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from helpers import InMemoryDataset, write_mvsec
+from helpers import InMemoryDataset, write_aedat4, write_mvsec
 
 from eas_vo import config, pipeline
 from eas_vo.datasets.ecd import EcdFolderDataset, write_ecd_folder
 from eas_vo.datasets.rosbag import write_bag
 from eas_vo.datasets.rosbag2 import write_bag2
+from eas_vo.io import clock_time
 from eas_vo.plugins import Dataset
 from eas_vo.sequence import describe
 
@@ -47,7 +48,24 @@ def ecd_folder(ds, folder):
     return folder / "seq"
 
 
+def aedat4_file(ds, folder):
+    """As DV records: integer microseconds of the Unix clock, frames stamped at the start of a
+    2 ms exposure centred on the frame's time, IMU in g and deg/s; poses in a TUM file beside."""
+    origin_us = ds.clock_origin_ns // 1000
+    us = lambda t: np.round(np.asarray(t) * 1e6).astype(np.int64) + origin_us  # noqa: E731
+    events = ds.events()
+    frames = [(int(us(t)) - 1000, 2000, ds.load_frame(k)) for k, t in enumerate(ds.frame_times())]
+    imu = np.column_stack([us(ds.imu.t), ds.imu.acc / 9.80665, np.degrees(ds.imu.gyro)])
+    write_aedat4(folder / "rec.aedat4", size=(ds.camera.width, ds.camera.height), frames=frames, imu=imu.tolist(),
+                 events=(us(events["t"]), events["x"], events["y"], events["p"]))
+    gt = ds.ground_truth
+    (folder / "gt.tum").write_text("".join(f"{clock_time(t, ds.clock_origin_ns)} {' '.join(repr(float(v)) for v in (*p, *q))}\n"
+                                           for t, p, q in zip(gt.t, gt.p_w_c, gt.q_w_c)))
+    return folder / "rec.aedat4"
+
+
 WRITERS = {
+    "aedat4": aedat4_file,
     "ecd": ecd_folder,
     "rosbag": lambda ds, folder: (write_bag(ds, folder / "rec.bag"), folder / "rec.bag")[1],
     "rosbag2-sqlite3-dvs": lambda ds, folder: (write_bag2(ds, folder / "bag", "sqlite3"), folder / "bag")[1],
@@ -65,7 +83,8 @@ def _written(base, fmt: str, origin_ns: int, folder):
     absolute = fmt == "mvsec"
     folder.mkdir()
     path = WRITERS[fmt](on_clock(base, origin_ns, absolute), folder)
-    extra = [f"dataset.calibration={base.label}/calib.txt"] if fmt == "mvsec" else []
+    extra = [f"dataset.calibration={base.label}/calib.txt"] if fmt in ("mvsec", "aedat4") else []
+    extra += [f"dataset.ground_truth={folder / 'gt.tum'}"] if fmt == "aedat4" else []
     return str(path), extra
 
 

@@ -349,3 +349,28 @@ def read_each_bounded(locations: list[Path], assignments: list[str] = (), per_re
     if child.returncode not in (0, -9) or len(outcomes) < len(locations):
         pytest.fail(f"{current}: the reading process died ({child.returncode}): {stderr[-2000:]}")
     return outcomes
+
+
+def write_aedat4(path, *, size, events=None, frames=(), imu=None, kind="davis", compression="LZ4", packet=50_000):
+    """An AEDAT4 written by dv-processing for a `size` (width, height) sensor. events: (t_us, x,
+    y, p) columns, `packet` per packet; frames: (start_us, exposure_us, uint8 image); imu: rows
+    (t_us, acc [g] x3, gyro [deg/s] x3)."""
+    import dv_processing as dv
+
+    config = {"davis": dv.io.MonoCameraWriter.DAVISConfig, "events": dv.io.MonoCameraWriter.EventOnlyConfig,
+              "frames": dv.io.MonoCameraWriter.FrameOnlyConfig}[kind]("DAVIS_test", size)
+    config.compression = dv.CompressionType.__members__[compression]
+    writer = dv.io.MonoCameraWriter(str(path), config)
+    if events is not None:
+        t, x, y, p = (np.asarray(c).tolist() for c in events)
+        for start in range(0, len(t), packet):  # the writer checks order between packets only
+            events = dv.EventPacket()
+            for k in range(start, min(start + packet, len(t))):
+                events.elements.append(dv.Event(t[k], x[k], y[k], bool(p[k])))
+            writer.writeEventPacket(events)
+    for start_us, exposure_us, image in frames:
+        writer.writeFrame(dv.Frame(int(start_us), int(exposure_us), 0, 0, image, dv.FrameSource.SENSOR))
+    for row in imu if imu is not None else ():
+        t_us, ax, ay, az, gx, gy, gz = row
+        writer.writeImu(dv.IMU(int(t_us), 25.0, ax, ay, az, gx, gy, gz, 0.0, 0.0, 0.0))
+    del writer  # closing writes the file's index
