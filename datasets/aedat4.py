@@ -117,18 +117,19 @@ class Aedat4Dataset(RecordingReader):
         self._events: np.ndarray | None = None
 
     def _first_time_us(self) -> int:
-        """The earliest of the first event's, frame's and IMU reading's timestamps [us] (0 with none)."""
-        firsts = []
+        """The first event's timestamp [us], else the first frame's, else the first IMU reading's
+        (0 with none): its whole second is the clock origin, whichever stream gives it."""
         streams = self.file.streams
         if "events" in streams and streams["events"].packets:
             records = self.file.event_records(0)
-            firsts += [int(records["t"][0])] if len(records) else []
+            if len(records):
+                return int(records["t"][0])
         if "frames" in streams and streams["frames"].packets:
-            firsts.append(int(self.file.frame(0).start_us))
-        if "imu" in streams:
+            return int(self.file.frame(0).start_us)
+        if "imu" in streams:  # (an IMU-only file: its rows are read once more by _read_imu)
             rows = self.file.imu_rows()
-            firsts += [int(rows[0, 0])] if len(rows) else []
-        return min(firsts) if firsts else 0
+            return int(rows[0, 0]) if len(rows) else 0
+        return 0
 
     def _sensor_size(self) -> tuple[int, int]:
         """(width, height) [px] from the events' or the frames' stream description (equal if both)."""

@@ -21,6 +21,7 @@ from eas_vo.datasets.calibration import camera_from_camera_info, check_frame_siz
 from eas_vo.datasets.recording import CALIBRATION_FORMATS, RecordingReader, StreamConfig, check_increasing, clock_origin_ns, pose_series
 from eas_vo.errors import DataError, DataWarnings
 from eas_vo.eventfile import Validator, cache_key, load_cached, write_behind
+from eas_vo.eventfile.packets import DECODERS, decoder_class
 from eas_vo.plugins import Dataset
 from eas_vo.types import CameraModel, ImuSeries, empty_events
 
@@ -109,8 +110,6 @@ class PacketStream:
         the bag's clock by one offset, the first packet's header stamp minus its first event's
         sensor time, so the sensor's own timing is kept exactly; those whose sensor clock was set
         to the host's at start (libcaer) are read as they are."""
-        from eas_vo.eventfile.packets import DECODERS, decoder_class
-
         stamp = stamp_ns(msg.header.stamp.sec, msg.header.stamp.nanosec)
         if msg.is_bigendian:
             raise RefusedEncoding(f"big-endian {msg.encoding} events are not read")
@@ -285,17 +284,22 @@ class BagDataset(RecordingReader):
         """What identifies the bag's content for the event cache (file_identity of its files)."""
         raise NotImplementedError
 
-    def _event_encoding(self) -> str:
-        """The packed encoding of the first event message (`mono`, `evt3`), or '' for a type without one."""
+    @functools.cached_property
+    def _first_event_message(self):
+        """(msgtype, message) of the first event message, deserialised once, or None."""
         for _, msgtype, msg in self._messages(self.topic["events_topic"], self.event_types):
-            return getattr(msg, "encoding", "")
-        return ""
+            return msgtype, msg
+        return None
+
+    def _event_encoding(self) -> str:
+        """The packed encoding of the first event message (`mono`, `evt3`), or '' for an event array."""
+        first = self._first_event_message
+        return first[1].encoding if first is not None and first[0] in PACKET_TYPES else ""
 
     def _event_message_size(self) -> tuple[int, int] | None:
         """(width, height) [px] the first event message states, or None (no events, or zero)."""
-        for _, _, msg in self._messages(self.topic["events_topic"], self.event_types):
-            return (int(msg.width), int(msg.height)) if msg.width and msg.height else None
-        return None
+        first = self._first_event_message
+        return (int(first[1].width), int(first[1].height)) if first is not None and first[1].width and first[1].height else None
 
     # -- shared reading ------------------------------------------------------------------
 

@@ -147,21 +147,19 @@ class EcdFolderDataset(RecordingReader):
     # -- readers -----------------------------------------------------------------------
 
     def _first_second(self) -> int:
-        """The whole second [s] of the first frame time or event time, whichever is earlier (0
+        """The whole second [s] of the first event line's time, else of the first frame time (0
         when neither can be read: the readers then name what is wrong)."""
-        firsts = [math.floor(self._times[0])] if self._times is not None and len(self._times) else []
         if self.source.exists("events.txt"):
             with self.source.open("events.txt") as fh:
                 head = fh.read(1 << 16)
-            for line in head.splitlines()[:-1] or head.splitlines():
-                token = line.split(maxsplit=1)[0] if line.split() else b""
-                if token and not token.startswith(b"#"):
+            for line in head.splitlines():
+                fields = line.split()
+                if fields and not fields[0].startswith(b"#"):
                     try:
-                        firsts.append(math.floor(float(token)))
+                        return math.floor(float(fields[0]))
                     except (ValueError, OverflowError):
-                        pass
-                    break
-        return min(firsts) if firsts else 0
+                        break
+        return math.floor(self._times[0]) if self._times is not None and len(self._times) else 0
 
     def _read_image_list(self) -> tuple[np.ndarray | None, list[str]]:
         self._frame_lines: list[int] = []
