@@ -144,6 +144,13 @@ class EcdFolderDataset(RecordingReader):
                 self._events = empty_events()
         return self._events
 
+    def time_sources(self) -> dict[str, str]:
+        """The files each stream's times are read from (the ground truth's: groundtruth.txt, or the
+        dataset.ground_truth file)."""
+        label = self.source.label
+        return {"frame": label("images.txt"), "event": label("events.txt"), "IMU": label("imu.txt"),
+                "ground-truth": self.config.ground_truth or label("groundtruth.txt")}
+
     # -- readers -----------------------------------------------------------------------
 
     def _first_second(self) -> int:

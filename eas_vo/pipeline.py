@@ -20,6 +20,7 @@ import numpy as np
 from eas_vo import concurrency, registry
 from eas_vo.config import TIME_OFFSET_LIMIT_S, ResolvedConfig
 from eas_vo.datasets.calibration import check_frame_size
+from eas_vo.datasets.recording import recording_clock_problems
 from eas_vo.errors import EasVoError, Interrupted
 from eas_vo.evaluation import (OFFSET_SEARCH_S, ImuAgreement, RotationErrors, estimate_time_offset, imu_agreement,
                                motion_errors, rotation_errors)
@@ -194,14 +195,18 @@ def dataset_identity(plugin: type, location: str):
 
 
 def open_pipeline(config: ResolvedConfig) -> Pipeline:
-    """Open the dataset, build the plugins, check the window, and read the event stream once
-    (its first read parses it into the cache)."""
+    """Open the dataset, check its clocks' units (datasets.recording.recording_clock_problems:
+    this reads the event stream once, its first read parsing it into the cache), build the
+    plugins and check the window."""
     rc = config.run
     dataset = registry.open_dataset(rc.dataset, config.dataset)
     frontend_cls = registry.get("frontends", rc.frontend)
     first_frame = dataset.load_frame(0)
     if frontend_cls.needs_frames and first_frame is None:
         raise EasVoError(f"frontend {rc.frontend!r} needs APS frames: {dataset.no_frames_reason}")
+    clocks = recording_clock_problems(dataset, first_frame is not None)  # before an event-only stream is sampled
+    if clocks:
+        raise EasVoError(next(iter(clocks.values())))
     if first_frame is not None:  # a frame of another size than the camera's: said before any work
         check_frame(first_frame, dataset, 0, float(dataset.frame_times()[0]))
     if not frontend_cls.makes_images and registry.get("trackers", rc.tracker).reads_images:
@@ -230,7 +235,6 @@ def open_pipeline(config: ResolvedConfig) -> Pipeline:
     if parts.imu is not None:
         window = dataset.frame_times()[dataset.window(rc.start_s, rc.duration_s)]
         parts.imu_warnings = check_readings(parts.imu, window, dataset.label, rc.imu_time_offset_s)
-    dataset.events()
     return parts
 
 
