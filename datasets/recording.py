@@ -124,15 +124,20 @@ def clock_unit_problems(spans: dict[str, float], sources: dict[str, str]) -> dic
 def recording_clock_problems(dataset: Dataset, has_frames: bool) -> dict[str, str]:
     """clock_unit_problems of `dataset`'s streams: its frames (when `has_frames`: an event-only
     stream's samples are made from its events, and are not read here), events, IMU and ground
-    truth. Reads the event stream (Dataset.events); `sources` from a RecordingReader's
-    time_sources, else the dataset's label and the stream."""
+    truth, each named by time_source. Reads the event stream (Dataset.events)."""
     events = dataset.events()
     streams = {"frame": dataset.frame_times() if has_frames else None, "event": events["t"] if len(events) else None,
                "IMU": None if dataset.imu is None else dataset.imu.t,
                "ground-truth": None if dataset.ground_truth is None else dataset.ground_truth.t}
     spans = {name: float(t[-1]) - float(t[0]) for name, t in streams.items() if t is not None and len(t) > 1}
+    return clock_unit_problems(spans, {name: time_source(dataset, name) for name in spans})
+
+
+def time_source(dataset: Dataset, stream: str) -> str:
+    """Where `dataset`'s `stream` ("frame", "event", "IMU", "ground-truth") is read, for
+    messages: a RecordingReader's time_sources, else the dataset's label and the stream."""
     sources = dataset.time_sources() if isinstance(dataset, RecordingReader) else {}
-    return clock_unit_problems(spans, {name: sources.get(name, f"{dataset.label} ({name} stream)") for name in spans})
+    return sources.get(stream, f"{dataset.label} ({stream} stream)")
 
 
 def event_sample_times(event_t: np.ndarray, rate_hz: float, every_events: int) -> np.ndarray:

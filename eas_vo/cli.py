@@ -734,6 +734,8 @@ def cmd_evaluate(args) -> int:
         _refuse_inputs_inside(out, args.dataset, ("the --estimate", args.estimate))
     m = evaluate_estimate(args.dataset, args.estimate, args.align, args.max_diff, args.out, args.label,
                           replace=args.overwrite)
+    for line in m["warnings"]:
+        print(f"eas-vo: warning: {line}", file=sys.stderr)
     print(f"{args.estimate} vs {m['dataset']} ({m['align']}, {m['matched_poses']} of {m['estimate_poses']} poses matched, "
           f"scale {m['scale']:.4g}): translation APE mean {figure_text(m['ape_trans_mean_m'], 4)} m, "
           f"RMSE {figure_text(m['ape_trans_rmse_m'], 4)} m; rotation APE mean {m['ape_rot_mean_rad']:.4f} rad" + (f" -> {args.out}" if args.out else ""))

@@ -20,7 +20,7 @@ import numpy as np
 from eas_vo import concurrency, registry
 from eas_vo.config import TIME_OFFSET_LIMIT_S, ResolvedConfig
 from eas_vo.datasets.calibration import check_frame_size
-from eas_vo.datasets.recording import recording_clock_problems
+from eas_vo.datasets.recording import recording_clock_problems, time_source
 from eas_vo.errors import EasVoError, Interrupted
 from eas_vo.evaluation import (MAX_GAP_FRAMES, OFFSET_SEARCH_S, ImuAgreement, RotationErrors, estimate_time_offset, ground_truth_gap_limit_s,
                                imu_agreement, motion_errors, rotation_errors, scorable)
@@ -326,7 +326,7 @@ def _check_ground_truth_overlap(dataset: Dataset, rc, n_window: int) -> None:
     t = dataset.frame_times()[dataset.window(rc.start_s, rc.duration_s)] + rc.time_offset_s
     if scorable(gt.t, t).any():
         return
-    where = f"{dataset.label}: the ground truth ({len(gt.t)} poses, {gt.t[0]:.3f}-{gt.t[-1]:.3f} s)"
+    where = f"{time_source(dataset, 'ground-truth')}: the ground truth ({len(gt.t)} poses, {gt.t[0]:.3f}-{gt.t[-1]:.3f} s)"
     if np.any((t >= gt.t[0]) & (t <= gt.t[-1])):
         widest = float(np.max(np.diff(gt.t)))
         raise EasVoError(f"{where} scores none of the {n_window} frame times of the window ({t[0]:.3f}-{t[-1]:.3f} s): "
