@@ -8,49 +8,23 @@ from __future__ import annotations
 import shutil
 
 import pytest
-from helpers import known_sequence, one_line_failure, write_mvsec
+from helpers import ECD_FILES, UNIX_S, known_sequence, one_line_failure, retimed, sequence_with, write_mvsec
 
 from eas_vo.config import resolve
 from eas_vo.datasets import recording
 from eas_vo.datasets.ecd import EcdFolderDataset
 from eas_vo.sequence import describe
 
-#: 2023-11-14 22:13:20 UTC [s]: a Unix-time clock.
-UNIX_S = 1_700_000_000
-#: The ECD text file of each stream.
-FILES = {"event": "events.txt", "frame": "images.txt", "IMU": "imu.txt", "ground-truth": "groundtruth.txt"}
 UNITS = {"microseconds": 10**6, "nanoseconds": 10**9}
-
-
-def retimed(path, factor: int = 1, shift_s: int = 0) -> None:
-    """The first column of an ECD text file as (t + shift_s) * factor, written exactly (integers
-    of the unit for factor > 1)."""
-    lines = []
-    for line in path.read_text().splitlines():
-        t, rest = line.split(" ", 1)
-        whole, _, fraction = t.partition(".")
-        ticks = (int(whole) + shift_s) * 10**9 + int(fraction.ljust(9, "0"))  # exact: integer nanoseconds
-        new = str(ticks * factor // 10**9) if factor > 1 else f"{ticks // 10**9}.{ticks % 10**9:09d}"
-        lines.append(f"{new} {rest}")
-    path.write_text("\n".join(lines) + "\n")
-
-
-def sequence_with(folder, stream: str | None, factor: int, shift_s: int = 0):
-    """known_sequence with every file on a clock shifted by shift_s [s], and `stream`'s times
-    multiplied by `factor` (its unit)."""
-    known_sequence(folder)
-    for name, file in FILES.items():
-        retimed(folder / file, factor if name == stream else 1, shift_s)
-    return folder
 
 
 @pytest.mark.parametrize("shift_s", [0, UNIX_S], ids=["zero", "unix"])
 @pytest.mark.parametrize("unit", sorted(UNITS))
-@pytest.mark.parametrize("stream", sorted(FILES))
+@pytest.mark.parametrize("stream", sorted(ECD_FILES))
 def test_a_stream_in_another_unit_is_refused_naming_its_file(tmp_path, capsys, stream, unit, shift_s):
     folder = sequence_with(tmp_path / "seq", stream, UNITS[unit], shift_s)
     err = one_line_failure(["run", "--dataset", str(folder), "--out", str(tmp_path / "run")], capsys)
-    assert f"{folder / FILES[stream]}: the {stream} timestamps span" in err and f"look like {unit}" in err, err
+    assert f"{folder / ECD_FILES[stream]}: the {stream} timestamps span" in err and f"look like {unit}" in err, err
     warnings = describe(resolve(None, {"dataset": str(folder)})).warnings
     assert [w for w in warnings if "look like" in w] == [err.removeprefix("eas-vo: error: ").strip()]
 
