@@ -98,9 +98,10 @@ class RotationErrors:
         in_gaps = (f"; {gaps} frames lie in its gaps wider than {c['ground_truth_max_gap_s']:.3g} s, across which it is "
                    "not interpolated" if gaps else "")
         start, end = c["ground_truth_span_s"]
-        return [f"the ground truth scores only {scored} of the run's {n} frames ({100 * scored / n:.0f} %, under "
+        said = (f"the ground truth scores only {scored} of the run's {n} frames ({100 * scored / n:.0f} %, under "
                 f"{100 * MIN_SCORED_FRACTION:.0f} %): it spans {start:.3f}-{end:.3f} s of the run's 0-{t[-1] - t[0]:.3f} s"
-                f"{in_gaps}; the APE describes those frames only"]
+                f"{in_gaps}; the APE describes those frames only")
+        return [said]
 
     def summary(self) -> dict:
         """Mean (the paper's average APE), RMSE, median and max [rad]; NaN without ground truth."""

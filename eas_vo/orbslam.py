@@ -171,7 +171,7 @@ def evaluate_estimate(dataset_spec: str, estimate_path: str | Path, align: str, 
         raise EasVoError(f"{estimate_path}: {exc}") from None
     label = label or Path(estimate_path).stem
     metrics = {"estimate": str(estimate_path), "dataset": dataset.label, "align": align, "max_diff_s": max_diff_s,
-               "estimate_poses": int(len(estimate.t)), **ape.summary(), **_coverage(estimate.t, gt.t, ape.summary())}
+               "estimate_poses": len(estimate.t), **ape.summary(), **_coverage(estimate.t, gt.t, ape.summary())}
     if out is not None:
         with output_folder(out, replace) as staging:
             write_text_atomic(staging / "metrics.json", json_text(metrics))

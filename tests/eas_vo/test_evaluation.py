@@ -100,7 +100,7 @@ def test_two_poses_far_apart_score_no_frame_between_them():
 
 def test_ground_truth_slower_than_the_frames_scores_them_all():
     """10 Hz poses beside 50 Hz frames: 100 ms between poses is within 10 frame intervals."""
-    gt, R_gt = ground_truth(n=21, rate=10.0)
+    gt, _ = ground_truth(n=21, rate=10.0)
     t = np.arange(101) * 0.02
     err = rotation_errors(t, np.tile(np.eye(3), (101, 1, 1)), gt)
     assert err.valid.all() and err.coverage_warning(t) == []

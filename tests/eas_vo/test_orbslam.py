@@ -285,8 +285,9 @@ def test_settings_yaml_names_the_lens_as_orbslam3_reads_it(tmp_path, model, dist
 def test_evaluate_reads_an_estimate_on_the_recordings_own_clock(tmp_path, capsys, shift_s):
     """An estimate holds the recording's own times (a run's trajectory.tum adds the clock origin
     back): its own ground truth scores it exactly, and the files written keep those times."""
-    from eas_vo.cli import main
     from helpers import sequence_with
+
+    from eas_vo.cli import main
 
     folder = sequence_with(tmp_path / "seq", None, 1, shift_s)
     out = tmp_path / "ev"
@@ -299,8 +300,9 @@ def test_evaluate_reads_an_estimate_on_the_recordings_own_clock(tmp_path, capsys
 
 
 def test_evaluate_refuses_an_estimate_in_microseconds_and_warns_on_a_partial_ground_truth(tmp_path, capsys):
-    from eas_vo.cli import main
     from helpers import one_line_failure, retimed, sequence_with
+
+    from eas_vo.cli import main
 
     folder = sequence_with(tmp_path / "seq", None, 1)
     micro = tmp_path / "micro.tum"
