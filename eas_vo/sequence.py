@@ -244,7 +244,8 @@ def convert(config: ResolvedConfig, out: str | Path, progress: bool = False, rep
     start if none) to that of the frame after its last (its end if none), so a full window
     keeps everything and a part what the frontends read of its first frame's past; IMU
     readings and poses over the same span, and one more at each end (to interpolate at
-    every frame), each on its own clock.
+    every frame), each on its own clock. A stream whose clock cannot be in seconds
+    (recording_clock_problems) is refused first.
     """
     from tqdm import tqdm
 
@@ -252,12 +253,15 @@ def convert(config: ResolvedConfig, out: str | Path, progress: bool = False, rep
 
     rc = config.run
     dataset = registry.open_dataset(rc.dataset, config.dataset)
+    has_frames = dataset.load_frame(0) is not None
+    clocks = recording_clock_problems(dataset, has_frames)  # before an event-only stream is sampled
+    if clocks:
+        raise EasVoError(next(iter(clocks.values())))
     window = dataset.window(rc.start_s, rc.duration_s)
     if len(window) == 0:
         raise EasVoError(f"{dataset.label}: the window start={rc.start_s} s, duration={rc.duration_s} s holds no sample")
     times = dataset.frame_times()
     t_lo, t_hi = _kept_span(times, window)
-    has_frames = dataset.load_frame(0) is not None
     lo, hi = search_times(dataset.events(), [t_lo, t_hi])
     events = dataset.events()[lo:hi]
     if len(events) and events["t"][0] < 0:

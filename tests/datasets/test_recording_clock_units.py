@@ -61,12 +61,13 @@ def test_event_only_microseconds_are_refused_before_any_sample_is_made(tmp_path,
         raise AssertionError("samples made from events in microseconds")
 
     monkeypatch.setattr(recording, "event_sample_times", no_sampling)
-    argv = ["run", "--dataset", str(location), "--tracker", "cmax", "--frontend", "none", "--set", "dataset.width=346",
-            "--set", "dataset.height=260", "--out", str(tmp_path / "run")]
-    err = one_line_failure(argv, capsys)
+    sensor = ["--set", "dataset.width=346", "--set", "dataset.height=260"]
+    err = one_line_failure(["run", "--dataset", str(location), "--tracker", "cmax", "--frontend", "none", *sensor, "--out",
+                            str(tmp_path / "run")], capsys)
     assert "events.txt: the event timestamps span" in err and "more than a day" in err, err
-    info = describe(resolve(None, {"dataset": str(location)}, ["dataset.width=346", "dataset.height=260"]))
-    assert info.samples.count == 0 and any("more than a day" in w for w in info.warnings)
+    info = describe(resolve(None, {"dataset": str(location)}, [sensor[1], sensor[3]]))
+    assert info.samples.count == 0 and [w for w in info.warnings if "more than a day" in w] == [err[len("eas-vo: error: "):-1]]
+    assert one_line_failure(["convert", "--dataset", str(location), *sensor, "--out", str(tmp_path / "copy")], capsys) == err
 
 
 def test_mvsec_pose_ts_in_microseconds_is_refused(tmp_path, capsys):
