@@ -144,11 +144,21 @@ class EcdFolderDataset(RecordingReader):
                 self._events = empty_events()
         return self._events
 
+    def time_sources(self) -> dict[str, str]:
+        """The files each stream's times are read from (the ground truth's: groundtruth.txt, or the
+        dataset.ground_truth file)."""
+        label = self.source.label
+        return {"frame": label("images.txt"), "event": label("events.txt"), "IMU": label("imu.txt"),
+                "ground-truth": self.config.ground_truth or label("groundtruth.txt")}
+
     # -- readers -----------------------------------------------------------------------
 
     def _first_second(self) -> int:
-        """The whole second [s] of the first event line's time, else of the first frame time (0
-        when neither can be read: the readers then name what is wrong)."""
+        """The whole second [s] of the earlier of the first event line's time and the first frame
+        time (0 when neither can be read: the readers then name what is wrong). The earlier: a
+        stream in a smaller unit (microseconds of Unix time, 1.7e15) then keeps the others'
+        digits, so that its span can be told from theirs."""
+        firsts = [float(self._times[0])] if self._times is not None and len(self._times) else []
         if self.source.exists("events.txt"):
             with self.source.open("events.txt") as fh:
                 head = fh.read(1 << 16)
@@ -156,10 +166,12 @@ class EcdFolderDataset(RecordingReader):
                 fields = line.split()
                 if fields and not fields[0].startswith(b"#"):
                     try:
-                        return math.floor(float(fields[0]))
-                    except (ValueError, OverflowError):
-                        break
-        return math.floor(self._times[0]) if self._times is not None and len(self._times) else 0
+                        firsts.append(float(fields[0]))
+                    except ValueError:
+                        pass
+                    break
+        firsts = [t for t in firsts if math.isfinite(t)]
+        return math.floor(min(firsts)) if firsts else 0
 
     def _read_image_list(self) -> tuple[np.ndarray | None, list[str]]:
         self._frame_lines: list[int] = []

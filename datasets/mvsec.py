@@ -169,6 +169,14 @@ class MvsecDataset(RecordingReader):
             self._events = empty_events() if self._events_dset is None else self._load_events()
         return self._events
 
+    def time_sources(self) -> dict[str, str]:
+        """The HDF5 datasets each stream's times are read from (the ground truth's: NAME_gt.hdf5
+        beside, or the dataset.ground_truth file)."""
+        gt = self._ground_truth_file()
+        return {"frame": self._where("image_raw_ts"), "event": self._where("events") + " (column t)",
+                "IMU": self._where("imu_ts"),
+                "ground-truth": str(gt) if gt is None or gt.suffix.lower() not in (".hdf5", ".h5") else self._where("pose_ts", gt)}
+
     # -- readers -----------------------------------------------------------------------
 
     @staticmethod

@@ -68,6 +68,78 @@ def clock_origin_ns(first_ns: int) -> int:
     return 0 if abs(first_ns) < ORIGIN_FREE_S * 1e9 else first_ns // 1_000_000_000 * 1_000_000_000
 
 
+#: Two streams of one recording whose time spans differ by this factor or more do not count
+#: time in one unit: an excerpt may keep a few milliseconds of one stream beside tens of
+#: seconds of another (the real shapes_rotation excerpt: 0.5 s of events beside 30 s of
+#: frames, a factor 60; a few ms of events beside 30 s would be 1e4), while a stream in
+#: microseconds beside one in seconds spans 1e6 times as long, in nanoseconds 1e9.
+SPAN_RATIO_LIMIT = 1e5
+#: No recording's stream lasts longer than a day [s]: a longer span is a clock read in a
+#: smaller unit than seconds (60 s in microseconds span 6e7 "s").
+MAX_SPAN_S = 86400.0
+#: The units a timestamp column is written in by mistake for seconds, as factors of the second.
+SMALL_UNITS = {"microseconds": 1e6, "nanoseconds": 1e9}
+
+
+def _unit_of(ratio: float) -> str:
+    """The unit of SMALL_UNITS whose factor is nearest `ratio` (in orders of magnitude)."""
+    return min(SMALL_UNITS, key=lambda unit: abs(np.log10(ratio / SMALL_UNITS[unit])))
+
+
+def clock_unit_problems(spans: dict[str, float], sources: dict[str, str]) -> dict[str, str]:
+    """Stream name -> one line, for each stream whose time span [s] cannot be in seconds beside
+    the others'.
+
+    `spans`: stream name -> the span of its times [s] (last minus first: whatever the clock's
+    origin); `sources`: stream name -> where its times are read (a file, an HDF5 dataset), for
+    the message. A stream whose span differs from the reference's (the median span: the odd
+    one out when three or more streams agree, else the shorter; the frames' when they agree with
+    it) by SPAN_RATIO_LIMIT or more is
+    named with the unit the ratio suggests; else one spanning more than MAX_SPAN_S (alone, or
+    beside streams as long)."""
+    problems, kept = {}, {name: span for name, span in spans.items() if span > 0}
+    if not kept:
+        return problems
+    ordered = sorted(kept, key=kept.get)
+    reference = ordered[(len(ordered) - 1) // 2]
+    if "frame" in kept and 1 / SPAN_RATIO_LIMIT < kept["frame"] / kept[reference] < SPAN_RATIO_LIMIT:
+        reference = "frame"  # the clock every time is put on (docs/time_offsets.md), when it agrees
+    ref_span, ref_where = kept[reference], sources.get(reference, reference)
+    for name in ordered:
+        ratio = kept[name] / ref_span
+        against = f"the {reference} timestamps' {ref_span:.4g} s ({ref_where})"
+        if ratio >= SPAN_RATIO_LIMIT:
+            problems[name] = (f"{sources.get(name, name)}: the {name} timestamps span {kept[name]:.4g} s, {ratio:.3g} times "
+                              f"{against}: they look like {_unit_of(ratio)}; times must be in seconds")
+        elif ratio <= 1 / SPAN_RATIO_LIMIT:
+            problems[name] = (f"{sources.get(name, name)}: the {name} timestamps span {kept[name]:.4g} s, 1/{1 / ratio:.3g} "
+                              f"of {against}: those look like {_unit_of(1 / ratio)}; times must be in seconds")
+        elif kept[name] > MAX_SPAN_S:
+            problems[name] = (f"{sources.get(name, name)}: the {name} timestamps span {kept[name]:.4g} s, more than a day, "
+                              f"which no recording lasts: they look like microseconds ({kept[name] / 1e6:.4g} s) or "
+                              f"nanoseconds ({kept[name] / 1e9:.4g} s); times must be in seconds")
+    return problems
+
+
+def recording_clock_problems(dataset: Dataset, has_frames: bool) -> dict[str, str]:
+    """clock_unit_problems of `dataset`'s streams: its frames (when `has_frames`: an event-only
+    stream's samples are made from its events, and are not read here), events, IMU and ground
+    truth, each named by time_source. Reads the event stream (Dataset.events)."""
+    events = dataset.events()
+    streams = {"frame": dataset.frame_times() if has_frames else None, "event": events["t"] if len(events) else None,
+               "IMU": None if dataset.imu is None else dataset.imu.t,
+               "ground-truth": None if dataset.ground_truth is None else dataset.ground_truth.t}
+    spans = {name: float(t[-1]) - float(t[0]) for name, t in streams.items() if t is not None and len(t) > 1}
+    return clock_unit_problems(spans, {name: time_source(dataset, name) for name in spans})
+
+
+def time_source(dataset: Dataset, stream: str) -> str:
+    """Where `dataset`'s `stream` ("frame", "event", "IMU", "ground-truth") is read, for
+    messages: a RecordingReader's time_sources, else the dataset's label and the stream."""
+    sources = dataset.time_sources() if isinstance(dataset, RecordingReader) else {}
+    return sources.get(stream, f"{dataset.label} ({stream} stream)")
+
+
 def event_sample_times(event_t: np.ndarray, rate_hz: float, every_events: int) -> np.ndarray:
     """Sample times [s] for an event-only stream: every `every_events` events, else at `rate_hz`."""
     if len(event_t) == 0:
@@ -180,6 +252,15 @@ class RecordingReader(Dataset):
 
     def data_warnings(self) -> list[str]:
         return self.warnings.lines()
+
+    def time_sources(self) -> dict[str, str]:
+        """Where each stream's times are read ("frame", "event", "IMU", "ground-truth" -> a
+        file, an HDF5 dataset, a stream), for messages: by default the recording's label and
+        the stream, and config.ground_truth when it gives the ground truth."""
+        sources = {name: f"{self.label} ({name} stream)" for name in ("frame", "event", "IMU", "ground-truth")}
+        if self.config.ground_truth:
+            sources["ground-truth"] = self.config.ground_truth
+        return sources
 
     def frame_times(self) -> np.ndarray:
         if self._times is None:  # event-only: samples from the events

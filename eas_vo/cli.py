@@ -296,7 +296,11 @@ def cmd_run(args) -> int:
     for line in m["data_warnings"]:
         print(f"eas-vo: warning: {line}", file=sys.stderr)
     ape = m.get("ape_mean_rad")
-    ape_text = f"average APE {ape:.4f} rad ({ape * 57.29577951:.2f} deg)" if ape is not None else "no ground truth"
+    ape_text = "no ground truth"
+    if "frames_scored_fraction" in m:  # scored: over how many frames and what span of the run
+        start, end = m["ground_truth_span_s"]
+        scored = f"{m['frames_evaluated']} of {m['frames']} frames scored, ground truth {start:.3f}-{end:.3f} s of the run's 0-{m['sequence_s']:.3f} s"
+        ape_text = f"average APE {ape:.4f} rad ({ape * 57.29577951:.2f} deg; {scored})" if m["frames_evaluated"] else f"no frame scored ({scored})"
     if m["time_offset_estimated"]:
         ape_text += f" (time offset {m['time_offset_s'] * 1e3:+.1f} ms, estimated on the ground truth it scores against)"
     statuses = _status_text(m["status_counts"], m["status_reasons"])
@@ -730,6 +734,8 @@ def cmd_evaluate(args) -> int:
         _refuse_inputs_inside(out, args.dataset, ("the --estimate", args.estimate))
     m = evaluate_estimate(args.dataset, args.estimate, args.align, args.max_diff, args.out, args.label,
                           replace=args.overwrite)
+    for line in m["warnings"]:
+        print(f"eas-vo: warning: {line}", file=sys.stderr)
     print(f"{args.estimate} vs {m['dataset']} ({m['align']}, {m['matched_poses']} of {m['estimate_poses']} poses matched, "
           f"scale {m['scale']:.4g}): translation APE mean {figure_text(m['ape_trans_mean_m'], 4)} m, "
           f"RMSE {figure_text(m['ape_trans_rmse_m'], 4)} m; rotation APE mean {m['ape_rot_mean_rad']:.4f} rad" + (f" -> {args.out}" if args.out else ""))

@@ -20,15 +20,16 @@ import numpy as np
 from eas_vo import concurrency, registry
 from eas_vo.config import TIME_OFFSET_LIMIT_S, ResolvedConfig
 from eas_vo.datasets.calibration import check_frame_size
+from eas_vo.datasets.recording import recording_clock_problems, time_source
 from eas_vo.errors import EasVoError, Interrupted
-from eas_vo.evaluation import (OFFSET_SEARCH_S, ImuAgreement, RotationErrors, estimate_time_offset, imu_agreement,
-                               motion_errors, rotation_errors)
+from eas_vo.evaluation import (MAX_GAP_FRAMES, OFFSET_SEARCH_S, ImuAgreement, RotationErrors, estimate_time_offset, ground_truth_gap_limit_s,
+                               imu_agreement, motion_errors, rotation_errors, scorable)
 from eas_vo.geometry.rotations import geodesic_angle, matrix_to_rotvec, quats_from_matrices, rotvec_to_matrix
 from eas_vo.imu_check import GyroVerdict, check_readings, judge_gyro, without
 from eas_vo.io import atomic_path, clock_time, json_text, output_folder, write_text_atomic
 from eas_vo.orb import OrbStats
 from eas_vo.plugins import Backend, Dataset, Frontend, Tracker
-from eas_vo.types import FrameRecord, ImuSeries, RelativeRotation
+from eas_vo.types import MAX_GAP_READINGS, FrameRecord, ImuSeries, RelativeRotation
 
 FRAMES_CSV_FIELDS = ("index", "t", "nc", "inliers", "status", "redetected", "inlier_ratio", "residual_px", "reason",
                      "events", "contrast_gain")
@@ -194,14 +195,18 @@ def dataset_identity(plugin: type, location: str):
 
 
 def open_pipeline(config: ResolvedConfig) -> Pipeline:
-    """Open the dataset, build the plugins, check the window, and read the event stream once
-    (its first read parses it into the cache)."""
+    """Open the dataset, check its clocks' units (datasets.recording.recording_clock_problems:
+    this reads the event stream once, its first read parsing it into the cache), build the
+    plugins and check the window."""
     rc = config.run
     dataset = registry.open_dataset(rc.dataset, config.dataset)
     frontend_cls = registry.get("frontends", rc.frontend)
     first_frame = dataset.load_frame(0)
     if frontend_cls.needs_frames and first_frame is None:
         raise EasVoError(f"frontend {rc.frontend!r} needs APS frames: {dataset.no_frames_reason}")
+    clocks = recording_clock_problems(dataset, first_frame is not None)  # before an event-only stream is sampled
+    if clocks:
+        raise EasVoError(next(iter(clocks.values())))
     if first_frame is not None:  # a frame of another size than the camera's: said before any work
         check_frame(first_frame, dataset, 0, float(dataset.frame_times()[0]))
     if not frontend_cls.makes_images and registry.get("trackers", rc.tracker).reads_images:
@@ -230,7 +235,6 @@ def open_pipeline(config: ResolvedConfig) -> Pipeline:
     if parts.imu is not None:
         window = dataset.frame_times()[dataset.window(rc.start_s, rc.duration_s)]
         parts.imu_warnings = check_readings(parts.imu, window, dataset.label, rc.imu_time_offset_s)
-    dataset.events()
     return parts
 
 
@@ -313,21 +317,28 @@ def _without_imu(parts: Pipeline, config: ResolvedConfig) -> Pipeline:
 
 
 def _check_ground_truth_overlap(dataset: Dataset, rc, n_window: int) -> None:
-    """A fixed time offset that puts every frame of the window outside the ground truth would
-    leave nothing to evaluate: say so before any work."""
+    """A fixed time offset that puts every frame of the window outside the ground truth, or a
+    ground truth too sparse to score any of them (evaluation.scorable), would leave nothing to
+    evaluate: say so before any work."""
     gt = dataset.ground_truth
     if gt is None or rc.time_offset_auto or len(gt.t) == 0:
         return
     t = dataset.frame_times()[dataset.window(rc.start_s, rc.duration_s)] + rc.time_offset_s
-    if not np.any((t >= gt.t[0]) & (t <= gt.t[-1])):
-        gap_s = float(dataset.frame_times()[0] - gt.t[0])
-        hint = ("check --time-offset, --start and --duration" if abs(gap_s) <= TIME_OFFSET_LIMIT_S else
-                f"its clock is not the recording's: put it there with --set dataset.ground_truth_time_offset_s=S "
-                f"(S = {gap_s:.6f} would start both together)")
-        raise EasVoError(
-            f"{dataset.label}: the ground truth ({gt.t[0]:.3f}-{gt.t[-1]:.3f} s) covers none of the {n_window} frame "
-            f"times of the window ({t[0]:.3f}-{t[-1]:.3f} s with the time offset {rc.time_offset_s:+g} s); {hint}"
-        )
+    if scorable(gt.t, t).any():
+        return
+    where = f"{time_source(dataset, 'ground-truth')}: the ground truth ({len(gt.t)} poses, {gt.t[0]:.3f}-{gt.t[-1]:.3f} s)"
+    if np.any((t >= gt.t[0]) & (t <= gt.t[-1])):
+        widest = float(np.max(np.diff(gt.t)))
+        raise EasVoError(f"{where} scores none of the {n_window} frame times of the window ({t[0]:.3f}-{t[-1]:.3f} s): "
+                         f"its poses lie up to {widest:.3g} s apart, and it is interpolated across gaps of at most "
+                         f"{ground_truth_gap_limit_s(gt.t, t):.3g} s ({MAX_GAP_READINGS} of its median sample intervals, "
+                         f"and {MAX_GAP_FRAMES} of the frames' at most)")
+    gap_s = float(dataset.frame_times()[0] - gt.t[0])
+    hint = ("check --time-offset, --start and --duration" if abs(gap_s) <= TIME_OFFSET_LIMIT_S else
+            f"its clock is not the recording's: put it there with --set dataset.ground_truth_time_offset_s=S "
+            f"(S = {gap_s:.6f} would start both together)")
+    raise EasVoError(f"{where} covers none of the {n_window} frame times of the window ({t[0]:.3f}-{t[-1]:.3f} s with "
+                     f"the time offset {rc.time_offset_s:+g} s); {hint}")
 
 
 def track(parts: Pipeline, config: ResolvedConfig, frames_csv: Path | None = None, progress: bool = False) -> Tracked:
@@ -430,6 +441,7 @@ def summarise(config: ResolvedConfig, dataset: Dataset, tracked: Tracked, errors
     }
     if errors is not None:
         metrics.update(errors.summary())
+        metrics.update(errors.coverage(tracked.times))
         metrics.update(motion_errors(tracked.times, errors, tracked.edges))
     metrics["time_offset_s"] = offset
     metrics["time_offset_estimated"] = offset_estimated
@@ -440,6 +452,7 @@ def summarise(config: ResolvedConfig, dataset: Dataset, tracked: Tracked, errors
     imu_findings = _imu_disagrees(config, agreement, reclocked)
     metrics["gyro"] = None if verdict is None else verdict.use
     metrics["data_warnings"] = (dataset.data_warnings() + _events_end_early(config, dataset, tracked.times)
+                                + ([] if errors is None else errors.coverage_warning(tracked.times))
                                 + _offset_not_estimated(config, dataset, tracked, offset, offset_estimated)
                                 + (imu_findings if verdict is None else verdict.warnings(retracked, imu_findings)))
     metrics["partial"] = tracked.interrupted is not None

@@ -17,6 +17,7 @@ import numpy as np
 
 from eas_vo import registry
 from eas_vo.config import ResolvedConfig
+from eas_vo.datasets.recording import recording_clock_problems
 from eas_vo.errors import EasVoError
 from eas_vo.io import output_folder
 from eas_vo.types import CameraModel, ImuSeries, PoseSeries, search_times
@@ -67,7 +68,8 @@ class SequenceInfo:
         samples: the times the dataset yields samples at (Dataset.frame_times).
         events, imu, ground_truth: each stream's span, None when the dataset has none.
         clock_origin_ns: the recording's clock at 0 s of the spans (Dataset.clock_origin_ns).
-        warnings: what the reader tolerated (--lenient), one line per kind.
+        warnings: clocks whose unit cannot be seconds (recording_clock_problems: a run refuses
+            them), then what the reader tolerated (--lenient), one line per kind.
     """
 
     label: str
@@ -190,9 +192,13 @@ def describe(config: ResolvedConfig) -> SequenceInfo:
     the frame list and at most one frame (whether there are frames at all), and the event
     stream once (its first read caches it)."""
     dataset = registry.open_dataset(config.run.dataset, config.dataset, need_camera=False)
-    samples = dataset.frame_times()
-    has_frames = len(samples) > 0 and dataset.load_frame(0) is not None
+    has_frames = dataset.load_frame(0) is not None
+    clocks = recording_clock_problems(dataset, has_frames)
     events = dataset.events()
+    # an event-only stream's samples are made from its events: not from a clock in the wrong unit
+    unsampled = not has_frames and "event" in clocks
+    samples = np.empty(0) if unsampled else dataset.frame_times()
+    has_frames = has_frames and len(samples) > 0
     return SequenceInfo(
         label=dataset.label,
         plugin=type(dataset).name,
@@ -207,7 +213,7 @@ def describe(config: ResolvedConfig) -> SequenceInfo:
         events=Span.of(events["t"]) if len(events) else None,
         imu=None if dataset.imu is None else Span.of(dataset.imu.t),
         ground_truth=None if dataset.ground_truth is None else Span.of(dataset.ground_truth.t),
-        warnings=tuple(dataset.data_warnings()),
+        warnings=(*clocks.values(), *dataset.data_warnings()),
     )
 
 
@@ -238,7 +244,8 @@ def convert(config: ResolvedConfig, out: str | Path, progress: bool = False, rep
     start if none) to that of the frame after its last (its end if none), so a full window
     keeps everything and a part what the frontends read of its first frame's past; IMU
     readings and poses over the same span, and one more at each end (to interpolate at
-    every frame), each on its own clock.
+    every frame), each on its own clock. A stream whose clock cannot be in seconds
+    (recording_clock_problems) is refused first.
     """
     from tqdm import tqdm
 
@@ -246,12 +253,15 @@ def convert(config: ResolvedConfig, out: str | Path, progress: bool = False, rep
 
     rc = config.run
     dataset = registry.open_dataset(rc.dataset, config.dataset)
+    has_frames = dataset.load_frame(0) is not None
+    clocks = recording_clock_problems(dataset, has_frames)  # before an event-only stream is sampled
+    if clocks:
+        raise EasVoError(next(iter(clocks.values())))
     window = dataset.window(rc.start_s, rc.duration_s)
     if len(window) == 0:
         raise EasVoError(f"{dataset.label}: the window start={rc.start_s} s, duration={rc.duration_s} s holds no sample")
     times = dataset.frame_times()
     t_lo, t_hi = _kept_span(times, window)
-    has_frames = dataset.load_frame(0) is not None
     lo, hi = search_times(dataset.events(), [t_lo, t_hi])
     events = dataset.events()[lo:hi]
     if len(events) and events["t"][0] < 0:

@@ -73,6 +73,39 @@ def test_frames_outside_the_ground_truth_are_not_evaluated():
     assert err.ape_rad.max() < 1e-9
 
 
+def test_frames_in_a_gap_of_the_ground_truth_are_not_scored():
+    """Poses every 5 ms but none between 0.8 and 1.2 s: the 20 Hz frames inside the gap are
+    left unscored (a pose at a frame's own time scores it), and the run is said to be covered
+    under 90 %."""
+    gt, R_gt = ground_truth(n=401, rate=200.0)
+    keep = (gt.t <= 0.8 + 1e-9) | (gt.t >= 1.2 - 1e-9)
+    holed = PoseSeries(gt.t[keep], gt.p_w_c[keep], gt.q_w_c[keep])
+    t = np.arange(41) * 0.05
+    err = rotation_errors(t, R_gt[::10], holed)
+    in_gap = (t > 0.8 + 1e-9) & (t < 1.2 - 1e-9)
+    assert in_gap.sum() == 7 and err.valid.tolist() == (~in_gap).tolist()
+    assert err.ape_rad.max() < 1e-9
+    coverage = err.coverage(t)
+    assert coverage["frames_in_ground_truth_gaps"] == 7 and coverage["frames_scored_fraction"] == pytest.approx(34 / 41)
+    assert coverage["ground_truth_span_s"] == [0.0, 2.0] and coverage["ground_truth_max_gap_s"] == pytest.approx(0.02)
+    warning, = err.coverage_warning(t)
+    assert "34 of the run's 41 frames" in warning and "7 frames lie in its gaps" in warning
+
+
+def test_two_poses_far_apart_score_no_frame_between_them():
+    gt = PoseSeries(np.array([0.2, 1.3]), np.zeros((2, 3)), np.array([[0, 0, 0, 1.0], [0, 0.3, 0, 0.954]]))
+    t = 0.01 + np.arange(40) * 0.05
+    assert not rotation_errors(t, np.tile(np.eye(3), (40, 1, 1)), gt).valid.any()
+
+
+def test_ground_truth_slower_than_the_frames_scores_them_all():
+    """10 Hz poses beside 50 Hz frames: 100 ms between poses is within 10 frame intervals."""
+    gt, _ = ground_truth(n=21, rate=10.0)
+    t = np.arange(101) * 0.02
+    err = rotation_errors(t, np.tile(np.eye(3), (101, 1, 1)), gt)
+    assert err.valid.all() and err.coverage_warning(t) == []
+
+
 def test_time_offset_known_answer():
     rng = np.random.default_rng(0)
     t_gt = np.arange(0, 10, 0.005)

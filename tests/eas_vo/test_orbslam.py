@@ -279,3 +279,42 @@ def test_settings_yaml_names_the_lens_as_orbslam3_reads_it(tmp_path, model, dist
     assert [fs.getNode(f"Camera.{k}").real() for k in names] == dist
     assert all(fs.getNode(f"Camera.{k}").empty() for k in {"p1", "p2", "k3", "k4"} - set(names))
     assert (fs.getNode("Camera.width").real(), fs.getNode("Camera.height").real()) == (346, 260)
+
+
+@pytest.mark.parametrize("shift_s", [0, 1_700_000_000], ids=["zero", "unix"])
+def test_evaluate_reads_an_estimate_on_the_recordings_own_clock(tmp_path, capsys, shift_s):
+    """An estimate holds the recording's own times (a run's trajectory.tum adds the clock origin
+    back): its own ground truth scores it exactly, and the files written keep those times."""
+    from helpers import sequence_with
+
+    from eas_vo.cli import main
+
+    folder = sequence_with(tmp_path / "seq", None, 1, shift_s)
+    out = tmp_path / "ev"
+    assert main(["evaluate", "--dataset", str(folder), "--estimate", str(folder / "groundtruth.txt"), "--align", "origin",
+                 "--out", str(out)]) == 0
+    metrics = json.loads((out / "metrics.json").read_text())
+    assert (metrics["matched_poses"], metrics["matched_fraction"], metrics["warnings"]) == (100, 1.0, [])
+    assert metrics["ape_rot_mean_rad"] < 1e-9 and metrics["ground_truth_span_s"] == [0.0, pytest.approx(0.495)]
+    np.testing.assert_array_equal(np.loadtxt(out / "groundtruth.tum")[:, 0], np.loadtxt(folder / "groundtruth.txt")[:, 0])
+
+
+def test_evaluate_refuses_an_estimate_in_microseconds_and_warns_on_a_partial_ground_truth(tmp_path, capsys):
+    from helpers import one_line_failure, retimed, sequence_with
+
+    from eas_vo.cli import main
+
+    folder = sequence_with(tmp_path / "seq", None, 1)
+    micro = tmp_path / "micro.tum"
+    micro.write_text((folder / "groundtruth.txt").read_text())
+    retimed(micro, 10**6)
+    err = one_line_failure(["evaluate", "--dataset", str(folder), "--estimate", str(micro)], capsys)
+    assert f"{micro}: the estimate timestamps span" in err and "look like microseconds" in err, err
+    estimate = tmp_path / "all.tum"
+    estimate.write_text((folder / "groundtruth.txt").read_text())
+    rows = (folder / "groundtruth.txt").read_text().splitlines()
+    (folder / "groundtruth.txt").write_text("\n".join(rows[50:]) + "\n")  # the second half of the poses
+    assert main(["evaluate", "--dataset", str(folder), "--estimate", str(estimate), "--align", "origin"]) == 0
+    said = capsys.readouterr()
+    assert "warning: the ground truth scores only 50 of the estimate's 100 poses (50 %, under 90 %)" in said.err
+    assert "50 of 100 poses matched" in said.out

@@ -70,9 +70,12 @@ def test_an_event_burst_and_slices_longer_than_the_events_left(sequence_copy, tm
 def test_gaps_in_ground_truth(sequence_copy, tmp_path):
     path = sequence_copy / "groundtruth.txt"
     lines = path.read_text().splitlines()
-    path.write_text("\n".join(lines[:100] + lines[250:]) + "\n")  # 0.75 s without poses
+    path.write_text("\n".join(lines[:100] + lines[250:]) + "\n")  # 0.75 s without poses: 0.495-1.25 s
     results = run_all(sequence_copy, tmp_path)
-    assert results["eas"]["frames_evaluated"] == results["eas"]["frames"]
+    in_gap = 15  # the frames at 0.51-1.21 s (every 50 ms from 0.01 s) are not scored: slerp would guess them
+    m = results["eas"]
+    assert (m["frames_evaluated"], m["frames_in_ground_truth_gaps"]) == (m["frames"] - in_gap, in_gap)
+    assert any(f"{in_gap} frames lie in its gaps" in w for w in m["data_warnings"])
 
 
 def test_identical_frame_timestamps(sequence_copy, tmp_path):

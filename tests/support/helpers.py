@@ -228,6 +228,34 @@ def known_sequence(folder: Path, width: int = 346, height: int = 260, frames: bo
     return folder
 
 
+#: 2023-11-14 22:13:20 UTC [s]: a Unix-time clock.
+UNIX_S = 1_700_000_000
+#: The ECD text file of each timed stream (recording.time_sources' names).
+ECD_FILES = {"event": "events.txt", "frame": "images.txt", "IMU": "imu.txt", "ground-truth": "groundtruth.txt"}
+
+
+def retimed(path, factor: int = 1, shift_s: int = 0) -> None:
+    """The first column of an ECD text file as (t + shift_s) * factor, written exactly (integers
+    of the unit for factor > 1)."""
+    lines = []
+    for line in path.read_text().splitlines():
+        t, rest = line.split(" ", 1)
+        whole, _, fraction = t.partition(".")
+        ticks = (int(whole) + shift_s) * 10**9 + int(fraction.ljust(9, "0"))  # exact: integer nanoseconds
+        new = str(ticks * factor // 10**9) if factor > 1 else f"{ticks // 10**9}.{ticks % 10**9:09d}"
+        lines.append(f"{new} {rest}")
+    path.write_text("\n".join(lines) + "\n")
+
+
+def sequence_with(folder, stream: str | None, factor: int, shift_s: int = 0):
+    """known_sequence with every file on a clock shifted by shift_s [s], and `stream`'s times
+    multiplied by `factor` (its unit)."""
+    known_sequence(folder)
+    for name, file in ECD_FILES.items():
+        retimed(folder / file, factor if name == stream else 1, shift_s)
+    return folder
+
+
 # ----------------------------------------------------------------------------- writers and damage
 
 class InMemoryDataset(Dataset):
