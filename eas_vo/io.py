@@ -176,10 +176,21 @@ def remove_stale_temporaries(folder: Path, names: tuple[str, ...]) -> None:
 OUTPUT_MARKER = ".eas-vo-output"
 
 
+def resolved_out(out: str | Path) -> Path:
+    """The absolute output path `out` (~ expanded, symlinks followed), or a one-line error naming
+    it when its links loop or it cannot be resolved."""
+    try:
+        return Path(out).expanduser().resolve()
+    except RuntimeError:  # Python before 3.13 raises this for a symlink loop
+        raise EasVoError(f"--out {out}: its symbolic links form a loop; remove them or choose another path") from None
+    except OSError as exc:
+        raise EasVoError(f"--out {out}: cannot be resolved ({exc.strerror or exc})") from None
+
+
 def check_writable_folder(out: str | Path) -> Path:
     """The absolute folder `out` (symlinks followed) if it is, or can be made, a writable folder
     other than the root; else a one-line error."""
-    out = Path(out).expanduser().resolve()
+    out = resolved_out(out)
     if out == Path(out.anchor):
         raise EasVoError(f"--out {out} is the root of the file system; choose a folder")
     if out.exists() and not out.is_dir():
@@ -191,7 +202,7 @@ def check_writable_folder(out: str | Path) -> Path:
 def check_output_file(out: str | Path, replace: bool) -> Path:
     """The absolute output file (symlinks followed), or a one-line error, before any work: a
     folder is refused, so is a place that cannot be written, and an existing file unless `replace`."""
-    out = Path(out).expanduser().resolve()
+    out = resolved_out(out)
     if out.is_dir():
         raise EasVoError(f"--out {out} is a folder; give the name of the file to write, e.g. {out / 'gallery.png'}")
     if out.exists() and not replace:
@@ -205,6 +216,64 @@ def _check_writable(out: Path) -> None:
     existing = next(p for p in [out, *out.parents] if p.exists() and p.is_dir())
     if not os.access(existing, os.W_OK | os.X_OK):
         raise EasVoError(f"--out {out}: {existing} is not writable")
+
+
+def refuse_inputs(out: Path, inputs: list[tuple[str, str | Path | None]], out_is_file: bool = False) -> None:
+    """A one-line error when writing `out` (resolved_out) would replace one of a command's
+    `inputs` ((what, path or None): a dataset, a config, a calibration, ...): an output folder
+    that is or holds an input, an output file that is one or lies inside one. A folder input
+    counts with every file under it and where its links lead (an `events.txt` linked from
+    elsewhere), and paths are compared both resolved and by (device, inode), which catches hard
+    links and a folder mounted twice. Inputs that do not exist are left to their readers."""
+    identities: dict[Path, tuple[int, int] | None] = {}
+
+    def identity(path: Path) -> tuple[int, int] | None:
+        if path not in identities:
+            identities[path] = _identity(path)
+        return identities[path]
+
+    out_ids = {identity(p) for p in ([out, *out.parents] if out_is_file else [out])} - {None}
+    for what, given in inputs:
+        if given is None:
+            continue
+        top = Path(given).expanduser()
+        for path in _input_files(top):
+            target = _resolved_input(path)
+            if target is None:
+                continue
+            named = f"{what} {given}" + (f" (its {path.relative_to(top)})" if path != top else "")
+            if out_is_file and (out == target or out.is_relative_to(target) or identity(path) in out_ids):
+                raise EasVoError(f"--out {out} is {named}, or inside it; writing there would replace it")
+            if not out_is_file and (target.is_relative_to(out)
+                                    or out_ids and any(identity(p) in out_ids for p in [target, *target.parents])):
+                raise EasVoError(f"--out {out} holds {named}; writing there would replace it")
+
+
+def _identity(path: Path) -> tuple[int, int] | None:
+    """(st_dev, st_ino) of what `path` names (links followed), or None if it cannot be reached."""
+    try:
+        st = path.stat()
+    except (OSError, RuntimeError):
+        return None
+    return st.st_dev, st.st_ino
+
+
+def _resolved_input(path: Path) -> Path | None:
+    """`path` resolved, or None when it does not exist or its links loop (its reader says so)."""
+    try:
+        return path.resolve(strict=True)
+    except (OSError, RuntimeError):
+        return None
+
+
+def _input_files(path: Path):
+    """`path` and, for a folder, every file and link under it (links to folders not entered:
+    their targets count as the links resolve)."""
+    yield path
+    if path.is_dir():
+        for root, dirs, files in os.walk(path):
+            for name in [*dirs, *files]:
+                yield Path(root) / name
 
 
 def check_output_folder(out: str | Path, replace: bool) -> Path:
@@ -279,7 +348,7 @@ def output_folder(out: str | Path, replace: bool = False, keep_partial: bool = T
     write into, and when the block ends normally or (with `keep_partial`) by an interrupt (the
     partial outputs are then written) move it into place, replacing what `out` held. On any
     other error the new folder is dropped and `out` stays as it was."""
-    out = Path(out).expanduser().resolve()
+    out = resolved_out(out)
     out.parent.mkdir(parents=True, exist_ok=True)
     lock = out.with_name(f".{out.name}.lock")
     _acquire(lock, out)
