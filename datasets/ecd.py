@@ -281,12 +281,13 @@ class EcdFolderDataset(RecordingReader):
         if not self.source.exists("groundtruth.txt"):
             return None
         return ground_truth_table(self.source.read_bytes("groundtruth.txt"), self.source.label("groundtruth.txt"),
-                                  self.config.ground_truth_time_offset_s, self.clock_origin_ns)
+                                  self.config.ground_truth_time_offset_s, self.clock_origin_ns, self.tolerated)
 
     def _read_imu(self) -> ImuSeries | None:
         if not self.source.exists("imu.txt"):
             return None
-        table, _ = timed_table(self.source.read_bytes("imu.txt"), self.source.label("imu.txt"), 7, "t ax ay az gx gy gz")
+        table, _ = timed_table(self.source.read_bytes("imu.txt"), self.source.label("imu.txt"), 7, "t ax ay az gx gy gz",
+                               self.tolerated)
         return ImuSeries(t=table[:, 0] - self._origin_s, acc=table[:, 1:4], gyro=table[:, 4:7])
 
 
