@@ -530,6 +530,17 @@ def slug(text: str) -> str:
 
 # ----------------------------------------------------------------------------- text tables
 
+#: The UTF-8 byte-order mark some editors (Windows Notepad, for one) write at a text file's start.
+UTF8_BOM = b"\xef\xbb\xbf"
+
+
+def text_bytes(data: bytes) -> bytes:
+    """A text input's bytes without a leading byte-order mark, which every text reader calls
+    first (tables, calibrations, frame and event lists, registries). Line ends need no such
+    care: the readers split on `\\n` and strip each line, so a CRLF file reads as an LF one."""
+    return data.removeprefix(UTF8_BOM)
+
+
 
 def clock_time(t_s: float, origin_ns: int = 0) -> str:
     """A time written to a file: `t_s` [s] after the clock origin `origin_ns` [ns]
@@ -566,6 +577,7 @@ def parse_table(data: bytes, where: str, ncols: int, what: str) -> np.ndarray:
     A fast C parse; on any irregularity a line-by-line scan names the first bad line.
     Lines starting with '#' are comments. `what` describes one row in messages.
     """
+    data = text_bytes(data)
     if b"#" not in data:
         try:
             values = np.fromstring(data, sep=" ")  # text mode is supported, only binary mode is deprecated

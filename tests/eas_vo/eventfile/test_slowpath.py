@@ -30,3 +30,10 @@ def test_a_bad_line_after_a_header_is_named_by_its_file_line(tmp_path):
     path.write_bytes(b"# t x y p\n" + b"".join(body[:20]) + b"0.5 1 2\n" + b"".join(body[20:]))
     with pytest.raises(DataError, match=r"events.txt:22: expected 4 columns"):
         load_event_file(path)
+
+
+def test_a_byte_order_mark_and_crlf_line_ends_are_read_past(tmp_path):
+    events = random_events(500, seed=6)
+    path = tmp_path / "events.txt"
+    path.write_bytes(b"\xef\xbb\xbf" + _text(events).replace(b"\n", b"\r\n"))
+    np.testing.assert_array_equal(load_event_file(path)["y"], events["y"])
