@@ -68,18 +68,16 @@ def test_precedence_of_the_file_the_options_and_set(tmp_path, in_file, in_option
     assert cfg.run.start_s == (3.0 if in_set else 2.0 if in_options else 1.0 if in_file else 0.0)
 
 
-def test_a_file_giving_a_key_flat_and_in_its_plugin_table_is_refused_unless_they_agree(tmp_path):
+@pytest.mark.parametrize("text", ["[tracker]\nmax_corners = 20\n[tracker.klt]\nmax_corners = 10\n",
+                                  "[tracker.klt]\nmax_corners = 10\n[tracker]\nmax_corners = 20\n"])
+def test_in_a_file_the_plugins_table_wins_over_the_flat_key_whatever_their_order(tmp_path, text):
     path = tmp_path / "c.toml"
-    path.write_text("[tracker]\nthreshold2 = 150\n[tracker.klt]\nthreshold2 = 100\n")
-    with pytest.raises(ConfigError, match=rf"^{path}: tracker.threshold2 = 150 and tracker.klt.threshold2 = 100 "
-                                          r"both set the klt tracker's threshold2; keep one$"):
-        resolve(path)
-    path.write_text("[tracker]\nthreshold2 = 150\n[tracker.klt]\nthreshold2 = 150\n")
-    assert resolve(path).tracker.threshold2 == 150
-    path.write_text("[frontend]\nn = 3000\n[frontend.slice]\nn = 5000\n")  # another plugin's table: no twin
+    path.write_text(text)
+    assert resolve(path).tracker.max_corners == 10
+    assert resolve(path, {}, ["tracker.max_corners=30"]).tracker.max_corners == 30  # --set over the file, either spelling
+    path.write_text("[frontend]\nn = 3000\n[frontend.slice]\nn = 5000\n")  # another plugin's table: not read
     assert resolve(path, {"frontend": "eas"}).frontend.n == 3000
-    with pytest.raises(ConfigError, match=r"frontend.n = 3000 and frontend.slice.n = 5000 both set the slice frontend's n"):
-        resolve(path, {"frontend": "slice"})
+    assert resolve(path, {"frontend": "slice"}).frontend.n == 5000
 
 
 @pytest.mark.parametrize("first,then", [("tracker.threshold2", "tracker.klt.threshold2"),
