@@ -3,6 +3,7 @@ atomic writes, folder names."""
 
 from __future__ import annotations
 
+import errno
 import itertools
 import json
 import math
@@ -128,11 +129,23 @@ def silenced_stderr():
         os.close(devnull)
 
 
+#: The errors of a write (a full disk or quota, a file too large, a read-only or forbidden place,
+#: a failing device), whose OSError names no file when `write` or `close` raised it.
+WRITE_ERRNOS = frozenset({errno.ENOSPC, errno.EDQUOT, errno.EFBIG, errno.EROFS, errno.EACCES, errno.EPERM, errno.EIO})
+
+
+def name_the_written(exc: BaseException, path: Path) -> None:
+    """Give a write's OSError that names no file the `path` being written (the CLI's one line
+    says "No space left on device (PATH)"); any other exception is left as it is."""
+    if isinstance(exc, OSError) and exc.filename is None and exc.errno in WRITE_ERRNOS:
+        exc.filename = str(path)
+
+
 @contextmanager
 def atomic_path(path: str | Path):
     """Yield a temporary path beside `path`, `.NAME.PID.RANDOM.tmp`; on success rename it over
     `path` with the mode a plain `open` would have given it (0666 less the umask), else delete
-    it (a killed writer's is left: remove_stale_temporaries)."""
+    it (a killed writer's is left: remove_stale_temporaries). A write's error names `path`."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.{os.getpid()}.", suffix=".tmp", dir=path.parent)
@@ -141,7 +154,8 @@ def atomic_path(path: str | Path):
         yield Path(tmp)
         os.chmod(tmp, 0o666 & ~current_umask())
         os.replace(tmp, path)
-    except BaseException:
+    except BaseException as exc:
+        name_the_written(exc, path)
         Path(tmp).unlink(missing_ok=True)
         raise
 
@@ -347,7 +361,8 @@ def output_folder(out: str | Path, replace: bool = False, keep_partial: bool = T
     over), check it under the lock (check_output_folder), yield a fresh hidden sibling folder to
     write into, and when the block ends normally or (with `keep_partial`) by an interrupt (the
     partial outputs are then written) move it into place, replacing what `out` held. On any
-    other error the new folder is dropped and `out` stays as it was."""
+    other error the new folder is dropped and `out` stays as it was (a write's error names its
+    file under `out`, or `out` when it names none)."""
     out = resolved_out(out)
     out.parent.mkdir(parents=True, exist_ok=True)
     lock = out.with_name(f".{out.name}.lock")
@@ -364,6 +379,11 @@ def output_folder(out: str | Path, replace: bool = False, keep_partial: bool = T
                 _move_into_place(staging, out)
             raise
         _move_into_place(staging, out)
+    except OSError as exc:  # named as the user knows it: `out`, or its file, not the staging folder
+        name_the_written(exc, out)
+        if isinstance(exc.filename, str) and Path(exc.filename).is_relative_to(staging):
+            exc.filename = str(out / Path(exc.filename).relative_to(staging))
+        raise
     finally:
         shutil.rmtree(staging, ignore_errors=True)
         lock.unlink(missing_ok=True)
