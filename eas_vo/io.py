@@ -251,10 +251,7 @@ def refuse_inputs(out: Path, inputs: list[tuple[str, str | Path | None]], out_is
         if given is None:
             continue
         top = Path(given).expanduser()
-        for path in _input_files(top):
-            target = _resolved_input(path)
-            if target is None:
-                continue
+        for path, target in _input_files(top):
             named = f"{what} {given}" + (f" (its {path.relative_to(top)})" if path != top else "")
             if out_is_file and (out == target or out.is_relative_to(target) or identity(path) in out_ids):
                 raise EasVoError(f"--out {out} is {named}, or inside it; writing there would replace it")
@@ -280,14 +277,21 @@ def _resolved_input(path: Path) -> Path | None:
         return None
 
 
-def _input_files(path: Path):
-    """`path` and, for a folder, every file and link under it (links to folders not entered:
-    their targets count as the links resolve)."""
-    yield path
-    if path.is_dir():
-        for root, dirs, files in os.walk(path):
+def _input_files(top: Path):
+    """(path, where it resolves to) of `top` and, for a folder, of every file and link under it
+    (links to folders not entered: their targets count as the links resolve); only links are
+    resolved one by one, the rest lie where `top` resolves. What does not exist or loops is left out."""
+    top_target = _resolved_input(top)
+    if top_target is None:
+        return
+    yield top, top_target
+    if top_target.is_dir():
+        for root, dirs, files in os.walk(top):
             for name in [*dirs, *files]:
-                yield Path(root) / name
+                path = Path(root) / name
+                target = _resolved_input(path) if path.is_symlink() else top_target / path.relative_to(top)
+                if target is not None:
+                    yield path, target
 
 
 def check_output_folder(out: str | Path, replace: bool) -> Path:

@@ -173,9 +173,9 @@ UNWRITABLE = (errno.EROFS, errno.EACCES, errno.EPERM, errno.ENOSPC, errno.EDQUOT
 
 
 def _cache_unwritable(exc: OSError, folder: Path) -> bool:
-    """Whether `exc` came from writing a cache file in `folder` (its temporary's name, or no
-    name: a write), not from reading the source (which names the source)."""
-    return exc.errno in UNWRITABLE and (exc.filename is None or Path(exc.filename).parent == folder)
+    """Whether `exc` came from writing a cache file in `folder` (naming the folder, a file in
+    it, or nothing: a write), not from reading the source (which names the source)."""
+    return exc.errno in UNWRITABLE and (exc.filename is None or folder in (Path(exc.filename), Path(exc.filename).parent))
 
 
 @functools.cache  # once per folder and reason
