@@ -21,6 +21,7 @@ from typing import Any, get_type_hints
 
 from eas_vo import registry
 from eas_vo.errors import ConfigError
+from eas_vo.io import text_bytes
 from eas_vo.validation import check_range, check_vector
 
 SECTIONS = ("run", "dataset", "frontend", "tracker", "backend")
@@ -200,7 +201,7 @@ def read_config_file(path: str | Path) -> dict:
     if not p.is_file():
         raise ConfigError(f"{p}: not a config file (a directory?)")
     try:
-        raw = tomllib.loads(p.read_text(encoding="utf-8-sig"))  # a byte-order mark, as some editors write, is read past
+        raw = tomllib.loads(text_bytes(p.read_bytes()).decode("utf-8"))  # a byte-order mark, as some editors write, is read past
     except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
         raise ConfigError(f"{p}: invalid TOML: {exc}") from None
     unknown = sorted(set(raw) - set(SECTIONS))

@@ -202,11 +202,20 @@ def test_hostile_config_files_are_one_line_errors_or_taken_exactly(tmp_path_fact
     except EasVoError as exc:
         assert "\n" not in str(exc).strip()
         return
-    for section, table in tomllib.loads(data.decode()).items():  # accepted: every flat key was taken
+    for section, table in tomllib.loads(data.decode("utf-8-sig")).items():  # accepted: every flat key was taken
         assert section in SECTIONS
         for key, value in table.items():
             if not isinstance(value, dict):
                 assert resolved_value(cfg, section, key) == value
+
+
+@pytest.mark.parametrize("data", [b"\xef", b"\xef\xbb", b"[run]\nstart_s = 1.0\n\xef"])
+def test_a_config_cut_inside_a_byte_order_mark_or_a_character_is_refused(tmp_path, data):
+    """Not read as an empty file: Python's utf-8-sig text reader takes a lone b"\\xef" for the start of a mark."""
+    path = tmp_path / "c.toml"
+    path.write_bytes(data)
+    with pytest.raises(ConfigError, match=rf"^{path}: invalid TOML: 'utf-8' codec can't decode"):
+        resolve(path)
 
 
 def test_a_config_written_before_the_imu_moved_to_run_still_resolves(tmp_path):
