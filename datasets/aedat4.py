@@ -192,7 +192,8 @@ class Aedat4Dataset(RecordingReader):
         if len(table) < 2:
             return None
         t = (table[:, 0] - self._origin_us) / 1e6
-        check_increasing(f"{self.path}:imu", t, lambda row: row)
+        keep = check_increasing(f"{self.path}:imu", t, lambda row: row, self.tolerated, "reading")
+        t, table = t[keep], table[keep]
         return ImuSeries(t=t, acc=table[:, 1:4] * STANDARD_GRAVITY, gyro=np.deg2rad(table[:, 4:7]))
 
     def events(self) -> np.ndarray:

@@ -191,13 +191,16 @@ class BagDataset(RecordingReader):
     def _find_topic(self, key: str, types: tuple[str, ...]) -> str | None:
         """The topic `config.<key>` names; where its default name is absent, the one topic of the
         bag carrying one of `types` (a driver's own names), else None. A topic the user named
-        that the bag lacks, or several candidates, raise DataError listing the bag's topics."""
+        that the bag lacks, or several candidates, raise DataError listing the bag's topics, those
+        carrying `types` first."""
         named = getattr(self.config, key)
         if named in self.topic_types:
             return named
-        if named != getattr(BagConfig, key):
-            raise DataError(self.path, f"has no topic {named} (dataset.{key}); it holds {self._topic_list()}")
         found = sorted(topic for topic, msgtype in self.topic_types.items() if msgtype in types)
+        if named != getattr(BagConfig, key):
+            kind = (f"its {' or '.join(types)} topic{'s' if len(found) > 1 else ''}: {', '.join(found)} "
+                    f"(--set dataset.{key}={found[0]}); " if found else f"it has no {' or '.join(types)} topic; ")
+            raise DataError(self.path, f"has no topic {named} (dataset.{key}); {kind}it holds {self._topic_list()}")
         if len(found) > 1:
             raise DataError(self.path, f"has no {named} and {len(found)} topics of its kind ({', '.join(found)}): "
                                        f"choose one with --set dataset.{key}=TOPIC")
@@ -377,8 +380,9 @@ class BagDataset(RecordingReader):
         ]
         if not rows:
             return None
-        check_increasing(f"{self.path}:{topic}", np.array(rows)[:, 0], _message_index)
-        return pose_series(f"{self.path}:{topic}", np.array(rows), _message_index)
+        table = np.array(rows)
+        keep = check_increasing(f"{self.path}:{topic}", table[:, 0], _message_index, self.tolerated, "message")
+        return pose_series(f"{self.path}:{topic}", table[keep], lambda row: _message_index(int(keep[row])))
 
     def _read_imu(self):
         topic = self.topic["imu_topic"]
@@ -390,7 +394,7 @@ class BagDataset(RecordingReader):
         if not rows:
             return None
         table = np.array(rows)
-        check_increasing(f"{self.path}:{topic}", table[:, 0], _message_index)
+        table = table[check_increasing(f"{self.path}:{topic}", table[:, 0], _message_index, self.tolerated, "message")]
         return ImuSeries(table[:, 0], table[:, 1:4], table[:, 4:7])
 
     # -- plugin contract -----------------------------------------------------------------

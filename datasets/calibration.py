@@ -26,6 +26,7 @@ from pathlib import Path
 import numpy as np
 
 from eas_vo.errors import DataError
+from eas_vo.io import text_bytes
 from eas_vo.types import LENS_MODELS, CameraModel
 
 
@@ -428,6 +429,6 @@ def read_calibration(path: str | Path, *, width: int | None = None, height: int 
 
 def _read_bytes(path: str | Path) -> bytes:
     try:
-        return Path(path).read_bytes()
+        return text_bytes(Path(path).read_bytes())
     except OSError as exc:
         raise DataError(str(path), f"cannot read the calibration: {exc.strerror or exc}") from None

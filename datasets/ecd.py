@@ -30,7 +30,7 @@ from eas_vo.datasets.recording import RecordingReader, StreamConfig, clock_origi
 from eas_vo.datasets.sources import MARKERS, open_source
 from eas_vo.errors import DataError, DataWarnings
 from eas_vo.eventfile import load_event_text, write_events_text
-from eas_vo.io import atomic_path, clock_time, silenced_stderr, write_text_atomic
+from eas_vo.io import atomic_path, clock_time, silenced_stderr, text_bytes, write_text_atomic
 from eas_vo.types import CameraModel, ImuSeries, PoseSeries, empty_events
 from eas_vo.validation import check_range
 
@@ -180,7 +180,7 @@ class EcdFolderDataset(RecordingReader):
             return None, []
         where = self.source.label("images.txt")
         times, names, lines = [], [], []
-        for lineno, line in enumerate(self.source.read_bytes("images.txt").decode(errors="replace").splitlines(), 1):
+        for lineno, line in enumerate(text_bytes(self.source.read_bytes("images.txt")).decode(errors="replace").splitlines(), 1):
             parts = line.split()
             if not parts or parts[0].startswith("#"):
                 continue
@@ -277,12 +277,15 @@ class EcdFolderDataset(RecordingReader):
                                      f"k3' (or {CAMCHAIN}, a kalibr camchain, those of a fisheye; or give one with "
                                      "--set dataset.calibration=FILE)")
             return None
-        return parse_ecd_calib(self.source.read_bytes("calib.txt"), where, width, height)
+        camera = parse_ecd_calib(text_bytes(self.source.read_bytes("calib.txt")), where, width, height)
+        if self.source.exists(CAMCHAIN):
+            _refuse_disagreement(camera, where, self._read_camchain(width, height), self.source.label(CAMCHAIN))
+        return camera
 
     def _read_camchain(self, width: int, height: int) -> CameraModel:
         """cam0 of the folder's kalibr camchain (calibration.parse_kalibr_camchain), for the frames' size."""
         where = self.source.label(CAMCHAIN)
-        camera = parse_kalibr_camchain(self.source.read_bytes(CAMCHAIN), where)
+        camera = parse_kalibr_camchain(text_bytes(self.source.read_bytes(CAMCHAIN)), where)
         check_frame_size(camera, width, height, where, "the frames are" if self._frame_names else "dataset.width x dataset.height is",
                          "cam0.resolution")
         return camera
@@ -293,13 +296,34 @@ class EcdFolderDataset(RecordingReader):
         if not self.source.exists("groundtruth.txt"):
             return None
         return ground_truth_table(self.source.read_bytes("groundtruth.txt"), self.source.label("groundtruth.txt"),
-                                  self.config.ground_truth_time_offset_s, self.clock_origin_ns)
+                                  self.config.ground_truth_time_offset_s, self.clock_origin_ns, self.tolerated)
 
     def _read_imu(self) -> ImuSeries | None:
         if not self.source.exists("imu.txt"):
             return None
-        table, _ = timed_table(self.source.read_bytes("imu.txt"), self.source.label("imu.txt"), 7, "t ax ay az gx gy gz")
+        table, _ = timed_table(self.source.read_bytes("imu.txt"), self.source.label("imu.txt"), 7, "t ax ay az gx gy gz",
+                               self.tolerated)
         return ImuSeries(t=table[:, 0] - self._origin_s, acc=table[:, 1:4], gyro=table[:, 4:7])
+
+
+def _refuse_disagreement(camera: CameraModel, where: str, other: CameraModel, other_where: str) -> None:
+    """A DataError when the two calibrations of one folder's camera differ in lens model,
+    intrinsics or distortion (beyond the 12 significant digits the writer prints): nothing
+    says which one is right, and a wrong one bends every rotation, so neither is used."""
+    names = ("fx", "fy", "cx", "cy")
+    mine = dict(zip(names, camera.K[[0, 1, 0, 1], [0, 1, 2, 2]]))
+    theirs = dict(zip(names, other.K[[0, 1, 0, 1], [0, 1, 2, 2]]))
+    if camera.model != other.model:
+        differs = f"lens model {camera.model} against {other.model}"
+    else:
+        key = next((k for k in names if not np.isclose(mine[k], theirs[k], rtol=1e-9, atol=0.0)), None)
+        same_dist = len(camera.dist) == len(other.dist) and np.allclose(camera.dist, other.dist, rtol=1e-9, atol=1e-12)
+        if key is None and same_dist:
+            return
+        differs = (f"{key} {mine[key]:g} against {theirs[key]:g}" if key is not None
+                   else f"distortion {' '.join(f'{v:g}' for v in camera.dist)} against {' '.join(f'{v:g}' for v in other.dist)}")
+    raise DataError(f"{where} and {other_where}", f"two calibrations of the camera that differ ({differs}); remove the "
+                    "wrong one, or choose one with --set dataset.calibration=FILE")
 
 
 def write_ecd_folder(

@@ -21,7 +21,7 @@ from pathlib import Path
 from urllib.parse import unquote, urlsplit
 
 from eas_vo.errors import DataError, EasVoError
-from eas_vo.io import atomic_path, cache_folder, current_umask
+from eas_vo.io import atomic_path, cache_folder, current_umask, text_bytes
 
 BASE_URL = "https://rpg.ifi.uzh.ch/datasets/davis/"
 _MD5 = re.compile(r"[0-9a-fA-F]{32}")
@@ -38,7 +38,7 @@ def registry() -> dict[str, str]:
     path = os.environ.get("EAS_VO_DATA_REGISTRY")
     if path:
         try:
-            text = Path(path).read_text(encoding="utf-8")
+            text = text_bytes(Path(path).read_bytes()).decode("utf-8")
         except (OSError, UnicodeDecodeError) as exc:
             raise DataError(path, f"cannot read the registry named by EAS_VO_DATA_REGISTRY: {exc}") from None
         return parse_registry(text, path)

@@ -222,7 +222,8 @@ class MvsecDataset(RecordingReader):
             raise DataError(where, f"unreadable ({_said(exc)})") from None
 
     def _timed(self, group, name: str, ndim: int, columns: int | None, path: Path | None = None):
-        """(values, times [s]) of `name` and `name_ts`, both finite, as many of each, the times increasing."""
+        """(values, times [s]) of `name` and `name_ts`, both finite, as many of each, the times
+        increasing (--lenient: rows repeating a time dropped)."""
         values = self._read(self._dataset(group, name, ndim, columns, "f8", path), self._where(name, path))
         ts_where = self._where(name + "_ts", path)
         if name + "_ts" not in group:
@@ -236,8 +237,8 @@ class MvsecDataset(RecordingReader):
             bad = np.flatnonzero(~np.isfinite(data).reshape(len(data), -1).all(axis=1))
             if len(bad):
                 raise DataError(at, "holds a value that is not finite (NaN or infinity)", int(bad[0]))
-        check_increasing(ts_where, t, int)
-        return values, t
+        keep = check_increasing(ts_where, t, int, self.tolerated, "row")
+        return values[keep], t[keep]
 
     def _read_frame_times(self) -> tuple[np.ndarray | None, list[int]]:
         """The frame times [s] and the image_raw row of each frame kept (lenient: those going back dropped)."""

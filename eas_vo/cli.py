@@ -198,27 +198,41 @@ def _names(option: str, text: str) -> list[str]:
     return listed
 
 
-def _refuse_inputs_inside(out: Path, datasets: str | list[str], *others: tuple[str, str | None], out_is_file: bool = False) -> None:
-    """An output folder that is, or holds, a dataset (or another input: (what, path or None))
-    it is made from would replace it; so would an output file that is one, or lies inside one.
-    A dataset spec that names no dataset is left to whoever opens it to report."""
+def _dataset_inputs(spec: str, settings=None) -> list[tuple[str, str | None]]:
+    """The inputs (what, path) a dataset brings to a command: the recording `spec` names (None
+    when it names none: whoever opens it says so) and each file or folder one of its [dataset]
+    `settings` (the resolved section) names, such as a calibration or a ground-truth file."""
+    from dataclasses import fields
+
     from eas_vo.registry import resolve_dataset
 
-    def location(spec: str) -> str | None:
-        try:
-            return resolve_dataset(spec)[1]
-        except EasVoError:
-            return None
+    try:
+        location = resolve_dataset(spec)[1]
+    except EasVoError:
+        location = None
+    named = [(f"dataset.{f.name}", getattr(settings, f.name)) for f in fields(settings)] if settings is not None else []
+    return [("the dataset", location),
+            *((what, value) for what, value in named if isinstance(value, str) and value and Path(value).expanduser().exists())]
 
-    specs = [datasets] if isinstance(datasets, str) else datasets
-    for what, path in [*(("the dataset", location(spec)) for spec in specs), *others]:
-        path = Path(path).expanduser() if path is not None else None
-        if path is None or not path.exists():
-            continue
-        if not out_is_file and path.resolve().is_relative_to(out):
-            raise EasVoError(f"--out {out} holds {what} {path}; writing there would replace it")
-        if out_is_file and out.is_relative_to(path.resolve()):
-            raise EasVoError(f"--out {out} is {what} {path}, or inside it; writing there would replace it")
+
+def _dataset_settings(args, spec: str):
+    """The [dataset] section `spec` resolves to under the command's --config and --set, or None
+    when they do not resolve (the run that reads them says why)."""
+    from eas_vo import config as config_mod
+
+    try:
+        return config_mod.resolve(args.config, {"dataset": spec}, args.assignments).dataset
+    except EasVoError:
+        return None
+
+
+def _refuse_inputs_inside(out: Path, datasets: list[tuple[str, str | None]], *others: tuple[str, str | None],
+                          out_is_file: bool = False) -> None:
+    """io.refuse_inputs for a command's output: its datasets' inputs (_dataset_inputs) and the
+    `others` it reads ((what, path or None): a --config, an --estimate, ...)."""
+    from eas_vo.io import refuse_inputs
+
+    refuse_inputs(out, [*datasets, *others], out_is_file=out_is_file)
 
 
 # ----------------------------------------------------------------------------- run
@@ -286,7 +300,7 @@ def cmd_run(args) -> int:
     rc = config.run
     if args.out:
         out = check_output_folder(args.out, replace=args.overwrite)
-        _refuse_inputs_inside(out, rc.dataset, ("the --config", args.config))
+        _refuse_inputs_inside(out, _dataset_inputs(rc.dataset, config.dataset), ("the --config", args.config))
     else:
         import time
 
@@ -373,7 +387,8 @@ def cmd_compare(args) -> int:
     out = check_writable_folder(args.out)
     run_defaults = config_mod.run_section(args.config, args.assignments)  # e.g. best.toml's tracker and backend
     datasets = args.datasets or [run_defaults.dataset]
-    _refuse_inputs_inside(out, datasets, ("the --config", args.config))
+    _refuse_inputs_inside(out, [i for spec in datasets for i in _dataset_inputs(spec, _dataset_settings(args, spec))],
+                          ("the --config", args.config))
     check_grid_folder(out)
     if args.trackers or args.backends:
         methods = compare.grid_methods(_names("--trackers", args.trackers or run_defaults.tracker),
@@ -502,8 +517,9 @@ def cmd_render(args) -> int:
         raise EasVoError(f"--frames takes comma-separated frame indices, got {args.frames!r}") from None
     if not frames:
         raise EasVoError("--frames names no frame")
-    dataset = config_mod.resolve(args.config, {"dataset": args.dataset}, args.assignments).run.dataset
-    _refuse_inputs_inside(out, dataset, ("the --config", args.config), out_is_file=True)
+    config = config_mod.resolve(args.config, {"dataset": args.dataset}, args.assignments)
+    dataset = config.run.dataset
+    _refuse_inputs_inside(out, _dataset_inputs(dataset, config.dataset), ("the --config", args.config), out_is_file=True)
     frontends = [v.strip() for v in args.frontends.split(",")] if args.frontends else None
     names, images = frontend_images(args.dataset, frames, frontends, args.config, args.assignments)
     with atomic_path(out) as tmp:
@@ -546,7 +562,7 @@ def cmd_export(args) -> int:
         args.assignments,
     )
     out = check_output_folder(args.out, replace=args.overwrite)
-    _refuse_inputs_inside(out, config.run.dataset, ("the --config", args.config))
+    _refuse_inputs_inside(out, _dataset_inputs(config.run.dataset, config.dataset), ("the --config", args.config))
     done = export(config, out, args.format, progress=_progress(args), replace=args.overwrite)
     print(f"wrote {done['frames']} {done['frontend']} images of {done['dataset']} ({done['format']} layout, "
           f"{done['fps']:.2f} frames/s) and settings.yaml to {out}")
@@ -608,7 +624,8 @@ def cmd_slam(args) -> int:
     config = config_mod.resolve(args.config, {"dataset": args.dataset, "frontend": args.frontend, **_window_overrides(args)},
                                 args.assignments)
     out = check_output_folder(args.out, replace=args.overwrite)
-    _refuse_inputs_inside(out, config.run.dataset, ("the --config", args.config), ("the --vocabulary", str(vocabulary)))
+    _refuse_inputs_inside(out, _dataset_inputs(config.run.dataset, config.dataset), ("the --config", args.config),
+                          ("the --vocabulary", str(vocabulary)))
     done = run_slam(config, out, str(vocabulary), args.runs, progress=_progress(args), replace=args.overwrite)
     statuses = ", ".join(f"{n} {s}" for s, n in done["statuses"].items())
     print(f"ORB-SLAM3 on {done['frames']} {done['frontend']} images of {done['dataset']}: {done['runs']} run(s), {statuses} -> {out}")
@@ -654,7 +671,8 @@ def cmd_vocabulary(args) -> int:
     config = config_mod.resolve(args.config, {"dataset": args.dataset, "frontend": args.frontend, **_window_overrides(args)},
                                 args.assignments)
     out = check_output_file(args.out, replace=args.overwrite)
-    _refuse_inputs_inside(out, config.run.dataset, ("the --config", args.config), out_is_file=True)
+    _refuse_inputs_inside(out, _dataset_inputs(config.run.dataset, config.dataset), ("the --config", args.config),
+                          out_is_file=True)
     done = train_vocabulary(config, out, args.k, args.levels, args.seed, progress=_progress(args))
     print(f"wrote a vocabulary of {done['nodes']} nodes ({done['words']} words, k={args.k}, L={args.levels}) from "
           f"{done['descriptors']} ORB descriptors of {done['images']} {done['frontend']} images of {done['dataset']} to {out}")
@@ -691,7 +709,7 @@ def cmd_convert(args) -> int:
 
     config = config_mod.resolve(args.config, {"dataset": args.dataset, **_window_overrides(args)}, _assignments(args))
     out = check_output_folder(args.out, replace=args.overwrite)
-    _refuse_inputs_inside(out, config.run.dataset, ("the --config", args.config))
+    _refuse_inputs_inside(out, _dataset_inputs(config.run.dataset, config.dataset), ("the --config", args.config))
     done = convert(config, out, progress=_progress(args), replace=args.overwrite)
     for line in done.warnings:
         print(f"eas-vo: warning: {line}", file=sys.stderr)
@@ -731,7 +749,7 @@ def cmd_evaluate(args) -> int:
 
     if args.out:
         out = check_output_folder(args.out, replace=args.overwrite)
-        _refuse_inputs_inside(out, args.dataset, ("the --estimate", args.estimate))
+        _refuse_inputs_inside(out, _dataset_inputs(args.dataset), ("the --estimate", args.estimate))
     m = evaluate_estimate(args.dataset, args.estimate, args.align, args.max_diff, args.out, args.label,
                           replace=args.overwrite)
     for line in m["warnings"]:
@@ -799,7 +817,8 @@ def cmd_reproduce(args) -> int:
     if args.vocabulary and args.table != "table2":
         raise EasVoError("--vocabulary belongs to table2 (ORB-SLAM3 runs)")
     out = check_writable_folder(args.out or f"reproduce/{args.table}")
-    _refuse_inputs_inside(out, list(reproduce.SPECS.values()), ("the --config", args.config),
+    _refuse_inputs_inside(out, [i for spec in reproduce.SPECS.values() for i in _dataset_inputs(spec)],
+                          ("the --config", args.config), ("the --vocabulary", args.vocabulary),
                           ("the data folder", str(data_dir())), *(("the --estimate", path) for path in estimates.values()))
     check_grid_folder(out)  # before any download
     progress = _progress(args)

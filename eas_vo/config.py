@@ -4,9 +4,9 @@ Sections: `[run]` (what to run), `[dataset]`, `[frontend]`, `[tracker]`, `[backe
 Each plugin section holds the keys of the chosen plugin; per-plugin tables such as
 `[frontend.eas]` apply only when that plugin is chosen, so one file can configure
 every frontend. Precedence is by source: dataclass defaults < file < CLI options < `--set`,
-whether a key is written flat (`[tracker] threshold2`) or in the plugin's table; within one
-source the two spellings are one key (a file giving both two values is refused; among `--set`
-assignments the later wins).
+whether a key is written flat (`[tracker] threshold2`) or in the plugin's table; within a file
+the plugin's table, the more specific, wins over the flat key (whatever their order: a flat
+value for every tracker, the table's for klt), and among `--set` assignments the later wins.
 """
 
 from __future__ import annotations
@@ -21,6 +21,7 @@ from typing import Any, get_type_hints
 
 from eas_vo import registry
 from eas_vo.errors import ConfigError
+from eas_vo.io import text_bytes
 from eas_vo.validation import check_range, check_vector
 
 SECTIONS = ("run", "dataset", "frontend", "tracker", "backend")
@@ -200,7 +201,7 @@ def read_config_file(path: str | Path) -> dict:
     if not p.is_file():
         raise ConfigError(f"{p}: not a config file (a directory?)")
     try:
-        raw = tomllib.loads(p.read_text(encoding="utf-8-sig"))  # a byte-order mark, as some editors write, is read past
+        raw = tomllib.loads(text_bytes(p.read_bytes()).decode("utf-8"))  # a byte-order mark, as some editors write, is read past
     except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
         raise ConfigError(f"{p}: invalid TOML: {exc}") from None
     unknown = sorted(set(raw) - set(SECTIONS))
@@ -244,8 +245,7 @@ class _Source:
         entries: (section, plugin or None, key, value): `[tracker.klt] threshold2` is
             ("tracker", "klt", "threshold2", v); a flat `[tracker] threshold2`, plugin None.
         ordered: a later value for a key wins over an earlier one (`--set`, whose order is the
-            user's); otherwise two that differ are refused (a file: a flat key and its twin in
-            the chosen plugin's table).
+            user's); otherwise (a file) a key in the chosen plugin's table wins over its flat twin.
     """
 
     where: str
@@ -303,12 +303,8 @@ def _values(source: _Source, section: str, plugin: type | None = None) -> dict[s
         if plugin is not None and table is None and isinstance(value, dict) and key not in own_keys:
             installed = ", ".join(_installed(section)) or "none"
             raise ConfigError(f"{source.where}: unknown table {section}.{key}: not an installed {section} plugin ({installed})")
-        written = ".".join(filter(None, (section, table, key)))
-        if key in found and not source.ordered and not _same(found[key][1], value):
-            raise ConfigError(f"{source.where}: {found[key][0]} = {_toml_value(found[key][1])} and {written} = "
-                              f"{_toml_value(value)} both set the {plugin.name} {section}'s {key}; keep one")
-        if key not in found or source.ordered:
-            found[key] = (written, value)
+        if key not in found or source.ordered or table is not None:
+            found[key] = (".".join(filter(None, (section, table, key))), value)
     return found
 
 
@@ -341,8 +337,8 @@ def resolve(
     Precedence is by source, whatever the spelling of a key: dataclass defaults < the config
     file < the command's options (`run_overrides`: `--frontend`, `--start`, ...) < `--set`.
     Within one source a flat key (`[tracker] threshold2`) and its twin in the chosen plugin's
-    table (`[tracker.klt] threshold2`) are one key: in a file, two values that differ are
-    refused; among `--set` assignments the later wins.
+    table (`[tracker.klt] threshold2`) are one key: in a file the table's value wins; among
+    `--set` assignments the later wins.
     """
     sources = _sources(config_file, run_overrides, assignments)
     run = _run_config(sources)

@@ -3,6 +3,7 @@ atomic writes, folder names."""
 
 from __future__ import annotations
 
+import errno
 import itertools
 import json
 import math
@@ -128,11 +129,23 @@ def silenced_stderr():
         os.close(devnull)
 
 
+#: The errors of a write (a full disk or quota, a file too large, a read-only or forbidden place,
+#: a failing device), whose OSError names no file when `write` or `close` raised it.
+WRITE_ERRNOS = frozenset({errno.ENOSPC, errno.EDQUOT, errno.EFBIG, errno.EROFS, errno.EACCES, errno.EPERM, errno.EIO})
+
+
+def name_the_written(exc: BaseException, path: Path) -> None:
+    """Give a write's OSError that names no file the `path` being written (the CLI's one line
+    says "No space left on device (PATH)"); any other exception is left as it is."""
+    if isinstance(exc, OSError) and exc.filename is None and exc.errno in WRITE_ERRNOS:
+        exc.filename = str(path)
+
+
 @contextmanager
 def atomic_path(path: str | Path):
     """Yield a temporary path beside `path`, `.NAME.PID.RANDOM.tmp`; on success rename it over
     `path` with the mode a plain `open` would have given it (0666 less the umask), else delete
-    it (a killed writer's is left: remove_stale_temporaries)."""
+    it (a killed writer's is left: remove_stale_temporaries). A write's error names `path`."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.{os.getpid()}.", suffix=".tmp", dir=path.parent)
@@ -141,7 +154,8 @@ def atomic_path(path: str | Path):
         yield Path(tmp)
         os.chmod(tmp, 0o666 & ~current_umask())
         os.replace(tmp, path)
-    except BaseException:
+    except BaseException as exc:
+        name_the_written(exc, path)
         Path(tmp).unlink(missing_ok=True)
         raise
 
@@ -176,10 +190,21 @@ def remove_stale_temporaries(folder: Path, names: tuple[str, ...]) -> None:
 OUTPUT_MARKER = ".eas-vo-output"
 
 
+def resolved_out(out: str | Path) -> Path:
+    """The absolute output path `out` (~ expanded, symlinks followed), or a one-line error naming
+    it when its links loop or it cannot be resolved."""
+    try:
+        return Path(out).expanduser().resolve()
+    except RuntimeError:  # Python before 3.13 raises this for a symlink loop
+        raise EasVoError(f"--out {out}: its symbolic links form a loop; remove them or choose another path") from None
+    except OSError as exc:
+        raise EasVoError(f"--out {out}: cannot be resolved ({exc.strerror or exc})") from None
+
+
 def check_writable_folder(out: str | Path) -> Path:
     """The absolute folder `out` (symlinks followed) if it is, or can be made, a writable folder
     other than the root; else a one-line error."""
-    out = Path(out).expanduser().resolve()
+    out = resolved_out(out)
     if out == Path(out.anchor):
         raise EasVoError(f"--out {out} is the root of the file system; choose a folder")
     if out.exists() and not out.is_dir():
@@ -191,7 +216,7 @@ def check_writable_folder(out: str | Path) -> Path:
 def check_output_file(out: str | Path, replace: bool) -> Path:
     """The absolute output file (symlinks followed), or a one-line error, before any work: a
     folder is refused, so is a place that cannot be written, and an existing file unless `replace`."""
-    out = Path(out).expanduser().resolve()
+    out = resolved_out(out)
     if out.is_dir():
         raise EasVoError(f"--out {out} is a folder; give the name of the file to write, e.g. {out / 'gallery.png'}")
     if out.exists() and not replace:
@@ -205,6 +230,68 @@ def _check_writable(out: Path) -> None:
     existing = next(p for p in [out, *out.parents] if p.exists() and p.is_dir())
     if not os.access(existing, os.W_OK | os.X_OK):
         raise EasVoError(f"--out {out}: {existing} is not writable")
+
+
+def refuse_inputs(out: Path, inputs: list[tuple[str, str | Path | None]], out_is_file: bool = False) -> None:
+    """A one-line error when writing `out` (resolved_out) would replace one of a command's
+    `inputs` ((what, path or None): a dataset, a config, a calibration, ...): an output folder
+    that is or holds an input, an output file that is one or lies inside one. A folder input
+    counts with every file under it and where its links lead (an `events.txt` linked from
+    elsewhere), and paths are compared both resolved and by (device, inode), which catches hard
+    links and a folder mounted twice. Inputs that do not exist are left to their readers."""
+    identities: dict[Path, tuple[int, int] | None] = {}
+
+    def identity(path: Path) -> tuple[int, int] | None:
+        if path not in identities:
+            identities[path] = _identity(path)
+        return identities[path]
+
+    out_ids = {identity(p) for p in ([out, *out.parents] if out_is_file else [out])} - {None}
+    for what, given in inputs:
+        if given is None:
+            continue
+        top = Path(given).expanduser()
+        for path, target in _input_files(top):
+            named = f"{what} {given}" + (f" (its {path.relative_to(top)})" if path != top else "")
+            if out_is_file and (out == target or out.is_relative_to(target) or identity(path) in out_ids):
+                raise EasVoError(f"--out {out} is {named}, or inside it; writing there would replace it")
+            if not out_is_file and (target.is_relative_to(out)
+                                    or out_ids and any(identity(p) in out_ids for p in [target, *target.parents])):
+                raise EasVoError(f"--out {out} holds {named}; writing there would replace it")
+
+
+def _identity(path: Path) -> tuple[int, int] | None:
+    """(st_dev, st_ino) of what `path` names (links followed), or None if it cannot be reached."""
+    try:
+        st = path.stat()
+    except (OSError, RuntimeError):
+        return None
+    return st.st_dev, st.st_ino
+
+
+def _resolved_input(path: Path) -> Path | None:
+    """`path` resolved, or None when it does not exist or its links loop (its reader says so)."""
+    try:
+        return path.resolve(strict=True)
+    except (OSError, RuntimeError):
+        return None
+
+
+def _input_files(top: Path):
+    """(path, where it resolves to) of `top` and, for a folder, of every file and link under it
+    (links to folders not entered: their targets count as the links resolve); only links are
+    resolved one by one, the rest lie where `top` resolves. What does not exist or loops is left out."""
+    top_target = _resolved_input(top)
+    if top_target is None:
+        return
+    yield top, top_target
+    if top_target.is_dir():
+        for root, dirs, files in os.walk(top):
+            for name in [*dirs, *files]:
+                path = Path(root) / name
+                target = _resolved_input(path) if path.is_symlink() else top_target / path.relative_to(top)
+                if target is not None:
+                    yield path, target
 
 
 def check_output_folder(out: str | Path, replace: bool) -> Path:
@@ -278,8 +365,9 @@ def output_folder(out: str | Path, replace: bool = False, keep_partial: bool = T
     over), check it under the lock (check_output_folder), yield a fresh hidden sibling folder to
     write into, and when the block ends normally or (with `keep_partial`) by an interrupt (the
     partial outputs are then written) move it into place, replacing what `out` held. On any
-    other error the new folder is dropped and `out` stays as it was."""
-    out = Path(out).expanduser().resolve()
+    other error the new folder is dropped and `out` stays as it was (a write's error names its
+    file under `out`, or `out` when it names none)."""
+    out = resolved_out(out)
     out.parent.mkdir(parents=True, exist_ok=True)
     lock = out.with_name(f".{out.name}.lock")
     _acquire(lock, out)
@@ -295,6 +383,11 @@ def output_folder(out: str | Path, replace: bool = False, keep_partial: bool = T
                 _move_into_place(staging, out)
             raise
         _move_into_place(staging, out)
+    except OSError as exc:  # named as the user knows it: `out`, or its file, not the staging folder
+        name_the_written(exc, out)
+        if isinstance(exc.filename, str) and Path(exc.filename).is_relative_to(staging):
+            exc.filename = str(out / Path(exc.filename).relative_to(staging))
+        raise
     finally:
         shutil.rmtree(staging, ignore_errors=True)
         lock.unlink(missing_ok=True)
@@ -461,6 +554,17 @@ def slug(text: str) -> str:
 
 # ----------------------------------------------------------------------------- text tables
 
+#: The UTF-8 byte-order mark some editors (Windows Notepad, for one) write at a text file's start.
+UTF8_BOM = b"\xef\xbb\xbf"
+
+
+def text_bytes(data: bytes) -> bytes:
+    """A text input's bytes without a leading byte-order mark, which every text reader calls
+    first (tables, calibrations, frame and event lists, registries). Line ends need no such
+    care: the readers split on `\\n` and strip each line, so a CRLF file reads as an LF one."""
+    return data.removeprefix(UTF8_BOM)
+
+
 
 def clock_time(t_s: float, origin_ns: int = 0) -> str:
     """A time written to a file: `t_s` [s] after the clock origin `origin_ns` [ns]
@@ -497,6 +601,7 @@ def parse_table(data: bytes, where: str, ncols: int, what: str) -> np.ndarray:
     A fast C parse; on any irregularity a line-by-line scan names the first bad line.
     Lines starting with '#' are comments. `what` describes one row in messages.
     """
+    data = text_bytes(data)
     if b"#" not in data:
         try:
             values = np.fromstring(data, sep=" ")  # text mode is supported, only binary mode is deprecated

@@ -6,10 +6,14 @@ device, inode, size, modification and change times in ns, and a hash of samples 
 content). Written atomically, read by memory-mapping it once its checksum (XXH3-64 of the
 records, ~25 GB/s from memory) matched; a damaged cache is rebuilt with a one-line notice.
 A lenient build's warnings sidecar is part of it: missing or unreadable, both are rebuilt.
+A cache folder that cannot be written (read-only, not the user's, full) costs speed, not the
+run: the events are read into memory, with one notice per folder.
 """
 
 from __future__ import annotations
 
+import errno
+import functools
 import hashlib
 import os
 import sys
@@ -163,6 +167,41 @@ def _write_block(out: BinaryIO, block: Callable[[], np.ndarray | list[np.ndarray
     return sum(len(events) for events in parts)
 
 
+#: What writing a cache file answers when its folder cannot take it: a read-only file system,
+#: a folder not the user's to write, a full disk or quota.
+UNWRITABLE = (errno.EROFS, errno.EACCES, errno.EPERM, errno.ENOSPC, errno.EDQUOT)
+
+
+def _cache_unwritable(exc: OSError, folder: Path) -> bool:
+    """Whether `exc` came from writing a cache file in `folder` (naming the folder, a file in
+    it, or nothing: a write), not from reading the source (which names the source)."""
+    return exc.errno in UNWRITABLE and (exc.filename is None or folder in (Path(exc.filename), Path(exc.filename).parent))
+
+
+@functools.cache  # once per folder and reason
+def _say_unwritable(folder: Path, reason: str) -> None:
+    print(f"eas-vo: warning: the event cache folder {folder} cannot be written ({reason}); events are read into "
+          "memory, and again next time (EAS_VO_CACHE_DIR chooses another folder)", file=sys.stderr)
+
+
+class _MemoryWriter:
+    """The `write`/`writelines` of a cache file, into memory (a cache that cannot be written)."""
+
+    def __init__(self):
+        self.chunks: list[bytes] = []
+
+    def write(self, data) -> int:
+        self.chunks.append(bytes(memoryview(data).cast("B")))
+        return len(self.chunks[-1])
+
+    def writelines(self, chunks) -> None:
+        for data in chunks:
+            self.write(data)
+
+    def events(self) -> np.ndarray:
+        return np.frombuffer(b"".join(self.chunks), EVENT_DTYPE)
+
+
 def write_cache(path: Path, events: np.ndarray) -> np.ndarray:
     """Cache an in-memory event array (e.g. decoded from a bag)."""
 
@@ -202,7 +241,16 @@ def load_cached(
     try:
         events = build_cache(target, lambda out: fill(out, local), max_events)
     except OSError as exc:
-        raise DataError(where, f"cannot read or cache events ({exc})") from None
+        if not _cache_unwritable(exc, target.parent):
+            raise DataError(where, f"cannot read or cache events ({exc.strerror or exc})") from None
+        _say_unwritable(target.parent, exc.strerror or str(exc))
+        local, memory = DataWarnings(), _MemoryWriter()
+        try:
+            fill(memory, local)
+        except OSError as exc:
+            raise DataError(where, f"cannot read events ({exc.strerror or exc})") from None
+        warnings.merge(local)
+        return memory.events()
     if local.counts:
         from eas_vo.io import write_text_atomic
 

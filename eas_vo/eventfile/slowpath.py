@@ -9,6 +9,7 @@ import numpy as np
 from eas_vo.errors import DataError, DataWarnings
 from eas_vo.eventfile.kernels import parse_and_pack
 from eas_vo.eventfile.validate import Validator
+from eas_vo.io import text_bytes
 from eas_vo.types import EVENT_DTYPE
 
 #: Lines the text path takes at once at most (so a file of lines the compiled parser does not
@@ -32,13 +33,14 @@ def _parse_line(parts: list[bytes]) -> tuple[list[float] | None, str, str]:
 
 
 def _slow_rows(text: bytes, first_line: int, where: str, lenient: bool, warnings: DataWarnings):
-    """Line-by-line parse of `text` (whole lines, the first numbered `first_line`). Lenient:
+    """Line-by-line parse of `text` (whole lines, the first numbered `first_line`; blank and `#`
+    comment lines skipped, whatever their place). Lenient:
     skips and counts bad lines. Strict: stops at the first and returns its error with the rows
     before it, so that an earlier invalid event can still be reported first."""
     rows, lines, pending = [], [], None
     for k, raw in enumerate(text.split(b"\n")):
-        parts = raw.split()
-        if not parts:
+        parts = (text_bytes(raw) if first_line + k == 1 else raw).split()
+        if not parts or parts[0].startswith(b"#"):  # a blank line, or a comment (`# t x y p`), as every table reads them
             continue
         row, kind, problem = _parse_line(parts)
         if row is None:

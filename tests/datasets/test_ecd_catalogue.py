@@ -121,6 +121,13 @@ def test_a_bad_registry_line_is_named(tmp_path, monkeypatch, text, line):
         ecd_catalogue.registry()
 
 
+def test_a_registry_with_a_byte_order_mark_and_crlf_line_ends_reads_as_plain_text(tmp_path, monkeypatch):
+    path = tmp_path / "reg.txt"
+    path.write_bytes(b"\xef\xbb\xbftiny 0123456789abcdef0123456789abcdef\r\n# a mirror's\r\nother 0123456789ABCDEF0123456789abcdef\r\n")
+    monkeypatch.setenv("EAS_VO_DATA_REGISTRY", str(path))
+    assert ecd_catalogue.registry() == {"tiny": "0123456789abcdef0123456789abcdef", "other": "0123456789abcdef0123456789abcdef"}
+
+
 def test_the_suite_cannot_reach_the_internet():
     with pytest.raises(OSError, match="no network outside loopback"):
         socket.create_connection(("93.184.216.34", 80), timeout=1)

@@ -33,7 +33,8 @@ def test_bag_topics_are_configurable(sequence, tmp_path):
     assert default.topic["events_topic"] == "/cam/events" and default.topic["image_topic"] == "/cam/image"
     assert len(default.events()) == len(sequence.events()) and len(default.frame_times()) == len(sequence.frame_times())
     # A topic the user names that the bag lacks is refused, listing what the bag holds.
-    with pytest.raises(DataError, match=r"has no topic /wrong \(dataset.events_topic\); it holds .*/cam/events \(dvs_msgs/msg/EventArray\)"):
+    with pytest.raises(DataError, match=r"has no topic /wrong \(dataset.events_topic\); its .* topic: /cam/events \(--set dataset.events_topic=/cam/events\); "
+                                        r"it holds .*/cam/events \(dvs_msgs/msg/EventArray\)"):
         RosbagDataset(tmp_path / "custom.bag", BagConfig(events_topic="/wrong"))
 
 

@@ -48,12 +48,13 @@ text = st.lists(line, max_size=40).map("\n".join).map(lambda s: s.encode("utf-8"
 
 
 def reference_rows(data: bytes):
-    """(t, x, y, p) of every line a reader must accept, by plain Python; None marks a line it must not."""
+    """(t, x, y, p) of every line a reader must accept, by plain Python; None marks a line it must
+    not; blank lines and `#` comments are neither."""
     rows = []
     for raw in data.split(b"\n"):
-        if not raw.strip():
-            continue
         parts = raw.split()
+        if not parts or parts[0].startswith(b"#"):
+            continue
         try:
             t, x, y, p = (float(v) for v in parts) if len(parts) == 4 else (None,) * 4
         except ValueError:
