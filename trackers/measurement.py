@@ -8,7 +8,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from eas_vo.geometry.two_view import ESSENTIAL_METHODS, GEOMETRIES, rotation_from_correspondences
+from eas_vo.geometry.two_view import ESSENTIAL_METHODS, GEOMETRIES, bearings, explains, rotation_from_correspondences
 from eas_vo.types import CameraModel, FrameRecord, RelativeRotation
 from eas_vo.validation import check_choice, check_range
 
@@ -107,18 +107,20 @@ def measure(
     config: TwoViewConfig, camera: CameraModel, pts_from_px: np.ndarray, pts_to_px: np.ndarray, i: int, j: int
 ) -> RelativeRotation | None:
     """The rotation R_i_j from pixel positions [px] of the same points in frames i and j
-    (undistorted first), with its quality; None when no model is found."""
-    found = rotation_from_correspondences(
-        camera.undistort(pts_from_px),
-        camera.undistort(pts_to_px),
-        config.ransac_threshold_px / camera.focal_px,
-        config.ransac_confidence,
-        config.essential_method,
-        config.geometry,
-    )
+    (undistorted first), with its quality; None when no model is found, or when the model is
+    weak and its rotation explains the correspondences worse than no motion does
+    (two_view.explains): a measurement its own tracker doubts that turns the bearings
+    further than they moved is no measurement (a still camera's is the identity), so a
+    handful of chance inliers cannot put a half turn into the trajectory."""
+    x_from, x_to = camera.undistort(pts_from_px), camera.undistort(pts_to_px)
+    threshold = config.ransac_threshold_px / camera.focal_px
+    found = rotation_from_correspondences(x_from, x_to, threshold, config.ransac_confidence, config.essential_method, config.geometry)
     if found is None:
         return None
-    return RelativeRotation(i, j, found.R_prev_cur, found.inliers, found.inliers / max(len(pts_from_px), 1), found.residual)
+    edge = RelativeRotation(i, j, found.R_prev_cur, found.inliers, found.inliers / max(len(pts_from_px), 1), found.residual)
+    if weakness(config, edge, camera.focal_px) and not explains(found.R_prev_cur.T, bearings(x_from), bearings(x_to), threshold):
+        return None
+    return edge
 
 
 def weakness(config: TwoViewConfig, edge: RelativeRotation, focal_px: float) -> str:
