@@ -108,10 +108,11 @@ def measure(
 ) -> RelativeRotation | None:
     """The rotation R_i_j from pixel positions [px] of the same points in frames i and j
     (undistorted first), with its quality; None when no model is found, or when the model is
-    weak and its rotation explains the correspondences worse than no motion does
-    (two_view.explains): a measurement its own tracker doubts that turns the bearings
-    further than they moved is no measurement (a still camera's is the identity), so a
-    handful of chance inliers cannot put a half turn into the trajectory."""
+    weak and its rotation explains the correspondences (all of them) worse than no motion
+    does (two_view.explains): a measurement its own tracker doubts loses nothing by being
+    dropped where the identity, which a lost frame's chain keeps, explains them better; so
+    a handful of chance inliers cannot put a half turn into the trajectory, and a weak step
+    turns the bearings by at most about twice their median motion."""
     x_from, x_to = camera.undistort(pts_from_px), camera.undistort(pts_to_px)
     threshold = config.ransac_threshold_px / camera.focal_px
     found = rotation_from_correspondences(x_from, x_to, threshold, config.ransac_confidence, config.essential_method, config.geometry)
