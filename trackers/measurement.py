@@ -107,16 +107,24 @@ def measure(
     config: TwoViewConfig, camera: CameraModel, pts_from_px: np.ndarray, pts_to_px: np.ndarray, i: int, j: int
 ) -> RelativeRotation | None:
     """The rotation R_i_j from pixel positions [px] of the same points in frames i and j
-    (undistorted first), with its quality; None when no model is found, or when the model is
-    weak and its rotation explains the correspondences (all of them) worse than no motion
-    does (two_view.explains): a measurement its own tracker doubts loses nothing by being
-    dropped where the identity, which a lost frame's chain keeps, explains them better; so
-    a handful of chance inliers cannot put a half turn into the trajectory, and a weak step
-    turns the bearings by at most about twice their median motion."""
+    (undistorted first), with its quality; None when no model is found, or the model is one
+    its own tracker doubts too much to use:
+
+    - an essential matrix with fewer than `min_inliers` inliers: support a robust fit finds
+      by chance (the five-point solver fits any 5 points, and hundreds of hypotheses find a
+      few more within a pixel of their epipolar lines: a band across the image, where the
+      rotation and homography models need a point within a pixel of a point); on frames
+      whose events had ended such steps turned the camera by 116-180 degrees;
+    - weak otherwise, with a rotation that explains the correspondences (all of them) worse
+      than no motion does (two_view.explains): dropping it loses nothing, since the identity
+      a lost frame's chain keeps explains them better.
+
+    A weak step that is kept turns the bearings by at most about twice their median motion.
+    """
     x_from, x_to = camera.undistort(pts_from_px), camera.undistort(pts_to_px)
     threshold = config.ransac_threshold_px / camera.focal_px
     found = rotation_from_correspondences(x_from, x_to, threshold, config.ransac_confidence, config.essential_method, config.geometry)
-    if found is None:
+    if found is None or (found.model == "essential" and found.inliers < config.min_inliers):
         return None
     edge = RelativeRotation(i, j, found.R_prev_cur, found.inliers, found.inliers / max(len(pts_from_px), 1), found.residual)
     if weakness(config, edge, camera.focal_px) and not explains(found.R_prev_cur.T, bearings(x_from), bearings(x_to), threshold):
