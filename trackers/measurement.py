@@ -115,11 +115,11 @@ def measure(
       few more within a pixel of their epipolar lines: a band across the image, where the
       rotation and homography models need a point within a pixel of a point); on frames
       whose events had ended such steps turned the camera by 116-180 degrees;
-    - weak otherwise, with a rotation that explains the correspondences (all of them) worse
-      than no motion does (two_view.explains): dropping it loses nothing, since the identity
-      a lost frame's chain keeps explains them better.
+    - weak otherwise, with a rotation that does not explain the correspondences (all of
+      them, two_view.explains): it turns them far further than they moved.
 
-    A weak step that is kept turns the bearings by at most about twice their median motion.
+    A weak step that is kept turns the bearings by at most about three times their median
+    motion; a step that is not weak has its model's own support (the paper's estimate).
     """
     x_from, x_to = camera.undistort(pts_from_px), camera.undistort(pts_to_px)
     threshold = config.ransac_threshold_px / camera.focal_px

@@ -302,9 +302,9 @@ def rotation_from_correspondences(
             geometry, views that show no motion (`motionless`) are measured rotation-only:
             no parallax determines no essential matrix, and a still camera is no turn.
             `auto` and `homography`, which choose a model, take the rotation-only one where
-            the other's rotation does not explain its inliers (`explains` with
-            PARALLAX_PER_MOTION); `essential`, the paper's, keeps its rotation (the
-            trackers judge a doubtful one, measurement.measure).
+            the other's rotation does not explain its inliers (`explains`); `essential`, the
+            paper's, keeps its rotation (the trackers judge a doubtful one,
+            measurement.measure).
 
     Returns:
         The rotation, its inlier count, the model used and the inliers' per-axis noise (sigma
@@ -331,12 +331,12 @@ def rotation_from_correspondences(
         return rotation_only
     if geometry == "homography":
         found = homography_rotation(pts_prev_n, pts_cur_n, threshold, confidence)
-        if found is None or not explains(found[0], f_prev[found[1]], f_cur[found[1]], threshold, PARALLAX_PER_MOTION):
+        if found is None or not explains(found[0], f_prev[found[1]], f_cur[found[1]], threshold):
             return rotation_only
         R_hom, hom_mask, hom_residuals = found
         return _result(R_hom, hom_mask, "homography", hom_residuals, dims=2)
     found = essential_rotation(pts_prev_n, pts_cur_n, threshold, confidence, ESSENTIAL_METHODS[method])
-    if found is None or not explains(found[1], f_prev[found[2]], f_cur[found[2]], threshold, PARALLAX_PER_MOTION):
+    if found is None or not explains(found[1], f_prev[found[2]], f_cur[found[2]], threshold):
         return rotation_only
     E, R_ess, ess_mask = found
     sigma = threshold / 2.0
@@ -357,30 +357,29 @@ def motionless(f_prev: np.ndarray, f_cur: np.ndarray, threshold_rad: float) -> b
     return bool(np.median(angular_residuals(np.eye(3), f_prev, f_cur)) < threshold_rad)
 
 
-#: How many times as far as the bearings moved a model's rotation may leave them from where
-#: they are seen (its parallax), for `auto` and `homography` to take it: a right rotation leaves the
-#: parallax p of the camera's translation, and the bearings moved by p + r (r the rotation's
-#: own flow), so it fails only where r cancels more than half of p, a camera turning to follow
-#: what it passes: its images then move less than half of what the translation alone would
-#: make them, and over one view pair a narrow field of view barely tells such a turn from a
+#: How many times as far as the bearings moved a rotation may leave them from where they are
+#: seen (its parallax) and still be what they show: a right rotation leaves the parallax p of
+#: the camera's translation, and the bearings moved by p + r (r the rotation's own flow), so
+#: it fails only where r cancels more than half of p, a camera turning to follow what it
+#: passes: its images then move less than half of what the translation alone would make
+#: them, and over one view pair a narrow field of view barely tells such a turn from a
 #: sideways move (the rotation-translation ambiguity: Adiv, "Inherent ambiguities in
 #: recovering 3-D motion and structure from a noisy flow field", IEEE PAMI 11(5), 1989).
 PARALLAX_PER_MOTION = 2.0
 
 
-def explains(
-    R_cur_prev: np.ndarray, f_prev: np.ndarray, f_cur: np.ndarray, threshold_rad: float, parallax_per_motion: float = 1.0,
-) -> bool:
+def explains(R_cur_prev: np.ndarray, f_prev: np.ndarray, f_cur: np.ndarray, threshold_rad: float) -> bool:
     """Whether the rotation leaves the previous bearings, turned, no further from the current
-    ones than `parallax_per_motion` times they moved, plus the inlier threshold [rad] (median
-    angles): the check of a rotation against the correspondences it claims to explain. With 1,
-    it explains them no worse than no motion does. A rotation that fails turns the bearings
-    far further than they moved, as the rotation of an essential matrix fitted to chance
-    inliers, or to flow too small to separate rotation from translation, does."""
+    ones than PARALLAX_PER_MOTION times they moved, plus the inlier threshold [rad] (median
+    angles): the check of a rotation against the correspondences it claims to explain. One
+    that fails turns the bearings far further than they moved, as the rotation of an
+    essential matrix fitted to chance inliers, or to flow too small to tell rotation from
+    translation, does; one that passes turns them by at most about three times their median
+    motion (the triangle inequality)."""
     if len(f_prev) == 0:
         return False
     moved = np.median(angular_residuals(np.eye(3), f_prev, f_cur))
-    return bool(np.median(angular_residuals(R_cur_prev, f_prev, f_cur)) <= parallax_per_motion * moved + threshold_rad)
+    return bool(np.median(angular_residuals(R_cur_prev, f_prev, f_cur)) <= PARALLAX_PER_MOTION * moved + threshold_rad)
 
 
 #: Median of |x| for x ~ N(0, 1) in 1 and of ||x|| in 2 dimensions (half-normal, Rayleigh).

@@ -83,7 +83,7 @@ def test_a_right_measurement_with_the_noise_of_the_simulator_s_right_ones_is_ok(
 def test_a_wrong_measurement_from_noise_beyond_the_inlier_threshold_is_weak(width, height, focal_px, seed):
     # 3 px per axis on 60 points, three inlier thresholds (LK on frames blurred differently):
     # most correspondences are outliers and the rotation is off by several pixels: weak, or no
-    # measurement where it explains the correspondences worse than no motion
+    # measurement where it does not explain the correspondences (two_view.explains)
     camera, px_1, px_2, R_1_2 = correspondences(width, height, focal_px, 3.0, seed, n=60)
     found = rotation_from_correspondences(camera.undistort(px_1), camera.undistort(px_2), 1.0 / focal_px, 0.999)
     assert geodesic_angle(found.R_prev_cur, R_1_2) * focal_px > WRONG_PX

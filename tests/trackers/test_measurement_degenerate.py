@@ -21,9 +21,11 @@ from helpers import CAMERA, textured_image, warp_by_rotation
 #: An `ok` step is right to within the calibration's cut for a wrong one: 3.5 px of focal
 #: length (docs/frame_status.md), 1 degree at this camera's 200 px.
 OK_ERROR_RAD = 3.5 / CAMERA.focal_px
-#: A `weak` step may be wrong, but by no more than a step of these scenes turns at most (the
-#: frame-gap jump, 8 degrees) plus the ok bound: it cannot outweigh the steps around it.
-WEAK_ERROR_RAD = np.radians(8.0) + OK_ERROR_RAD
+#: A `weak` step may be wrong, by a bounded amount: a kept weak step turns the bearings by at
+#: most about three times their median motion (two_view.explains), which is at most the
+#: largest step of these scenes (the frame-gap jump, 8 degrees); so it is off by at most four
+#: such steps, plus the ok bound: far from a half turn.
+WEAK_ERROR_RAD = 4 * np.radians(8.0) + OK_ERROR_RAD
 
 TRACKERS = {
     "klt": lambda: KltTracker(KltConfig(), CAMERA),
@@ -90,8 +92,10 @@ def test_degenerate_motion_is_measured_within_a_bound_or_doubted_or_lost(tracker
 def test_events_that_end_leave_no_weak_half_turn_in_the_trajectory(sequence_copy, tmp_path, frontend):
     """The events end at a third of the sequence: the event images empty or freeze, LK
     tracks chance texture, and the essential matrix finds a handful of chance inliers. A weak
-    step turns the bearings by at most about twice their motion (two_view.explains), which LK
-    bounds by its pyramid's reach ((window // 2) * 2^levels px: 80 px, 0.4 rad at 200 px)."""
+    step turns the bearings by at most about three times their motion (two_view.explains), which LK
+    bounds by its pyramid's reach (Bouguet, "Pyramidal implementation of the Lucas Kanade
+    feature tracker", 2000, section 2.4: (2^(levels + 1) - 1) half-windows, 150 px, 0.75 rad
+    at 200 px): no weak step is off by a half turn."""
     import csv
 
     from eas_vo.cli import main
@@ -102,12 +106,13 @@ def test_events_that_end_leave_no_weak_half_turn_in_the_trajectory(sequence_copy
     events.write_text("\n".join(r for r in rows if float(r.split()[0]) < t_end) + "\n")
     out = tmp_path / frontend
     assert main(["run", "--dataset", str(sequence_copy), "--frontend", frontend, "--out", str(out), "--quiet"]) == 0
-    status = [r["status"] for r in csv.DictReader(open(out / "frames.csv"))]
+    with open(out / "frames.csv") as frames:
+        status = [r["status"] for r in csv.DictReader(frames)]
     R_est, R_true = (Rotation.from_quat(np.loadtxt(out / name, ndmin=2)[:, 4:8]).as_matrix()
                      for name in ("trajectory.tum", "groundtruth.tum"))
     config = KltConfig()
-    reach_rad = (config.lk_win_size // 2) * 2**config.lk_max_level / CAMERA.focal_px
+    reach_rad = (2 ** (config.lk_max_level + 1) - 1) * (config.lk_win_size // 2) / CAMERA.focal_px
     for k in range(1, len(status)):
         if status[k] == "weak":
             error = geodesic_angle(R_true[k - 1].T @ R_true[k], R_est[k - 1].T @ R_est[k])
-            assert error <= 2 * reach_rad, (k, np.degrees(error))
+            assert error <= 3 * reach_rad, (k, np.degrees(error))
