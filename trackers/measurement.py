@@ -75,7 +75,9 @@ class TwoViewConfig:
         min_inliers, min_inlier_ratio, max_residual_px: a measurement with fewer inliers, a
             lower inlier ratio or a larger inlier noise (per-axis sigma from the median
             residual [px]) is `weak`: less reliable than a typical one, not necessarily wrong
-            (the frame is marked so; the edge is still used). The ratio and the residual are
+            (the frame is marked so; the edge is still used unless `measure` drops it as too
+            doubtful: an essential matrix with fewer inliers, or a weak rotation that does not
+            explain its correspondences). The ratio and the residual are
             calibrated against ground truth (benchmarks/status_calibration.py,
             docs/frame_status.md): with the paper's configuration on the choice data, at most
             10 % of the right measurements are weak and as many wrong ones as possible are.
