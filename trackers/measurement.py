@@ -8,7 +8,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from eas_vo.geometry.two_view import ESSENTIAL_METHODS, GEOMETRIES, rotation_from_correspondences
+from eas_vo.geometry.two_view import ESSENTIAL_METHODS, GEOMETRIES, bearings, explains, rotation_from_correspondences
 from eas_vo.types import CameraModel, FrameRecord, RelativeRotation
 from eas_vo.validation import check_choice, check_range
 
@@ -75,7 +75,9 @@ class TwoViewConfig:
         min_inliers, min_inlier_ratio, max_residual_px: a measurement with fewer inliers, a
             lower inlier ratio or a larger inlier noise (per-axis sigma from the median
             residual [px]) is `weak`: less reliable than a typical one, not necessarily wrong
-            (the frame is marked so; the edge is still used). The ratio and the residual are
+            (the frame is marked so; the edge is still used unless `measure` drops it as too
+            doubtful: an essential matrix with fewer inliers, or a weak rotation that does not
+            explain its correspondences). The ratio and the residual are
             calibrated against ground truth (benchmarks/status_calibration.py,
             docs/frame_status.md): with the paper's configuration on the choice data, at most
             10 % of the right measurements are weak and as many wrong ones as possible are.
@@ -107,18 +109,29 @@ def measure(
     config: TwoViewConfig, camera: CameraModel, pts_from_px: np.ndarray, pts_to_px: np.ndarray, i: int, j: int
 ) -> RelativeRotation | None:
     """The rotation R_i_j from pixel positions [px] of the same points in frames i and j
-    (undistorted first), with its quality; None when no model is found."""
-    found = rotation_from_correspondences(
-        camera.undistort(pts_from_px),
-        camera.undistort(pts_to_px),
-        config.ransac_threshold_px / camera.focal_px,
-        config.ransac_confidence,
-        config.essential_method,
-        config.geometry,
-    )
-    if found is None:
+    (undistorted first), with its quality; None when no model is found, or the model is one
+    its own tracker doubts too much to use:
+
+    - an essential matrix with fewer than `min_inliers` inliers: support a robust fit finds
+      by chance (the five-point solver fits any 5 points, and hundreds of hypotheses find a
+      few more within a pixel of their epipolar lines: a band across the image, where the
+      rotation and homography models need a point within a pixel of a point); on frames
+      whose events had ended such steps turned the camera by 116-180 degrees;
+    - weak otherwise, with a rotation that does not explain the correspondences (all of
+      them, two_view.explains): it turns them far further than they moved.
+
+    A weak step that is kept turns the bearings by at most about three times their median
+    motion; a step that is not weak has its model's own support (the paper's estimate).
+    """
+    x_from, x_to = camera.undistort(pts_from_px), camera.undistort(pts_to_px)
+    threshold = config.ransac_threshold_px / camera.focal_px
+    found = rotation_from_correspondences(x_from, x_to, threshold, config.ransac_confidence, config.essential_method, config.geometry)
+    if found is None or (found.model == "essential" and found.inliers < config.min_inliers):
         return None
-    return RelativeRotation(i, j, found.R_prev_cur, found.inliers, found.inliers / max(len(pts_from_px), 1), found.residual)
+    edge = RelativeRotation(i, j, found.R_prev_cur, found.inliers, found.inliers / max(len(pts_from_px), 1), found.residual)
+    if weakness(config, edge, camera.focal_px) and not explains(found.R_prev_cur.T, bearings(x_from), bearings(x_to), threshold):
+        return None
+    return edge
 
 
 def weakness(config: TwoViewConfig, edge: RelativeRotation, focal_px: float) -> str:

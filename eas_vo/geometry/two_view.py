@@ -180,26 +180,41 @@ def gric(residuals: np.ndarray, sigma: float, model_dim: int, params: int, data_
 
 
 def essential_rotation(
-    x_prev: np.ndarray, x_cur: np.ndarray, threshold: float, confidence: float, method: int, R_hint: np.ndarray | None = None
+    x_prev: np.ndarray, x_cur: np.ndarray, threshold: float, confidence: float, method: int
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
     """Five-point essential matrix and its rotation: (E, R_cur_prev, inlier mask) or None.
 
-    The decomposition's two rotations differ by a half turn about the baseline; cheirality
-    decides (no distance cut: with a small baseline every point is "far"). With `R_hint`
-    (e.g. the rotation-only estimate) the candidate closest to it is taken instead, which
-    keeps a cheirality flip out of the trajectory.
+    E's decomposition gives two rotations, R and its twist (R followed by a half turn about
+    the baseline); the one whose rotated bearings lie closer to the current ones over the
+    inliers (median angle, twist_free) is taken. Unlike cheirality (which views the
+    triangulated points lie in front of), this stays decided as the baseline vanishes: with no
+    translation every point is at infinity, cheirality is a coin toss, and a camera that did
+    not move came out turned by a half turn.
     """
     E, mask = cv2.findEssentialMat(x_prev, x_cur, np.eye(3), method=method, prob=confidence, threshold=threshold)
     if E is None or E.shape[0] < 3 or mask is None:
         return None
     E = E[:3]
     mask = mask.ravel().astype(bool)
-    if R_hint is None:
-        _, R, _, _, _ = cv2.recoverPose(E, x_prev, x_cur, np.eye(3), distanceThresh=1e12, mask=mask.astype(np.uint8).copy())
-    else:
-        R1, R2, _ = cv2.decomposeEssentialMat(E)
-        R = min((R1, R2), key=lambda c: np.arccos(np.clip((np.trace(c.T @ R_hint) - 1) / 2, -1, 1)))
-    return E, R, mask
+    if not mask.any():
+        return None
+    R1, R2, _ = cv2.decomposeEssentialMat(E)
+    return E, twist_free(R1, R2, bearings(x_prev[mask]), bearings(x_cur[mask])), mask
+
+
+def twist_free(R1: np.ndarray, R2: np.ndarray, f_prev: np.ndarray, f_cur: np.ndarray) -> np.ndarray:
+    """Of an essential matrix's two rotations R1, R2 (R_cur_prev, one the other's twist about
+    the baseline t), the one with the smaller median angular residual on the bearings.
+
+    Why it is the true one: in the epipolar plane of a point, with angles measured from t, let
+    the true rotation put the previous bearing at alpha and the current bearing be at beta.
+    The point lies in front of the previous camera, so beta is on the same side of t as alpha
+    (0 < alpha, beta < pi, up to a common sign); the twist puts the bearing at -alpha. Then
+    |beta - alpha| < min(beta + alpha, 2 pi - beta - alpha): every point in front of the
+    first camera is closer to the true rotation's bearing, whatever the baseline's length.
+    """
+    residuals = [np.median(angular_residuals(R, f_prev, f_cur)) for R in (R1, R2)]
+    return R1 if residuals[0] <= residuals[1] else R2
 
 
 #: A homography's decomposition is taken to put the points in front of both views when this
@@ -280,42 +295,48 @@ def rotation_from_correspondences(
         threshold: inlier threshold in normalised units (pixels / focal length).
         confidence: robust estimator confidence.
         method: a key of ESSENTIAL_METHODS (the five-point estimator's robust loop).
-        geometry: `essential` (the paper: five-point essential matrix, rotation by cheirality),
-            `rotation` (rotation-only: 2-point RANSAC and least squares on bearings), `auto`
-            (both, the better by GRIC; the essential matrix's rotation is then the candidate
-            closest to the rotation-only one, so a cheirality flip cannot get through), or
-            `homography` (a plane's homography and its rotation where it determines one,
-            see homography_rotation; else rotation-only).
+        geometry: `essential` (the paper: five-point essential matrix), `rotation`
+            (rotation-only: 2-point RANSAC and least squares on bearings), `auto` (both, the
+            better by GRIC), or `homography` (a plane's homography and its rotation where it
+            determines one, see homography_rotation; else rotation-only). Whatever the
+            geometry, views that show no motion (`motionless`) are measured rotation-only:
+            no parallax determines no essential matrix, and a still camera is no turn.
+            `auto` and `homography`, which choose a model, take the rotation-only one where
+            the other's rotation does not explain its inliers (`explains`); `essential`, the
+            paper's, keeps its rotation (the trackers judge a doubtful one,
+            measurement.measure).
 
     Returns:
         The rotation, its inlier count, the model used and the inliers' per-axis noise (sigma
         from their median residual, see _result), or
-        None when no model is found (for `rotation`, `auto` and `homography`: when the
-        rotation-only RANSAC, which runs first, finds none).
+        None when no model is found: for `essential`, when the five-point solver finds none
+        (or, where rotation-only measures, its RANSAC); for the others, when the
+        rotation-only RANSAC finds none.
     """
-    if geometry == "essential":
+    f_prev, f_cur = bearings(pts_prev_n), bearings(pts_cur_n)
+    still = motionless(f_prev, f_cur, threshold)
+    if geometry == "essential" and not still:
         found = essential_rotation(pts_prev_n, pts_cur_n, threshold, confidence, ESSENTIAL_METHODS[method])
         if found is None:
             return None
         E, R_ess, ess_mask = found
         return _result(R_ess, ess_mask, "essential", sampson_residuals(E, pts_prev_n, pts_cur_n), dims=1)
-    f_prev, f_cur = bearings(pts_prev_n), bearings(pts_cur_n)
     rotation = rotation_ransac(f_prev, f_cur, threshold, confidence)
     if rotation is None:
         return None
     R_rot, rot_mask = rotation
     rot_residuals = angular_residuals(R_rot, f_prev, f_cur)
     rotation_only = _result(R_rot, rot_mask, "rotation", rot_residuals, dims=2)
-    if geometry == "rotation":
+    if geometry == "rotation" or still:
         return rotation_only
     if geometry == "homography":
         found = homography_rotation(pts_prev_n, pts_cur_n, threshold, confidence)
-        if found is None:
+        if found is None or not explains(found[0], f_prev[found[1]], f_cur[found[1]], threshold):
             return rotation_only
         R_hom, hom_mask, hom_residuals = found
         return _result(R_hom, hom_mask, "homography", hom_residuals, dims=2)
-    found = essential_rotation(pts_prev_n, pts_cur_n, threshold, confidence, ESSENTIAL_METHODS[method], R_hint=R_rot)
-    if found is None:
+    found = essential_rotation(pts_prev_n, pts_cur_n, threshold, confidence, ESSENTIAL_METHODS[method])
+    if found is None or not explains(found[1], f_prev[found[2]], f_cur[found[2]], threshold):
         return rotation_only
     E, R_ess, ess_mask = found
     sigma = threshold / 2.0
@@ -325,6 +346,40 @@ def rotation_from_correspondences(
     if gric_rot <= gric_ess:
         return rotation_only
     return _result(R_ess, ess_mask, "essential", ess_residuals, dims=1)
+
+
+def motionless(f_prev: np.ndarray, f_cur: np.ndarray, threshold_rad: float) -> bool:
+    """Whether the views show no motion: at least half of the bearings moved less than the
+    inlier threshold [rad]. The identity then explains them as well as any model does, and the
+    five-point solver has no parallax to measure: a point that stays put lies on the epipolar
+    line of every translation, so E is undetermined (any skew-symmetric matrix fits, whose
+    decomposition is the identity and a half turn)."""
+    return bool(np.median(angular_residuals(np.eye(3), f_prev, f_cur)) < threshold_rad)
+
+
+#: How many times as far as the bearings moved a rotation may leave them from where they are
+#: seen (its parallax) and still be what they show: a right rotation leaves the parallax p of
+#: the camera's translation, and the bearings moved by p + r (r the rotation's own flow), so
+#: it fails only where r cancels more than half of p, a camera turning to follow what it
+#: passes: its images then move less than half of what the translation alone would make
+#: them, and over one view pair a narrow field of view barely tells such a turn from a
+#: sideways move (the rotation-translation ambiguity: Adiv, "Inherent ambiguities in
+#: recovering 3-D motion and structure from a noisy flow field", IEEE PAMI 11(5), 1989).
+PARALLAX_PER_MOTION = 2.0
+
+
+def explains(R_cur_prev: np.ndarray, f_prev: np.ndarray, f_cur: np.ndarray, threshold_rad: float) -> bool:
+    """Whether the rotation leaves the previous bearings, turned, no further from the current
+    ones than PARALLAX_PER_MOTION times they moved, plus the inlier threshold [rad] (median
+    angles): the check of a rotation against the correspondences it claims to explain. One
+    that fails turns the bearings far further than they moved, as the rotation of an
+    essential matrix fitted to chance inliers, or to flow too small to tell rotation from
+    translation, does; one that passes turns them by at most about three times their median
+    motion (the triangle inequality)."""
+    if len(f_prev) == 0:
+        return False
+    moved = np.median(angular_residuals(np.eye(3), f_prev, f_cur))
+    return bool(np.median(angular_residuals(R_cur_prev, f_prev, f_cur)) <= PARALLAX_PER_MOTION * moved + threshold_rad)
 
 
 #: Median of |x| for x ~ N(0, 1) in 1 and of ||x|| in 2 dimensions (half-normal, Rayleigh).
