@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from eas_vo import compare
-from eas_vo.errors import EasVoError
+from eas_vo.errors import DataError, EasVoError
 from eas_vo.gallery import PAPER_ORDER
 from eas_vo.io import atomic_path, claim_grid_folder, figure_text, json_text, remove_stale_temporaries, slug, write_text_atomic
 
@@ -260,14 +260,17 @@ def table2(out: Path, estimates: dict[tuple[str, str], str], duration_s: float |
 
 def _vocabulary(progress: bool) -> Path:
     """The vocabulary ORB-SLAM3 loads: $PYORBSLAM3_VOCAB or the data folder's ORBvoc.txt,
-    fetched first if neither is there."""
+    fetched first if neither is there; checked whole either way (slam.run.find_vocabulary). A
+    broken one is an error, never replaced by another."""
     from eas_vo.slam.orbvoc import fetch_orb_vocabulary
     from eas_vo.slam.run import find_vocabulary
 
     try:
         return find_vocabulary(None)
-    except EasVoError:
-        return fetch_orb_vocabulary(progress=progress)
+    except DataError:
+        raise
+    except EasVoError:  # none there
+        return find_vocabulary(str(fetch_orb_vocabulary(progress=progress)))
 
 
 def _slam_cell(cell: compare.Cell, config: str, overrides: dict, folder: Path, vocabulary: str, runs: int,

@@ -302,3 +302,28 @@ def test_a_table2_cell_reruns_slam_runs_made_under_another_protocol(tmp_path, mo
     (folder / "summary.json").write_text(json.dumps({**old, "protocol": slam_run.PROTOCOL}))
     assert reproduce._slam_cell(cell, "paper", {}, folder, "voc.txt", 2, False)["ape_trans_mean_m"] == 0.5
     assert calls == [folder]
+
+
+@pytest.mark.parametrize("where", ["environment", "data_folder"])
+def test_table2s_vocabulary_is_checked_whole_and_a_broken_one_never_replaced(tmp_path, monkeypatch, where):
+    """A vocabulary in $PYORBSLAM3_VOCAB or the data folder that is cut short is refused naming
+    its line: neither handed to ORB-SLAM3 nor swapped for a download."""
+    from eas_vo import reproduce
+    from eas_vo.errors import DataError
+    from eas_vo.slam import orbvoc
+    from eas_vo.slam.vocabulary import train
+
+    rng = np.random.default_rng(2)
+    text = train([rng.integers(0, 256, (60, 32), dtype=np.uint8) for _ in range(2)], k=3, levels=2, seed=0).text()
+    data = tmp_path / "data"
+    data.mkdir()
+    path = tmp_path / "mine.txt" if where == "environment" else data / "ORBvoc.txt"
+    path.write_text(text[: len(text) // 2])  # cut inside a line
+    monkeypatch.setenv("EAS_VO_DATA_DIR", str(data))
+    if where == "environment":
+        monkeypatch.setenv("PYORBSLAM3_VOCAB", str(path))
+    else:
+        monkeypatch.delenv("PYORBSLAM3_VOCAB", raising=False)
+    monkeypatch.setattr(orbvoc, "fetch_orb_vocabulary", lambda **kw: pytest.fail("a download replaced the vocabulary"))
+    with pytest.raises(DataError, match=rf"^{path}:{text[: len(text) // 2].count(chr(10)) + 1}: expected 'parent is_leaf'"):
+        reproduce._vocabulary(False)
