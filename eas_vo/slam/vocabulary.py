@@ -190,8 +190,8 @@ def _header(path: Path, line: str) -> tuple[int, int, int, int]:
     return k, levels, scoring, weighting
 
 
-#: Bytes of a text vocabulary parsed at once (whole lines): ORB-SLAM3's 145 MB ORBvoc.txt is
-#: read in pieces of this size, each parsed by numpy.
+#: Bytes of a text vocabulary parsed at once (whole lines): ORB-SLAM3's ORBvoc.txt (10^6 nodes)
+#: is read in pieces of this size, each parsed by numpy, never as a Python list of its lines.
 BLOCK_BYTES = 1 << 23
 #: The characters of a number numpy's parser reads (digits, sign, point, exponent, nan, inf).
 NUMBER_CHARACTERS = np.frombuffer(b"0123456789+-.eEnNaAiIfF", np.uint8)
@@ -255,7 +255,7 @@ def _nodes(path: Path, first: int, block: bytes, count: int):
            | ~np.isin(table[:, 1], (0, 1)) | ~((integers[:, 2:] >= 0) & (integers[:, 2:] <= 255)).all(1)
            | ~np.isfinite(table[:, -1]))
     if bad.any():
-        raise DataError(path, "parent not an earlier node, is_leaf not 0/1, a byte outside 0..255 or a weight not finite",
+        raise DataError(path, "parent not an earlier node, is_leaf not 0/1, a byte not a whole number 0..255 or a weight not finite",
                         first + int(np.argmax(bad)))
     return (table[:, 0].astype(np.int64), table[:, 1] == 1, integers[:, 2:].astype(np.uint8), table[:, -1])
 
