@@ -239,11 +239,10 @@ def table2(out: Path, estimates: dict[tuple[str, str], str], duration_s: float |
             for key, path in estimates.items()}
     rows, n_run = compare.run_experiment(cells, out, config, [], overrides, jobs, progress)
     best_rows = []
-    if with_slam:
-        if config != "best":  # eas-vo's most accurate configuration on the same images, for the rotation rows
-            best_rows, n_best = compare.run_experiment(cells, out / "best", "best", [], _overrides(duration_s, orb=False),
-                                                       jobs, progress)
-            n_run += n_best
+    if with_slam:  # eas-vo's most accurate configuration on the same images, as `--config best` runs it, for the rotation rows
+        best_rows, n_best = compare.run_experiment(_cells(frontends, [best_method()]), out / "best", "best", [],
+                                                   _overrides(duration_s, orb=False), jobs, progress)
+        n_run += n_best
         vocabulary = vocabulary or str(_vocabulary(progress))
         for cell in cells:
             key = (cell.dataset_name, cell.frontend)
@@ -251,11 +250,19 @@ def table2(out: Path, estimates: dict[tuple[str, str], str], duration_s: float |
                 slam[key] = _slam_cell(cell, config, overrides, out / "slam" / f"{key[0]}_{key[1]}", vocabulary, runs,
                                        progress)
         _keyframe_figures(out, cells, slam)
-    markdown = table2_markdown(rows, slam, duration_s, frontends, with_slam, best_rows)
+    markdown = table2_markdown(rows, slam, duration_s, frontends, with_slam, best_rows, config)
     write_text_atomic(out / "table2.md", markdown)
-    write_text_atomic(out / "table2.json", json_text({"paper": PAPER_TABLE2, "orb": rows,
+    write_text_atomic(out / "table2.json", json_text({"paper": PAPER_TABLE2, "orb": rows, "config": config, "best": best_rows,
                                                       "slam": {f"{s}:{f}": m for (s, f), m in slam.items()}}))
     return rows, n_run, markdown
+
+
+def best_method() -> compare.Method:
+    """configs/best.toml's tracker and backend, as `--config best` runs them."""
+    from eas_vo.config import run_section
+
+    run = run_section("best")
+    return compare.Method(run.tracker, run.backend)
 
 
 def _vocabulary(progress: bool) -> Path:
@@ -317,17 +324,18 @@ def _keyframe_figures(out: Path, cells: list[compare.Cell], slam: dict) -> None:
 
 
 def table2_markdown(rows: list[dict], slam: dict, duration_s: float | None, frontends=TABLE2_SOURCES,
-                    with_slam: bool = False, best_rows: list[dict] = ()) -> str:
+                    with_slam: bool = False, best_rows: list[dict] = (), config: str = "paper") -> str:
     """The paper's Table 2 layout, each of our figures followed by the paper's (a source the
     paper has not: -); with ORB-SLAM3, its rotation scored by Eq. 3 beside eas-vo's on the same
-    images (the configuration asked for, and `best_rows`: configs/best.toml's)."""
+    images: `rows` (`config` with the paper's method) and `best_rows` (configs/best.toml's own
+    method), each row labelled with the configuration and the tracker+backend its cells ran."""
     from eas_vo.slam.run import MIN_TRACKED_FRACTION
 
     by_key = {(r["dataset_name"], r["frontend"]): r for r in rows}
     columns = [(seq, source) for seq in SEQUENCES for source in frontends]
     head = ["", *[f"{seq} {source}" for seq, source in columns]]
     window = f"first {duration_s:g} s" if duration_s else "whole sequences"
-    lines = [f"# Table 2: ours ({window}) beside the paper's", "",
+    lines = [f"# Table 2: ours (`--config {config}`, {window}) beside the paper's", "",
              "| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     missing = "- (no ORB-SLAM2 trajectory given; ORB-SLAM3 runs with pip install 'eas-vo[slam]')"
 
@@ -363,12 +371,11 @@ def table2_markdown(rows: list[dict], slam: dict, duration_s: float | None, fron
 
         lines.append("| " + " | ".join(["rotation APE, Eq. 3 [rad] (ORB-SLAM3, tracked frames)",
                                         *[eq3(s, f) for s, f in columns]]) + " |")
-        lines.append("| " + " | ".join([f"rotation APE, Eq. 3 [rad] (eas-vo {PAPER.label}, every frame)",
-                                        *[ours_eq3(by_key, s, f) for s, f in columns]]) + " |")
-        if best_rows:
-            best = {(r["dataset_name"], r["frontend"]): r for r in best_rows}
-            lines.append("| " + " | ".join(["rotation APE, Eq. 3 [rad] (eas-vo best.toml, every frame)",
-                                            *[ours_eq3(best, s, f) for s, f in columns]]) + " |")
+        for label_config, runs in ((config, rows), ("best", best_rows)):
+            for method in dict.fromkeys(r["method"] for r in runs):  # the label of what the cells ran
+                ran = {(r["dataset_name"], r["frontend"]): r for r in runs if r["method"] == method}
+                lines.append("| " + " | ".join([f"rotation APE, Eq. 3 [rad] (eas-vo --config {label_config}, {method}, "
+                                                "every frame)", *[ours_eq3(ran, s, f) for s, f in columns]]) + " |")
     system = (f"ORB-SLAM3 (monocular, pyorbslam3): the median over its runs whose status is ok (from its first "
               f"initialisation on it tracked at least {MIN_TRACKED_FRACTION:.0%} of the frames, the last one among them; "
               "runs scored / runs), an --estimate's ORB-SLAM2 keyframes as given" if with_slam else "ORB-SLAM2")

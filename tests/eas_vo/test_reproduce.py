@@ -327,3 +327,39 @@ def test_table2s_vocabulary_is_checked_whole_and_a_broken_one_never_replaced(tmp
     monkeypatch.setattr(orbvoc, "fetch_orb_vocabulary", lambda **kw: pytest.fail("a download replaced the vocabulary"))
     with pytest.raises(DataError, match=rf"^{path}:{text[: len(text) // 2].count(chr(10)) + 1}: expected 'parent is_leaf'"):
         reproduce._vocabulary(False)
+
+
+def test_table2s_rows_say_the_configuration_and_method_their_cells_ran(tmp_path, monkeypatch):
+    """Table 2's rotation rows (ORB-SLAM3 faked, every grid recorded instead of run): the
+    configuration asked for with the paper's klt+chain, and configs/best.toml with its own
+    tracker and backend, as `--config best` runs it; each row's label names both."""
+    import importlib.util
+
+    from eas_vo import compare, config, reproduce
+
+    real = importlib.util.find_spec
+    monkeypatch.setattr(importlib.util, "find_spec", lambda name, *a: object() if name == "pyorbslam3" else real(name, *a))
+    grids = []
+
+    def run_experiment(cells, out, config_file, assignments, overrides, jobs, progress):
+        grids.append((config_file, {(c.tracker, c.backend) for c in cells}))
+        return ([{"dataset_name": c.dataset_name, "frontend": c.frontend, "method": c.method.label, "status": "ok",
+                  "ape_mean_rad": 0.1 * len(grids), "orb_keypoints_mean": 1.0, "orb_matches_mean": 1.0} for c in cells],
+                len(cells))
+
+    monkeypatch.setattr(compare, "run_experiment", run_experiment)
+    monkeypatch.setattr(reproduce, "fetch_sequences", lambda progress: None)
+    monkeypatch.setattr(reproduce, "_check", lambda *a: None)
+    monkeypatch.setattr(reproduce, "_vocabulary", lambda progress: tmp_path / "voc.txt")
+    monkeypatch.setattr(reproduce, "_slam_cell", lambda *a: {"ape_trans_mean_m": None, "statuses": {}})
+    monkeypatch.setattr(reproduce, "_keyframe_figures", lambda *a: None)
+    best = config.run_section("best")
+    assert (best.tracker, best.backend) == ("klt", "gtsam")  # what `--config best` runs
+    _, _, markdown = reproduce.table2(tmp_path / "out", {}, config="paper")
+    assert grids == [("paper", {("klt", "chain")}), ("best", {("klt", "gtsam")})]
+    rows = [line for line in markdown.splitlines() if line.startswith("| rotation APE, Eq. 3 [rad] (eas-vo")]
+    assert [row.split("|")[1].strip() for row in rows] == [
+        "rotation APE, Eq. 3 [rad] (eas-vo --config paper, klt+chain, every frame)",
+        "rotation APE, Eq. 3 [rad] (eas-vo --config best, klt+gtsam, every frame)"]
+    assert [row.split("|")[2].strip() for row in rows] == ["0.100", "0.200"]
+    assert markdown.startswith("# Table 2: ours (`--config paper`, whole sequences)")
