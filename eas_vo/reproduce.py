@@ -374,8 +374,8 @@ def table2_markdown(rows: list[dict], slam: dict, duration_s: float | None, fron
         for label_config, runs in ((config, rows), ("best", best_rows)):
             for method in dict.fromkeys(r["method"] for r in runs):  # the label of what the cells ran
                 ran = {(r["dataset_name"], r["frontend"]): r for r in runs if r["method"] == method}
-                lines.append("| " + " | ".join([f"rotation APE, Eq. 3 [rad] (eas-vo --config {label_config}, {method}, "
-                                                "every frame)", *[ours_eq3(ran, s, f) for s, f in columns]]) + " |")
+                label = f"rotation APE, Eq. 3 [rad] (eas-vo --config {label_config}, {method}, every frame)"
+                lines.append("| " + " | ".join([label, *[ours_eq3(ran, s, f) for s, f in columns]]) + " |")
     system = (f"ORB-SLAM3 (monocular, pyorbslam3): the median over its runs whose status is ok (from its first "
               f"initialisation on it tracked at least {MIN_TRACKED_FRACTION:.0%} of the frames, the last one among them; "
               "runs scored / runs), an --estimate's ORB-SLAM2 keyframes as given" if with_slam else "ORB-SLAM2")

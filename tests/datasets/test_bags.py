@@ -71,9 +71,8 @@ def test_stamps_are_integer_nanoseconds_read_after_the_clock_origin():
 def _with_camera_info_of(bag, out, width, height, images=True):
     """A copy of `bag` whose CameraInfo is for a width x height sensor (K scaled to it), and
     without its images unless `images`."""
-    from rosbags.rosbag1 import Reader, Writer
-
     from eas_vo.datasets.rosbag import typestore
+    from rosbags.rosbag1 import Reader, Writer
 
     store = typestore()
     with Reader(bag) as reader, Writer(out) as writer:
