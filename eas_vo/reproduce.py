@@ -216,7 +216,9 @@ def table2(out: Path, estimates: dict[tuple[str, str], str], duration_s: float |
     file} given, that ORB-SLAM2 trajectory scored (OUT/slam/SEQUENCE_SOURCE); for the others,
     with the slam extra installed, `runs` runs of ORB-SLAM3 (eas-vo slam, into the same
     folders; a folder holding that many runs with this vocabulary is kept: resumable).
-    Writes table2.md beside the paper's, table2.json and the Fig. 4 panels."""
+    Writes table2.md beside the paper's, table2.json and the Fig. 4 panels. Returns (the rows
+    of every cell run: with ORB-SLAM3, best.toml's too, their folders under `best/`; cells run;
+    table2 markdown)."""
     import importlib.util
 
     from eas_vo.orbslam import evaluate_estimate, read_estimate
@@ -242,6 +244,7 @@ def table2(out: Path, estimates: dict[tuple[str, str], str], duration_s: float |
     if with_slam:  # eas-vo's most accurate configuration on the same images, as `--config best` runs it, for the rotation rows
         best_rows, n_best = compare.run_experiment(_cells(frontends, [best_method()]), out / "best", "best", [],
                                                    _overrides(duration_s, orb=False), jobs, progress)
+        best_rows = [{**r, "folder": f"best/{r['folder']}"} for r in best_rows]  # (relative to `out`, as the others)
         n_run += n_best
         vocabulary = vocabulary or str(_vocabulary(progress))
         for cell in cells:
@@ -254,7 +257,7 @@ def table2(out: Path, estimates: dict[tuple[str, str], str], duration_s: float |
     write_text_atomic(out / "table2.md", markdown)
     write_text_atomic(out / "table2.json", json_text({"paper": PAPER_TABLE2, "orb": rows, "config": config, "best": best_rows,
                                                       "slam": {f"{s}:{f}": m for (s, f), m in slam.items()}}))
-    return rows, n_run, markdown
+    return rows + best_rows, n_run, markdown
 
 
 def best_method() -> compare.Method:

@@ -267,8 +267,10 @@ def test_table2_runs_orbslam3_on_each_cell_beside_the_papers(walk_site, walk_voc
     eq3 = next(line for line in table.splitlines() if line.startswith("| rotation APE, Eq. 3 [rad] (ORB-SLAM3"))
     median = report["hdr_boxes:original"]["rotation_eq3.ape_mean_rad"]["median"]
     assert eq3.split("|")[2].strip() == f"{median:.3f}"
-    assert "| rotation APE, Eq. 3 [rad] (eas-vo klt+chain, every frame) |" in table
-    best_row = next(line for line in table.splitlines() if line.startswith("| rotation APE, Eq. 3 [rad] (eas-vo best.toml"))
+    assert "| rotation APE, Eq. 3 [rad] (eas-vo --config paper, klt+chain, every frame) |" in table
+    best_row = next(line for line in table.splitlines()
+                    if line.startswith("| rotation APE, Eq. 3 [rad] (eas-vo --config best, klt+gtsam, every frame) |"))
+    assert {p.parent.name for p in (out / "best").rglob("metrics.json")} == {"original_klt_gtsam", "eas_klt_gtsam"}
     best_metrics = json.loads(next((out / "best").rglob("metrics.json")).read_text())
     assert f"{best_metrics['ape_mean_rad']:.3f}" in [cell.strip() for cell in best_row.split("|")[2:]]
     assert (out / "fig4_hdr_boxes.png").stat().st_size > 0
@@ -344,8 +346,8 @@ def test_table2s_rows_say_the_configuration_and_method_their_cells_ran(tmp_path,
     def run_experiment(cells, out, config_file, assignments, overrides, jobs, progress):
         grids.append((config_file, {(c.tracker, c.backend) for c in cells}))
         return ([{"dataset_name": c.dataset_name, "frontend": c.frontend, "method": c.method.label, "status": "ok",
-                  "ape_mean_rad": 0.1 * len(grids), "orb_keypoints_mean": 1.0, "orb_matches_mean": 1.0} for c in cells],
-                len(cells))
+                  "folder": c.folder, "ape_mean_rad": 0.1 * len(grids), "orb_keypoints_mean": 1.0,
+                  "orb_matches_mean": 1.0} for c in cells], len(cells))
 
     monkeypatch.setattr(compare, "run_experiment", run_experiment)
     monkeypatch.setattr(reproduce, "fetch_sequences", lambda progress: None)
@@ -355,8 +357,10 @@ def test_table2s_rows_say_the_configuration_and_method_their_cells_ran(tmp_path,
     monkeypatch.setattr(reproduce, "_keyframe_figures", lambda *a: None)
     best = config.run_section("best")
     assert (best.tracker, best.backend) == ("klt", "gtsam")  # what `--config best` runs
-    _, _, markdown = reproduce.table2(tmp_path / "out", {}, config="paper")
+    rows, n_run, markdown = reproduce.table2(tmp_path / "out", {}, config="paper")
     assert grids == [("paper", {("klt", "chain")}), ("best", {("klt", "gtsam")})]
+    assert len(rows) == n_run == 8  # every cell run is reported: 2 sequences x 2 sources, in both grids
+    assert {r["folder"].split("/")[0] for r in rows if r["method"] == "klt+gtsam"} == {"best"}
     rows = [line for line in markdown.splitlines() if line.startswith("| rotation APE, Eq. 3 [rad] (eas-vo")]
     assert [row.split("|")[1].strip() for row in rows] == [
         "rotation APE, Eq. 3 [rad] (eas-vo --config paper, klt+chain, every frame)",
