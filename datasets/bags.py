@@ -175,9 +175,8 @@ class BagDataset(RecordingReader):
         self._sensor = self._sensor_size()
         given = self.calibration_file(*self._sensor)
         self.camera = given if given is not None else self._read_camera()
-        if self.camera is not None and self._frames:
-            height, width = self._frames[0].shape
-            check_frame_size(self.camera, width, height, f"{self.path}:{self.topic['image_topic']}:0", "its frames are")
+        if self.camera is not None:
+            self._check_camera_size()
         self.ground_truth = self._read_poses() if not self.config.ground_truth else self.ground_truth_file()
         self.imu = self._read_imu()
         self._events = None
@@ -348,17 +347,29 @@ class BagDataset(RecordingReader):
         return None
 
     def _sensor_size(self) -> tuple[int, int]:
-        """(width, height) [px]: CameraInfo's, else the frames', else what the event messages state."""
-        info = self._camera_info
-        if info is not None:
-            return int(info[1].width), int(info[1].height)
+        """(width, height) [px]: the frames', else what the event messages state, else CameraInfo's
+        (the data's own size first: _check_camera_size holds the calibration to it)."""
         if self._frames:
             return self._frames[0].shape[1], self._frames[0].shape[0]
         size = self._event_message_size()
-        if size is None:
+        if size is not None:
+            return size
+        info = self._camera_info
+        if info is None:
             raise DataError(self.path, "the sensor size is unknown: no CameraInfo, no images, and the event messages "
                                        "state none; give a calibration with --set dataset.calibration=FILE")
-        return size
+        return int(info[1].width), int(info[1].height)
+
+    def _check_camera_size(self) -> None:
+        """A DataError unless the camera (CameraInfo's or dataset.calibration's) is for the size of
+        the frames and of the sensor the event messages state."""
+        if self._frames:
+            height, width = self._frames[0].shape
+            check_frame_size(self.camera, width, height, f"{self.path}:{self.topic['image_topic']}:0", "its frames are")
+        size = self._event_message_size()
+        if size is not None:
+            check_frame_size(self.camera, *size, f"{self.path}:{self.topic['events_topic']}:0",
+                             "its event messages state a sensor of")
 
     def _read_camera(self) -> CameraModel | None:
         info = self._camera_info

@@ -14,7 +14,8 @@ dataset plugin. Not a plugin.
 
 `read_calibration` tells them apart by content. Every value is checked (sizes whole numbers of
 pixels up to MAX_SENSOR_PX, everything finite, focal lengths, principal point and distortion in
-range); every error is one line naming the file and the key (or line) at fault.
+range, the lens' projection growing out to the sensor's corners); every error is one line naming
+the file and the key (or line) at fault.
 """
 
 from __future__ import annotations
@@ -55,13 +56,29 @@ def _distortion_problem(dist, model: str) -> str | None:
     return None
 
 
+def _fold_problem(camera: CameraModel) -> str | None:
+    """Where `camera`'s lens folds back inside its sensor (CameraModel.fold), as a message."""
+    fold = camera.fold()
+    if fold is None:
+        return None
+    radius_px, angle_rad, corner_px = fold
+    names = " ".join(LENS_MODELS[camera.model])
+    return (f"the {camera.model} lens ({names} = {' '.join(f'{d:g}' for d in camera.dist)}) folds back "
+            f"{radius_px:.1f} px from the principal point ({angle_rad:.3f} rad off the optical axis), inside the "
+            f"{camera.width}x{camera.height} sensor (its farthest corner {corner_px:.1f} px): a lens model must "
+            "grow over the whole sensor")
+
+
 def camera_problem(values, width: int, height: int, model: str = "radtan") -> str | None:
     """What makes `fx fy cx cy` [px] and distortion coefficients (in `model`'s order) impossible
     for a width x height camera, or None: focal lengths between 0.1 and 100 sensor widths
     (fields of view of about 160 down to 0.6 degrees), the principal point on the sensor; radtan:
-    |k1|, |k2|, |k3| <= 10 and |p1|, |p2| <= 1; equidistant: |k1..k4| <= 10 (beyond, the model no
-    longer maps the sensor). NaN fails every range."""
-    return _intrinsics_problem(*values[:4], width, height) or _distortion_problem(values[4:], model)
+    |k1|, |k2|, |k3| <= 10 and |p1|, |p2| <= 1; equidistant: |k1..k4| <= 10; and the projection
+    growing out to the sensor's corners (_fold_problem). NaN fails every range."""
+    n = len(LENS_MODELS[model])
+    dist = np.array((list(values[4:]) + [0.0] * n)[:n], float)
+    return (_intrinsics_problem(*values[:4], width, height) or _distortion_problem(dist, model)
+            or _fold_problem(CameraModel(width, height, _intrinsic_matrix(*values[:4]), dist, model)))
 
 
 def sensor_size(where: str, value, key: str) -> tuple[int, int]:
@@ -117,7 +134,11 @@ def camera_model(where: str, width: int, height: int, K, dist, model: str = "rad
                         (dist_key, _distortion_problem(dist, model))):
         if problem:
             raise DataError(where, f"{at}{problem}")
-    return CameraModel(width, height, K, dist, model)
+    camera = CameraModel(width, height, K, dist, model)
+    problem = _fold_problem(camera)
+    if problem:
+        raise DataError(where, f"{dist_key}{problem}")
+    return camera
 
 
 def _intrinsic_matrix(fx, fy, cx, cy) -> np.ndarray:

@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from eas_vo import compare
-from eas_vo.errors import EasVoError
+from eas_vo.errors import DataError, EasVoError
 from eas_vo.gallery import PAPER_ORDER
 from eas_vo.io import atomic_path, claim_grid_folder, figure_text, json_text, remove_stale_temporaries, slug, write_text_atomic
 
@@ -216,7 +216,9 @@ def table2(out: Path, estimates: dict[tuple[str, str], str], duration_s: float |
     file} given, that ORB-SLAM2 trajectory scored (OUT/slam/SEQUENCE_SOURCE); for the others,
     with the slam extra installed, `runs` runs of ORB-SLAM3 (eas-vo slam, into the same
     folders; a folder holding that many runs with this vocabulary is kept: resumable).
-    Writes table2.md beside the paper's, table2.json and the Fig. 4 panels."""
+    Writes table2.md beside the paper's, table2.json and the Fig. 4 panels. Returns (the rows
+    of every cell run: with ORB-SLAM3, best.toml's too, their folders under `best/`; cells run;
+    table2 markdown)."""
     import importlib.util
 
     from eas_vo.orbslam import evaluate_estimate, read_estimate
@@ -239,11 +241,11 @@ def table2(out: Path, estimates: dict[tuple[str, str], str], duration_s: float |
             for key, path in estimates.items()}
     rows, n_run = compare.run_experiment(cells, out, config, [], overrides, jobs, progress)
     best_rows = []
-    if with_slam:
-        if config != "best":  # eas-vo's most accurate configuration on the same images, for the rotation rows
-            best_rows, n_best = compare.run_experiment(cells, out / "best", "best", [], _overrides(duration_s, orb=False),
-                                                       jobs, progress)
-            n_run += n_best
+    if with_slam:  # eas-vo's most accurate configuration on the same images, as `--config best` runs it, for the rotation rows
+        best_rows, n_best = compare.run_experiment(_cells(frontends, [best_method()]), out / "best", "best", [],
+                                                   _overrides(duration_s, orb=False), jobs, progress)
+        best_rows = [{**r, "folder": f"best/{r['folder']}"} for r in best_rows]  # (relative to `out`, as the others)
+        n_run += n_best
         vocabulary = vocabulary or str(_vocabulary(progress))
         for cell in cells:
             key = (cell.dataset_name, cell.frontend)
@@ -251,23 +253,34 @@ def table2(out: Path, estimates: dict[tuple[str, str], str], duration_s: float |
                 slam[key] = _slam_cell(cell, config, overrides, out / "slam" / f"{key[0]}_{key[1]}", vocabulary, runs,
                                        progress)
         _keyframe_figures(out, cells, slam)
-    markdown = table2_markdown(rows, slam, duration_s, frontends, with_slam, best_rows)
+    markdown = table2_markdown(rows, slam, duration_s, frontends, with_slam, best_rows, config)
     write_text_atomic(out / "table2.md", markdown)
-    write_text_atomic(out / "table2.json", json_text({"paper": PAPER_TABLE2, "orb": rows,
+    write_text_atomic(out / "table2.json", json_text({"paper": PAPER_TABLE2, "orb": rows, "config": config, "best": best_rows,
                                                       "slam": {f"{s}:{f}": m for (s, f), m in slam.items()}}))
-    return rows, n_run, markdown
+    return rows + best_rows, n_run, markdown
+
+
+def best_method() -> compare.Method:
+    """configs/best.toml's tracker and backend, as `--config best` runs them."""
+    from eas_vo.config import run_section
+
+    run = run_section("best")
+    return compare.Method(run.tracker, run.backend)
 
 
 def _vocabulary(progress: bool) -> Path:
     """The vocabulary ORB-SLAM3 loads: $PYORBSLAM3_VOCAB or the data folder's ORBvoc.txt,
-    fetched first if neither is there."""
+    fetched first if neither is there; checked whole either way (slam.run.find_vocabulary). A
+    broken one is an error, never replaced by another."""
     from eas_vo.slam.orbvoc import fetch_orb_vocabulary
     from eas_vo.slam.run import find_vocabulary
 
     try:
         return find_vocabulary(None)
-    except EasVoError:
-        return fetch_orb_vocabulary(progress=progress)
+    except DataError:
+        raise
+    except EasVoError:  # none there
+        return find_vocabulary(str(fetch_orb_vocabulary(progress=progress)))
 
 
 def _slam_cell(cell: compare.Cell, config: str, overrides: dict, folder: Path, vocabulary: str, runs: int,
@@ -314,17 +327,18 @@ def _keyframe_figures(out: Path, cells: list[compare.Cell], slam: dict) -> None:
 
 
 def table2_markdown(rows: list[dict], slam: dict, duration_s: float | None, frontends=TABLE2_SOURCES,
-                    with_slam: bool = False, best_rows: list[dict] = ()) -> str:
+                    with_slam: bool = False, best_rows: list[dict] = (), config: str = "paper") -> str:
     """The paper's Table 2 layout, each of our figures followed by the paper's (a source the
     paper has not: -); with ORB-SLAM3, its rotation scored by Eq. 3 beside eas-vo's on the same
-    images (the configuration asked for, and `best_rows`: configs/best.toml's)."""
+    images: `rows` (`config` with the paper's method) and `best_rows` (configs/best.toml's own
+    method), each row labelled with the configuration and the tracker+backend its cells ran."""
     from eas_vo.slam.run import MIN_TRACKED_FRACTION
 
     by_key = {(r["dataset_name"], r["frontend"]): r for r in rows}
     columns = [(seq, source) for seq in SEQUENCES for source in frontends]
     head = ["", *[f"{seq} {source}" for seq, source in columns]]
     window = f"first {duration_s:g} s" if duration_s else "whole sequences"
-    lines = [f"# Table 2: ours ({window}) beside the paper's", "",
+    lines = [f"# Table 2: ours (`--config {config}`, {window}) beside the paper's", "",
              "| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     missing = "- (no ORB-SLAM2 trajectory given; ORB-SLAM3 runs with pip install 'eas-vo[slam]')"
 
@@ -360,12 +374,11 @@ def table2_markdown(rows: list[dict], slam: dict, duration_s: float | None, fron
 
         lines.append("| " + " | ".join(["rotation APE, Eq. 3 [rad] (ORB-SLAM3, tracked frames)",
                                         *[eq3(s, f) for s, f in columns]]) + " |")
-        lines.append("| " + " | ".join([f"rotation APE, Eq. 3 [rad] (eas-vo {PAPER.label}, every frame)",
-                                        *[ours_eq3(by_key, s, f) for s, f in columns]]) + " |")
-        if best_rows:
-            best = {(r["dataset_name"], r["frontend"]): r for r in best_rows}
-            lines.append("| " + " | ".join(["rotation APE, Eq. 3 [rad] (eas-vo best.toml, every frame)",
-                                            *[ours_eq3(best, s, f) for s, f in columns]]) + " |")
+        for label_config, runs in ((config, rows), ("best", best_rows)):
+            for method in dict.fromkeys(r["method"] for r in runs):  # the label of what the cells ran
+                ran = {(r["dataset_name"], r["frontend"]): r for r in runs if r["method"] == method}
+                label = f"rotation APE, Eq. 3 [rad] (eas-vo --config {label_config}, {method}, every frame)"
+                lines.append("| " + " | ".join([label, *[ours_eq3(ran, s, f) for s, f in columns]]) + " |")
     system = (f"ORB-SLAM3 (monocular, pyorbslam3): the median over its runs whose status is ok (from its first "
               f"initialisation on it tracked at least {MIN_TRACKED_FRACTION:.0%} of the frames, the last one among them; "
               "runs scored / runs), an --estimate's ORB-SLAM2 keyframes as given" if with_slam else "ORB-SLAM2")

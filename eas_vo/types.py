@@ -158,6 +158,29 @@ class CameraModel:
         px = self.project(rays).astype(np.float32)
         return px[:, 0].reshape(u.shape), px[:, 1].reshape(u.shape)
 
+    def fold(self) -> tuple[float, float, float] | None:
+        """Where the lens' radial projection stops growing inside the sensor, or None when it
+        grows out to the sensor's farthest corner (the pixel edges, (0, 0) to (width, height)):
+        (its radius from the principal point [px, focal_px], the ray's angle to the optical axis
+        there [rad], the farthest corner's radius [px]). Beyond such a fold two rays land on one
+        pixel and undistortion inverts the wrong branch. `equidistant` maps rays up to 180 deg: a
+        sensor reaching past that radius folds there. The tangential terms of `radtan` (p1 p2)
+        are left out: the radial part decides whether the projection folds."""
+        from eas_vo.geometry.lens import first_fold
+
+        fx, fy, cx, cy = self.K[0, 0], self.K[1, 1], self.K[0, 2], self.K[1, 2]
+        corner = max(np.hypot((u - cx) / fx, (v - cy) / fy) for u in (0, self.width) for v in (0, self.height))
+        if self.model == "equidistant":
+            coefficients, theta = self.dist, lambda x: x
+            x = first_fold(coefficients, np.pi)
+        else:
+            coefficients, theta = (self.dist[0], self.dist[1], self.dist[4]), np.arctan
+            x = first_fold(coefficients, np.inf)
+        radius = x * (1.0 + sum(c * x ** (2 * n + 2) for n, c in enumerate(coefficients))) if np.isfinite(x) else np.inf
+        if radius >= corner:
+            return None
+        return float(radius * self.focal_px), float(theta(x)), float(corner * self.focal_px)
+
     def calib_values(self) -> list[float]:
         """`fx fy cx cy` and the distortion coefficients in the order of `model`."""
         K = self.K

@@ -37,3 +37,17 @@ def project_points(points, K, dist, equidistant, out):
             yd = y * radial + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y
         out[n, 0] = K[0, 0] * xd + K[0, 1] * yd + K[0, 2]
         out[n, 1] = K[1, 1] * yd + K[1, 2]
+
+
+def first_fold(coefficients, limit: float) -> float:
+    """The smallest x in (0, limit] at which the radial projection f(x) = x (1 + c1 x^2 + c2 x^4
+    + ...) stops growing (f'(x) = 0, f'(0) = 1), `limit` if it grows all the way there.
+    `coefficients` c1, c2, ...: radtan's k1 k2 k3 with x = tan(theta), the normalised radius;
+    equidistant's k1..k4 with x = theta [rad], the angle to the optical axis."""
+    import numpy as np
+
+    # f'(x) = 1 + 3 c1 s + 5 c2 s^2 + ... in s = x^2, highest power first for np.roots
+    derivative = [(2 * n + 1) * float(c) for n, c in enumerate([1.0, *coefficients])][::-1]
+    roots = np.roots(np.trim_zeros(derivative, "f")) if any(derivative[:-1]) else np.empty(0)
+    s = [r.real for r in roots if abs(r.imag) <= 1e-12 * max(1.0, abs(r.real)) and r.real > 0]
+    return min([math.sqrt(v) for v in s if math.sqrt(v) < limit], default=limit)

@@ -62,10 +62,11 @@ def require_extra() -> None:
 
 def find_vocabulary(given: str | None) -> Path:
     """The vocabulary to load: `given`, else $PYORBSLAM3_VOCAB, else ORBvoc.txt in the data
-    folder; its first line checked as DBoW2's text header. One line when there is none."""
+    folder; every line of it and its tree checked (vocabulary.check_vocabulary) before ORB-SLAM3
+    loads it. One line when there is none, or it is broken."""
     from eas_vo.datasets.ecd_catalogue import data_dir
     from eas_vo.slam.orbvoc import NAME
-    from eas_vo.slam.vocabulary import check_header
+    from eas_vo.slam.vocabulary import check_vocabulary
 
     if given is None:
         given = os.environ.get("PYORBSLAM3_VOCAB") or None
@@ -75,7 +76,7 @@ def find_vocabulary(given: str | None) -> Path:
             raise DataError(path, "no such vocabulary file")
         raise EasVoError(f"no ORB vocabulary: give --vocabulary FILE (one `eas-vo vocabulary` trains), set "
                          f"PYORBSLAM3_VOCAB, or download ORB-SLAM3's with `eas-vo fetch orb-vocabulary` (into {path})")
-    check_header(path)
+    check_vocabulary(path)
     return path
 
 

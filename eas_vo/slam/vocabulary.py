@@ -11,6 +11,7 @@ decimal. No newline after the last line: the loader reads an empty last line as 
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -189,41 +190,135 @@ def _header(path: Path, line: str) -> tuple[int, int, int, int]:
     return k, levels, scoring, weighting
 
 
-def check_header(path: str | Path) -> None:
-    """The first line of a text vocabulary checked (the rest of a 139 MB ORBvoc.txt is left to
-    ORB-SLAM3): a binary or foreign file is a one-line error before ORB-SLAM3 exits on it."""
-    path = Path(path)
+#: Bytes of a text vocabulary parsed at once (whole lines): ORB-SLAM3's ORBvoc.txt (10^6 nodes)
+#: is read in pieces of this size, each parsed by numpy, never as a Python list of its lines.
+BLOCK_BYTES = 1 << 23
+#: The characters of a number numpy's parser reads (digits, sign, point, exponent, nan, inf).
+NUMBER_CHARACTERS = np.frombuffer(b"0123456789+-.eEnNaAiIfF", np.uint8)
+WHITESPACE = np.frombuffer(b" \t\r\n\v\f", np.uint8)
+FIELDS = DESCRIPTOR_BYTES + 3  # parent, is_leaf, the bytes, the weight
+
+
+def _lines_of(path: Path):
+    """(first line number, whole lines as bytes) of `path` after its header, BLOCK_BYTES at a
+    time; the header line itself first, as (1, its bytes)."""
     try:
         with open(path, "rb") as fh:
-            first = fh.readline(200).decode("ascii")
-    except (OSError, UnicodeDecodeError) as exc:
-        raise DataError(path, f"cannot read as a text vocabulary: {getattr(exc, 'strerror', None) or exc}") from None
-    _header(path, first)
+            yield 1, fh.readline(200)
+            number, rest = 2, b""
+            while block := fh.read(BLOCK_BYTES):
+                block = rest + block
+                cut = block.rfind(b"\n") + 1
+                if cut:
+                    yield number, block[:cut]
+                    number += block.count(b"\n", 0, cut)
+                    rest = block[cut:]
+                else:
+                    rest = block
+            yield number, rest  # the last line (empty after a final newline)
+    except OSError as exc:
+        raise DataError(path, f"cannot read as a text vocabulary: {exc.strerror or exc}") from None
+
+
+def _nodes(path: Path, first: int, block: bytes, count: int):
+    """parent, is_leaf, descriptors, weight of the nodes on the lines of `block` (line `first`
+    on: node first - 1), checked: each line `parent is_leaf`, DESCRIPTOR_BYTES bytes and a
+    weight; the parent an earlier node, is_leaf 0 or 1, the bytes whole numbers 0..255, the
+    weight finite. `count`: the nodes read before (the root included)."""
+    data = np.frombuffer(block, np.uint8)
+    line_of = np.concatenate([[0], np.cumsum(data == ord("\n"))[:-1]])  # each byte's line in the block
+    lines = block.count(b"\n") + (not block.endswith(b"\n"))
+    space = np.isin(data, WHITESPACE)
+    foreign = ~space & ~np.isin(data, NUMBER_CHARACTERS)
+    if foreign.any():
+        raise DataError(path, "a field is not a number", first + int(line_of[np.argmax(foreign)]))
+    starts = ~space & np.concatenate([[True], space[:-1]])
+    fields = np.bincount(line_of[starts], minlength=lines)
+    wrong = np.flatnonzero(fields != FIELDS)
+    if len(wrong):
+        raise DataError(path, f"expected 'parent is_leaf' then {DESCRIPTOR_BYTES} descriptor bytes and a weight, "
+                        f"got {fields[wrong[0]]} fields", first + int(wrong[0]))
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", DeprecationWarning)  # numpy's word for a field it could not parse
+        try:
+            values = np.fromstring(block.decode("ascii"), sep=" ")
+        except (DeprecationWarning, ValueError):
+            values = None
+    if values is None or len(values) != lines * FIELDS:
+        raise DataError(path, "a field is not a number", first + (len(values) // FIELDS if values is not None else 0))
+    table = values.reshape(lines, FIELDS)
+    integers = table[:, :-1]
+    node = count + np.arange(lines)
+    bad = ((integers != np.round(integers)).any(1) | ~(table[:, 0] >= 0) | ~(table[:, 0] < node)
+           | ~np.isin(table[:, 1], (0, 1)) | ~((integers[:, 2:] >= 0) & (integers[:, 2:] <= 255)).all(1)
+           | ~np.isfinite(table[:, -1]))
+    if bad.any():
+        raise DataError(path, "parent not an earlier node, is_leaf not 0/1, a byte not a whole number 0..255 or a weight not finite",
+                        first + int(np.argmax(bad)))
+    return (table[:, 0].astype(np.int64), table[:, 1] == 1, integers[:, 2:].astype(np.uint8), table[:, -1])
+
+
+def _check_tree(path: Path, k: int, levels: int, parent: np.ndarray, is_leaf: np.ndarray) -> None:
+    """The nodes form DBoW2's tree of k branches and `levels` levels: a node has children exactly
+    when it is not a leaf (a file cut at a line's end leaves inner nodes without theirs), at most
+    k, and no node lies deeper than `levels`. Node i is on line i + 1."""
+    children = np.bincount(parent[1:], minlength=len(parent))
+    if children[0] == 0:
+        raise DataError(path, "holds no node but the root (the file ends after its header)", 2)
+    childless = np.flatnonzero(~is_leaf[1:] & (children[1:] == 0)) + 1
+    if len(childless):
+        raise DataError(path, "an inner node (is_leaf 0) without children: the file ends early", int(childless[0]) + 1)
+    under_leaf = np.flatnonzero(is_leaf[parent[1:]]) + 1
+    if len(under_leaf):
+        raise DataError(path, "the parent is a leaf (is_leaf 1)", int(under_leaf[0]) + 1)
+    crowded = np.flatnonzero(children > k)
+    if len(crowded):
+        extra = np.flatnonzero(parent == crowded[0])[k]
+        raise DataError(path, f"node {crowded[0]} gets more than the header's k = {k} children", int(extra) + 1)
+    depth = np.zeros(len(parent), np.int64)
+    for _ in range(levels + 1):  # parents come first: each pass settles one more level
+        depth[1:] = depth[parent[1:]] + 1
+    deep = np.flatnonzero(depth > levels)
+    if len(deep):
+        raise DataError(path, f"a node deeper than the header's L = {levels} levels", int(deep[0]) + 1)
 
 
 def read_vocabulary(path: str | Path) -> Vocabulary:
-    """A DBoW2 text vocabulary of ORB descriptors; a malformed one is a DataError naming its line."""
+    """A DBoW2 text vocabulary of ORB descriptors, every line and the tree's structure checked
+    (_nodes, _check_tree); a malformed one is a DataError naming its line. A final newline (as
+    DBoW2's saveToTextFile ends every line) is accepted; any other empty line is not. Parsed
+    BLOCK_BYTES at a time by numpy, so ORB-SLAM3's 10^6-word ORBvoc.txt is read whole before
+    ORB-SLAM3 would load it."""
     path = Path(path)
+    pieces = _lines_of(path)
+    _, header = next(pieces)
     try:
-        lines = path.read_text().split("\n")
-    except (OSError, UnicodeDecodeError) as exc:
-        raise DataError(path, f"cannot read as a text vocabulary: {getattr(exc, 'strerror', None) or exc}") from None
-    k, levels, _, _ = _header(path, lines[0])
-    parent, is_leaf, descriptors, weight = [-1], [False], [np.zeros(DESCRIPTOR_BYTES, np.uint8)], [0.0]
-    for number, line in enumerate(lines[1:], start=2):
-        fields = line.split()
-        if len(fields) != DESCRIPTOR_BYTES + 3:
-            raise DataError(path, f"expected 'parent is_leaf' then {DESCRIPTOR_BYTES} descriptor bytes and a weight, "
-                            f"got {len(fields)} fields", number)
-        try:
-            p, leaf, *data = (int(v) for v in fields[:-1])
-            w = float(fields[-1])
-        except ValueError:
-            raise DataError(path, "a field is not a number", number) from None
-        if not 0 <= p < len(parent) or leaf not in (0, 1) or not all(0 <= b <= 255 for b in data) or not np.isfinite(w):
-            raise DataError(path, "parent not an earlier node, is_leaf not 0/1, a byte outside 0..255 or a weight not finite", number)
-        parent.append(p)
-        is_leaf.append(bool(leaf))
-        descriptors.append(np.array(data, np.uint8))
-        weight.append(w)
-    return Vocabulary(k, levels, np.array(parent, np.int64), np.array(is_leaf), np.stack(descriptors), np.array(weight))
+        k, levels, _, _ = _header(path, header.decode("ascii"))
+    except UnicodeDecodeError:
+        raise DataError(path, "cannot read as a text vocabulary: not ASCII text", 1) from None
+    parts = [(np.array([-1]), np.array([False]), np.zeros((1, DESCRIPTOR_BYTES), np.uint8), np.zeros(1))]
+    count = 1
+    for first, block in pieces:
+        if not block:  # nothing after the last line's newline
+            continue
+        part = _nodes(path, first, block, count)
+        parts.append(part)
+        count += len(part[0])
+    parent, is_leaf, descriptors, weight = (np.concatenate(column) for column in zip(*parts))
+    _check_tree(path, k, levels, parent, is_leaf)
+    return Vocabulary(k, levels, parent, is_leaf, descriptors, weight)
+
+
+@functools.lru_cache(maxsize=4)
+def _checked(path: str, size: int, mtime_ns: int) -> None:
+    read_vocabulary(path)
+
+
+def check_vocabulary(path: str | Path) -> None:
+    """read_vocabulary's checks of every line and of the tree, before ORB-SLAM3 loads `path`
+    (its loader takes any file, exits on some and builds a broken tree of others); each file
+    (path, size, modification time) checked once a process."""
+    stat = Path(path).stat()
+    _checked(str(path), stat.st_size, stat.st_mtime_ns)

@@ -66,3 +66,52 @@ def test_stamps_are_integer_nanoseconds_read_after_the_clock_origin():
     origin = clock_origin_ns(1403636580_000013555)
     assert origin == 1403636580 * 10**9
     assert (1403636580_000013555 - origin) / 1e9 == 1.3555e-05
+
+
+def _with_camera_info_of(bag, out, width, height, images=True):
+    """A copy of `bag` whose CameraInfo is for a width x height sensor (K scaled to it), and
+    without its images unless `images`."""
+    from eas_vo.datasets.rosbag import typestore
+    from rosbags.rosbag1 import Reader, Writer
+
+    store = typestore()
+    with Reader(bag) as reader, Writer(out) as writer:
+        kept = [c for c in reader.connections if images or c.msgtype != "sensor_msgs/msg/Image"]
+        connections = {c.id: writer.add_connection(c.topic, c.msgtype, typestore=store) for c in kept}
+        for connection, timestamp, raw in reader.messages(connections=kept):
+            if connection.msgtype == "sensor_msgs/msg/CameraInfo":
+                msg = store.deserialize_ros1(raw, connection.msgtype)
+                K = msg.K.reshape(3, 3).copy()
+                K[0] *= width / msg.width
+                K[1] *= height / msg.height
+                msg.width, msg.height, msg.K = width, height, K.ravel()
+                raw = store.serialize_ros1(msg, connection.msgtype)
+            writer.write(connections[connection.id], timestamp, raw)
+    return out
+
+
+@pytest.fixture(scope="module")
+def sequence_bag(short_sequence, tmp_path_factory):
+    """The short simulated sequence (240x180) as a ROS 1 bag."""
+    from eas_vo.datasets.rosbag import write_bag
+    from eas_vo.registry import open_dataset
+
+    path = tmp_path_factory.mktemp("bag") / "seq.bag"
+    write_bag(open_dataset(str(short_sequence)), path)
+    return path
+
+
+@pytest.mark.parametrize("images", [True, False], ids=["frames", "events_only"])
+def test_a_camera_info_of_another_sensor_than_the_datas_is_refused(short_sequence, sequence_bag, tmp_path, images):
+    """A 640x480 CameraInfo in a bag of 240x180 frames and events (their messages state
+    240x180) is refused naming both sizes, with frames or without; a calibration file of the
+    data's size is taken instead of it."""
+    from eas_vo.datasets.rosbag import BagConfig, RosbagDataset
+
+    bag = _with_camera_info_of(sequence_bag, tmp_path / "vga.bag", 640, 480, images)
+    topic = "/dvs/image_raw" if images else "/dvs/events"
+    seen = "its frames are" if images else "its event messages state a sensor of"
+    with pytest.raises(DataError, match=rf"^{bag}:{topic}:0: the calibration is for 640x480 px, {seen} 240x180$"):
+        RosbagDataset(bag)
+    camera = RosbagDataset(bag, BagConfig(calibration=str(short_sequence / "calib.txt"))).camera
+    assert (camera.width, camera.height) == (240, 180)

@@ -14,6 +14,8 @@ from eas_vo.datasets.calibration import (
     read_kalibr_camchain,
 )
 from eas_vo.errors import DataError
+from eas_vo.types import LENS_MODELS, CameraModel
+from helpers import ECD_DAVIS240, MVSEC_LEFT
 
 # A DAVIS346 with a fisheye lens (values of the size MVSEC's kalibr calibrations have) and one
 # with radial-tangential distortion.
@@ -413,3 +415,41 @@ def test_check_frame_size_names_both_sizes(tmp_path):
         with pytest.raises(DataError, match=rf"^rec.bag:/dvs/image_raw:7: the calibration is for 346x260 px, "
                                             rf"the frames are {width}x{height}$"):
             check_frame_size(camera, width, height, "rec.bag:/dvs/image_raw:7")
+
+
+# -- lenses whose projection folds back inside the sensor -----------------------------------
+
+#: Lenses within every coefficient range that fold inside the DAVIS346 of FISHEYE / RADTAN: an
+#: equidistant model whose angle grows only to 0.19 rad (it then turns back, 43 px from the
+#: centre), and a radtan k1 = -0.9 (r (1 + k1 r^2) peaks at r = 0.61, 105 px at f = 259).
+FOLDING = {"equidistant": {**FISHEYE, "dist": [-9.9, 9.9, -9.9, 9.9]},
+           "radtan": {**RADTAN, "dist": [-0.9, 0.0, 0.0, 0.0, 0.0]}}
+
+
+@pytest.mark.parametrize("fmt, model", [(fmt, model) for fmt in WRITERS for model in FOLDING
+                                        if fmt != "ecd" or model == "radtan"])
+def test_a_lens_that_folds_inside_the_sensor_is_refused_naming_model_and_radius(tmp_path, fmt, model):
+    cam = FOLDING[model]
+    path = tmp_path / NAMES[fmt]
+    WRITERS[fmt](path, cam)
+    with pytest.raises(DataError, match=rf"the {model} lens \(.*\) folds back \d+\.\d px from the principal point "
+                                        rf"\(\d\.\d+ rad off the optical axis\), inside the 346x260 sensor") as info:
+        read_calibration(path, width=346, height=260)
+    message = str(info.value)
+    assert message.startswith(f"{path}:") and "\n" not in message
+    camera = CameraModel(346, 260, K_of(cam), np.array((cam["dist"] + [0.0] * 5)[: len(LENS_MODELS[model])]), model)
+    fold_px, fold_rad, _ = camera.fold()
+    assert f"{fold_px:.1f} px" in message and f"({fold_rad:.3f} rad" in message
+    # the ray at that angle lands where the message says: the farthest any ray reaches on that line
+    ray = np.array([[np.sin(fold_rad), 0.0, np.cos(fold_rad)]])
+    assert camera.project(ray)[0, 0] - K_of(cam)[0, 2] == pytest.approx(fold_px * K_of(cam)[0, 0] / camera.focal_px, rel=1e-6)
+
+
+def test_the_lenses_of_real_cameras_do_not_fold(tmp_path):
+    """The DAVIS346 fisheye and radtan lenses above and the ECD's DAVIS240C (k1 = -0.37) grow
+    over their whole sensors."""
+    for cam in (FISHEYE, RADTAN):
+        path = tmp_path / NAMES["kalibr"]
+        write_kalibr(path, cam)
+        assert read_calibration(path).fold() is None
+    assert ECD_DAVIS240.fold() is None and MVSEC_LEFT.fold() is None

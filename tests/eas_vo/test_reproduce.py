@@ -267,8 +267,10 @@ def test_table2_runs_orbslam3_on_each_cell_beside_the_papers(walk_site, walk_voc
     eq3 = next(line for line in table.splitlines() if line.startswith("| rotation APE, Eq. 3 [rad] (ORB-SLAM3"))
     median = report["hdr_boxes:original"]["rotation_eq3.ape_mean_rad"]["median"]
     assert eq3.split("|")[2].strip() == f"{median:.3f}"
-    assert "| rotation APE, Eq. 3 [rad] (eas-vo klt+chain, every frame) |" in table
-    best_row = next(line for line in table.splitlines() if line.startswith("| rotation APE, Eq. 3 [rad] (eas-vo best.toml"))
+    assert "| rotation APE, Eq. 3 [rad] (eas-vo --config paper, klt+chain, every frame) |" in table
+    best_row = next(line for line in table.splitlines()
+                    if line.startswith("| rotation APE, Eq. 3 [rad] (eas-vo --config best, klt+gtsam, every frame) |"))
+    assert {p.parent.name for p in (out / "best").rglob("metrics.json")} == {"original_klt_gtsam", "eas_klt_gtsam"}
     best_metrics = json.loads(next((out / "best").rglob("metrics.json")).read_text())
     assert f"{best_metrics['ape_mean_rad']:.3f}" in [cell.strip() for cell in best_row.split("|")[2:]]
     assert (out / "fig4_hdr_boxes.png").stat().st_size > 0
@@ -302,3 +304,66 @@ def test_a_table2_cell_reruns_slam_runs_made_under_another_protocol(tmp_path, mo
     (folder / "summary.json").write_text(json.dumps({**old, "protocol": slam_run.PROTOCOL}))
     assert reproduce._slam_cell(cell, "paper", {}, folder, "voc.txt", 2, False)["ape_trans_mean_m"] == 0.5
     assert calls == [folder]
+
+
+@pytest.mark.parametrize("where", ["environment", "data_folder"])
+def test_table2s_vocabulary_is_checked_whole_and_a_broken_one_never_replaced(tmp_path, monkeypatch, where):
+    """A vocabulary in $PYORBSLAM3_VOCAB or the data folder that is cut short is refused naming
+    its line: neither handed to ORB-SLAM3 nor swapped for a download."""
+    from eas_vo import reproduce
+    from eas_vo.errors import DataError
+    from eas_vo.slam import orbvoc
+    from eas_vo.slam.vocabulary import train
+
+    rng = np.random.default_rng(2)
+    text = train([rng.integers(0, 256, (60, 32), dtype=np.uint8) for _ in range(2)], k=3, levels=2, seed=0).text()
+    data = tmp_path / "data"
+    data.mkdir()
+    path = tmp_path / "mine.txt" if where == "environment" else data / "ORBvoc.txt"
+    path.write_text(text[: len(text) // 2])  # cut inside a line
+    monkeypatch.setenv("EAS_VO_DATA_DIR", str(data))
+    if where == "environment":
+        monkeypatch.setenv("PYORBSLAM3_VOCAB", str(path))
+    else:
+        monkeypatch.delenv("PYORBSLAM3_VOCAB", raising=False)
+    monkeypatch.setattr(orbvoc, "fetch_orb_vocabulary", lambda **kw: pytest.fail("a download replaced the vocabulary"))
+    with pytest.raises(DataError, match=rf"^{path}:{text[: len(text) // 2].count(chr(10)) + 1}: expected 'parent is_leaf'"):
+        reproduce._vocabulary(False)
+
+
+def test_table2s_rows_say_the_configuration_and_method_their_cells_ran(tmp_path, monkeypatch):
+    """Table 2's rotation rows (ORB-SLAM3 faked, every grid recorded instead of run): the
+    configuration asked for with the paper's klt+chain, and configs/best.toml with its own
+    tracker and backend, as `--config best` runs it; each row's label names both."""
+    import importlib.util
+
+    from eas_vo import compare, config, reproduce
+
+    real = importlib.util.find_spec
+    monkeypatch.setattr(importlib.util, "find_spec", lambda name, *a: object() if name == "pyorbslam3" else real(name, *a))
+    grids = []
+
+    def run_experiment(cells, out, config_file, assignments, overrides, jobs, progress):
+        grids.append((config_file, {(c.tracker, c.backend) for c in cells}))
+        return ([{"dataset_name": c.dataset_name, "frontend": c.frontend, "method": c.method.label, "status": "ok",
+                  "folder": c.folder, "ape_mean_rad": 0.1 * len(grids), "orb_keypoints_mean": 1.0,
+                  "orb_matches_mean": 1.0} for c in cells], len(cells))
+
+    monkeypatch.setattr(compare, "run_experiment", run_experiment)
+    monkeypatch.setattr(reproduce, "fetch_sequences", lambda progress: None)
+    monkeypatch.setattr(reproduce, "_check", lambda *a: None)
+    monkeypatch.setattr(reproduce, "_vocabulary", lambda progress: tmp_path / "voc.txt")
+    monkeypatch.setattr(reproduce, "_slam_cell", lambda *a: {"ape_trans_mean_m": None, "statuses": {}})
+    monkeypatch.setattr(reproduce, "_keyframe_figures", lambda *a: None)
+    best = config.run_section("best")
+    assert (best.tracker, best.backend) == ("klt", "gtsam")  # what `--config best` runs
+    rows, n_run, markdown = reproduce.table2(tmp_path / "out", {}, config="paper")
+    assert grids == [("paper", {("klt", "chain")}), ("best", {("klt", "gtsam")})]
+    assert len(rows) == n_run == 8  # every cell run is reported: 2 sequences x 2 sources, in both grids
+    assert {r["folder"].split("/")[0] for r in rows if r["method"] == "klt+gtsam"} == {"best"}
+    rows = [line for line in markdown.splitlines() if line.startswith("| rotation APE, Eq. 3 [rad] (eas-vo")]
+    assert [row.split("|")[1].strip() for row in rows] == [
+        "rotation APE, Eq. 3 [rad] (eas-vo --config paper, klt+chain, every frame)",
+        "rotation APE, Eq. 3 [rad] (eas-vo --config best, klt+gtsam, every frame)"]
+    assert [row.split("|")[2].strip() for row in rows] == ["0.100", "0.200"]
+    assert markdown.startswith("# Table 2: ours (`--config paper`, whole sequences)")

@@ -134,3 +134,23 @@ def test_a_ray_behind_a_radtan_camera_is_seen_nowhere():
     behind = cv2.Rodrigues(np.radians([0.0, 180.0, 0.0]))[0]  # the view looking backwards
     map_x, map_y = ECD_DAVIS240.rotation_maps(behind)
     assert (map_x == -1).all() and (map_y == -1).all()
+
+
+@pytest.mark.parametrize("k1", [-0.2, -0.3, -0.6, -1.2])
+def test_a_radtan_lens_folds_where_its_radius_stops_growing(k1):
+    """r (1 + k1 r^2) peaks at r = 1 / sqrt(-3 k1), where it is 2/3 of that: a fold where the
+    sensor's corner (150 px at f = 200 px) lies beyond it, none where it does not."""
+    r = 1 / np.sqrt(-3 * k1)
+    radius = 2 / 3 * r * 200.0
+    camera = CameraModel(240, 180, np.array([[200.0, 0, 120], [0, 200.0, 90], [0, 0, 1]]), np.array([k1, 0, 0, 0, 0]))
+    assert camera.fold() == (pytest.approx((radius, np.arctan(r), 150.0)) if radius < 150 else None)
+
+
+def test_an_equidistant_lens_folds_where_its_angle_stops_growing_or_at_180_degrees():
+    K = np.array([[200.0, 0, 120], [0, 200.0, 90], [0, 0, 1]])
+    theta = 1 / np.sqrt(3 * 0.5)  # theta (1 - 0.5 theta^2) peaks there, at 2/3 of it
+    assert CameraModel(240, 180, K, np.array([-0.5, 0, 0, 0]), "equidistant").fold() == pytest.approx(
+        (2 / 3 * theta * 200, theta, 150.0))
+    assert CameraModel(240, 180, K, np.zeros(4), "equidistant").fold() is None
+    tiny = np.array([[30.0, 0, 120], [0, 30.0, 90], [0, 0, 1]])  # corners 5 rad off the axis: past any ray
+    assert CameraModel(240, 180, tiny, np.zeros(4), "equidistant").fold() == pytest.approx((np.pi * 30, np.pi, 150.0))

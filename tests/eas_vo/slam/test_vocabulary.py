@@ -1,12 +1,14 @@
 """DBoW2 vocabularies: the k-majority maths against exact answers and OpenCV's Hamming norm,
 the tree's shape, the IDF weights, and the text format read back."""
 
+import re
+
 import cv2
 import numpy as np
 import pytest
 
 from eas_vo.errors import DataError, EasVoError
-from eas_vo.slam.vocabulary import (_as_words64, check_header, hamming, k_majority, majority, read_vocabulary,
+from eas_vo.slam.vocabulary import (_as_words64, check_vocabulary, hamming, k_majority, majority, read_vocabulary,
                                     train)
 
 
@@ -114,8 +116,66 @@ def test_a_malformed_vocabulary_names_its_line(tmp_path, text, line, what):
     assert str(info.value).startswith(f"{path}:{line}: ")
 
 
-def test_check_header_refuses_a_binary_file(tmp_path):
+def test_check_vocabulary_refuses_a_binary_file(tmp_path):
     path = tmp_path / "ORBvoc.bin"
     path.write_bytes(b"\x00\xff\x10binary")
     with pytest.raises(DataError, match="text vocabulary"):
-        check_header(path)
+        check_vocabulary(path)
+
+
+@pytest.fixture(scope="module")
+def small_text():
+    """A trained vocabulary in the text format: k = 5, L = 2, full (the 5 inner nodes on lines
+    2-6, then their 5 leaves each on lines 7-31, in DBoW2's breadth-first order)."""
+    rng = np.random.default_rng(7)
+    vocabulary = train([random_descriptors(rng, 200) for _ in range(4)], k=5, levels=2, seed=0)
+    assert vocabulary.parent.tolist() == [-1] + [0] * 5 + [p for p in range(1, 6) for _ in range(5)]
+    return vocabulary.text()
+
+
+def _replace_line(text, line, new):
+    lines = text.split("\n")
+    lines[line - 1] = new
+    return "\n".join(lines)
+
+
+BROKEN = {  # name: (damage of the text, the line named ("last": the damaged file's last), what the message says)
+    "64-byte descriptors": (lambda t: _replace_line(t, 3, "0 0 " + "7 " * 64 + "0"), 3, "got 67 fields"),
+    "a byte above 255": (lambda t: _replace_line(t, 4, "0 0 " + "300 " * 32 + "0"), 4, "0..255"),
+    "a NaN weight": (lambda t: t.rsplit(" ", 1)[0] + " nan", 31, "not finite"),
+    "cut in half inside a line": (lambda t: t[: len(t) // 2], "last", "fields"),
+    "cut in half after a line": (lambda t: "\n".join(t.split("\n")[:16]), 4, "inner node .* without children"),
+    "a child of a leaf": (lambda t: _replace_line(t, 9, "6 1 " + "0 " * 32 + "0.5"), 9, "parent is a leaf"),
+    "a sixth child": (lambda t: _replace_line(t, 12, "1 1 " + "0 " * 32 + "0.5"), 12, "more than the header's k = 5"),
+    "a third level": (lambda t: t.replace("5 2 0 0", "5 1 0 0", 1), 7, "deeper than the header's L = 1"),
+    "an empty line": (lambda t: _replace_line(t, 9, ""), 9, "got 0 fields"),
+    "a word that is not a number": (lambda t: _replace_line(t, 5, "0 0 " + "x " * 32 + "0"), 5, "not a number"),
+}
+
+
+@pytest.mark.parametrize("name", BROKEN)
+def test_a_broken_vocabulary_is_refused_naming_its_line(tmp_path, small_text, name):
+    damage, line, what = BROKEN[name]
+    path = tmp_path / "bad.txt"
+    damaged = damage(small_text)
+    path.write_text(damaged)
+    line = damaged.count("\n") + 1 if line == "last" else line
+    with pytest.raises(DataError, match=what) as info:
+        check_vocabulary(path)
+    message = str(info.value)
+    assert re.match(rf"{re.escape(str(path))}:{line}: ", message) and "\n" not in message
+
+
+def test_the_numbers_of_every_line_are_read_back_and_a_final_newline_is_accepted(tmp_path, small_text):
+    """Every node of a file parsed in pieces of a few lines reads back as written."""
+    from eas_vo.slam import vocabulary
+
+    path = tmp_path / "voc.txt"
+    path.write_text(small_text + "\n")  # DBoW2's saveToTextFile ends every line with one
+    whole = read_vocabulary(path)
+    assert whole.text() == small_text
+    try:
+        vocabulary.BLOCK_BYTES, saved = 300, vocabulary.BLOCK_BYTES  # pieces of 2-3 lines
+        assert read_vocabulary(path).text() == small_text
+    finally:
+        vocabulary.BLOCK_BYTES = saved
