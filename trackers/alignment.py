@@ -65,11 +65,11 @@ IDENTITY_MARGIN = 0.7
 
 #: A run stops using a fallback once more than half of its judged steps, and at least
 #: AUDIT_MIN_JUDGED of them, disagree with the primary measurements beside them (FallbackAudit).
-#: A right fallback's steps disagree only where the motion itself changes by more than a step's
-#: angle between two frames: on the ground truth of synthetic:default and of the real excerpt
-#: (20-23 Hz) a step's constant-velocity extrapolation misses the next by more than its own
-#: angle on 5 % and 20 % of the steps. With one in four, 10 judged steps of a right fallback
-#: are a majority against it with a chance of 2 %.
+#: A right fallback's steps disagree only where the motion itself changes by more than the bound
+#: between two frames: on the ground truth of synthetic:default and of the real excerpt
+#: (20-23 Hz) a step's constant-velocity extrapolation misses the next by more than
+#: FINEST_PIXEL_RAD plus its own angle on 3 % and 19 % of the steps. With one in four, 10 judged
+#: steps of a right fallback are a majority against it with a chance of 2 % (binomial).
 AUDIT_MIN_JUDGED = 10
 
 
@@ -77,7 +77,7 @@ AUDIT_MIN_JUDGED = 10
 class FallbackAudit:
     """A fallback judged over a run by the primary tracker's own steps: each step the fallback
     gave (frame k, R_{k-1}_{k}) is compared with the constant-velocity extrapolation of the
-    primary step of frame k-1 and of frame k+1 where there is one. It agrees when it lies
+    primary (not weak) step of frame k-1 and of frame k+1 where there is one. It agrees when it lies
     within FINEST_PIXEL_RAD plus the extrapolation's own angle of one of them (the neighbour
     explains it better than no motion does). Once more than half of at least
     AUDIT_MIN_JUDGED judged steps disagree, the fallback is `off` for the rest of the run and
@@ -93,7 +93,8 @@ class FallbackAudit:
 
     def observe(self, k: int, kind: str, R_prev_cur: np.ndarray | None, dt_s: float) -> None:
         """Frame k's step from frame k-1 over `dt_s` [s]: `kind` "primary" (a step of the primary
-        tracker the fallback leaves alone), "fallback" (the fallback's step) or "other" (none)."""
+        tracker that is not weak), "fallback" (the fallback's step) or "other" (none, or weak:
+        no evidence either way)."""
         self._now = k
         if self._waiting is not None:
             j, R, dt, distances = self._waiting

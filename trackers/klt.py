@@ -74,9 +74,13 @@ class KltConfig(LoopClosureConfig, TwoViewConfig):
             rotation explains them clearly better than no motion, LK tracks corners detected
             afresh from that rotation (where it does not, LK's step stays if it does, else the
             frame is `lost`: no measurement). That measurement
-            replaces LK's if it is not weak; otherwise whichever of LK's step, the retried one
-            and the alignment alone explains the two images best (the alignment alone: an edge
-            without correspondences, inliers 0, `weak`). It keeps frames-only tracking through
+            replaces LK's if it is not weak and agrees with the alignment within a pixel of its
+            finest resolution (alignment.FINEST_PIXEL_RAD); otherwise whichever of LK's step,
+            the retried one and the alignment alone explains the two images best (the alignment
+            alone: an edge without correspondences, inliers 0, `weak`). Across the run, its steps
+            are compared with LK's steps beside them (alignment.FallbackAudit): once most of
+            them disagree, the fallback is off for the rest of the run and `tracker_warnings`
+            names the frames. It keeps frames-only tracking through
             motion LK cannot follow: blur that differs between two frames defeats LK's
             patches, not an alignment of whole images.
     """
@@ -297,18 +301,17 @@ class KltTracker(Tracker):
                     record = replace(record, reason="aligned by intensities alone (no correspondences)")
         self._prev_pyramid = pyramid
         if self._audit is not None:
-            self._audited(k, t_prev, t, step, aligned is not None and step is not None)
+            self._audited(k, t_prev, t, step, aligned is not None and step is not None, record.status == "ok")
         self._last_step = (step.R_i_j, t - t_prev) if step is not None else None
         self._advance(image, record.redetected, cur, ok, k)
         if self._loops is not None:
             edges = edges + self._loops.step(k, image, edges, lost=record.status == "lost")
         return record, edges
 
-    def _audited(self, k: int, t_prev: float, t: float, step: RelativeRotation | None, by_fallback: bool) -> None:
-        """Frame k's step shown to the fallback's audit: the fallback's, LK's own with at least
-        min_inliers inliers (primary: one the fallback leaves alone), or neither."""
-        primary = step is not None and step.inliers >= self.config.min_inliers
-        kind = "fallback" if by_fallback else "primary" if primary else "other"
+    def _audited(self, k: int, t_prev: float, t: float, step: RelativeRotation | None, by_fallback: bool, ok: bool) -> None:
+        """Frame k's step shown to the fallback's audit: the fallback's, LK's own where it is not
+        weak (primary: evidence the fallback can be judged by), or neither."""
+        kind = "fallback" if by_fallback else "primary" if ok and step is not None else "other"
         self._audit.observe(k, kind, None if step is None else step.R_i_j, t - t_prev)
 
     def _aligned_step(self, image: np.ndarray, pyramid: dict, predicted: np.ndarray | None, step: RelativeRotation | None, k: int):
