@@ -10,11 +10,15 @@ exactly the homography K R_i_j K^-1 from view j to view i, whatever the scene's 
 
 from __future__ import annotations
 
+from dataclasses import dataclass, field
+
 import cv2
 import numba
 import numpy as np
 
 from eas_vo import concurrency
+from eas_vo.geometry.rotations import geodesic_angle
+from eas_vo.trackers.motion import scaled_rotation
 from eas_vo.types import CameraModel
 
 #: Focal lengths [px] of the resolutions the alignment and the score work at, whatever the
@@ -25,6 +29,9 @@ from eas_vo.types import CameraModel
 #: the noise. Equal to an eighth, a quarter and half of the DAVIS240's 200 px.
 ALIGN_FOCAL_PX = (25.0, 50.0, 100.0)
 SCORE_FOCAL_PX = 100.0
+#: What the alignment can be held to [rad]: a pixel of its finest resolution (0.57 deg). Two
+#: rotations further apart than that are two different answers, not the same one measured twice.
+FINEST_PIXEL_RAD = 1.0 / ALIGN_FOCAL_PX[-1]
 #: Blur [px of the coarsest resolution] where the search ranks its first candidates: it widens the
 #: score's peak beyond the grid's half step for scenes of fine texture.
 SEARCH_BLUR_PX = 1.0
@@ -54,6 +61,71 @@ MIN_OVERLAP = 0.2
 #: more than 2 deg off leave more; on the real excerpt thinned to every 3rd frame the right
 #: ones leave 0.02-0.64).
 IDENTITY_MARGIN = 0.7
+
+
+#: A run stops using a fallback once more than half of its judged steps, and at least
+#: AUDIT_MIN_JUDGED of them, disagree with the primary measurements beside them (FallbackAudit).
+#: A right fallback's steps disagree only where the motion itself changes by more than the bound
+#: between two frames: on the ground truth of synthetic:default and of the real excerpt
+#: (20-23 Hz) a step's constant-velocity extrapolation misses the next by more than
+#: FINEST_PIXEL_RAD plus its own angle on 3 % and 19 % of the steps. With one in four, 10 judged
+#: steps of a right fallback are a majority against it with a chance of 2 % (binomial).
+AUDIT_MIN_JUDGED = 10
+
+
+@dataclass
+class FallbackAudit:
+    """A fallback judged over a run by the primary tracker's own steps: each step the fallback
+    gave (frame k, R_{k-1}_{k}) is compared with the constant-velocity extrapolation of the
+    primary (not weak) step of frame k-1 and of frame k+1 where there is one. It agrees when it lies
+    within FINEST_PIXEL_RAD plus the extrapolation's own angle of one of them (the neighbour
+    explains it better than no motion does). Once more than half of at least
+    AUDIT_MIN_JUDGED judged steps disagree, the fallback is `off` for the rest of the run and
+    `warning` says so, naming the frames."""
+
+    name: str
+    off: bool = False
+    warning: str = ""
+    judged: list = field(default_factory=list)  # (frame, whether it agreed)
+    _now: int = 0  # the frame observed last
+    _previous: tuple | None = None  # the last frame's (index, kind, R_{k-1}_{k}, dt [s])
+    _waiting: tuple | None = None  # a fallback step not yet compared with its next frame: (k, R, dt, distances)
+
+    def observe(self, k: int, kind: str, R_prev_cur: np.ndarray | None, dt_s: float) -> None:
+        """Frame k's step from frame k-1 over `dt_s` [s]: `kind` "primary" (a step of the primary
+        tracker that is not weak), "fallback" (the fallback's step) or "other" (none, or weak:
+        no evidence either way)."""
+        self._now = k
+        if self._waiting is not None:
+            j, R, dt, distances = self._waiting
+            self._waiting = None
+            if kind == "primary" and k == j + 1:
+                distances.append(self._distance(R, dt, R_prev_cur, dt_s))
+            self._judge(j, distances)
+        if kind == "fallback" and not self.off:
+            previous = self._previous
+            adjacent = previous is not None and previous[0] == k - 1 and previous[1] == "primary"
+            self._waiting = k, R_prev_cur, dt_s, [self._distance(R_prev_cur, dt_s, *previous[2:])] if adjacent else []
+        self._previous = k, kind, R_prev_cur, dt_s
+
+    @staticmethod
+    def _distance(R: np.ndarray, dt_s: float, R_neighbour: np.ndarray, dt_neighbour_s: float) -> float:
+        """How far R lies from the neighbour's extrapolation to dt_s, in units of the bound
+        (FINEST_PIXEL_RAD plus the extrapolation's own angle): above 1 disagrees."""
+        expected = scaled_rotation(R_neighbour, dt_s / dt_neighbour_s)
+        return float(geodesic_angle(expected, R) / (FINEST_PIXEL_RAD + geodesic_angle(np.eye(3), expected)))
+
+    def _judge(self, k: int, distances: list[float]) -> None:
+        """Frame k's fallback step agrees when one of `distances` is at most 1; the run's verdict."""
+        if not distances or self.off:
+            return
+        self.judged.append((k, min(distances) <= 1.0))
+        against = [j for j, agreed in self.judged if not agreed]
+        if len(self.judged) >= AUDIT_MIN_JUDGED and 2 * len(against) > len(self.judged):
+            self.off = True
+            frames = ", ".join(str(j) for j in against)
+            self.warning = (f"the {self.name} fallback is off from frame {self._now + 1}: {len(against)} of the {len(self.judged)} "
+                            f"steps of it judged disagree with the measurements beside them (frames {frames})")
 
 
 class PhotometricAlignment:

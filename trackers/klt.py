@@ -16,9 +16,9 @@ import numpy as np
 
 from eas_vo import concurrency
 from eas_vo.errors import ConfigError
-from eas_vo.geometry.rotations import gyro_rotation
+from eas_vo.geometry.rotations import geodesic_angle, gyro_rotation
 from eas_vo.plugins import Tracker
-from eas_vo.trackers.alignment import PhotometricAlignment
+from eas_vo.trackers.alignment import FINEST_PIXEL_RAD, FallbackAudit, PhotometricAlignment
 from eas_vo.trackers.features import DETECTORS, Features, RefinedMatching
 from eas_vo.trackers.loops import LoopClosureConfig, LoopCloser
 from eas_vo.trackers.measurement import PixelScale, TwoViewConfig, frame_record, measure, weakness
@@ -74,9 +74,13 @@ class KltConfig(LoopClosureConfig, TwoViewConfig):
             rotation explains them clearly better than no motion, LK tracks corners detected
             afresh from that rotation (where it does not, LK's step stays if it does, else the
             frame is `lost`: no measurement). That measurement
-            replaces LK's if it is not weak; otherwise whichever of LK's step, the retried one
-            and the alignment alone explains the two images best (the alignment alone: an edge
-            without correspondences, inliers 0, `weak`). It keeps frames-only tracking through
+            replaces LK's if it is not weak and agrees with the alignment within a pixel of its
+            finest resolution (alignment.FINEST_PIXEL_RAD); otherwise whichever of LK's step,
+            the retried one and the alignment alone explains the two images best (the alignment
+            alone: an edge without correspondences, inliers 0, `weak`). Across the run, its steps
+            are compared with LK's steps beside them (alignment.FallbackAudit): once most of
+            them disagree, the fallback is off for the rest of the run and `tracker_warnings`
+            names the frames. It keeps frames-only tracking through
             motion LK cannot follow: blur that differs between two frames defeats LK's
             patches, not an alignment of whole images.
     """
@@ -152,6 +156,7 @@ class KltTracker(Tracker):
         self._k = -1
         self._last_step: tuple[np.ndarray, float] | None = None  # (R_{k-2}_{k-1}, its interval [s]) for velocity
         self._loops = LoopCloser(self.config, self.camera) if self.config.loop_closure else None
+        self._audit = FallbackAudit("align") if self.config.fallback == "align" else None
 
     @property
     def needs_imu(self) -> bool:
@@ -164,6 +169,12 @@ class KltTracker(Tracker):
     @property
     def closes_loops(self) -> bool:
         return self.config.loop_closure
+
+    @property
+    def tracker_warnings(self) -> tuple[str, ...]:
+        """What the run should say about this tracking: the `align` fallback turned off, with the
+        frames that turned it off (alignment.FallbackAudit)."""
+        return (self._audit.warning,) if self._audit is not None and self._audit.warning else ()
 
     def detect(self, image: np.ndarray) -> np.ndarray:
         """Shi-Tomasi corners of `image`, (N, 2) float32 [px]."""
@@ -275,7 +286,9 @@ class KltTracker(Tracker):
         self._prev_detected = detected
         pyramid = None
         by_gyro = self._predict == "gyro" and predicted is not None
-        if self._alignment is not None and not by_gyro and (step is None or step.inliers < c.min_inliers):
+        aligned = None
+        if (self._alignment is not None and not self._audit.off and not by_gyro
+                and (step is None or step.inliers < c.min_inliers)):
             pyramid = self._alignment.pyramid(image)
             aligned = self._aligned_step(image, pyramid, predicted, step, k)
             if aligned is not None:
@@ -287,11 +300,19 @@ class KltTracker(Tracker):
                 elif n_aligned == 0:
                     record = replace(record, reason="aligned by intensities alone (no correspondences)")
         self._prev_pyramid = pyramid
+        if self._audit is not None:
+            self._audited(k, t_prev, t, step, aligned is not None and step is not None, record.status == "ok")
         self._last_step = (step.R_i_j, t - t_prev) if step is not None else None
         self._advance(image, record.redetected, cur, ok, k)
         if self._loops is not None:
             edges = edges + self._loops.step(k, image, edges, lost=record.status == "lost")
         return record, edges
+
+    def _audited(self, k: int, t_prev: float, t: float, step: RelativeRotation | None, by_fallback: bool, ok: bool) -> None:
+        """Frame k's step shown to the fallback's audit: the fallback's, LK's own where it is not
+        weak (primary: evidence the fallback can be judged by), or neither."""
+        kind = "fallback" if by_fallback else "primary" if ok and step is not None else "other"
+        self._audit.observe(k, kind, None if step is None else step.R_i_j, t - t_prev)
 
     def _aligned_step(self, image: np.ndarray, pyramid: dict, predicted: np.ndarray | None, step: RelativeRotation | None, k: int):
         """A missing LK step, or one with too few inliers, replaced by direct alignment (see
@@ -310,7 +331,8 @@ class KltTracker(Tracker):
         corners = self.detect(self._prev_image) if self._prev_corners is None else self._prev_corners
         cur, ok = lk_track(self.camera, self._prev_image, corners, image, self._lk_params, R_aligned, self.config.fb_max_px)
         retried = measure(self.config, self.camera, corners[ok], cur[ok], k - 1, k) if ok.sum() >= self.config.threshold1 else None
-        if retried is not None and not weakness(self.config, retried, self.camera.focal_px):
+        if (retried is not None and not weakness(self.config, retried, self.camera.focal_px)
+                and geodesic_angle(retried.R_i_j, R_aligned) <= FINEST_PIXEL_RAD):
             return retried, int(ok.sum())
         candidates = [(RelativeRotation(k - 1, k, R_aligned), 0)] + ([(retried, int(ok.sum()))] if retried is not None else [])
         scores = [score(candidate[0].R_i_j) for candidate in candidates]

@@ -313,3 +313,116 @@ def test_other_sensors_and_lenses(camera):
     image = align.pyramid(rendered_through_lens(camera, R_c0_c1, seed=3))
     assert_rotations_close(align.align(source, image, [np.eye(3)]), R_c0_c1, np.radians(0.2))
     assert align.score(source, image, R_c0_c1) > 0.95
+
+
+def test_an_lk_retry_the_alignment_does_not_confirm_is_no_ok_step(monkeypatch):
+    """LK retried from the aligned rotation returns a step that is not weak (many inliers) but
+    3 degrees from the alignment: it is weighed against the alignment by how well each explains
+    the two images, and the alignment's rotation is kept, not LK's taken as `ok`."""
+    from eas_vo.trackers import klt
+    from eas_vo.types import RelativeRotation
+
+    base = blobs(0)
+    R_c0_c1 = large_rotation(np.random.default_rng(200), angle_deg=(25, 35))
+    wrong = R_c0_c1 @ Rotation.from_rotvec(np.radians([0.0, 0.0, 3.0])).as_matrix()
+    calls = []
+    real_measure = klt.measure
+
+    def measure(config, camera, pts_from, pts_to, i, j):
+        calls.append(j)
+        if len(calls) == 1:  # LK's own step
+            return real_measure(config, camera, pts_from, pts_to, i, j)
+        return RelativeRotation(i, j, wrong, inliers=len(pts_from), inlier_ratio=1.0, residual_rad=0.0)
+
+    monkeypatch.setattr(klt, "measure", measure)
+    tracker = KltTracker(KltConfig(fallback="align"), CAMERA)
+    tracker.process(base, 0.0)
+    record, (edge,) = tracker.process(warp_by_rotation(base, R_c0_c1.T), 0.05)
+    assert len(calls) == 2  # the retry ran
+    assert record.reason == "aligned by intensities alone (no correspondences)"
+    assert_rotations_close(edge.R_i_j, R_c0_c1, np.radians(0.5))
+
+
+def constant_turn(n_frames: int, deg_per_frame: float = 1.0) -> list[np.ndarray]:
+    """R_{k-1}_{k} of a camera panning at a constant rate, frames 1..n_frames-1 (index k-1)."""
+    return [Rotation.from_rotvec(np.radians([0.0, deg_per_frame, 0.0])).as_matrix()] * (n_frames - 1)
+
+
+@pytest.mark.parametrize("error_deg, turned_off", [(0.0, False), (0.3, False), (5.0, True)])
+def test_the_audit_turns_off_a_fallback_its_neighbours_contradict(error_deg, turned_off):
+    """Primary steps of a 1 deg/frame pan with a fallback step every third frame: one within the
+    alignment's precision stays on; one 5 degrees off (of roll) is off after AUDIT_MIN_JUDGED
+    judged steps, said once with the frames."""
+    from eas_vo.trackers.alignment import AUDIT_MIN_JUDGED, FallbackAudit
+
+    audit = FallbackAudit("align")
+    off = Rotation.from_rotvec(np.radians([0.0, 0.0, error_deg])).as_matrix()
+    fallback_frames = []
+    for k, R in enumerate(constant_turn(60), start=1):
+        if k % 3 == 0 and not audit.off:
+            fallback_frames.append(k)
+            audit.observe(k, "fallback", R @ off, 0.05)
+        else:
+            audit.observe(k, "primary", R, 0.05)
+    assert audit.off == turned_off
+    if turned_off:
+        assert len(audit.judged) == AUDIT_MIN_JUDGED and fallback_frames == list(range(3, 3 * AUDIT_MIN_JUDGED + 1, 3))
+        frames = ", ".join(map(str, fallback_frames))
+        assert audit.warning == (f"the align fallback is off from frame {3 * AUDIT_MIN_JUDGED + 2}: {AUDIT_MIN_JUDGED} of the "
+                                 f"{AUDIT_MIN_JUDGED} steps of it judged disagree with the measurements beside them (frames {frames})")
+    else:
+        assert audit.warning == "" and len(audit.judged) == len(fallback_frames) == 19
+
+
+def test_the_audit_judges_a_step_by_either_neighbour_and_leaves_unjudged_what_has_none():
+    """A fallback step agrees when one primary neighbour explains it (the motion may change on
+    one side); a run of fallback steps between lost frames has no neighbour and is not judged."""
+    from eas_vo.trackers.alignment import FallbackAudit
+
+    audit = FallbackAudit("align")
+    pan = constant_turn(2)[0]
+    reversed_pan = pan.T
+    audit.observe(1, "primary", pan, 0.05)
+    audit.observe(2, "fallback", reversed_pan, 0.05)  # against frame 1 ...
+    audit.observe(3, "primary", reversed_pan, 0.05)  # ... but frame 3 turns back too
+    audit.observe(4, "other", None, 0.05)
+    audit.observe(5, "fallback", pan, 0.05)
+    audit.observe(6, "fallback", pan, 0.05)
+    audit.observe(7, "other", None, 0.05)
+    assert audit.judged == [(2, True)]
+
+
+@pytest.mark.parametrize("right", [True, False])
+def test_klt_stops_aligning_where_the_alignment_contradicts_lk(monkeypatch, right):
+    """A 1 deg/frame pan where LK measures nothing on every odd frame: an alignment that finds
+    the pan keeps being used; one that answers 5 degrees of roll off is used until
+    AUDIT_MIN_JUDGED of its steps were judged, then no more, and the tracker says so once."""
+    from eas_vo.trackers import klt
+    from eas_vo.trackers.alignment import AUDIT_MIN_JUDGED
+
+    real_measure = klt.measure
+    monkeypatch.setattr(klt, "measure", lambda config, camera, a, b, i, j: None if j % 2 else real_measure(config, camera, a, b, i, j))
+    error = np.eye(3) if right else Rotation.from_rotvec(np.radians([0.0, 0.0, 5.0])).as_matrix()
+    aligned_at = []
+
+    def align(self, source, image, starts):
+        aligned_at.append(tracker._k)
+        return steps[tracker._k - 1] @ error
+
+    monkeypatch.setattr(PhotometricAlignment, "align", align)
+    n_frames = 2 * AUDIT_MIN_JUDGED + 12
+    steps = constant_turn(n_frames)
+    base = textured_image(3, shapes=300)
+    tracker = KltTracker(KltConfig(fallback="align"), CAMERA)
+    R_0_k = np.eye(3)
+    for k in range(n_frames):
+        R_0_k = R_0_k @ steps[k - 1] if k else R_0_k
+        tracker.process(warp_by_rotation(base, R_0_k.T), 0.05 * k)
+    odd = list(range(1, n_frames, 2))
+    if right:
+        assert aligned_at == odd and tracker.tracker_warnings == ()
+    else:
+        assert aligned_at == odd[:AUDIT_MIN_JUDGED]
+        (warning,) = tracker.tracker_warnings
+        assert warning.startswith(f"the align fallback is off from frame {odd[AUDIT_MIN_JUDGED - 1] + 2}: ")
+        assert warning.endswith(f"(frames {', '.join(map(str, odd[:AUDIT_MIN_JUDGED]))})")
