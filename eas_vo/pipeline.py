@@ -116,7 +116,8 @@ def _run_into(parts: Pipeline, config: ResolvedConfig, out: Path | None, progres
         errors, offset, offset_estimated = evaluate(config, parts.dataset, t, R_w_c, tracked.edges)
         metrics = summarise(config, parts.dataset, tracked, errors, offset, offset_estimated,
                             time.perf_counter() - started, load_s, agreement, imu_offset, verdict, retracked)
-        metrics["data_warnings"] = parts.imu_warnings + metrics["data_warnings"] + list(parts.backend.solver_warnings)
+        metrics["data_warnings"] = (parts.imu_warnings + metrics["data_warnings"] + list(parts.tracker.tracker_warnings)
+                                  + list(parts.backend.solver_warnings))
         metrics["gyro_use"] = _gyro_use(parts, config, verdict, retracked)
         result = RunResult(t, R_w_c, tracked.records, tracked.edges, errors, metrics, parts.backend.causal_R_w_c,
                            parts.dataset.clock_origin_ns)

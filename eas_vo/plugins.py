@@ -190,7 +190,7 @@ class Tracker:
 
     Required: `process(image, t)`. Optional: `reset()`, which `__init__` calls last, so a
     tracker sets up its per-sequence state there, `submit` (overlap with the next image),
-    `needs_imu`, `uses_imu`, `imu_use`, `closes_loops`,
+    `needs_imu`, `uses_imu`, `imu_use`, `closes_loops`, `tracker_warnings`,
     `needs_events` (default False) and `reads_images` (default True). It never knows which
     frontend made the images. Frame indices count the images given since construction (or reset), from 0.
     """
@@ -207,6 +207,10 @@ class Tracker:
     #: `no_image` frontend whatever run.frontend says (no image is made; `image` is None), so an
     #: event-only dataset needs no frontend choice.
     reads_images: ClassVar[bool] = True
+    #: One line per way the tracking fell short that no frame's status says (a fallback turned
+    #: off for the rest of the run), which the run prints as warnings once it has tracked.
+    #: Empty by default.
+    tracker_warnings: tuple[str, ...] = ()
     #: What the tracker reads the gyro for when `uses_imu`, for the run's summary ("gyro used by
     #: the NAME tracker as ..."): the built-ins start their search from it (klt: where the
     #: features move; cmax: each window's first rotation) and measure the rotation themselves.

@@ -195,3 +195,13 @@ def test_the_imu_clock_warning_names_what_the_tracker_measured(tracker, frontend
     cfg = config.resolve(None, {"tracker": tracker, "frontend": frontend})
     (said,) = _imu_disagrees(cfg, ImuAgreement(np.eye(3), 100, 90, 0.6, 0.012, False, 0.004, 0.008, 0.5), reclocked=False)
     assert f"the IMU's clock, or {names}, is off by that" in said and "no_image" not in said
+
+
+def test_the_trackers_own_warnings_reach_the_run(sequence_copy, monkeypatch):
+    """A tracker's `tracker_warnings` (here klt's, as when its fallback was turned off) are
+    among the run's warnings, once."""
+    from eas_vo.trackers.klt import KltTracker
+
+    monkeypatch.setattr(KltTracker, "tracker_warnings", property(lambda self: ("the align fallback is off",)))
+    cfg = config.resolve(None, {"dataset": str(sequence_copy), "duration_s": 0.5})
+    assert pipeline.run(cfg).metrics["data_warnings"].count("the align fallback is off") == 1

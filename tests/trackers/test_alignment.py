@@ -75,9 +75,9 @@ def test_align_fallback_recovers_what_lk_lost(seed):
         tracker = KltTracker(KltConfig(fallback=fallback), CAMERA)
         tracker.process(base, 0.0)
         results[fallback] = tracker.process(moved, 0.05)
-    lk_record, (lk_edge,) = results["none"]
-    assert lk_record.status == "weak" and lk_record.inliers < 15
-    assert np.degrees(Rotation.from_matrix(R_c0_c1.T @ lk_edge.R_i_j).magnitude()) > 5
+    lk_record, lk_edges = results["none"]
+    assert lk_record.status in ("weak", "lost") and lk_record.inliers < 15
+    assert all(np.degrees(Rotation.from_matrix(R_c0_c1.T @ e.R_i_j).magnitude()) > 5 for e in lk_edges)
     record, (edge,) = results["align"]
     assert record.status == "ok" and record.redetected
     assert_rotations_close(edge.R_i_j, R_c0_c1, np.radians(0.5))
