@@ -18,7 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from eas_vo.errors import EasVoError
-from eas_vo.geometry.rotations import geodesic_angle, gyro_rotation, matrix_to_rotvec
+from eas_vo.geometry.rotations import geodesic_angle, gyro_rotation, matrix_to_rotvec, rotvec_to_matrix
 from eas_vo.types import MAX_GAP_READINGS, ImuSeries, RelativeRotation
 
 #: No MEMS gyro measures faster [rad/s]: the widest full scale sold is +-4000 deg/s (e.g.
@@ -109,6 +109,8 @@ MAX_SCALE_ERROR = 0.2
 #: so a smaller bias cannot be told from it.
 MAX_BIAS_RAD_S = 0.15
 FIT_SIGMAS = 4.0
+#: A gyro read in deg/s as rad/s (or the reverse) turns this many times as far as the images.
+DEG_PER_RAD = float(np.degrees(1.0))
 #: The gyro's white-noise density [rad/s/sqrt(Hz)] and the sigma of the constant bias it may keep
 #: [rad/s], for an IMU whose own calibration is not given: the MPU-6150-like DAVIS IMU the
 #: simulator models (datasets.simulator ImuModel) and the gtsam backend assumes (backend.gyro_noise,
@@ -136,6 +138,8 @@ class GyroVerdict:
             the images' plus a constant bias times the interval (least squares), and its
             standard error.
         bias_rad_s, bias_se_rad_s: that bias's norm [rad/s] and its standard error.
+        rescaled_disagreeing: the judged pairs that still disagree (DISAGREEMENT) with the
+            images' rotation vectors multiplied by `scale`.
         still: (frame j, angle [rad] between the two rotations) of each consecutive pair (j - 1,
             j) over which the edge turns while the gyro reads still (still_gyro_pairs), of the
             `compared` pairs with an estimator's own sigma that the gyro measures.
@@ -148,6 +152,7 @@ class GyroVerdict:
     scale_se: float = 0.0
     bias_rad_s: float = 0.0
     bias_se_rad_s: float = 0.0
+    rescaled_disagreeing: int = 0
     still: tuple[tuple[int, float], ...] = ()
     compared: int = 0
 
@@ -155,6 +160,19 @@ class GyroVerdict:
     def scale_off(self) -> bool:
         off = abs(self.scale - 1.0)
         return off > MAX_SCALE_ERROR and off > FIT_SIGMAS * self.scale_se
+
+    @property
+    def scaled_alike(self) -> bool:
+        """The gyro and the images turn about the same axes, one scale apart (scale_off, and once
+        the images' rotations are scaled by it most judged pairs agree), by no factor a unit
+        explains (deg/s for rad/s, within 10 %). The images' rotations scale with 1 / focal_px
+        (an image shift of d px is read as d / focal_px rad), while a MEMS gyro's sensitivity
+        is within 3 % of its datasheet's: this points at the camera's focal length (a
+        calibration of another resolution or binning: a factor of 2), or at a gyro read with
+        the wrong full-scale setting, not at its axes, signs or clock."""
+        if not (self.scale_off and self.scale > 0 and self.rescaled_disagreeing <= self.judged / 2):
+            return False
+        return min(abs(np.log(self.scale * f)) for f in (DEG_PER_RAD, 1 / DEG_PER_RAD)) > np.log(1.1)
 
     @property
     def bias_off(self) -> bool:
@@ -166,8 +184,11 @@ class GyroVerdict:
 
     @property
     def contradicts(self) -> bool:
-        """The images contradict the gyro: most judged pairs disagree, or its scale or bias is off."""
-        return self.can_tell and (self.disagreeing > self.judged / 2 or self.scale_off or self.bias_off)
+        """The images contradict the gyro: most judged pairs disagree, or its scale or bias is off,
+        unless the two are one scale apart about the same axes (scaled_alike: the images' scale is
+        as suspect as the gyro's, and a bias fitted with one scale absorbs what differs per axis)."""
+        return self.can_tell and not self.scaled_alike and (self.disagreeing > self.judged / 2 or self.scale_off
+                                                            or self.bias_off)
 
     @property
     def use(self) -> str:
@@ -191,7 +212,7 @@ class GyroVerdict:
             if not findings:
                 return [f"{said}. Check its units (rad/s), signs, axes (run.imu_rotvec_cam) and clock (run.imu_time_offset_s)"]
             return [f"{said}; {findings[0]}"] + findings[1:]
-        findings = self._still_warnings() + findings
+        findings = self._still_warnings() + self._scale_warnings() + findings
         if not self.can_tell:
             return [f"the gyro is used unchecked: the images measured {self.judged} turning frame pairs confidently, "
                     f"at least {MIN_JUDGED_PAIRS} are needed to check it"] + findings
@@ -206,6 +227,17 @@ class GyroVerdict:
                 f"of {self.compared} frame pairs (frames {frames[0]}-{frames[-1]}, up to {np.degrees(max(off)):.2f} deg "
                 "apart): the scene moves before a still camera (independent motion), or the gyro measures nothing; "
                 "those frames are weak"]
+
+    def _scale_warnings(self) -> list[str]:
+        """One line when the gyro and the images are one scale apart (scaled_alike)."""
+        if not self.can_tell or not self.scaled_alike:
+            return []
+        return [f"the gyro turns {self.scale:.2f} times as far as the images (+-{self.scale_se:.2f}) about the same axes "
+                f"over {self.judged} confidently measured frame pairs ({self.judged - self.rescaled_disagreeing} agree once "
+                "scaled): one scale points at the camera's focal length (the images' rotations scale with 1 / focal_px; "
+                f"it looks {1 / self.scale:.2f} times the calibration's: check the calibration against the frames' size "
+                "and binning) or the gyro's full-scale setting, not its axes, signs or clock; a MEMS gyro's sensitivity "
+                "is within 3 % of its datasheet's, so the gyro is used"]
 
     def _why(self) -> str:
         if self.disagreeing > self.judged / 2:
@@ -244,8 +276,11 @@ def judge_gyro(t: np.ndarray, edges, imu: ImuSeries) -> GyroVerdict:
     if not judged.any():
         return GyroVerdict(0, 0, float("nan"), **noted)
     dt = np.array([t[e.j] - t[e.i] for e in steps])[judged]
-    fitted = _scale_and_bias(matrix_to_rotvec(R_vision[judged]), matrix_to_rotvec(R_gyro[judged]), dt)
-    return GyroVerdict(int(judged.sum()), int(disagree.sum()), float(np.degrees(np.median(off[judged]))), *fitted, **noted)
+    v = matrix_to_rotvec(R_vision[judged])
+    fitted = _scale_and_bias(v, matrix_to_rotvec(R_gyro[judged]), dt)
+    rescaled_disagreeing = int(disagreement(R_gyro[judged], rotvec_to_matrix(v * fitted[0]))[1].sum())
+    return GyroVerdict(int(judged.sum()), int(disagree.sum()), float(np.degrees(np.median(off[judged]))), *fitted,
+                       rescaled_disagreeing, **noted)
 
 
 def still_gyro_pairs(t: np.ndarray, edges, imu: ImuSeries) -> tuple[int, list[tuple[RelativeRotation, float]]]:

@@ -216,9 +216,11 @@ class CmaxTracker(Tracker):
             status, reason = "weak", f"quadrants disagree ({residual:.2f} px)"
         elif not np.isfinite(sigma):
             status, reason, sigma = "weak", "flat objective", FLAT_SIGMA_RAD
-        # inliers: the events the estimate rests on (what makes an edge confident for the gyro's check)
+        # the edge's inliers: the events an ok estimate rests on, none for a weak one (what makes an
+        # edge confident for the gyro's check, imu_check.CONFIDENT_INLIERS: a weak window is not)
         record = FrameRecord(k, t, 0, n, status, False, residual_px=residual, reason=reason, events=n, contrast_gain=gain)
-        return record, [RelativeRotation(k - 1, k, R, inliers=n, estimated_sigma_rad=min(sigma, FLAT_SIGMA_RAD))]
+        confident = n if status == "ok" else 0
+        return record, [RelativeRotation(k - 1, k, R, inliers=confident, estimated_sigma_rad=min(sigma, FLAT_SIGMA_RAD))]
 
     def _windows(self, events: np.ndarray, t_prev: float, t: float):
         """(events, t0, t1) per window: its events, all within [t_prev, t), and the part [t0, t1]

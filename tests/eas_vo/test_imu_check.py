@@ -6,7 +6,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from eas_vo.errors import EasVoError
-from eas_vo.geometry.rotations import gyro_rotation
+from eas_vo.geometry.rotations import gyro_rotation, matrix_to_rotvec, rotvec_to_matrix
 from eas_vo.imu_check import CONFIDENT_INLIERS, MAX_GYRO_RAD_S, MIN_JUDGED_PAIRS, check_readings, judge_gyro
 from eas_vo.types import ImuSeries, RelativeRotation
 
@@ -119,7 +119,8 @@ def test_the_images_say_when_they_cannot_tell():
 
 @pytest.mark.parametrize("scale, bias, verdict", [
     (1.0, 0.0, "used"), (1.03, 0.01, "used"),  # within a MEMS gyro's tolerance and the graph's prior
-    (0.7, 0.0, "not used"), (1.3, 0.0, "not used"), (1.0, 0.25, "not used"),
+    (0.7, 0.0, "used"), (1.3, 0.0, "used"),  # one scale about the same axes: the focal length, or its range
+    (1.0, 0.25, "not used"),
 ])
 def test_a_gyro_turning_too_far_or_reading_a_constant_bias_is_contradicted(scale, bias, verdict):
     imu = gyro()
@@ -128,8 +129,31 @@ def test_a_gyro_turning_too_far_or_reading_a_constant_bias_is_contradicted(scale
     judged = judge_gyro(FRAMES, edges, wrong)
     assert judged.use == verdict and judged.scale == pytest.approx(scale, abs=0.01)
     assert judged.bias_rad_s == pytest.approx(bias, abs=0.01)
-    if verdict == "not used":
+    if scale != 1.03 and (scale, bias) != (1.0, 0.0):
         assert ("times as far" if scale != 1.0 else "rad/s (+-") in judged.warnings(False, [])[0]
+
+
+@pytest.mark.parametrize("focal_factor", [0.5, 1.4])
+def test_images_one_scale_off_the_gyro_point_at_the_focal_length_and_the_gyro_is_used(focal_factor):
+    """Images measured with the focal length focal_factor times the true one read rotations
+    across the optical axis (x, y) 1 / focal_factor times too large (the roll, z, right): the
+    gyro is used, and the warning names the focal length, not the gyro's units, axes or clock."""
+    imu = gyro()
+    edges = [RelativeRotation(e.i, e.j, rotvec_to_matrix(matrix_to_rotvec(e.R_i_j) * [1 / focal_factor, 1 / focal_factor, 1]),
+                              e.inliers) for e in edges_from(imu)]
+    verdict = judge_gyro(FRAMES, edges, imu)
+    assert verdict.scaled_alike and not verdict.contradicts and verdict.use == "used"
+    (said,) = verdict.warnings(False, [])
+    assert "focal length" in said and f"looks {1 / verdict.scale:.2f} times" in said
+    assert "not used" not in said and "Check its units" not in said
+
+
+def test_a_gyro_one_unit_factor_off_is_still_not_used():
+    """Rates in deg/s read as rad/s, on motion slow enough that no reading exceeds a MEMS range."""
+    imu = gyro()
+    slow = changed(imu, rates=imu.gyro * 0.02)
+    verdict = judge_gyro(FRAMES, edges_from(slow), changed(slow, rates=np.degrees(slow.gyro)))
+    assert verdict.scale_off and not verdict.scaled_alike and verdict.use == "not used"
 
 
 def still_gyro(seed=1) -> ImuSeries:
