@@ -109,6 +109,14 @@ MAX_SCALE_ERROR = 0.2
 #: so a smaller bias cannot be told from it.
 MAX_BIAS_RAD_S = 0.15
 FIT_SIGMAS = 4.0
+#: The scale and bias fits refute the gyro only over judged pairs spanning this long [s]: the
+#: images' systematic errors (the events' latency at one speed, one texture in view) last as long
+#: as the motion that causes them, and the fits' standard errors, taking the pairs for
+#: independent, understate them over a short stretch (a right gyro over the first second of a
+#: simulated dim sequence, seed 91: a bias of 0.10 +- 0.02 rad/s); the simulated hand-held
+#: motion changes speed and axis within about a second. Most pairs disagreeing refutes it over
+#: any span: a wrong sign, axis or clock shows in every pair.
+MIN_FIT_SPAN_S = 1.0
 #: A gyro read in deg/s as rad/s (or the reverse) turns this many times as far as the images.
 DEG_PER_RAD = float(np.degrees(1.0))
 #: The gyro's white-noise density [rad/s/sqrt(Hz)] and the sigma of the constant bias it may keep
@@ -138,6 +146,7 @@ class GyroVerdict:
             the images' plus a constant bias times the interval (least squares), and its
             standard error.
         bias_rad_s, bias_se_rad_s: that bias's norm [rad/s] and its standard error.
+        judged_span_s: from the start of the first judged pair to the end of the last [s].
         rescaled_disagreeing: the judged pairs that still disagree (DISAGREEMENT) with the
             images' rotation vectors multiplied by `scale`.
         still: (frame j, angle [rad] between the two rotations) of each consecutive pair (j - 1,
@@ -152,6 +161,7 @@ class GyroVerdict:
     scale_se: float = 0.0
     bias_rad_s: float = 0.0
     bias_se_rad_s: float = 0.0
+    judged_span_s: float = 0.0
     rescaled_disagreeing: int = 0
     still: tuple[tuple[int, float], ...] = ()
     compared: int = 0
@@ -183,12 +193,19 @@ class GyroVerdict:
         return self.judged >= MIN_JUDGED_PAIRS
 
     @property
+    def fit_off(self) -> bool:
+        """The scale or bias fit is off (whether or not the pairs span enough to refute the gyro)."""
+        return self.can_tell and not self.scaled_alike and (self.scale_off or self.bias_off)
+
+    @property
     def contradicts(self) -> bool:
-        """The images contradict the gyro: most judged pairs disagree, or its scale or bias is off,
-        unless the two are one scale apart about the same axes (scaled_alike: the images' scale is
-        as suspect as the gyro's, and a bias fitted with one scale absorbs what differs per axis)."""
-        return self.can_tell and not self.scaled_alike and (self.disagreeing > self.judged / 2 or self.scale_off
-                                                            or self.bias_off)
+        """The images contradict the gyro: most judged pairs disagree, or (over MIN_FIT_SPAN_S or
+        more) its scale or bias is off, unless the two are one scale apart about the same axes
+        (scaled_alike: the images' scale is as suspect as the gyro's, and a bias fitted with one
+        scale absorbs what differs per axis)."""
+        if not self.can_tell or self.scaled_alike:
+            return False
+        return self.disagreeing > self.judged / 2 or (self.fit_off and self.judged_span_s >= MIN_FIT_SPAN_S)
 
     @property
     def use(self) -> str:
@@ -212,7 +229,7 @@ class GyroVerdict:
             if not findings:
                 return [f"{said}. Check its units (rad/s), signs, axes (run.imu_rotvec_cam) and clock (run.imu_time_offset_s)"]
             return [f"{said}; {findings[0]}"] + findings[1:]
-        findings = self._still_warnings() + self._scale_warnings() + findings
+        findings = self._still_warnings() + self._scale_warnings() + self._short_warnings() + findings
         if not self.can_tell:
             return [f"the gyro is used unchecked: the images measured {self.judged} turning frame pairs confidently, "
                     f"at least {MIN_JUDGED_PAIRS} are needed to check it"] + findings
@@ -227,6 +244,14 @@ class GyroVerdict:
                 f"of {self.compared} frame pairs (frames {frames[0]}-{frames[-1]}, up to {np.degrees(max(off)):.2f} deg "
                 "apart): the scene moves before a still camera (independent motion), or the gyro measures nothing; "
                 "those frames are weak"]
+
+    def _short_warnings(self) -> list[str]:
+        """One line when the fit is off over too short a span to refute the gyro (fit_off, not contradicts)."""
+        if not self.fit_off or self.contradicts:
+            return []
+        return [f"the gyro is used, though {self._why()}: those pairs span {self.judged_span_s:.2f} s, too short to tell "
+                f"a gyro's scale or bias from the images' own systematic errors (at least {MIN_FIT_SPAN_S:g} s are "
+                "needed); a longer window checks it"]
 
     def _scale_warnings(self) -> list[str]:
         """One line when the gyro and the images are one scale apart (scaled_alike)."""
@@ -279,8 +304,10 @@ def judge_gyro(t: np.ndarray, edges, imu: ImuSeries) -> GyroVerdict:
     v = matrix_to_rotvec(R_vision[judged])
     fitted = _scale_and_bias(v, matrix_to_rotvec(R_gyro[judged]), dt)
     rescaled_disagreeing = int(disagreement(R_gyro[judged], rotvec_to_matrix(v * fitted[0]))[1].sum())
+    pairs = [e for e, m in zip(steps, judged) if m]
+    span = float(t[pairs[-1].j] - t[pairs[0].i])
     return GyroVerdict(int(judged.sum()), int(disagree.sum()), float(np.degrees(np.median(off[judged]))), *fitted,
-                       rescaled_disagreeing, **noted)
+                       span, rescaled_disagreeing, **noted)
 
 
 def still_gyro_pairs(t: np.ndarray, edges, imu: ImuSeries) -> tuple[int, list[tuple[RelativeRotation, float]]]:

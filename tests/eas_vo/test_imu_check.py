@@ -156,6 +156,21 @@ def test_a_gyro_one_unit_factor_off_is_still_not_used():
     assert verdict.scale_off and not verdict.scaled_alike and verdict.use == "not used"
 
 
+def test_a_fit_over_under_a_second_does_not_refute_the_gyro_but_a_wrong_sign_does():
+    """Over 0.95 s (20 frames) a bias or scale beyond the thresholds may be the images' own
+    systematic error: the gyro is used and the warning says the span is too short; a sign flip
+    disagrees in every pair and is refused over any span."""
+    imu = gyro()
+    second = FRAMES[:20]
+    edges = [e for e in edges_from(imu) if e.j < len(second)]
+    biased = changed(imu, rates=imu.gyro + np.array([0.25, -0.25, 0.25]) / np.sqrt(3))
+    short = judge_gyro(second, edges, biased)
+    assert short.bias_off and short.judged_span_s < 1.0 and not short.contradicts and short.use == "used"
+    assert any("too short to tell" in w for w in short.warnings(False, []))
+    assert judge_gyro(FRAMES, edges_from(imu), biased).contradicts  # the same gyro over 1.95 s
+    assert judge_gyro(second, edges, changed(imu, rates=-imu.gyro)).use == "not used"
+
+
 def still_gyro(seed=1) -> ImuSeries:
     """A 200 Hz gyro on a still camera: the noise model's white noise and a constant bias."""
     from eas_vo.imu_check import GYRO_BIAS_RAD_S, GYRO_NOISE_DENSITY
