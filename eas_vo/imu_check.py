@@ -177,9 +177,13 @@ class GyroVerdict:
         the images' rotations are scaled by it most judged pairs agree), by no factor a unit
         explains (deg/s for rad/s, within 10 %). The images' rotations scale with 1 / focal_px
         (an image shift of d px is read as d / focal_px rad), while a MEMS gyro's sensitivity
-        is within 3 % of its datasheet's: this points at the camera's focal length (a
-        calibration of another resolution or binning: a factor of 2), or at a gyro read with
-        the wrong full-scale setting, not at its axes, signs or clock."""
+        is within 3 % of its datasheet's: this points first at the camera's focal length (a
+        calibration of another resolution or binning: a factor of 2), then at a gyro read with
+        the wrong full-scale setting, not at its axes, signs or clock. The rates alone cannot
+        tell the two apart (a focal length off scales cmax's roll too, as the gyro's scale
+        would: 0.54 about the optical axis, 0.68 across it, on a 2 s simulated sequence, seed
+        7, without distortion, read with half its focal length), so the gyro is not fused with
+        images it is one scale apart from (contradicts), and the warning names the camera first."""
         if not (self.scale_off and self.scale > 0 and self.rescaled_disagreeing <= self.judged / 2):
             return False
         return min(abs(np.log(self.scale * f)) for f in (DEG_PER_RAD, 1 / DEG_PER_RAD)) > np.log(1.1)
@@ -195,17 +199,18 @@ class GyroVerdict:
     @property
     def fit_off(self) -> bool:
         """The scale or bias fit is off (whether or not the pairs span enough to refute the gyro)."""
-        return self.can_tell and not self.scaled_alike and (self.scale_off or self.bias_off)
+        return self.can_tell and (self.scale_off or self.bias_off)
 
     @property
     def contradicts(self) -> bool:
-        """The images contradict the gyro: most judged pairs disagree, or (over MIN_FIT_SPAN_S or
-        more) its scale or bias is off, unless the two are one scale apart about the same axes
-        (scaled_alike: the images' scale is as suspect as the gyro's, and a bias fitted with one
-        scale absorbs what differs per axis)."""
-        if not self.can_tell or self.scaled_alike:
+        """The images contradict the gyro: most judged pairs disagree (unless the two are one scale
+        apart, scaled_alike: then the scale decides), or over MIN_FIT_SPAN_S or more its scale
+        or bias is off."""
+        if not self.can_tell:
             return False
-        return self.disagreeing > self.judged / 2 or (self.fit_off and self.judged_span_s >= MIN_FIT_SPAN_S)
+        if self.disagreeing > self.judged / 2 and not self.scaled_alike:
+            return True
+        return self.fit_off and self.judged_span_s >= MIN_FIT_SPAN_S
 
     @property
     def use(self) -> str:
@@ -226,10 +231,12 @@ class GyroVerdict:
         if self.contradicts:
             again = "; the frames were tracked again without it" if retracked else ""
             said = f"the gyro is not used: {self._why()}{again}"
+            if self.scaled_alike:
+                return [f"{said}. {self._scale_hint()}"] + findings
             if not findings:
                 return [f"{said}. Check its units (rad/s), signs, axes (run.imu_rotvec_cam) and clock (run.imu_time_offset_s)"]
             return [f"{said}; {findings[0]}"] + findings[1:]
-        findings = self._still_warnings() + self._scale_warnings() + self._short_warnings() + findings
+        findings = self._still_warnings() + self._short_warnings() + findings
         if not self.can_tell:
             return [f"the gyro is used unchecked: the images measured {self.judged} turning frame pairs confidently, "
                     f"at least {MIN_JUDGED_PAIRS} are needed to check it"] + findings
@@ -253,19 +260,15 @@ class GyroVerdict:
                 f"a gyro's scale or bias from the images' own systematic errors (at least {MIN_FIT_SPAN_S:g} s are "
                 "needed); a longer window checks it"]
 
-    def _scale_warnings(self) -> list[str]:
-        """One line when the gyro and the images are one scale apart (scaled_alike)."""
-        if not self.can_tell or not self.scaled_alike:
-            return []
-        return [f"the gyro turns {self.scale:.2f} times as far as the images (+-{self.scale_se:.2f}) about the same axes "
-                f"over {self.judged} confidently measured frame pairs ({self.judged - self.rescaled_disagreeing} agree once "
-                "scaled): one scale points at the camera's focal length (the images' rotations scale with 1 / focal_px; "
-                f"it looks {1 / self.scale:.2f} times the calibration's: check the calibration against the frames' size "
-                "and binning) or the gyro's full-scale setting, not its axes, signs or clock; a MEMS gyro's sensitivity "
-                "is within 3 % of its datasheet's, so the gyro is used"]
+    def _scale_hint(self) -> str:
+        """What one scale between the gyro and the images points at (scaled_alike)."""
+        return (f"Turning about the same axes ({self.judged - self.rescaled_disagreeing} of {self.judged} pairs agree once "
+                "scaled), the two are one scale apart: check the camera's focal length first (the images' rotations "
+                f"scale with 1 / focal_px; it looks {1 / self.scale:.2f} times the calibration's: a calibration of another "
+                "resolution or binning), then the gyro's full-scale setting; not its axes, signs or clock")
 
     def _why(self) -> str:
-        if self.disagreeing > self.judged / 2:
+        if self.disagreeing > self.judged / 2 and not self.scaled_alike:
             return (f"{self.disagreeing} of {self.judged} confidently measured frame pairs disagree with it "
                     f"(median {self.median_off_deg:.2f} deg apart)")
         if self.scale_off:
