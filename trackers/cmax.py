@@ -70,7 +70,8 @@ class CmaxConfig:
         window_events: events per window when window_s is 0: the interval between two samples is
             cut into round(N / window_events) windows (at least one); an interval with fewer
             events than this takes the window_events events before the sample (reaching back).
-        window_s: window length [s] instead (0: by events): round(interval / window_s) windows.
+        window_s: window length [s] instead (0: by events): round(interval / window_s) windows,
+            one holding over 2 * window_events events cut further by count.
         sigma_px: the Gaussian smoothing the image of warped events [px of the sensor].
         min_events: a window with fewer events is not measured (the frame is `lost`).
         lost_focus, lost_gain: a focus (the optimum's contrast over that of warps FOCUS_STEP_PX
@@ -213,24 +214,26 @@ class CmaxTracker(Tracker):
 
     def _windows(self, events: np.ndarray, t_prev: float, t: float):
         """(events, t0, t1) per window: its events, all within [t_prev, t), and the part [t0, t1]
-        of [t_prev, t] it stands for; None when some window would hold fewer than min_events (so
-        that an interval of any length makes at most len(events) / min_events windows)."""
+        of [t_prev, t] it stands for; None when some window would hold fewer than min_events.
+        An interval of any length or density makes at most len(events) / min_events windows,
+        none of over 2 * window_events events (the memory a window's measurement takes, about
+        110 bytes an event, is bounded by the configuration)."""
         c = self.config
-        n_events = len(events)
-        if c.window_s > 0:
-            n = max(1, round((t - t_prev) / c.window_s))
-            if n * c.min_events > n_events:  # some window would hold fewer than min_events
-                return None
-            cuts = np.linspace(t_prev, t, n + 1)
-            bounds = np.searchsorted(events["t"], cuts)
-            return [(events[bounds[i]:bounds[i + 1]], cuts[i], cuts[i + 1]) for i in range(n)]
-        if n_events < c.min_events:
+        if c.window_s <= 0:
+            return _by_count(events, t_prev, t, c.window_events, c.min_events)
+        n = max(1, round((t - t_prev) / c.window_s))
+        if n * c.min_events > len(events):  # some window would hold fewer than min_events
             return None
-        n = max(1, round(n_events / c.window_events))
-        bounds = np.linspace(0, n_events, n + 1).round().astype(int)
-        times = events["t"]
-        cuts = [t_prev] + [0.5 * (times[b - 1] + times[b]) for b in bounds[1:-1]] + [t]
-        return [(events[bounds[i]:bounds[i + 1]], cuts[i], cuts[i + 1]) for i in range(n)]
+        cuts = np.linspace(t_prev, t, n + 1)
+        bounds = np.searchsorted(events["t"], cuts)
+        windows = []
+        for i in range(n):
+            chunk = events[bounds[i]:bounds[i + 1]]
+            if len(chunk) > 2 * c.window_events:
+                windows += _by_count(chunk, cuts[i], cuts[i + 1], c.window_events, c.min_events)
+            else:
+                windows.append((chunk, cuts[i], cuts[i + 1]))
+        return windows
 
     def measure(self, events: np.ndarray, t0: float, t1: float) -> Window:
         """The angular velocity of one window of events standing for [t0, t1] [s]."""
@@ -401,6 +404,19 @@ def _newton(cost, p: np.ndarray, H: np.ndarray | None) -> tuple[np.ndarray, floa
             break
         solver.update(*cost(trial))
     return solver.p, solver.f
+
+
+def _by_count(events: np.ndarray, t0: float, t1: float, per_window: int, min_events: int):
+    """[t0, t1]'s `events` cut into round(N / per_window) windows (at least one) of about equal
+    counts, each standing for [t0, t1] cut halfway between its last event and the next's;
+    None under min_events."""
+    if len(events) < min_events:
+        return None
+    n = max(1, round(len(events) / per_window))
+    bounds = np.linspace(0, len(events), n + 1).round().astype(int)
+    times = events["t"]
+    cuts = [t0] + [0.5 * (times[b - 1] + times[b]) for b in bounds[1:-1]] + [t1]
+    return [(events[bounds[i]:bounds[i + 1]], cuts[i], cuts[i + 1]) for i in range(n)]
 
 
 def _longest_gap(times: np.ndarray, t0: float, t1: float) -> float:

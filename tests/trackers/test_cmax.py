@@ -151,8 +151,12 @@ def test_an_interval_is_measured_only_from_its_own_events():
 
 def test_a_window_of_any_length_holds_a_bounded_number_of_windows():
     """window_s = 1 ms over an interval of 1000 s (times in the wrong unit) is not cut into a
-    million windows: a window under min_events makes the frame lost before any is made."""
+    million windows: a window under min_events makes the frame lost before any is made; a
+    window of time holds at most 2 * window_events events (the memory one takes)."""
     events = events_of((0.0, 60.0, 0.0), "davis240", 0.05)
     tracker = CmaxTracker(CmaxConfig(window_s=0.001), SENSORS["davis240"].model())
     assert tracker._windows(events, 0.0, 1000.0) is None
     assert len(tracker._windows(events, 0.0, 0.05)) == 50
+    dense = CmaxTracker(CmaxConfig(window_s=0.05, window_events=1000), SENSORS["davis240"].model())
+    windows = dense._windows(events, 0.0, 0.05)  # one window of time holding many times window_events
+    assert max(len(w) for w, *_ in windows) <= 2 * 1000 and sum(len(w) for w, *_ in windows) == len(events)
