@@ -256,9 +256,9 @@ class GyroVerdict:
         """One line when the fit is off over too short a span to refute the gyro (fit_off, not contradicts)."""
         if not self.fit_off or self.contradicts:
             return []
-        return [f"the gyro is used, though {self._why()}: those pairs span {self.judged_span_s:.2f} s, too short to tell "
-                f"a gyro's scale or bias from the images' own systematic errors (at least {MIN_FIT_SPAN_S:g} s are "
-                "needed); a longer window checks it"]
+        return [(f"the gyro is used, though {self._why()}: those pairs span {self.judged_span_s:.2f} s, too short to "
+                 f"tell a gyro's scale or bias from the images' own systematic errors (at least {MIN_FIT_SPAN_S:g} s "
+                 "are needed); a longer window checks it")]
 
     def _scale_hint(self) -> str:
         """What one scale between the gyro and the images points at (scaled_alike)."""

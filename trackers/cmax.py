@@ -68,12 +68,13 @@ MAX_UNCOVERED = 0.5
 class CmaxConfig:
     """Attributes:
         window_events: events per window when window_s is 0: the interval between two samples is
-            cut into round(N / window_events) windows (at least one); an interval with fewer
-            events than this takes the window_events events before the sample (reaching back).
+            cut into round(N / window_events) windows (at least one) of its own events only (an
+            interval with fewer is one window: a window padded from before it would measure the
+            interval before).
         window_s: window length [s] instead (0: by events): round(interval / window_s) windows,
             one holding over 2 * window_events events cut further by count.
         sigma_px: the Gaussian smoothing the image of warped events [px of the sensor].
-        min_events: a window with fewer events is not measured (the frame is `lost`).
+        min_events: a window with fewer events (hot pixels left out) is not measured (the frame is `lost`).
         lost_focus, lost_gain: a focus (the optimum's contrast over that of warps FOCUS_STEP_PX
             away) at or below lost_focus with a contrast gain (over no motion) at or below
             lost_gain measures nothing: nothing was brought into focus and no blur removed

@@ -11,6 +11,7 @@ biases the optimum (docs/cmax.md measures how much); this test checks the estima
 """
 
 import functools
+import itertools
 
 import numpy as np
 import pytest
@@ -145,7 +146,7 @@ def test_an_interval_is_measured_only_from_its_own_events():
     assert records[3].status == "lost" and records[3].events == 0 and not results[3][1], records[3]
     for k in (2, 4):
         assert records[k].status == "weak" and "miss part of the interval" in records[k].reason, records[k]
-    inside = [(events["t"] >= a) & (events["t"] < b) for a, b in zip(times[:-1], times[1:])]
+    inside = [(events["t"] >= a) & (events["t"] < b) for a, b in itertools.pairwise(times)]
     assert all(0 < r.events <= m.sum() for m, r in zip(inside, records[1:]) if r.status != "lost")  # hot pixels left out
 
 
