@@ -15,6 +15,7 @@ seconds; the examples are derandomised and bounded.
 """
 
 import numpy as np
+import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
@@ -50,21 +51,21 @@ SCENARIOS = st.one_of(
 )
 
 
-def intervals(omega_deg, gap=None, hot=5e-4):
-    """(record, edges, true R_{k-1}_{k}) of each interval between TIMES."""
+def intervals(omega_deg, gap=None, hot=5e-4, times=TIMES):
+    """(record, edges, true R_{k-1}_{k}) of each interval between `times` [s]."""
     dvs = DvsModel(cutoff_hz=0.0, hot_pixel_fraction=hot)
     motion = ConstantMotion(np.radians(omega_deg), (0.0, 0.0, 0.0), R_W_C0)
-    events, _ = simulate_events(SimConfig(duration_s=TIMES[-1] + 0.002, seed=5, dvs=dvs, camera=CAMERA), motion)
+    events, _ = simulate_events(SimConfig(duration_s=times[-1] + 0.002, seed=5, dvs=dvs, camera=CAMERA), motion)
     if gap is not None:
         events = events[(events["t"] < gap[0]) | (events["t"] >= gap[1])]
-    starts = np.searchsorted(events["t"], TIMES)
+    starts = np.searchsorted(events["t"], times)
     tracker = CmaxTracker(CmaxConfig(), CAMERA.model())
     out = []
-    for n, t in enumerate(TIMES):
+    for n, t in enumerate(times):
         record, edges = tracker.process(None, float(t), sample=Sample(n, float(t), None, events, int(starts[n]),
                                                                       int(starts[n - 1]) if n else 0))
         if n:
-            out.append((record, edges, rotvec_to_matrix(np.radians(omega_deg) * (t - TIMES[n - 1]))))
+            out.append((record, edges, rotvec_to_matrix(np.radians(omega_deg) * (t - times[n - 1]))))
     return out
 
 
@@ -89,3 +90,15 @@ def test_every_interval_is_ok_within_its_bound_weak_within_its_sigma_or_lost(sce
                 [error, edge.estimated_sigma_rad]))
         if scenario.get("gap") is not None and record.t - 0.025 >= scenario["gap"][0] and record.t <= scenario["gap"][1]:
             raise AssertionError(f"an interval inside the gap was measured: {record}")
+
+
+@pytest.mark.xfail(strict=True, reason="not solved: a rotation under a pixel per interval can pass the focus test "
+                                       "on a noise peak a few pixels away (docs/cmax.md, degenerate motion)")
+def test_a_rotation_under_a_pixel_per_interval_is_never_ok_far_off():
+    """9.6 deg/s, no hot pixels: 0.24 deg (0.4 px) per interval; the third was `ok` 1.6 deg off."""
+    camera = CAMERA.model()
+    corner_px = min(camera.focal_px, 0.5 * np.hypot(camera.width, camera.height))
+    for record, edges, truth in intervals(np.array([5.0, -8.0, 2.0]), hot=0.0, times=np.r_[TIMES, 0.085]):
+        if record.status == "ok":
+            turned = geodesic_angle(np.eye(3), truth)
+            assert geodesic_angle(edges[0].R_i_j, truth) <= OK_FRACTION * turned + 1.0 / corner_px, record
