@@ -16,7 +16,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from eas_vo.geometry.rotations import rotvec_to_matrix
+from eas_vo.geometry.rotations import matrix_to_rotvec, rotvec_to_matrix
 from eas_vo.plugins import Tracker
 from eas_vo.trackers.contrast import Contrast, WarpGrid
 from eas_vo.types import FrameRecord, RelativeRotation, Sample
@@ -123,8 +123,10 @@ class Window:
     the curvature of the objective), the contrast gain (over no motion), the focus (over warps
     FOCUS_STEP_PX away), the events read, the span [s] of the
     interval it stands for, how many times the objective was evaluated, how far apart the
-    image quadrants' own optima lie (CmaxTracker._quadrant_residual_px) [px] and that as an
-    angular velocity [rad/s] (spread_rad_s)."""
+    image quadrants' own optima lie (CmaxTracker._quadrant_residual_px) [px], the angular
+    velocity [rad/s] that displaces its events 1 px over half the window (rad_s_per_px), and no
+    motion's own focus where the gain is below the focus (0 where it is not: the optimum stands
+    clear of no motion)."""
 
     omega: np.ndarray
     sigma_rad_s: float
@@ -135,7 +137,8 @@ class Window:
     t1: float
     evaluations: int
     residual_px: float
-    spread_rad_s: float = 0.0
+    rad_s_per_px: float = 0.0
+    still_focus: float = 0.0
 
 
 class CmaxTracker(Tracker):
@@ -201,10 +204,17 @@ class CmaxTracker(Tracker):
             status, reason = "weak", f"events miss part of the interval ({100 * uncovered:.0f} % without any)"
         elif focus < self.config.weak_focus:
             status, reason = "weak", f"little in focus ({focus:.3f})"
+        elif any(w.still_focus >= self.config.weak_focus for w in windows):
+            # two peaks, the optimum and no motion, no farther apart in contrast than the optimum's own
+            # width: a motion under about a pixel, not told from none (a noise peak a few px away passes
+            # the focus test): the rotation is known to within itself and the peak's width
+            still = max(w.still_focus for w in windows)
+            status, reason = "weak", f"as sharp at no motion ({still:.3f})"
+            sigma = max(sigma, float(np.hypot(np.linalg.norm(matrix_to_rotvec(R)), _angle(windows, lambda w: FOCUS_STEP_PX))))
         elif residual > self.config.max_residual_px:
             # the rotation is known no better than the quadrants agree: the sigma is at least their spread
             status, reason = "weak", f"quadrants disagree ({residual:.2f} px)"
-            sigma = max(sigma, float(np.sqrt(sum((w.spread_rad_s * (w.t1 - w.t0)) ** 2 for w in windows))))
+            sigma = max(sigma, _angle(windows, lambda w: w.residual_px))
         elif not np.isfinite(sigma):
             status, reason, sigma = "weak", "flat objective", FLAT_SIGMA_RAD
         # the edge's inliers: the events an ok estimate rests on, none for a weak one (what makes an
@@ -279,9 +289,15 @@ class CmaxTracker(Tracker):
         self._metric = H if np.isfinite(sigma) else None
         focus = float(centre[0] / np.mean([a[0] for a in around]))
         residual = self._quadrant_residual_px(contrast, p, scale, centre, around, H)
+        gain = float(-best[1])
+        # no motion's own focus, where the optimum stands above it by less than above its neighbours
+        still_focus = 0.0
+        if gain < focus:
+            still_focus = v0 / np.mean([contrast.value(sign * FOCUS_STEP_PX * e / scale) for e in np.eye(3)
+                                         for sign in (1.0, -1.0)])
         self._omega = omega
-        return Window(omega, sigma / scale, float(-best[1]), focus, n, t0, t1, contrast.evaluations, residual,
-                      residual / scale)
+        return Window(omega, sigma / scale, gain, focus, n, t0, t1, contrast.evaluations, residual, 1.0 / scale,
+                      still_focus)
 
     def _quadrant_residual_px(self, contrast: Contrast, p: np.ndarray, scale: float, centre, around, H) -> float:
         """How far apart the four image quadrants' own optima lie [px of displacement over half
@@ -418,6 +434,12 @@ def _by_count(events: np.ndarray, t0: float, t1: float, per_window: int, min_eve
     times = events["t"]
     cuts = [t0] + [0.5 * (times[b - 1] + times[b]) for b in bounds[1:-1]] + [t1]
     return [(events[bounds[i]:bounds[i + 1]], cuts[i], cuts[i + 1]) for i in range(n)]
+
+
+def _angle(windows, px) -> float:
+    """The angle [rad] over the windows' intervals, added in quadrature, of displacing each
+    window's events px(window) pixels over half the window."""
+    return float(np.sqrt(sum((px(w) * w.rad_s_per_px * (w.t1 - w.t0)) ** 2 for w in windows)))
 
 
 def _longest_gap(times: np.ndarray, t0: float, t1: float) -> float:

@@ -15,7 +15,6 @@ seconds; the examples are derandomised and bounded.
 """
 
 import numpy as np
-import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
@@ -92,13 +91,15 @@ def test_every_interval_is_ok_within_its_bound_weak_within_its_sigma_or_lost(sce
             raise AssertionError(f"an interval inside the gap was measured: {record}")
 
 
-@pytest.mark.xfail(strict=True, reason="not solved: a rotation under a pixel per interval can pass the focus test "
-                                       "on a noise peak a few pixels away (docs/cmax.md, degenerate motion)")
 def test_a_rotation_under_a_pixel_per_interval_is_never_ok_far_off():
-    """9.6 deg/s, no hot pixels: 0.24 deg (0.4 px) per interval; the third was `ok` 1.6 deg off."""
+    """9.6 deg/s, no hot pixels: 0.24 deg (0.4 px) per interval. A noise peak a few pixels away
+    passes the focus test (the third interval's was 1.6 deg off); no motion is as sharp there,
+    so the interval is weak with a sigma that covers the rotation."""
     camera = CAMERA.model()
     corner_px = min(camera.focal_px, 0.5 * np.hypot(camera.width, camera.height))
     for record, edges, truth in intervals(np.array([5.0, -8.0, 2.0]), hot=0.0, times=np.r_[TIMES, 0.085]):
+        error = geodesic_angle(edges[0].R_i_j, truth) if edges else 0.0
         if record.status == "ok":
-            turned = geodesic_angle(np.eye(3), truth)
-            assert geodesic_angle(edges[0].R_i_j, truth) <= OK_FRACTION * turned + 1.0 / corner_px, record
+            assert error <= OK_FRACTION * geodesic_angle(np.eye(3), truth) + 1.0 / corner_px, record
+        elif record.status == "weak":
+            assert error <= WEAK_SIGMAS * edges[0].estimated_sigma_rad, record
