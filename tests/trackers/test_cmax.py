@@ -146,6 +146,7 @@ def test_an_interval_is_measured_only_from_its_own_events():
     assert records[3].status == "lost" and records[3].events == 0 and not results[3][1], records[3]
     for k in (2, 4):
         assert records[k].status == "weak" and "miss part of the interval" in records[k].reason, records[k]
+        assert results[k][1][0].inliers == 0  # a weak window is no confident pair for the gyro's check
     inside = [(events["t"] >= a) & (events["t"] < b) for a, b in itertools.pairwise(times)]
     assert all(0 < r.events <= m.sum() for m, r in zip(inside, records[1:]) if r.status != "lost")  # hot pixels left out
 
