@@ -18,7 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from eas_vo.errors import EasVoError
-from eas_vo.geometry.rotations import geodesic_angle, gyro_rotation, matrix_to_rotvec
+from eas_vo.geometry.rotations import geodesic_angle, gyro_rotation, matrix_to_rotvec, rotvec_to_matrix
 from eas_vo.types import MAX_GAP_READINGS, ImuSeries, RelativeRotation
 
 #: No MEMS gyro measures faster [rad/s]: the widest full scale sold is +-4000 deg/s (e.g.
@@ -109,6 +109,16 @@ MAX_SCALE_ERROR = 0.2
 #: so a smaller bias cannot be told from it.
 MAX_BIAS_RAD_S = 0.15
 FIT_SIGMAS = 4.0
+#: The scale and bias fits refute the gyro only over judged pairs spanning this long [s]: the
+#: images' systematic errors (the events' latency at one speed, one texture in view) last as long
+#: as the motion that causes them, and the fits' standard errors, taking the pairs for
+#: independent, understate them over a short stretch (a right gyro over the first second of a
+#: simulated dim sequence, seed 91: a bias of 0.10 +- 0.02 rad/s); the simulated hand-held
+#: motion changes speed and axis within about a second. Most pairs disagreeing refutes it over
+#: any span: a wrong sign, axis or clock shows in every pair.
+MIN_FIT_SPAN_S = 1.0
+#: A gyro read in deg/s as rad/s (or the reverse) turns this many times as far as the images.
+DEG_PER_RAD = float(np.degrees(1.0))
 #: The gyro's white-noise density [rad/s/sqrt(Hz)] and the sigma of the constant bias it may keep
 #: [rad/s], for an IMU whose own calibration is not given: the MPU-6150-like DAVIS IMU the
 #: simulator models (datasets.simulator ImuModel) and the gtsam backend assumes (backend.gyro_noise,
@@ -136,6 +146,9 @@ class GyroVerdict:
             the images' plus a constant bias times the interval (least squares), and its
             standard error.
         bias_rad_s, bias_se_rad_s: that bias's norm [rad/s] and its standard error.
+        judged_span_s: from the start of the first judged pair to the end of the last [s].
+        rescaled_disagreeing: the judged pairs that still disagree (DISAGREEMENT) with the
+            images' rotation vectors multiplied by `scale`.
         still: (frame j, angle [rad] between the two rotations) of each consecutive pair (j - 1,
             j) over which the edge turns while the gyro reads still (still_gyro_pairs), of the
             `compared` pairs with an estimator's own sigma that the gyro measures.
@@ -148,6 +161,8 @@ class GyroVerdict:
     scale_se: float = 0.0
     bias_rad_s: float = 0.0
     bias_se_rad_s: float = 0.0
+    judged_span_s: float = 0.0
+    rescaled_disagreeing: int = 0
     still: tuple[tuple[int, float], ...] = ()
     compared: int = 0
 
@@ -155,6 +170,23 @@ class GyroVerdict:
     def scale_off(self) -> bool:
         off = abs(self.scale - 1.0)
         return off > MAX_SCALE_ERROR and off > FIT_SIGMAS * self.scale_se
+
+    @property
+    def scaled_alike(self) -> bool:
+        """The gyro and the images turn about the same axes, one scale apart (scale_off, and once
+        the images' rotations are scaled by it most judged pairs agree), by no factor a unit
+        explains (deg/s for rad/s, within 10 %). The images' rotations scale with 1 / focal_px
+        (an image shift of d px is read as d / focal_px rad), while a MEMS gyro's sensitivity
+        is within 3 % of its datasheet's: this points first at the camera's focal length (a
+        calibration of another resolution or binning: a factor of 2), then at a gyro read with
+        the wrong full-scale setting, not at its axes, signs or clock. The rates alone cannot
+        tell the two apart (a focal length off scales cmax's roll too, as the gyro's scale
+        would: 0.54 about the optical axis, 0.68 across it, on a 2 s simulated sequence, seed
+        7, without distortion, read with half its focal length), so the gyro is not fused with
+        images it is one scale apart from (contradicts), and the warning names the camera first."""
+        if not (self.scale_off and self.scale > 0 and self.rescaled_disagreeing <= self.judged / 2):
+            return False
+        return min(abs(np.log(self.scale * f)) for f in (DEG_PER_RAD, 1 / DEG_PER_RAD)) > np.log(1.1)
 
     @property
     def bias_off(self) -> bool:
@@ -165,9 +197,20 @@ class GyroVerdict:
         return self.judged >= MIN_JUDGED_PAIRS
 
     @property
+    def fit_off(self) -> bool:
+        """The scale or bias fit is off (whether or not the pairs span enough to refute the gyro)."""
+        return self.can_tell and (self.scale_off or self.bias_off)
+
+    @property
     def contradicts(self) -> bool:
-        """The images contradict the gyro: most judged pairs disagree, or its scale or bias is off."""
-        return self.can_tell and (self.disagreeing > self.judged / 2 or self.scale_off or self.bias_off)
+        """The images contradict the gyro: most judged pairs disagree (unless the two are one scale
+        apart, scaled_alike: then the scale decides), or over MIN_FIT_SPAN_S or more its scale
+        or bias is off."""
+        if not self.can_tell:
+            return False
+        if self.disagreeing > self.judged / 2 and not self.scaled_alike:
+            return True
+        return self.fit_off and self.judged_span_s >= MIN_FIT_SPAN_S
 
     @property
     def use(self) -> str:
@@ -188,10 +231,12 @@ class GyroVerdict:
         if self.contradicts:
             again = "; the frames were tracked again without it" if retracked else ""
             said = f"the gyro is not used: {self._why()}{again}"
+            if self.scaled_alike:
+                return [f"{said}. {self._scale_hint()}"] + findings
             if not findings:
                 return [f"{said}. Check its units (rad/s), signs, axes (run.imu_rotvec_cam) and clock (run.imu_time_offset_s)"]
             return [f"{said}; {findings[0]}"] + findings[1:]
-        findings = self._still_warnings() + findings
+        findings = self._still_warnings() + self._short_warnings() + findings
         if not self.can_tell:
             return [f"the gyro is used unchecked: the images measured {self.judged} turning frame pairs confidently, "
                     f"at least {MIN_JUDGED_PAIRS} are needed to check it"] + findings
@@ -207,8 +252,23 @@ class GyroVerdict:
                 "apart): the scene moves before a still camera (independent motion), or the gyro measures nothing; "
                 "those frames are weak"]
 
+    def _short_warnings(self) -> list[str]:
+        """One line when the fit is off over too short a span to refute the gyro (fit_off, not contradicts)."""
+        if not self.fit_off or self.contradicts:
+            return []
+        return [(f"the gyro is used, though {self._why()}: those pairs span {self.judged_span_s:.2f} s, too short to "
+                 f"tell a gyro's scale or bias from the images' own systematic errors (at least {MIN_FIT_SPAN_S:g} s "
+                 "are needed); a longer window checks it")]
+
+    def _scale_hint(self) -> str:
+        """What one scale between the gyro and the images points at (scaled_alike)."""
+        return (f"Turning about the same axes ({self.judged - self.rescaled_disagreeing} of {self.judged} pairs agree once "
+                "scaled), the two are one scale apart: check the camera's focal length first (the images' rotations "
+                f"scale with 1 / focal_px; it looks {1 / self.scale:.2f} times the calibration's: a calibration of another "
+                "resolution or binning), then the gyro's full-scale setting; not its axes, signs or clock")
+
     def _why(self) -> str:
-        if self.disagreeing > self.judged / 2:
+        if self.disagreeing > self.judged / 2 and not self.scaled_alike:
             return (f"{self.disagreeing} of {self.judged} confidently measured frame pairs disagree with it "
                     f"(median {self.median_off_deg:.2f} deg apart)")
         if self.scale_off:
@@ -244,8 +304,13 @@ def judge_gyro(t: np.ndarray, edges, imu: ImuSeries) -> GyroVerdict:
     if not judged.any():
         return GyroVerdict(0, 0, float("nan"), **noted)
     dt = np.array([t[e.j] - t[e.i] for e in steps])[judged]
-    fitted = _scale_and_bias(matrix_to_rotvec(R_vision[judged]), matrix_to_rotvec(R_gyro[judged]), dt)
-    return GyroVerdict(int(judged.sum()), int(disagree.sum()), float(np.degrees(np.median(off[judged]))), *fitted, **noted)
+    v = matrix_to_rotvec(R_vision[judged])
+    fitted = _scale_and_bias(v, matrix_to_rotvec(R_gyro[judged]), dt)
+    rescaled_disagreeing = int(disagreement(R_gyro[judged], rotvec_to_matrix(v * fitted[0]))[1].sum())
+    pairs = [e for e, m in zip(steps, judged) if m]
+    span = float(t[pairs[-1].j] - t[pairs[0].i])
+    return GyroVerdict(int(judged.sum()), int(disagree.sum()), float(np.degrees(np.median(off[judged]))), *fitted,
+                       span, rescaled_disagreeing, **noted)
 
 
 def still_gyro_pairs(t: np.ndarray, edges, imu: ImuSeries) -> tuple[int, list[tuple[RelativeRotation, float]]]:

@@ -16,7 +16,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from eas_vo.geometry.rotations import rotvec_to_matrix
+from eas_vo.geometry.rotations import matrix_to_rotvec, rotvec_to_matrix
 from eas_vo.plugins import Tracker
 from eas_vo.trackers.contrast import Contrast, WarpGrid
 from eas_vo.types import FrameRecord, RelativeRotation, Sample
@@ -58,17 +58,23 @@ NEWTON_EVALS = 20
 QUADRANT_TOL_PX = 0.05
 QUADRANT_EVALS = 2
 HOT_PIXEL_MIN_EVENTS = 8
+#: An interval whose longest stretch without any event (its ends included) is over this share of
+#: it is `weak`: the rotation there is the rate measured elsewhere, extrapolated over more of
+#: the interval than it was measured on (events missing: a dropped transfer, a bias reset).
+MAX_UNCOVERED = 0.5
 
 
 @dataclass(frozen=True)
 class CmaxConfig:
     """Attributes:
         window_events: events per window when window_s is 0: the interval between two samples is
-            cut into round(N / window_events) windows (at least one); an interval with fewer
-            events than this takes the window_events events before the sample (reaching back).
-        window_s: window length [s] instead (0: by events): round(interval / window_s) windows.
+            cut into round(N / window_events) windows (at least one) of its own events only (an
+            interval with fewer is one window: a window padded from before it would measure the
+            interval before).
+        window_s: window length [s] instead (0: by events): round(interval / window_s) windows,
+            one holding over 2 * window_events events cut further by count.
         sigma_px: the Gaussian smoothing the image of warped events [px of the sensor].
-        min_events: a window with fewer events is not measured (the frame is `lost`).
+        min_events: a window with fewer events (hot pixels left out) is not measured (the frame is `lost`).
         lost_focus, lost_gain: a focus (the optimum's contrast over that of warps FOCUS_STEP_PX
             away) at or below lost_focus with a contrast gain (over no motion) at or below
             lost_gain measures nothing: nothing was brought into focus and no blur removed
@@ -116,8 +122,11 @@ class Window:
     """One window's estimate: omega [rad/s] (camera frame), its 1-sigma per axis [rad/s] (from
     the curvature of the objective), the contrast gain (over no motion), the focus (over warps
     FOCUS_STEP_PX away), the events read, the span [s] of the
-    interval it stands for, how many times the objective was evaluated, and how far apart the
-    image quadrants' own optima lie (CmaxTracker._quadrant_residual_px)."""
+    interval it stands for, how many times the objective was evaluated, how far apart the
+    image quadrants' own optima lie (CmaxTracker._quadrant_residual_px) [px], the angular
+    velocity [rad/s] that displaces its events 1 px over half the window (rad_s_per_px), and no
+    motion's own focus where the gain is below the focus (0 where it is not: the optimum stands
+    clear of no motion)."""
 
     omega: np.ndarray
     sigma_rad_s: float
@@ -128,6 +137,8 @@ class Window:
     t1: float
     evaluations: int
     residual_px: float
+    rad_s_per_px: float = 0.0
+    still_focus: float = 0.0
 
 
 class CmaxTracker(Tracker):
@@ -152,7 +163,7 @@ class CmaxTracker(Tracker):
         self._counts = np.zeros(cam.width * cam.height, np.int64)  # events per pixel so far (hot pixels)
         self._prev_t = -np.inf
         self._k = -1
-        self.windows: list[Window] = []  # every window measured, in time order
+        self.windows: list[Window] = []  # the last interval's windows (memory bounded by the config)
 
     def process(self, image, t: float, *, sample: Sample | None = None) -> tuple[FrameRecord, list[RelativeRotation]]:
         self._k += 1
@@ -163,7 +174,13 @@ class CmaxTracker(Tracker):
         if t <= self._prev_t:
             return FrameRecord(k, t, 0, 0, "same_time", False), []
         t_prev, self._prev_t = self._prev_t, t
-        windows = [self.measure(chunk, lo, hi) for chunk, lo, hi in self._windows(sample, t_prev, t)]
+        events = sample.events_since_previous  # those of [t_prev, t): a window never reaches outside
+        cut = self._windows(events, t_prev, t)
+        if cut is None:
+            self._omega = None
+            return FrameRecord(k, t, 0, 0, "lost", False, reason=f"too few events ({len(events)})", events=len(events)), []
+        windows = [self.measure(chunk, lo, hi) for chunk, lo, hi in cut]
+        self.windows = windows
         n = sum(w.events for w in windows)
         gain = min(w.gain for w in windows)
         focus = min(w.focus for w in windows)
@@ -174,7 +191,6 @@ class CmaxTracker(Tracker):
             self._omega = None
             return FrameRecord(k, t, 0, 0, "lost", False, reason=f"nothing in focus ({focus:.3f})", events=n,
                                contrast_gain=gain), []
-        self.windows.extend(windows)
         R = np.eye(3)
         variance = 0.0
         for w in windows:
@@ -182,42 +198,61 @@ class CmaxTracker(Tracker):
             variance += (w.sigma_rad_s * (w.t1 - w.t0)) ** 2
         sigma = float(np.sqrt(variance))
         residual = max(w.residual_px for w in windows)
+        uncovered = _longest_gap(events["t"], t_prev, t) / (t - t_prev)
         status, reason = "ok", ""
-        if focus < self.config.weak_focus:
+        if uncovered > MAX_UNCOVERED:
+            status, reason = "weak", f"events miss part of the interval ({100 * uncovered:.0f} % without any)"
+        elif focus < self.config.weak_focus:
             status, reason = "weak", f"little in focus ({focus:.3f})"
+        elif any(w.still_focus >= self.config.weak_focus for w in windows):
+            # two peaks, the optimum and no motion, no farther apart in contrast than the optimum's own
+            # width: a motion under about a pixel, not told from none (a noise peak a few px away passes
+            # the focus test): the rotation is known to within itself and the peak's width
+            still = max(w.still_focus for w in windows)
+            status, reason = "weak", f"as sharp at no motion ({still:.3f})"
+            sigma = max(sigma, float(np.hypot(np.linalg.norm(matrix_to_rotvec(R)), _angle(windows, lambda w: FOCUS_STEP_PX))))
         elif residual > self.config.max_residual_px:
+            # the rotation is known no better than the quadrants agree: the sigma is at least their spread
             status, reason = "weak", f"quadrants disagree ({residual:.2f} px)"
+            sigma = max(sigma, _angle(windows, lambda w: w.residual_px))
         elif not np.isfinite(sigma):
             status, reason, sigma = "weak", "flat objective", FLAT_SIGMA_RAD
-        # inliers: the events the estimate rests on (what makes an edge confident for the gyro's check)
+        # the edge's inliers: the events an ok estimate rests on, none for a weak one (what makes an
+        # edge confident for the gyro's check, imu_check.CONFIDENT_INLIERS: a weak window is not)
         record = FrameRecord(k, t, 0, n, status, False, residual_px=residual, reason=reason, events=n, contrast_gain=gain)
-        return record, [RelativeRotation(k - 1, k, R, inliers=n, estimated_sigma_rad=min(sigma, FLAT_SIGMA_RAD))]
+        confident = n if status == "ok" else 0
+        return record, [RelativeRotation(k - 1, k, R, inliers=confident, estimated_sigma_rad=min(sigma, FLAT_SIGMA_RAD))]
 
-    def _windows(self, sample: Sample, t_prev: float, t: float):
-        """(events, t0, t1) per window: its events and the part [t0, t1] of [t_prev, t] it stands for."""
+    def _windows(self, events: np.ndarray, t_prev: float, t: float):
+        """(events, t0, t1) per window: its events, all within [t_prev, t), and the part [t0, t1]
+        of [t_prev, t] it stands for; None when some window would hold fewer than min_events.
+        An interval of any length or density makes at most len(events) / min_events windows,
+        none of over 2 * window_events events (the memory a window's measurement takes, about
+        110 bytes an event, is bounded by the configuration)."""
         c = self.config
-        events = sample.events_since_previous
-        if c.window_s > 0:
-            n = max(1, round((t - t_prev) / c.window_s))
-            cuts = np.linspace(t_prev, t, n + 1)
-            bounds = np.searchsorted(events["t"], cuts)
-            return [(events[bounds[i]:bounds[i + 1]], cuts[i], cuts[i + 1]) for i in range(n)]
-        if len(events) < c.window_events:  # reach back for a window's worth
-            start = max(0, sample.event_index - c.window_events)
-            return [(sample.events[start:sample.event_index], t_prev, t)]
-        n = max(1, round(len(events) / c.window_events))
-        bounds = np.linspace(0, len(events), n + 1).round().astype(int)
-        times = events["t"]
-        cuts = [t_prev] + [0.5 * (times[b - 1] + times[b]) for b in bounds[1:-1]] + [t]
-        return [(events[bounds[i]:bounds[i + 1]], cuts[i], cuts[i + 1]) for i in range(n)]
+        if c.window_s <= 0:
+            return _by_count(events, t_prev, t, c.window_events, c.min_events)
+        n = max(1, round((t - t_prev) / c.window_s))
+        if n * c.min_events > len(events):  # some window would hold fewer than min_events
+            return None
+        cuts = np.linspace(t_prev, t, n + 1)
+        bounds = np.searchsorted(events["t"], cuts)
+        windows = []
+        for i in range(n):
+            chunk = events[bounds[i]:bounds[i + 1]]
+            if len(chunk) > 2 * c.window_events:
+                windows += _by_count(chunk, cuts[i], cuts[i + 1], c.window_events, c.min_events)
+            else:
+                windows.append((chunk, cuts[i], cuts[i + 1]))
+        return windows
 
     def measure(self, events: np.ndarray, t0: float, t1: float) -> Window:
         """The angular velocity of one window of events standing for [t0, t1] [s]."""
         c = self.config
+        events = self._without_hot_pixels(events)
         n = len(events)
         if n < c.min_events:
             return Window(np.zeros(3), np.inf, 1.0, 1.0, n, t0, t1, 0, 0.0)
-        events = self._without_hot_pixels(events)
         times = events["t"]
         t_ref = 0.5 * (float(times[0]) + float(times[-1]))
         xy = self._bearing[events["y"].astype(np.intp), events["x"].astype(np.intp)]
@@ -254,8 +289,15 @@ class CmaxTracker(Tracker):
         self._metric = H if np.isfinite(sigma) else None
         focus = float(centre[0] / np.mean([a[0] for a in around]))
         residual = self._quadrant_residual_px(contrast, p, scale, centre, around, H)
+        gain = float(-best[1])
+        # no motion's own focus, where the optimum stands above it by less than above its neighbours
+        still_focus = 0.0
+        if gain < focus:
+            still_focus = v0 / np.mean([contrast.value(sign * FOCUS_STEP_PX * e / scale) for e in np.eye(3)
+                                         for sign in (1.0, -1.0)])
         self._omega = omega
-        return Window(omega, sigma / scale, float(-best[1]), focus, n, t0, t1, contrast.evaluations, residual)
+        return Window(omega, sigma / scale, gain, focus, n, t0, t1, contrast.evaluations, residual, 1.0 / scale,
+                      still_focus)
 
     def _quadrant_residual_px(self, contrast: Contrast, p: np.ndarray, scale: float, centre, around, H) -> float:
         """How far apart the four image quadrants' own optima lie [px of displacement over half
@@ -379,6 +421,30 @@ def _newton(cost, p: np.ndarray, H: np.ndarray | None) -> tuple[np.ndarray, floa
             break
         solver.update(*cost(trial))
     return solver.p, solver.f
+
+
+def _by_count(events: np.ndarray, t0: float, t1: float, per_window: int, min_events: int):
+    """[t0, t1]'s `events` cut into round(N / per_window) windows (at least one) of about equal
+    counts, each standing for [t0, t1] cut halfway between its last event and the next's;
+    None under min_events."""
+    if len(events) < min_events:
+        return None
+    n = max(1, round(len(events) / per_window))
+    bounds = np.linspace(0, len(events), n + 1).round().astype(int)
+    times = events["t"]
+    cuts = [t0] + [0.5 * (times[b - 1] + times[b]) for b in bounds[1:-1]] + [t1]
+    return [(events[bounds[i]:bounds[i + 1]], cuts[i], cuts[i + 1]) for i in range(n)]
+
+
+def _angle(windows, px) -> float:
+    """The angle [rad] over the windows' intervals, added in quadrature, of displacing each
+    window's events px(window) pixels over half the window."""
+    return float(np.sqrt(sum((px(w) * w.rad_s_per_px * (w.t1 - w.t0)) ** 2 for w in windows)))
+
+
+def _longest_gap(times: np.ndarray, t0: float, t1: float) -> float:
+    """The longest stretch [s] of [t0, t1] without any of the event `times` (within it, sorted), its ends included."""
+    return float(np.max(np.diff(np.concatenate([[t0], times, [t1]]))))
 
 
 def _lower(best, found):

@@ -6,7 +6,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from eas_vo.errors import EasVoError
-from eas_vo.geometry.rotations import gyro_rotation
+from eas_vo.geometry.rotations import gyro_rotation, matrix_to_rotvec, rotvec_to_matrix
 from eas_vo.imu_check import CONFIDENT_INLIERS, MAX_GYRO_RAD_S, MIN_JUDGED_PAIRS, check_readings, judge_gyro
 from eas_vo.types import ImuSeries, RelativeRotation
 
@@ -130,6 +130,45 @@ def test_a_gyro_turning_too_far_or_reading_a_constant_bias_is_contradicted(scale
     assert judged.bias_rad_s == pytest.approx(bias, abs=0.01)
     if verdict == "not used":
         assert ("times as far" if scale != 1.0 else "rad/s (+-") in judged.warnings(False, [])[0]
+
+
+@pytest.mark.parametrize("focal_factor", [0.5, 1.4])
+def test_images_one_scale_off_the_gyro_name_the_focal_length_first_not_the_gyros_units_or_axes(focal_factor):
+    """Images measured with the focal length focal_factor times the true one read rotations
+    across the optical axis (x, y) 1 / focal_factor times too large: the rates alone cannot tell
+    that from a gyro off in scale, so the two are not fused, and the warning names the camera's
+    focal length first, not the gyro's units, signs, axes or clock."""
+    imu = gyro()
+    edges = [RelativeRotation(e.i, e.j, rotvec_to_matrix(matrix_to_rotvec(e.R_i_j) * [1 / focal_factor, 1 / focal_factor, 1]),
+                              e.inliers) for e in edges_from(imu)]
+    verdict = judge_gyro(FRAMES, edges, imu)
+    assert verdict.scaled_alike and verdict.use == "not used"
+    (said,) = verdict.warnings(False, [])
+    assert "focal length first" in said and f"looks {1 / verdict.scale:.2f} times" in said
+    assert "Check its units" not in said
+
+
+def test_a_gyro_one_unit_factor_off_is_still_not_used():
+    """Rates in deg/s read as rad/s, on motion slow enough that no reading exceeds a MEMS range."""
+    imu = gyro()
+    slow = changed(imu, rates=imu.gyro * 0.02)
+    verdict = judge_gyro(FRAMES, edges_from(slow), changed(slow, rates=np.degrees(slow.gyro)))
+    assert verdict.scale_off and not verdict.scaled_alike and verdict.use == "not used"
+
+
+def test_a_fit_over_under_a_second_does_not_refute_the_gyro_but_a_wrong_sign_does():
+    """Over 0.95 s (20 frames) a bias or scale beyond the thresholds may be the images' own
+    systematic error: the gyro is used and the warning says the span is too short; a sign flip
+    disagrees in every pair and is refused over any span."""
+    imu = gyro()
+    second = FRAMES[:20]
+    edges = [e for e in edges_from(imu) if e.j < len(second)]
+    biased = changed(imu, rates=imu.gyro + np.array([0.25, -0.25, 0.25]) / np.sqrt(3))
+    short = judge_gyro(second, edges, biased)
+    assert short.bias_off and short.judged_span_s < 1.0 and not short.contradicts and short.use == "used"
+    assert any("too short to tell" in w for w in short.warnings(False, []))
+    assert judge_gyro(FRAMES, edges_from(imu), biased).contradicts  # the same gyro over 1.95 s
+    assert judge_gyro(second, edges, changed(imu, rates=-imu.gyro)).use == "not used"
 
 
 def still_gyro(seed=1) -> ImuSeries:

@@ -11,6 +11,7 @@ biases the optimum (docs/cmax.md measures how much); this test checks the estima
 """
 
 import functools
+import itertools
 
 import numpy as np
 import pytest
@@ -131,3 +132,33 @@ def test_newton_finds_the_peak_in_a_metric_half_wrong_in_a_few_evaluations(metri
     assert f == min(costs) and len(costs) <= 12  # the lowest point it evaluated
     p, f = _newton(cost, np.zeros(3), None)  # the curvature measured at the start
     assert np.linalg.norm(p - top) < 0.05
+
+
+def test_an_interval_is_measured_only_from_its_own_events():
+    """Events missing over 0.06-0.14 s (a dropped transfer) of a camera panning at 60 deg/s: the
+    intervals inside the gap hold no event and are lost (not measured from the events before
+    it), those the gap cuts into are weak (the rate extrapolated over most of them)."""
+    events = events_of((0.0, 60.0, 0.0), "davis240", 0.2, ideal=False)
+    events = events[(events["t"] < 0.06) | (events["t"] >= 0.14)]
+    times = np.array([0.02, 0.05, 0.08, 0.11, 0.15, 0.18])
+    results = statuses(CmaxTracker(CmaxConfig(), SENSORS["davis240"].model()), events, times)
+    records = [r for r, _ in results]
+    assert records[3].status == "lost" and records[3].events == 0 and not results[3][1], records[3]
+    for k in (2, 4):
+        assert records[k].status == "weak" and "miss part of the interval" in records[k].reason, records[k]
+        assert results[k][1][0].inliers == 0  # a weak window is no confident pair for the gyro's check
+    inside = [(events["t"] >= a) & (events["t"] < b) for a, b in itertools.pairwise(times)]
+    assert all(0 < r.events <= m.sum() for m, r in zip(inside, records[1:]) if r.status != "lost")  # hot pixels left out
+
+
+def test_a_window_of_any_length_holds_a_bounded_number_of_windows():
+    """window_s = 1 ms over an interval of 1000 s (times in the wrong unit) is not cut into a
+    million windows: a window under min_events makes the frame lost before any is made; a
+    window of time holds at most 2 * window_events events (the memory one takes)."""
+    events = events_of((0.0, 60.0, 0.0), "davis240", 0.05)
+    tracker = CmaxTracker(CmaxConfig(window_s=0.001), SENSORS["davis240"].model())
+    assert tracker._windows(events, 0.0, 1000.0) is None
+    assert len(tracker._windows(events, 0.0, 0.05)) == 50
+    dense = CmaxTracker(CmaxConfig(window_s=0.05, window_events=1000), SENSORS["davis240"].model())
+    windows = dense._windows(events, 0.0, 0.05)  # one window of time holding many times window_events
+    assert max(len(w) for w, *_ in windows) <= 2 * 1000 and sum(len(w) for w, *_ in windows) == len(events)
