@@ -15,7 +15,7 @@ from eas_vo.datasets.calibration import read_calibration
 from eas_vo.errors import DataError, DataWarnings
 from eas_vo.io import data_line, parse_table
 from eas_vo.plugins import Dataset
-from eas_vo.types import CameraModel, PoseSeries
+from eas_vo.types import TIME_UNITS, CameraModel, PoseSeries
 from eas_vo.validation import check_range
 
 
@@ -77,8 +77,9 @@ SPAN_RATIO_LIMIT = 1e5
 #: No recording's stream lasts longer than a day [s]: a longer span is a clock read in a
 #: smaller unit than seconds (60 s in microseconds span 6e7 "s").
 MAX_SPAN_S = 86400.0
-#: The units a timestamp column is written in by mistake for seconds, as factors of the second.
-SMALL_UNITS = {"microseconds": 1e6, "nanoseconds": 1e9}
+#: The units of TIME_UNITS a span ratio can tell from seconds (milliseconds cannot: excerpts'
+#: streams may differ by that much).
+SMALL_UNITS = {unit: factor for unit, factor in TIME_UNITS.items() if factor >= SPAN_RATIO_LIMIT}
 
 
 def _unit_of(ratio: float) -> str:

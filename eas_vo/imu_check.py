@@ -19,13 +19,11 @@ import numpy as np
 
 from eas_vo.errors import EasVoError
 from eas_vo.geometry.rotations import geodesic_angle, gyro_rotation, matrix_to_rotvec, rotvec_to_matrix
-from eas_vo.types import MAX_GAP_READINGS, ImuSeries, RelativeRotation
+from eas_vo.types import MAX_GAP_READINGS, TIME_UNITS, ImuSeries, RelativeRotation
 
 #: No MEMS gyro measures faster [rad/s]: the widest full scale sold is +-4000 deg/s (e.g.
 #: TDK InvenSense ICM-20649; the DAVIS240's MPU-6150 and the DAVIS346's MPU-6500 reach 2000).
 MAX_GYRO_RAD_S = float(np.radians(4000.0))
-#: Clock units a timestamp column is often written in by mistake, as factors of the second.
-_TIME_UNITS = {"milliseconds": 1e3, "microseconds": 1e6, "nanoseconds": 1e9}
 
 
 def check_readings(imu: ImuSeries, frame_times: np.ndarray, label: str, offset_s: float) -> list[str]:
@@ -74,7 +72,7 @@ def _unit_hint(imu: ImuSeries, frame_times: np.ndarray) -> str:
     """'; are its timestamps in microseconds?' when the IMU's time span is about 1e3, 1e6 or
     1e9 times the frames' (the readings' rate then looks that much lower)."""
     ratio = np.ptp(imu.t) / max(np.ptp(frame_times), 1e-12)
-    for unit, factor in _TIME_UNITS.items():
+    for unit, factor in TIME_UNITS.items():
         if abs(np.log10(ratio / factor)) < 0.5:
             return f"; are its timestamps in {unit}? they must be in seconds"
     return ""

@@ -205,6 +205,9 @@ class PoseSeries:
 #: A gyro is taken to measure an interval when no stretch of it without a reading is longer
 #: than this many median reading intervals (a sample or three lost).
 MAX_GAP_READINGS = 4
+#: Clock units a timestamp column is often written in by mistake for seconds, as factors of
+#: the second (each reader's and the gyro check's unit hint).
+TIME_UNITS = {"milliseconds": 1e3, "microseconds": 1e6, "nanoseconds": 1e9}
 
 
 @dataclass(frozen=True)
