@@ -21,7 +21,7 @@ from eas_vo.plugins import Tracker
 from eas_vo.trackers.alignment import FINEST_PIXEL_RAD, FallbackAudit, PhotometricAlignment
 from eas_vo.trackers.features import DETECTORS, Features, RefinedMatching
 from eas_vo.trackers.loops import LoopClosureConfig, LoopCloser
-from eas_vo.trackers.measurement import PixelScale, TwoViewConfig, frame_record, measure, weakness
+from eas_vo.trackers.measurement import PixelScale, StepBound, TwoViewConfig, frame_record, measure, weakness
 from eas_vo.trackers.motion import lk_params, lk_track, scaled_rotation
 from eas_vo.types import CameraModel, FrameRecord, ImuSeries, RelativeRotation
 from eas_vo.validation import check_choice, check_range
@@ -157,6 +157,7 @@ class KltTracker(Tracker):
         self._last_step: tuple[np.ndarray, float] | None = None  # (R_{k-2}_{k-1}, its interval [s]) for velocity
         self._loops = LoopCloser(self.config, self.camera) if self.config.loop_closure else None
         self._audit = FallbackAudit("align") if self.config.fallback == "align" else None
+        self._bound = StepBound(self.config, self.camera)
 
     @property
     def needs_imu(self) -> bool:
@@ -262,7 +263,7 @@ class KltTracker(Tracker):
         nc = int(ok.sum())
         measured = concurrency.submit(self._measured, k, t, nc, self._prev_pts[ok], cur[ok], self._kf_pts[ok], self._kf_index)
         self._advance(image, nc < self.config.threshold2, cur, ok, k)
-        return lambda: measured.result()[:2]
+        return lambda: self._bound.judge(*measured.result()[:2], t_prev, t)  # results are taken in order
 
     def process(self, image: np.ndarray, t: float) -> tuple[FrameRecord, list[RelativeRotation]]:
         """Track into `image` (uint8, sensor size) taken at `t` [s]."""
@@ -300,6 +301,8 @@ class KltTracker(Tracker):
                 elif n_aligned == 0:
                     record = replace(record, reason="aligned by intensities alone (no correspondences)")
         self._prev_pyramid = pyramid
+        record, edges = self._bound.judge(record, edges, t_prev, t)
+        step = edges[0] if edges else None
         if self._audit is not None:
             self._audited(k, t_prev, t, step, aligned is not None and step is not None, record.status == "ok")
         self._last_step = (step.R_i_j, t - t_prev) if step is not None else None

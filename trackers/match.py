@@ -11,7 +11,7 @@ import numpy as np
 from eas_vo.plugins import Tracker
 from eas_vo.trackers.features import DETECTORS, MATCHINGS, MAX_RESIDUAL_PX, MIN_MATCHES, RANSAC_THRESHOLD_PX, Features
 from eas_vo.trackers.loops import LoopClosureConfig, LoopCloser
-from eas_vo.trackers.measurement import TwoViewConfig, frame_record
+from eas_vo.trackers.measurement import StepBound, TwoViewConfig, frame_record
 from eas_vo.types import FrameRecord, RelativeRotation
 from eas_vo.validation import check_choice, check_range
 
@@ -71,6 +71,7 @@ class MatchTracker(Tracker):
         self._prev_t = -np.inf
         self._k = -1
         self._loops = LoopCloser(c, self.camera) if c.loop_closure else None
+        self._bound = StepBound(c, self.camera)
 
     def process(self, image: np.ndarray, t: float) -> tuple[FrameRecord, list[RelativeRotation]]:
         c = self.config
@@ -79,12 +80,14 @@ class MatchTracker(Tracker):
         if self._previous is not None and t <= self._prev_t:
             return FrameRecord(k, t, 0, 0, "same_time", False), []
         detected = self.features.detect(image)
-        previous, self._previous, self._prev_t = self._previous, detected, t
+        previous, t_prev = self._previous, self._prev_t
+        self._previous, self._prev_t = detected, t
         if previous is None:
             record, edges = FrameRecord(k, t, 0, 0, "first", True), []
         else:
             step, nc = self.features.rotation(c, self.camera, previous, detected, k - 1, k, c.min_matches)
             record, edges = frame_record(c, self.camera, k, t, nc, step, True, nc >= c.min_matches), [step] if step else []
+            record, edges = self._bound.judge(record, edges, t_prev, t)
         if self._loops is not None:
             edges = edges + self._loops.step(k, image, edges, lost=record.status == "lost")
         return record, edges

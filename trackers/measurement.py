@@ -8,6 +8,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from eas_vo.geometry.rotations import matrix_to_rotvec
 from eas_vo.geometry.two_view import ESSENTIAL_METHODS, GEOMETRIES, bearings, explains, rotation_from_correspondences
 from eas_vo.types import CameraModel, FrameRecord, RelativeRotation
 from eas_vo.validation import check_choice, check_range
@@ -85,6 +86,12 @@ class TwoViewConfig:
             1 px inlier threshold it is cut at are properties of image patches in pixels.
             15 inliers is three times the five-point minimum (a count follows the scene's
             corners, so data cannot calibrate it for every frontend).
+        max_angular_acceleration_deg_s2: a `weak` step whose rotation departs from the rate
+            of the last step that was not weak by more than this acceleration allows is no
+            measurement (`lost`; StepBound). 10 000 deg/s^2 is above the most abrupt
+            rotations a person's head is put through (the head impulse test's peaks, 3 000 to
+            6 000 deg/s^2: Halmagyi and Curthoys 1988, MacDougall et al. 2009), so hand-held
+            and head-mounted motion keeps its weak steps; raise it for a drone or a vehicle.
     """
 
     geometry: str = "essential"
@@ -94,6 +101,7 @@ class TwoViewConfig:
     min_inliers: int = 15
     min_inlier_ratio: float = 0.55
     max_residual_px: float = 0.6
+    max_angular_acceleration_deg_s2: float = 10_000.0
 
     def validate(self) -> None:
         check_choice(self, "geometry", GEOMETRIES)
@@ -103,6 +111,7 @@ class TwoViewConfig:
         check_range(self, "min_inliers", 0, 100_000)
         check_range(self, "min_inlier_ratio", 0.0, 1.0)
         check_range(self, "max_residual_px", 0.0, 100.0, lo_open=True)
+        check_range(self, "max_angular_acceleration_deg_s2", 0.0, 1e9, lo_open=True)
 
 
 def measure(
@@ -158,3 +167,40 @@ def frame_record(
     why = weakness(config, step, camera.focal_px)
     return FrameRecord(k, t, nc, step.inliers, "weak" if why else "ok", redetected, step.inlier_ratio,
                        step.residual_rad * camera.focal_px, why)
+
+
+class StepBound:
+    """What a doubtful step may say, given the steps before it: the frame-to-frame rotation of a
+    `weak` frame must lie within `a * dt * (t_mid - t_ref)` [rad] (plus three inlier thresholds of
+    measurement noise) of the rotation at the last `ok` step's rate, `a` the config's largest
+    angular acceleration [rad/s^2], dt the frame interval [s] and t_mid - t_ref the time between
+    the two steps' midpoints [s]: a weak step farther off would need a faster change of rate than
+    the motion can have, and becomes `lost` (its edges dropped). Without an `ok` step before it a
+    weak step stands. One per tracker, fed every frame in order."""
+
+    def __init__(self, config: TwoViewConfig, camera: CameraModel | None):
+        self._acceleration = math.radians(config.max_angular_acceleration_deg_s2)
+        self._noise_rad = 3.0 * config.ransac_threshold_px / (REFERENCE_FOCAL_PX if camera is None else camera.focal_px)
+        self._rate: tuple[np.ndarray, float] | None = None  # (rotation vector per second [rad/s], midpoint [s])
+
+    def judge(self, record: FrameRecord, edges: list[RelativeRotation], t_prev: float,
+              t: float) -> tuple[FrameRecord, list[RelativeRotation]]:
+        """Frame `record`'s (record, edges), measured over [t_prev, t] [s], kept or made `lost`."""
+        step = next((e for e in edges if e.j == record.index and e.i == record.index - 1), None)
+        if step is None or record.status not in ("ok", "weak"):
+            return record, edges
+        dt, mid = t - t_prev, 0.5 * (t + t_prev)
+        rotvec = matrix_to_rotvec(step.R_i_j)
+        if record.status == "ok":
+            self._rate = (rotvec / dt, mid)
+            return record, edges
+        if self._rate is None:
+            return record, edges
+        rate, t_ref = self._rate
+        departure = float(np.linalg.norm(rotvec - rate * dt))
+        bound = self._acceleration * dt * (mid - t_ref) + self._noise_rad
+        if departure <= bound:
+            return record, edges
+        reason = (f"{record.reason}, and {math.degrees(departure):.1f} deg from the last ok step's rate "
+                  f"(more than {math.degrees(bound):.1f} deg)")
+        return replace(record, status="lost", inliers=0, reason=reason), []

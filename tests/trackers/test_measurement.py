@@ -93,3 +93,30 @@ def test_a_wrong_measurement_from_noise_beyond_the_inlier_threshold_is_weak(widt
         assert weakness(TwoViewConfig(), edge, camera.focal_px).startswith("low inlier ratio")
     else:
         assert edge is None
+
+
+def test_a_weak_step_that_departs_from_the_recent_rate_more_than_the_motion_allows_is_lost():
+    """StepBound at 20 frames/s after an ok step of 1 deg about x: a weak step of 1.5 deg stands
+    (10 000 deg/s^2 allow 25 deg over one frame interval), a weak half turn (the five-point
+    solver's degenerate answer) is lost with its edges; a weak step with no ok step before it
+    stands, and ok steps always do."""
+    from eas_vo.trackers.measurement import StepBound
+    from eas_vo.types import FrameRecord, RelativeRotation
+
+    camera = camera_of_focal(200.0)
+
+    def frame(k, status, angle_deg):
+        R = rotvec_to_matrix(np.radians([angle_deg, 0.0, 0.0]))
+        return FrameRecord(k, 0.05 * k, 100, 50, status, False, reason="few inliers" * (status == "weak")), [
+            RelativeRotation(k - 1, k, R, 50, 0.5, 0.001)]
+
+    bound = StepBound(TwoViewConfig(), camera)
+    record, edges = bound.judge(*frame(1, "weak", 180.0), 0.0, 0.05)
+    assert record.status == "weak" and len(edges) == 1  # nothing to hold it against yet
+    bound.judge(*frame(2, "ok", 1.0), 0.05, 0.10)
+    record, edges = bound.judge(*frame(3, "weak", 1.5), 0.10, 0.15)
+    assert record.status == "weak" and len(edges) == 1
+    record, edges = bound.judge(*frame(4, "weak", 180.0), 0.15, 0.20)
+    assert (record.status, edges, record.inliers) == ("lost", [], 0) and "from the last ok step's rate" in record.reason
+    record, edges = bound.judge(*frame(5, "ok", 30.0), 0.20, 0.25)
+    assert record.status == "ok" and len(edges) == 1
