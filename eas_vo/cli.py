@@ -313,7 +313,7 @@ def cmd_run(args) -> int:
     ape_text = "no ground truth"
     if "frames_scored_fraction" in m:  # scored: over how many frames and what span of the run
         start, end = m["ground_truth_span_s"]
-        scored = f"{m['frames_evaluated']} of {m['frames']} frames scored, ground truth {start:.3f}-{end:.3f} s of the run's 0-{m['sequence_s']:.3f} s"
+        scored = f"{m['frames_evaluated']} of {m['frames']} frames scored, ground truth from {start:.3f} to {end:.3f} s of the run's 0 to {m['sequence_s']:.3f} s"
         ape_text = f"average APE {ape:.4f} rad ({ape * 57.29577951:.2f} deg; {scored})" if m["frames_evaluated"] else f"no frame scored ({scored})"
     if m["time_offset_estimated"]:
         ape_text += f" (time offset {m['time_offset_s'] * 1e3:+.1f} ms, estimated on the ground truth it scores against)"
