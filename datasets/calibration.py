@@ -149,8 +149,10 @@ def _intrinsic_matrix(fx, fy, cx, cy) -> np.ndarray:
 
 
 def parse_ecd_calib(data: bytes, where: str, width: int, height: int) -> CameraModel:
-    """The ECD `calib.txt` content (`fx fy cx cy [k1 k2 p1 p2 [k3]]`, radtan) for a width x height sensor."""
-    fields = data.decode(errors="replace").split()
+    """The ECD `calib.txt` content (`fx fy cx cy [k1 k2 p1 p2 [k3]]`, radtan) for a width x height
+    sensor; `#` lines are comments, as in every table."""
+    lines = data.decode(errors="replace").splitlines()
+    fields = [v for line in lines if not line.lstrip().startswith("#") for v in line.split()]
     try:
         values = [float(v) for v in fields]
     except ValueError:

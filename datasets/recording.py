@@ -77,6 +77,10 @@ SPAN_RATIO_LIMIT = 1e5
 #: No recording's stream lasts longer than a day [s]: a longer span is a clock read in a
 #: smaller unit than seconds (60 s in microseconds span 6e7 "s").
 MAX_SPAN_S = 86400.0
+#: Events and frames further apart than this many times the longer one's span (or a second)
+#: are on two clocks: an excerpt cuts a stream short, it does not move it (Unix time beside a
+#: clock from zero: 1.7e9 s apart).
+STREAMS_APART_SPANS = 100.0
 #: The units of TIME_UNITS a span ratio can tell from seconds (milliseconds cannot: excerpts'
 #: streams may differ by that much).
 SMALL_UNITS = {unit: factor for unit, factor in TIME_UNITS.items() if factor >= SPAN_RATIO_LIMIT}
@@ -125,13 +129,24 @@ def clock_unit_problems(spans: dict[str, float], sources: dict[str, str]) -> dic
 def recording_clock_problems(dataset: Dataset, has_frames: bool) -> dict[str, str]:
     """clock_unit_problems of `dataset`'s streams: its frames (when `has_frames`: an event-only
     stream's samples are made from its events, and are not read here), events, IMU and ground
-    truth, each named by time_source. Reads the event stream (Dataset.events)."""
+    truth, each named by time_source; and events lying far from the frames (STREAMS_APART_SPANS:
+    a stream on another clock). Reads the event stream (Dataset.events)."""
     events = dataset.events()
     streams = {"frame": dataset.frame_times() if has_frames else None, "event": events["t"] if len(events) else None,
                "IMU": None if dataset.imu is None else dataset.imu.t,
                "ground-truth": None if dataset.ground_truth is None else dataset.ground_truth.t}
     spans = {name: float(t[-1]) - float(t[0]) for name, t in streams.items() if t is not None and len(t) > 1}
-    return clock_unit_problems(spans, {name: time_source(dataset, name) for name in spans})
+    problems = clock_unit_problems(spans, {name: time_source(dataset, name) for name in spans})
+    frames, event_t = streams["frame"], streams["event"]
+    if not problems and frames is not None and len(frames) and event_t is not None:
+        first, last = float(event_t[0]), float(event_t[-1])
+        apart = max(float(frames[0]) - last, first - float(frames[-1]))
+        if apart > STREAMS_APART_SPANS * max(last - first, float(frames[-1]) - float(frames[0]), 1.0):
+            problems["event"] = (f"{time_source(dataset, 'event')}: the events ({first:.6g} to {last:.6g} s) and the frames "
+                                 f"({float(frames[0]):.6g} to {float(frames[-1]):.6g} s, {time_source(dataset, 'frame')}) "
+                                 "do not overlap: are they on two clocks (one from zero, one at Unix time)? "
+                                 "Every time must be on the recording's one clock")
+    return problems
 
 
 def time_source(dataset: Dataset, stream: str) -> str:

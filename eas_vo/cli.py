@@ -507,7 +507,7 @@ def _parse_render(sub) -> None:
 def cmd_render(args) -> int:
     from eas_vo import config as config_mod
     from eas_vo.gallery import frontend_images
-    from eas_vo.io import atomic_path, check_output_file
+    from eas_vo.io import atomic_path, check_output_file, refuse_foreign_file
     from eas_vo.plots import plot_gallery
 
     out = check_output_file(args.out, replace=args.overwrite)
@@ -520,6 +520,7 @@ def cmd_render(args) -> int:
     config = config_mod.resolve(args.config, {"dataset": args.dataset}, args.assignments)
     dataset = config.run.dataset
     _refuse_inputs_inside(out, _dataset_inputs(dataset, config.dataset), ("the --config", args.config), out_is_file=True)
+    refuse_foreign_file(out, "PNG image")
     frontends = [v.strip() for v in args.frontends.split(",")] if args.frontends else None
     names, images = frontend_images(args.dataset, frames, frontends, args.config, args.assignments)
     with atomic_path(out) as tmp:
@@ -665,7 +666,7 @@ def _parse_vocabulary(sub) -> None:
 
 def cmd_vocabulary(args) -> int:
     from eas_vo import config as config_mod
-    from eas_vo.io import check_output_file
+    from eas_vo.io import check_output_file, refuse_foreign_file
     from eas_vo.slam.train import train_vocabulary
 
     config = config_mod.resolve(args.config, {"dataset": args.dataset, "frontend": args.frontend, **_window_overrides(args)},
@@ -673,6 +674,7 @@ def cmd_vocabulary(args) -> int:
     out = check_output_file(args.out, replace=args.overwrite)
     _refuse_inputs_inside(out, _dataset_inputs(config.run.dataset, config.dataset), ("the --config", args.config),
                           out_is_file=True)
+    refuse_foreign_file(out, "DBoW2 vocabulary")
     done = train_vocabulary(config, out, args.k, args.levels, args.seed, progress=_progress(args))
     print(f"wrote a vocabulary of {done['nodes']} nodes ({done['words']} words, k={args.k}, L={args.levels}) from "
           f"{done['descriptors']} ORB descriptors of {done['images']} {done['frontend']} images of {done['dataset']} to {out}")

@@ -99,7 +99,7 @@ class RotationErrors:
                    "not interpolated" if gaps else "")
         start, end = c["ground_truth_span_s"]
         said = (f"the ground truth scores only {scored} of the run's {n} frames ({100 * scored / n:.0f} %, under "
-                f"{100 * MIN_SCORED_FRACTION:.0f} %): it spans {start:.3f}-{end:.3f} s of the run's 0-{t[-1] - t[0]:.3f} s"
+                f"{100 * MIN_SCORED_FRACTION:.0f} %): it spans {start:.3f} to {end:.3f} s of the run's 0 to {t[-1] - t[0]:.3f} s"
                 f"{in_gaps}; the APE describes those frames only")
         return [said]
 

@@ -213,6 +213,11 @@ def check_writable_folder(out: str | Path) -> Path:
     return out
 
 
+#: How the files eas-vo writes begin, by kind: an existing --out is replaced only if it is one.
+FILE_SIGNATURES = {"PNG image": re.compile(rb"\x89PNG\r\n\x1a\n"),
+                   "DBoW2 vocabulary": re.compile(rb"\d+ \d+ \d+ \d+\s")}
+
+
 def check_output_file(out: str | Path, replace: bool) -> Path:
     """The absolute output file (symlinks followed), or a one-line error, before any work: a
     folder is refused, so is a place that cannot be written, and an existing file unless `replace`."""
@@ -223,6 +228,19 @@ def check_output_file(out: str | Path, replace: bool) -> Path:
         raise EasVoError(f"--out {out} exists; choose another name or add --overwrite")
     _check_writable(out)
     return out
+
+
+def refuse_foreign_file(out: Path, kind: str) -> None:
+    """A one-line error when the existing file `out` does not begin as eas-vo's files of `kind`
+    do (FILE_SIGNATURES): --overwrite never replaces a file of something else (a note, another
+    tool's output), wherever it lies."""
+    if not out.is_file():
+        return
+    with open(out, "rb") as f:
+        start = f.read(64)
+    if not FILE_SIGNATURES[kind].match(start):
+        raise EasVoError(f"--out {out} exists and is no {kind}, so not a file eas-vo wrote: --overwrite replaces only "
+                         "those; choose another name")
 
 
 def _check_writable(out: Path) -> None:

@@ -195,8 +195,8 @@ def _coverage(t_est: np.ndarray, t_gt: np.ndarray, summary: dict) -> dict:
     warnings = []
     if matched < MIN_SCORED_FRACTION * n:
         warnings.append(f"the ground truth scores only {matched} of the estimate's {n} poses ({100 * matched / n:.0f} %, "
-                        f"under {100 * MIN_SCORED_FRACTION:.0f} %): it spans {start:.3f}-{end:.3f} s of the estimate's "
-                        f"0-{span:.3f} s; the APE describes those poses only")
+                        f"under {100 * MIN_SCORED_FRACTION:.0f} %): it spans {start:.3f} to {end:.3f} s of the estimate's "
+                        f"0 to {span:.3f} s; the APE describes those poses only")
     return {"matched_fraction": matched / n, "ground_truth_span_s": [start, end], "estimate_span_s": span,
             "warnings": warnings}
 

@@ -13,6 +13,7 @@ import itertools
 import time
 from collections import Counter
 from dataclasses import dataclass, field
+from dataclasses import replace as with_changes
 from pathlib import Path
 
 import numpy as np
@@ -352,10 +353,15 @@ def track(parts: Pipeline, config: ResolvedConfig, frames_csv: Path | None = Non
     n_window = len(parts.dataset.window(rc.start_s, rc.duration_s))
     overlap = concurrency.threads() > 1  # the tracker may finish a frame while the next is tracked
     pending = None  # the submitted frame whose result is not taken yet
+    previous_image, repeated = None, set()  # the tracker's positions of images equal to the one before
 
     def take(record: FrameRecord, edges: list) -> None:
         if record.index != len(tracked.records):  # an interrupt lost the frame before it
             return
+        if record.index in repeated and record.status in ("ok", "weak"):
+            # No camera's noise repeats to the bit: a driver sent the frame again, or the frontend
+            # made nothing new (no events). Its identity measures nothing, stillness least of all.
+            record, edges = with_changes(record, status="lost", inliers=0, reason="the same image as the previous frame"), []
         tracked.records.append(record)
         tracked.edges.extend(edges)
         log.write(record)
@@ -365,12 +371,15 @@ def track(parts: Pipeline, config: ResolvedConfig, frames_csv: Path | None = Non
 
     with _FrameLog(frames_csv, parts.dataset.clock_origin_ns) as log, _progress(n_window, progress, rc) as bar:
         try:
-            for sample in concurrency.ahead(parts.dataset.samples(rc.start_s, rc.duration_s)):  # the next one read meanwhile
+            for position, sample in enumerate(concurrency.ahead(parts.dataset.samples(rc.start_s, rc.duration_s))):  # the next one read meanwhile
                 check_frame(sample.frame, parts.dataset, sample.index, sample.t)
                 image = None
                 if parts.frontend.makes_images:
                     image = parts.frontend(sample)
                     check_image(image, parts.dataset.camera, rc.frontend, sample)
+                    if previous_image is not None and np.array_equal(image, previous_image):
+                        repeated.add(position)  # the tracker's index of this image
+                    previous_image = image
                     if tracked.orb is not None:
                         tracked.orb.add(image)
                 events = {"sample": sample} if parts.tracker.needs_events else {}

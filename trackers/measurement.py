@@ -86,9 +86,9 @@ class TwoViewConfig:
             1 px inlier threshold it is cut at are properties of image patches in pixels.
             15 inliers is three times the five-point minimum (a count follows the scene's
             corners, so data cannot calibrate it for every frontend).
-        max_angular_acceleration_deg_s2: a `weak` step whose rotation departs from the rate
-            of the last step that was not weak by more than this acceleration allows is no
-            measurement (`lost`; StepBound). 10 000 deg/s^2 is above the most abrupt
+        max_angular_acceleration_deg_s2: a step whose rotation departs from the rate of the
+            last `ok` step by more than this acceleration allows is doubted (StepBound: an
+            `ok` one becomes `weak`, a `weak` one `lost`). 10 000 deg/s^2 is above the most abrupt
             rotations a person's head is put through (the head impulse test's peaks, 3 000 to
             6 000 deg/s^2: Halmagyi and Curthoys 1988, MacDougall et al. 2009), so hand-held
             and head-mounted motion keeps its weak steps; raise it for a drone or a vehicle.
@@ -170,13 +170,14 @@ def frame_record(
 
 
 class StepBound:
-    """What a doubtful step may say, given the steps before it: the frame-to-frame rotation of a
-    `weak` frame must lie within `a * dt * (t_mid - t_ref)` [rad] (plus three inlier thresholds of
-    measurement noise) of the rotation at the last `ok` step's rate, `a` the config's largest
-    angular acceleration [rad/s^2], dt the frame interval [s] and t_mid - t_ref the time between
-    the two steps' midpoints [s]: a weak step farther off would need a faster change of rate than
-    the motion can have, and becomes `lost` (its edges dropped). Without an `ok` step before it a
-    weak step stands. One per tracker, fed every frame in order."""
+    """What a step may say, given the steps before it: the frame-to-frame rotation must lie
+    within `a * dt * (t_mid - t_ref)` [rad] (plus three inlier thresholds of measurement noise)
+    of the rotation at the last `ok` step's rate, `a` the config's largest angular acceleration
+    [rad/s^2], dt the frame interval [s] and t_mid - t_ref the time between the two steps'
+    midpoints [s]: a step farther off would need a faster change of rate than the motion can
+    have. Such an `ok` step becomes `weak` (kept: the images may show it, as a camera's image
+    turned upside down does, but it is not confident), a `weak` one `lost` (its edges dropped).
+    Without an `ok` step before it a step stands. One per tracker, fed every frame in order."""
 
     def __init__(self, config: TwoViewConfig, camera: CameraModel | None):
         self._acceleration = math.radians(config.max_angular_acceleration_deg_s2)
@@ -191,16 +192,16 @@ class StepBound:
             return record, edges
         dt, mid = t - t_prev, 0.5 * (t + t_prev)
         rotvec = matrix_to_rotvec(step.R_i_j)
-        if record.status == "ok":
-            self._rate = (rotvec / dt, mid)
-            return record, edges
-        if self._rate is None:
-            return record, edges
-        rate, t_ref = self._rate
-        departure = float(np.linalg.norm(rotvec - rate * dt))
-        bound = self._acceleration * dt * (mid - t_ref) + self._noise_rad
+        departure = bound = 0.0
+        if self._rate is not None:
+            rate, t_ref = self._rate
+            departure = float(np.linalg.norm(rotvec - rate * dt))
+            bound = self._acceleration * dt * (mid - t_ref) + self._noise_rad
         if departure <= bound:
+            if record.status == "ok":
+                self._rate = (rotvec / dt, mid)
             return record, edges
-        reason = (f"{record.reason}, and {math.degrees(departure):.1f} deg from the last ok step's rate "
-                  f"(more than {math.degrees(bound):.1f} deg)")
-        return replace(record, status="lost", inliers=0, reason=reason), []
+        why = f"{math.degrees(departure):.1f} deg from the last ok step's rate (more than {math.degrees(bound):.1f} deg)"
+        if record.status == "ok":
+            return replace(record, status="weak", reason=why), edges
+        return replace(record, status="lost", inliers=0, reason=f"{record.reason}, and {why}"), []

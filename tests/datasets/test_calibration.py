@@ -453,3 +453,11 @@ def test_the_lenses_of_real_cameras_do_not_fold(tmp_path):
         write_kalibr(path, cam)
         assert read_calibration(path).fold() is None
     assert ECD_DAVIS240.fold() is None and MVSEC_LEFT.fold() is None
+
+
+def test_an_ecd_calib_txt_reads_comment_lines_as_every_table_does():
+    from eas_vo.datasets.calibration import parse_ecd_calib
+
+    plain = parse_ecd_calib(b"199.1 198.9 120.5 90.2 -0.3 0.1 0 0\n", "calib.txt", 240, 180)
+    commented = parse_ecd_calib(b"# fx fy cx cy k1 k2 p1 p2\r\n199.1 198.9 120.5 90.2 -0.3 0.1 0 0\n", "calib.txt", 240, 180)
+    assert np.array_equal(plain.K, commented.K) and np.array_equal(plain.dist, commented.dist)

@@ -97,3 +97,14 @@ def test_clock_unit_problems_name_the_unit_the_ratio_suggests():
     problems = recording.clock_unit_problems(spans, {})
     assert list(problems) == ["IMU"] and "look like nanoseconds" in problems["IMU"]
     assert recording.clock_unit_problems({"frame": 30.0, "event": 30.0 / 1e4}, {}) == {}
+
+
+def test_events_on_another_clock_than_the_frames_are_refused_naming_both(tmp_path, capsys):
+    """Events at Unix time beside frames from zero (spans alike, no unit to see): a run is refused
+    in one line naming events.txt and images.txt, and `info` warns the same."""
+    folder = sequence_with(tmp_path / "seq", None, 1)
+    retimed(folder / ECD_FILES["event"], 1, UNIX_S)
+    err = one_line_failure(["run", "--dataset", str(folder), "--out", str(tmp_path / "run")], capsys)
+    assert f"{folder / ECD_FILES['event']}: the events (" in err and "do not overlap" in err and ECD_FILES["frame"] in err, err
+    warnings = describe(resolve(None, {"dataset": str(folder)})).warnings
+    assert [w for w in warnings if "do not overlap" in w] == [err.removeprefix("eas-vo: error: ").strip()]

@@ -61,3 +61,19 @@ def test_an_out_whose_links_loop_is_one_line_naming_it(short_sequence, tmp_path,
     dataset = [] if command[0] in ("simulate", "reproduce") else ["--dataset", str(short_sequence)]
     err = one_line_failure([*command, *dataset, "--out", str(tmp_path / "a" / "out")], capsys)
     assert f"--out {tmp_path / 'a' / 'out'}: its symbolic links form a loop" in err
+
+
+@pytest.mark.parametrize("command", [["render", "--frames", "1", "--frontends", "original"],
+                                     ["vocabulary", "--frontend", "eas", "--duration", "0.5", "--k", "2", "--levels", "1"]])
+def test_overwrite_replaces_only_a_file_of_the_kind_the_command_writes(short_sequence, tmp_path, capsys, command):
+    """A note anywhere is never replaced by --overwrite; the command's own earlier file is."""
+    note = tmp_path / "notes.txt"
+    note.write_text("important\n")
+    args = [command[0], "--dataset", str(short_sequence), *command[1:]]
+    err = one_line_failure([*args, "--out", str(note), "--overwrite"], capsys)
+    assert "so not a file eas-vo wrote" in err and note.read_text() == "important\n"
+    from eas_vo.cli import main
+
+    own = tmp_path / "own"
+    assert main([*args, "--out", str(own)]) == 0
+    assert main([*args, "--out", str(own), "--overwrite"]) == 0

@@ -28,8 +28,8 @@ def test_a_late_ground_truth_scores_half_the_frames_and_says_so(sequence_copy, t
     start, end = metrics["ground_truth_span_s"]
     assert abs(start - 0.49) < 1e-9 and abs(end - 1.985) < 1e-9  # from the run's first frame, at 0.01 s
     warning = [w for w in metrics["data_warnings"] if "ground truth scores only" in w]
-    assert warning == [("the ground truth scores only 10 of the run's 20 frames (50 %, under 90 %): it spans 0.490-1.985 s "
-                        "of the run's 0-0.950 s; the APE describes those frames only")]
+    assert warning == [("the ground truth scores only 10 of the run's 20 frames (50 %, under 90 %): it spans 0.490 to 1.985 s "
+                        "of the run's 0 to 0.950 s; the APE describes those frames only")]
     assert f"eas-vo: warning: {warning[0]}" in said.err
     assert "10 of 20 frames scored, ground truth from 0.490 to 1.985 s of the run's 0 to 0.950 s" in said.out
 

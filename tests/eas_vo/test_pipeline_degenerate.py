@@ -190,3 +190,19 @@ def test_an_imu_mounted_otherwise_than_configured_is_named(sequence_copy, tmp_pa
     configured = best(sequence_copy, "configured", "--set", f"run.imu_rotvec_cam=[{exact}]")
     assert configured["data_warnings"] == []
     assert configured["ape_mean_rad"] == pytest.approx(untouched["ape_mean_rad"], abs=1e-6)
+
+
+def test_frames_repeated_while_the_camera_turns_are_no_evidence(sequence_copy, tmp_path):
+    """Every frame a copy of the first while the events and the gyro say the camera turns (a
+    driver resending one frame): every frame after the first is `lost` (LK's identity with a
+    zero residual measures nothing, stillness least of all), and best.toml's gyro, not
+    contradicted by them, is used."""
+    first = cv2.imread(str(sequence_copy / "images" / "frame_00000000.png"), cv2.IMREAD_GRAYSCALE)
+    rewrite_frames(sequence_copy, lambda im: first)
+    for extra in ([], ["--config", "best"]):
+        out = tmp_path / f"out{len(extra)}"
+        assert main(["run", "--dataset", str(sequence_copy), "--frontend", "original", "--out", str(out), "--quiet", *extra]) == 0
+        metrics = json.loads((out / "metrics.json").read_text())
+        rows = list(csv.DictReader(open(out / "frames.csv")))
+        assert Counter((r["status"], r["reason"]) for r in rows[1:]) == {("lost", "the same image as the previous frame"): len(rows) - 1}
+    assert "gyro not used" not in " ".join(metrics["data_warnings"]) and metrics["gyro_use"], metrics

@@ -95,11 +95,11 @@ def test_a_wrong_measurement_from_noise_beyond_the_inlier_threshold_is_weak(widt
         assert edge is None
 
 
-def test_a_weak_step_that_departs_from_the_recent_rate_more_than_the_motion_allows_is_lost():
+def test_a_step_that_departs_from_the_recent_rate_more_than_the_motion_allows_is_doubted():
     """StepBound at 20 frames/s after an ok step of 1 deg about x: a weak step of 1.5 deg stands
     (10 000 deg/s^2 allow 25 deg over one frame interval), a weak half turn (the five-point
-    solver's degenerate answer) is lost with its edges; a weak step with no ok step before it
-    stands, and ok steps always do."""
+    solver's degenerate answer) is lost with its edges, an ok one is weak; a weak step with no
+    ok step before it stands."""
     from eas_vo.trackers.measurement import StepBound
     from eas_vo.types import FrameRecord, RelativeRotation
 
@@ -118,5 +118,7 @@ def test_a_weak_step_that_departs_from_the_recent_rate_more_than_the_motion_allo
     assert record.status == "weak" and len(edges) == 1
     record, edges = bound.judge(*frame(4, "weak", 180.0), 0.15, 0.20)
     assert (record.status, edges, record.inliers) == ("lost", [], 0) and "from the last ok step's rate" in record.reason
-    record, edges = bound.judge(*frame(5, "ok", 30.0), 0.20, 0.25)
+    record, edges = bound.judge(*frame(5, "ok", 1.2), 0.20, 0.25)
     assert record.status == "ok" and len(edges) == 1
+    record, edges = bound.judge(*frame(6, "ok", 180.0), 0.25, 0.30)  # an image turned upside down
+    assert (record.status, len(edges)) == ("weak", 1) and record.reason.startswith("178.8 deg from the last ok step's rate")
