@@ -500,7 +500,7 @@ def _parse_render(sub) -> None:
     _add_config(render, config_help="config file for the frontends' settings",
                 set_help="override one config value, e.g. frontend.n=8000 (repeatable)")
     render.add_argument("--out", required=True, metavar="PNG", help="output image, e.g. gallery.png")
-    render.add_argument("--overwrite", action="store_true", help="replace an existing --out (never one of the inputs)")
+    render.add_argument("--overwrite", action="store_true", help="replace an existing --out if it is a PNG image (never one of the inputs)")
     render.set_defaults(func=cmd_render)
 
 
@@ -660,7 +660,7 @@ def _parse_vocabulary(sub) -> None:
     _add_window(vocabulary)
     _add_quiet(vocabulary)
     vocabulary.add_argument("--out", required=True, metavar="FILE", help="the vocabulary file to write")
-    vocabulary.add_argument("--overwrite", action="store_true", help="replace an existing --out")
+    vocabulary.add_argument("--overwrite", action="store_true", help="replace an existing --out if it is a vocabulary (never one of the inputs)")
     vocabulary.set_defaults(func=cmd_vocabulary)
 
 

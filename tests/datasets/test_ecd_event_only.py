@@ -32,16 +32,17 @@ def test_frame_frontend_on_an_event_only_stream_is_a_clear_error(capsys):
 @pytest.mark.parametrize("name", ["boxes_rotation", "poster_rotation", "dynamic_rotation"])
 def test_event_only_real_windows_run_cmax_without_a_frontend(name):
     """No frontend is chosen (the configured default, eas, needs frames): cmax runs with `no_image`.
-    A sample every 5000 events, windows of 15000 reaching back: every full window brings the
-    events into focus (contrast gain over 1.1) and consecutive ones turn about similar axes."""
+    A sample every 7500 events, each interval's window its own 7500 (a window keeps to its
+    interval): every window is ok, brings its events into sharper focus than no motion does
+    (contrast gain over 1), and consecutive ones turn about similar axes."""
     folder = require(EVENT_WINDOWS / name)
     cfg = config.resolve(None, {"dataset": str(folder), "tracker": "cmax"},
-                         ["dataset.sample_every_events=5000", "tracker.window_events=15000"])
+                         ["dataset.sample_every_events=7500", "tracker.window_events=7500"])
     assert cfg.run.frontend == "no_image"
     result = pipeline.run(cfg)
-    full = [r for r in result.records if r.events > 14000]  # the first ones reach back to the stream start
-    assert len(full) >= 3 and all(r.status == "ok" and r.contrast_gain > 1.1 for r in full)
-    steps = [matrix_to_rotvec(e.R_i_j) for e in result.edges if result.records[e.j].events > 14000]
+    full = [r for r in result.records if r.events > 7000]
+    assert len(full) >= 3 and all(r.status == "ok" and r.contrast_gain > 1.0 for r in full)
+    steps = [matrix_to_rotvec(e.R_i_j) for e in result.edges if result.records[e.j].events > 7000]
     cosines = [a @ b / np.linalg.norm(a) / np.linalg.norm(b) for a, b in zip(steps, steps[1:])]
     assert min(cosines) > 0.8, np.round(cosines, 2)
 

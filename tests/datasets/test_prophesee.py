@@ -244,6 +244,10 @@ def test_an_event_only_raw_with_a_calibration_runs_cmax(tmp_path):
     assert main(["run", "--dataset", str(path), "--tracker", "cmax", "--set", f"dataset.calibration={calibration}",
                  "--set", "dataset.sample_rate_hz=50", "--out", str(out), "--quiet"]) == 0
     t, _, q_xyzw = read_tum(out / "trajectory.tum")
-    turned = float(geodesic_angle(matrices_from_quats(q_xyzw[:1]), matrices_from_quats(q_xyzw[-1:]))[0])
-    span = t[-1] - t[0]
-    assert span > 0.2 and abs(turned - 2.0 * span) < 0.1 * 2.0 * span, (turned, span)
+    R = matrices_from_quats(q_xyzw)
+    statuses = [row.split(",")[4] for row in (out / "frames.csv").read_text().splitlines()[1:]]
+    ok = [k for k, status in enumerate(statuses) if status == "ok"]
+    assert t[-1] - t[0] > 0.2 and len(ok) >= len(statuses) // 2, statuses
+    # every ok interval turns at the true 2 rad/s within 10 % (the others are weak, and say why)
+    rates = geodesic_angle(R[np.array(ok) - 1], R[ok]) / np.diff(t)[np.array(ok) - 1]
+    assert np.all(np.abs(rates - 2.0) < 0.2), rates

@@ -388,7 +388,8 @@ def test_an_absurd_window_is_one_line_without_numpy_warnings(short_sequence, tmp
 
 def test_render_writes_over_a_file_only_with_overwrite_and_never_over_an_input(short_sequence, tmp_path, capsys):
     """An existing --out is kept without --overwrite; with it, a file of the dataset (a frame,
-    also through a link to it) or the --config is still refused; any other file is replaced."""
+    also through a link to it) or the --config is still refused, so is a file that is no PNG
+    (a trajectory); a PNG image is replaced."""
     dataset = tmp_path / "seq"  # the short sequence, its frames copied (its events linked: their cache is reused)
     shutil.copytree(short_sequence / "images", dataset / "images")
     for name in ("events.txt", "images.txt", "calib.txt"):
@@ -404,11 +405,14 @@ def test_render_writes_over_a_file_only_with_overwrite_and_never_over_an_input(s
     for out, overwrite, says in ((estimate, [], "exists; choose another name or add --overwrite"),
                                  (frame, ["--overwrite"], "is the dataset"),
                                  (tmp_path / "frame.png", ["--overwrite"], "is the dataset"),
-                                 (config, ["--overwrite"], "is the --config")):
+                                 (config, ["--overwrite"], "is the --config"),
+                                 (estimate, ["--overwrite"], "is no PNG image, so not a file eas-vo wrote")):
         assert says in one_line_failure([*render, "--out", str(out), *overwrite], capsys)
     assert frame.read_bytes() == kept and estimate.read_text() == "0 0 0 0 0 0 0 1\n" and config.read_text().startswith("[run]")
-    assert main([*render, "--out", str(estimate), "--overwrite"]) == 0
-    assert estimate.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and not list(tmp_path.glob(".*.tmp"))
+    image = tmp_path / "gallery.png"
+    image.write_bytes(frame.read_bytes())  # a PNG, as render's own
+    assert main([*render, "--out", str(image), "--overwrite"]) == 0
+    assert image.read_bytes() != kept and image.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and not list(tmp_path.glob(".*.tmp"))
 
 
 @pytest.mark.parametrize("command", [["run", "--overwrite"], ["export", "--overwrite"], ["compare", "--frontends", "original"]])
