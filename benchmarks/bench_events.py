@@ -49,7 +49,7 @@ def make_file(n_events: int) -> Path:
     """The first n_events of a simulated sequence long enough to hold them, as events.txt."""
     from eas_vo.datasets.simulator import SimConfig, simulate
     from eas_vo.eventfile import write_events_text
-    from eas_vo.io import cache_folder
+    from eas_vo.io.cache import cache_folder
     from eas_vo.registry import open_dataset
 
     bench = cache_folder("bench", BENCH_ABOUT)
@@ -76,7 +76,7 @@ def make_aedat4(text: Path) -> Path:
     import dv_processing as dv
 
     from eas_vo.eventfile import file_identity, load_event_text
-    from eas_vo.io import write_text_atomic
+    from eas_vo.io.atomic import write_text_atomic
 
     path = text.with_suffix(".aedat4")
     write_text_atomic(path.with_name("calib.txt"), "200 200 120 90 0 0 0 0 0\n")
@@ -130,7 +130,7 @@ def make_mvsec_file(text: Path) -> Path:
     """The events of `text` as an MVSEC NAME_data.hdf5 (davis/left/events only), with a camchain beside it."""
     import h5py
 
-    from eas_vo.io import atomic_path, write_text_atomic
+    from eas_vo.io.atomic import atomic_path, write_text_atomic
 
     path = text.with_name(text.stem + "_data.hdf5")
     write_text_atomic(text.with_name(text.stem + "_camchain.yaml"), BENCH_CAMCHAIN)
@@ -219,7 +219,7 @@ def make_bag(text: Path, n_events: int, storage: str) -> Path:
 
     from eas_vo.datasets.rosbag2 import write_bag2
     from eas_vo.eventfile import file_identity, load_event_text
-    from eas_vo.io import cache_folder
+    from eas_vo.io.cache import cache_folder
     from eas_vo.plugins import Dataset
     from eas_vo.types import CameraModel
 

@@ -18,7 +18,8 @@ from bench_events import BENCH_ABOUT
 
 def make_folder(n_events: int):
     from eas_vo.eventfile import format_events
-    from eas_vo.io import atomic_path, cache_folder, write_text_atomic
+    from eas_vo.io.atomic import atomic_path, write_text_atomic
+    from eas_vo.io.cache import cache_folder
     from eas_vo.registry import open_dataset
 
     folder = cache_folder("bench", BENCH_ABOUT) / f"events_only_{n_events}"

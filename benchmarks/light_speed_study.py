@@ -28,7 +28,8 @@ from pathlib import Path
 from eas_vo import compare
 from eas_vo.compare import Method
 from eas_vo.gallery import PAPER_COLOURS, PAPER_ORDER
-from eas_vo.io import cache_folder, json_text, write_text_atomic
+from eas_vo.io.atomic import json_text, write_text_atomic
+from eas_vo.io.cache import cache_folder
 
 #: Seeds that chose something (best.toml, cmax's settings, the gyro model at speed 4) or were
 #: looked at before this study (cmax.md's first look): never reported on here.

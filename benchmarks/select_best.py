@@ -28,7 +28,7 @@ from pathlib import Path
 
 from eas_vo import config, pipeline
 from eas_vo.config import parse_set
-from eas_vo.io import cache_folder
+from eas_vo.io.cache import cache_folder
 
 #: The values tried by default (every other value is best.toml's).
 CANDIDATES = {

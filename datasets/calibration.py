@@ -27,7 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from eas_vo.errors import DataError
-from eas_vo.io import text_bytes
+from eas_vo.io.tables import text_bytes
 from eas_vo.types import LENS_MODELS, CameraModel
 
 

@@ -16,8 +16,10 @@ rate or every N events.
 from __future__ import annotations
 
 import math
+import os
 import sys
 from collections.abc import Iterable
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path, PurePosixPath, PureWindowsPath
 
@@ -30,7 +32,8 @@ from eas_vo.datasets.recording import RecordingReader, StreamConfig, clock_origi
 from eas_vo.datasets.sources import MARKERS, open_source
 from eas_vo.errors import DataError, DataWarnings
 from eas_vo.eventfile import load_event_text, write_events_text
-from eas_vo.io import atomic_path, clock_time, silenced_stderr, text_bytes, write_text_atomic
+from eas_vo.io.atomic import atomic_path, write_text_atomic
+from eas_vo.io.tables import clock_time, text_bytes
 from eas_vo.types import CameraModel, ImuSeries, PoseSeries, empty_events
 from eas_vo.validation import check_range
 
@@ -38,6 +41,24 @@ from eas_vo.validation import check_range
 #: The calibration of a fisheye sequence in this layout: calib.txt has only the radial-tangential
 #: model, so (as fisheye datasets in this layout ship, e.g. UZH-FPV's DAVIS) it is kalibr's camchain.
 CAMCHAIN = "camchain.yaml"
+
+
+from eas_vo.errors import DataError, EasVoError
+
+
+@contextmanager
+def silenced_stderr():
+    """Send what C libraries write to file descriptor 2 to /dev/null for the block (libpng
+    prints its own complaint about a damaged PNG; eas-vo's one error line says it instead)."""
+    sys.stderr.flush()
+    saved, devnull = os.dup(2), os.open(os.devnull, os.O_WRONLY)
+    try:
+        os.dup2(devnull, 2)
+        yield
+    finally:
+        os.dup2(saved, 2)
+        os.close(saved)
+        os.close(devnull)
 
 @dataclass(frozen=True)
 class EcdConfig(StreamConfig):

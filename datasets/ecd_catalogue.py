@@ -21,7 +21,9 @@ from pathlib import Path
 from urllib.parse import unquote, urlsplit
 
 from eas_vo.errors import DataError, EasVoError
-from eas_vo.io import atomic_path, cache_folder, current_umask, text_bytes
+from eas_vo.io.atomic import atomic_path, current_umask
+from eas_vo.io.cache import cache_folder
+from eas_vo.io.tables import text_bytes
 
 BASE_URL = "https://rpg.ifi.uzh.ch/datasets/davis/"
 _MD5 = re.compile(r"[0-9a-fA-F]{32}")

@@ -31,7 +31,7 @@ from eas_vo.datasets.recording import CALIBRATION_FORMATS, RecordingReader, Stre
 from eas_vo.errors import DataError, DataWarnings
 from eas_vo.eventfile import Validator, cache_key, cache_path, file_identity, load_cached, write_behind
 from eas_vo.eventfile.prophesee import DECODERS, Evt21Decoder, PropheseeDecoder, WordError
-from eas_vo.io import atomic_file
+from eas_vo.io.atomic import atomic_file
 from eas_vo.validation import check_range
 
 #: The most header bytes read (a header longer than this is not a Prophesee one).

@@ -17,7 +17,7 @@ from eas_vo.datasets.simulator import SimConfig, simulate
 from eas_vo.datasets.simulator.generate import SENSORS, SimCamera
 from eas_vo.datasets.simulator.sensor import DvsModel
 from eas_vo.errors import ConfigError, EasVoError
-from eas_vo.io import cache_folder
+from eas_vo.io.cache import cache_folder
 from eas_vo.types import LENS_MODELS
 from eas_vo.validation import check_choice, check_range
 

@@ -230,7 +230,7 @@ def _refuse_inputs_inside(out: Path, datasets: list[tuple[str, str | None]], *ot
                           out_is_file: bool = False) -> None:
     """io.refuse_inputs for a command's output: its datasets' inputs (_dataset_inputs) and the
     `others` it reads ((what, path or None): a --config, an --estimate, ...)."""
-    from eas_vo.io import refuse_inputs
+    from eas_vo.io.outputs import refuse_inputs
 
     refuse_inputs(out, [*datasets, *others], out_is_file=out_is_file)
 
@@ -288,7 +288,8 @@ def _parse_run(sub) -> None:
 def cmd_run(args) -> int:
     from eas_vo import config as config_mod
     from eas_vo import pipeline
-    from eas_vo.io import check_output_folder, slug
+    from eas_vo.io.outputs import check_output_folder
+    from eas_vo.io.tables import slug
 
     _apply_threads(args)
     config = config_mod.resolve(
@@ -381,7 +382,7 @@ def cmd_compare(args) -> int:
     from eas_vo import compare
     from eas_vo import config as config_mod
     from eas_vo.gallery import PAPER_ORDER
-    from eas_vo.io import check_grid_folder, check_writable_folder
+    from eas_vo.io.outputs import check_grid_folder, check_writable_folder
     from eas_vo.reproduce import default_methods
 
     out = check_writable_folder(args.out)
@@ -507,7 +508,8 @@ def _parse_render(sub) -> None:
 def cmd_render(args) -> int:
     from eas_vo import config as config_mod
     from eas_vo.gallery import frontend_images
-    from eas_vo.io import atomic_path, check_output_file, refuse_foreign_file
+    from eas_vo.io.atomic import atomic_path
+    from eas_vo.io.outputs import check_output_file, refuse_foreign_file
     from eas_vo.plots import plot_gallery
 
     out = check_output_file(args.out, replace=args.overwrite)
@@ -554,7 +556,7 @@ def _parse_export(sub) -> None:
 
 def cmd_export(args) -> int:
     from eas_vo import config as config_mod
-    from eas_vo.io import check_output_folder
+    from eas_vo.io.outputs import check_output_folder
     from eas_vo.orbslam import export
 
     config = config_mod.resolve(
@@ -617,7 +619,8 @@ def _parse_slam(sub) -> None:
 
 def cmd_slam(args) -> int:
     from eas_vo import config as config_mod
-    from eas_vo.io import check_output_folder, figure_text
+    from eas_vo.io.outputs import check_output_folder
+    from eas_vo.io.tables import figure_text
     from eas_vo.slam.run import SUMMARISED, find_vocabulary, require_extra, run_slam
 
     require_extra()
@@ -666,7 +669,7 @@ def _parse_vocabulary(sub) -> None:
 
 def cmd_vocabulary(args) -> int:
     from eas_vo import config as config_mod
-    from eas_vo.io import check_output_file, refuse_foreign_file
+    from eas_vo.io.outputs import check_output_file, refuse_foreign_file
     from eas_vo.slam.train import train_vocabulary
 
     config = config_mod.resolve(args.config, {"dataset": args.dataset, "frontend": args.frontend, **_window_overrides(args)},
@@ -706,7 +709,7 @@ def _parse_convert(sub) -> None:
 
 def cmd_convert(args) -> int:
     from eas_vo import config as config_mod
-    from eas_vo.io import check_output_folder
+    from eas_vo.io.outputs import check_output_folder
     from eas_vo.sequence import convert
 
     config = config_mod.resolve(args.config, {"dataset": args.dataset, **_window_overrides(args)}, _assignments(args))
@@ -746,7 +749,8 @@ def _parse_evaluate(sub) -> None:
 
 
 def cmd_evaluate(args) -> int:
-    from eas_vo.io import check_output_folder, figure_text
+    from eas_vo.io.outputs import check_output_folder
+    from eas_vo.io.tables import figure_text
     from eas_vo.orbslam import evaluate_estimate
 
     if args.out:
@@ -802,7 +806,7 @@ def _parse_reproduce(sub) -> None:
 def cmd_reproduce(args) -> int:
     from eas_vo import reproduce
     from eas_vo.datasets.ecd_catalogue import data_dir
-    from eas_vo.io import check_grid_folder, check_writable_folder
+    from eas_vo.io.outputs import check_grid_folder, check_writable_folder
 
     estimates = {}
     for text in args.estimates:
@@ -888,7 +892,7 @@ def _parse_cache(sub) -> None:
 
 
 def cmd_cache(args) -> int:
-    from eas_vo.io import cache_dir, cache_usage, clear_cache
+    from eas_vo.io.cache import cache_dir, cache_usage, clear_cache
 
     if args.clear:
         for name, freed in clear_cache(args.clear).items():
@@ -943,7 +947,7 @@ def cmd_simulate(args) -> int:
     from eas_vo.config import build, parse_set
     from eas_vo.datasets.simulator import SimConfig, simulate
     from eas_vo.datasets.synthetic import SyntheticConfig
-    from eas_vo.io import check_output_folder, output_folder
+    from eas_vo.io.outputs import check_output_folder, output_folder
 
     pixel = {}
     for assignment in args.assignments:

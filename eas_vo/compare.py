@@ -23,7 +23,9 @@ import numpy as np
 from eas_vo import concurrency, registry
 from eas_vo.config import NO_IMAGES, parse_set
 from eas_vo.errors import EasVoError, Interrupted, sigterm_as_interrupt
-from eas_vo.io import claim_grid_folder, json_text, markdown_cell, output_folder, remove_stale_temporaries, slug, write_text_atomic
+from eas_vo.io.atomic import json_text, remove_stale_temporaries, write_text_atomic
+from eas_vo.io.outputs import claim_grid_folder, output_folder
+from eas_vo.io.tables import markdown_cell, slug
 
 
 @dataclass(frozen=True)
@@ -320,7 +322,7 @@ def write_figures(out: Path, cells: list[Cell], rows: list[dict]) -> None:
     earlier one's (row `same_as`) drawn once, under both names; a frontend in one colour throughout."""
     from eas_vo.evaluation import tum_rotation_errors
     from eas_vo.gallery import PAPER_COLOURS
-    from eas_vo.io import atomic_path
+    from eas_vo.io.atomic import atomic_path
     from eas_vo.plots import frontend_colours, plot_ape_bars, plot_ape_time, plot_sweep
 
     colours = frontend_colours((c.frontend for c in cells), PAPER_COLOURS)  # every figure the same
@@ -373,7 +375,7 @@ def same_trajectory(a: Path, b: Path, tol: float = 1e-9) -> bool:
     """Whether two TUM trajectories hold the same timestamps and the same rotations to `tol`
     in every quaternion component (q and -q alike; 1e-9 is about 2e-9 rad, far above the
     files' 12 decimals); False if either is unreadable."""
-    from eas_vo.io import read_tum
+    from eas_vo.io.tum import read_tum
 
     try:
         (t_a, _, q_a), (t_b, _, q_b) = read_tum(a), read_tum(b)

@@ -21,7 +21,7 @@ from typing import Any, get_type_hints
 
 from eas_vo import registry
 from eas_vo.errors import ConfigError
-from eas_vo.io import text_bytes
+from eas_vo.io.tables import text_bytes
 from eas_vo.validation import check_range, check_vector
 
 SECTIONS = ("run", "dataset", "frontend", "tracker", "backend")

@@ -224,7 +224,7 @@ def tum_rotation_errors(estimate_tum: Path, groundtruth_tum: Path) -> tuple[np.n
 def tum_aligned_rotations(estimate_tum: Path, groundtruth_tum: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
     """(common timestamps [s], R_w_c ground truth, R_w_c estimate aligned at the first) of two
     TUM files; None if either is unreadable or they share no timestamp."""
-    from eas_vo.io import read_tum
+    from eas_vo.io.tum import read_tum
 
     try:
         t_est, _, q_est = read_tum(estimate_tum)

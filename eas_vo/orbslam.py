@@ -17,7 +17,9 @@ import cv2
 import numpy as np
 
 from eas_vo.errors import DataError, EasVoError
-from eas_vo.io import data_line, figure_text, json_text, markdown_cell, output_folder, parse_table, write_text_atomic
+from eas_vo.io.atomic import json_text, write_text_atomic
+from eas_vo.io.outputs import output_folder
+from eas_vo.io.tables import data_line, figure_text, markdown_cell, parse_table
 from eas_vo.types import LENS_MODELS, CameraModel, PoseSeries
 
 FORMATS = ("tum", "euroc")

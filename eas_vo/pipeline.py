@@ -27,7 +27,9 @@ from eas_vo.evaluation import (MAX_GAP_FRAMES, OFFSET_SEARCH_S, ImuAgreement, Ro
                                imu_agreement, motion_errors, rotation_errors, scorable)
 from eas_vo.geometry.rotations import geodesic_angle, matrix_to_rotvec, quats_from_matrices, rotvec_to_matrix
 from eas_vo.imu_check import GyroVerdict, check_readings, judge_gyro, without
-from eas_vo.io import atomic_path, clock_time, json_text, output_folder, write_text_atomic
+from eas_vo.io.atomic import atomic_path, json_text, write_text_atomic
+from eas_vo.io.outputs import output_folder
+from eas_vo.io.tables import clock_time
 from eas_vo.orb import OrbStats
 from eas_vo.plugins import Backend, Dataset, Frontend, Tracker
 from eas_vo.types import MAX_GAP_READINGS, FrameRecord, ImuSeries, RelativeRotation

@@ -15,7 +15,9 @@ import numpy as np
 from eas_vo import compare
 from eas_vo.errors import DataError, EasVoError
 from eas_vo.gallery import PAPER_ORDER
-from eas_vo.io import atomic_path, claim_grid_folder, figure_text, json_text, remove_stale_temporaries, slug, write_text_atomic
+from eas_vo.io.atomic import atomic_path, json_text, remove_stale_temporaries, write_text_atomic
+from eas_vo.io.outputs import claim_grid_folder
+from eas_vo.io.tables import figure_text, slug
 
 SEQUENCES = ("hdr_boxes", "hdr_poster")
 
@@ -305,7 +307,7 @@ def _keyframe_figures(out: Path, cells: list[compare.Cell], slam: dict) -> None:
     """fig4_SEQUENCE.png: the paper's Fig. 4, a column per source: the keyframe positions of the
     run with the median keyframe APE, Sim(3)-aligned, per axis over ground truth, and each
     keyframe's APE."""
-    from eas_vo.io import read_tum
+    from eas_vo.io.tum import read_tum
     from eas_vo.plots import plot_keyframes
     from eas_vo.registry import open_dataset
 

@@ -19,7 +19,7 @@ from eas_vo import registry
 from eas_vo.config import ResolvedConfig
 from eas_vo.datasets.recording import recording_clock_problems
 from eas_vo.errors import EasVoError
-from eas_vo.io import output_folder
+from eas_vo.io.outputs import output_folder
 from eas_vo.types import CameraModel, ImuSeries, PoseSeries, search_times
 
 

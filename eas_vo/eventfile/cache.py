@@ -26,7 +26,8 @@ import numpy as np
 
 from eas_vo.errors import DataError, DataWarnings
 from eas_vo.eventfile.convert import convert_text_to_cache
-from eas_vo.io import atomic_file, cache_folder
+from eas_vo.io.atomic import atomic_file
+from eas_vo.io.cache import cache_folder
 from eas_vo.types import EVENT_DTYPE
 
 CACHE_MAGIC = b"EASVOEV3"
@@ -252,7 +253,7 @@ def load_cached(
         warnings.merge(local)
         return memory.events()
     if local.counts:
-        from eas_vo.io import write_text_atomic
+        from eas_vo.io.atomic import write_text_atomic
 
         write_text_atomic(target.with_suffix(".warnings"), local.to_json())
     elif target is tolerant:

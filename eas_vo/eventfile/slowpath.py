@@ -9,7 +9,7 @@ import numpy as np
 from eas_vo.errors import DataError, DataWarnings
 from eas_vo.eventfile.kernels import parse_and_pack
 from eas_vo.eventfile.validate import Validator
-from eas_vo.io import text_bytes
+from eas_vo.io.tables import text_bytes
 from eas_vo.types import EVENT_DTYPE
 
 #: Lines the text path takes at once at most (so a file of lines the compiled parser does not

@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from eas_vo.eventfile.cache import prime_text_cache
-from eas_vo.io import atomic_file
+from eas_vo.io.atomic import atomic_file
 from eas_vo.types import EVENT_DTYPE
 
 

@@ -9,7 +9,7 @@ import tarfile
 from pathlib import Path
 
 from eas_vo.errors import EasVoError
-from eas_vo.io import atomic_file
+from eas_vo.io.atomic import atomic_file
 
 #: Where ORB-SLAM3 publishes it, and the SHA-1 of the archive: both as pyorbslam3's vocab.py
 #: (0.1.1) gives them. EAS_VO_ORB_VOCABULARY_URL names a mirror of the same archive.

@@ -34,7 +34,9 @@ from pathlib import Path
 import numpy as np
 
 from eas_vo.errors import DataError, EasVoError, Interrupted
-from eas_vo.io import figure_text, json_text, output_folder, write_text_atomic
+from eas_vo.io.atomic import json_text, write_text_atomic
+from eas_vo.io.outputs import output_folder
+from eas_vo.io.tables import figure_text
 
 EXTRA_HINT = "monocular ORB-SLAM3 runs through the optional extra: pip install 'eas-vo[slam]' (pyorbslam3, GPL-3.0)"
 FRAMES_FIELDS = ("index", "t", "state", "tracked_points", "tx", "ty", "tz", "qx", "qy", "qz", "qw")
@@ -238,7 +240,7 @@ def _euroc_to_tum(src: Path, dst: Path, results: list[FrameResult]) -> None:
     ORB-SLAM3 writes a line per frame since its initialisation, and for a frame it could not
     pose the previous frame's time and pose again (Tracking::Track, "This can happen if
     tracking is lost"), so its file can hold one time twice and poses of frames it lost."""
-    from eas_vo.io import read_table
+    from eas_vo.io.tables import read_table
 
     rows = read_table(src, 8, "ORB-SLAM3 EuRoC pose 't_ns tx ty tz qx qy qz qw'") if src.stat().st_size else np.empty((0, 8))
     t = np.array([r.t for r in results])
@@ -256,7 +258,7 @@ def on_recording_clock(folder: Path, origin_ns: int) -> None:
     """A run folder's times (ORB-SLAM3 is fed, and its files and frames.csv first hold, times
     after the dataset's clock origin) written as the recording's own: the origin added back in
     integer ns (io.clock_time), as every eas-vo output holds them."""
-    from eas_vo.io import clock_time
+    from eas_vo.io.tables import clock_time
 
     if not origin_ns:
         return
@@ -314,7 +316,7 @@ def rotation_score(ground_truth, path: Path, time_offset_s: float) -> dict | Non
     of the rotations of a TUM trajectory (the frames ORB-SLAM3 tracked); None without poses."""
     from eas_vo.evaluation import rotation_errors
     from eas_vo.geometry.rotations import matrices_from_quats
-    from eas_vo.io import read_tum
+    from eas_vo.io.tum import read_tum
 
     if not path.exists() or not path.stat().st_size:
         return None

@@ -8,7 +8,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from eas_vo.io import atomic_path
+from eas_vo.io.atomic import atomic_path
 from eas_vo.slam.vocabulary import DESCRIPTOR_BYTES, check_shape, train
 
 

@@ -231,7 +231,7 @@ def rotating_dots(width=240, height=180, f=200.0, omega=(0.0, 2.0, 0.0), duratio
 
 def test_an_event_only_raw_with_a_calibration_runs_cmax(tmp_path):
     from eas_vo.geometry.rotations import geodesic_angle, matrices_from_quats
-    from eas_vo.io import read_tum
+    from eas_vo.io.tum import read_tum
 
     events = rotating_dots()
     words, _, _ = ENCODERS["EVT3"](events, others_every=0)

@@ -12,7 +12,7 @@ from eas_vo import config, pipeline
 from eas_vo.datasets.ecd import EcdFolderDataset, write_ecd_folder
 from eas_vo.datasets.rosbag import write_bag
 from eas_vo.datasets.rosbag2 import write_bag2
-from eas_vo.io import clock_time
+from eas_vo.io.tables import clock_time
 from eas_vo.plugins import Dataset
 from eas_vo.sequence import describe
 

@@ -224,7 +224,7 @@ def strict_json(path):
 
 
 def test_json_text_writes_null_for_what_json_cannot_hold(tmp_path):
-    from eas_vo.io import json_text
+    from eas_vo.io.atomic import json_text
 
     path = tmp_path / "m.json"
     path.write_text(json_text({"a": float("nan"), "b": [1.5, float("inf"), {"c": -float("inf")}], "d": (2, "x")}))

@@ -14,7 +14,9 @@ import numpy as np
 import pytest
 
 from eas_vo.errors import DataError, EasVoError
-from eas_vo.io import atomic_file, atomic_path, check_output_folder, output_folder, read_table
+from eas_vo.io.atomic import atomic_file, atomic_path
+from eas_vo.io.outputs import check_output_folder, output_folder
+from eas_vo.io.tables import read_table
 
 
 def test_read_table_skips_comments_and_blank_lines(tmp_path):
@@ -114,7 +116,7 @@ def test_a_crashed_writers_lock_and_leftovers_are_taken_over(tmp_path):
 def test_a_lock_appears_with_its_owner_already_in_it(tmp_path, monkeypatch):
     """A writer killed between making its lock and writing it would leave an empty lock that
     blocks every other writer for 10 s: the lock is a second name of a file written first."""
-    import eas_vo.io as io_module
+    import eas_vo.io.locks as io_module
 
     seen = []
     real_link = os.link
@@ -271,7 +273,7 @@ def test_the_cache_is_listed_and_cleared_folder_by_folder(tmp_path, monkeypatch)
     folder elsewhere is listed, and never emptied (nor anything else, asked with it); clearing
     keeps hidden files (a write under way), the folders, the others and any link's target;
     every name is checked first."""
-    from eas_vo.io import CachePart, cache_folder, cache_usage, clear_cache
+    from eas_vo.io.cache import CachePart, cache_folder, cache_usage, clear_cache
 
     cache = tmp_path / "cache"
     monkeypatch.setenv("EAS_VO_CACHE_DIR", str(cache))

@@ -7,7 +7,7 @@ import os
 import pytest
 
 from eas_vo.errors import EasVoError
-from eas_vo.io import check_output_file, check_output_folder, refuse_inputs, resolved_out
+from eas_vo.io.outputs import check_output_file, check_output_folder, refuse_inputs, resolved_out
 
 
 @pytest.fixture

@@ -2,7 +2,7 @@
 
 import numpy as np
 
-from eas_vo.io import parse_table
+from eas_vo.io.tables import parse_table
 
 
 def test_a_byte_order_mark_and_crlf_line_ends_read_as_plain_text():

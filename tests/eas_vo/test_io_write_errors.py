@@ -6,7 +6,8 @@ from pathlib import Path
 
 import pytest
 
-from eas_vo.io import atomic_path, output_folder, write_text_atomic
+from eas_vo.io.atomic import atomic_path, write_text_atomic
+from eas_vo.io.outputs import output_folder
 from helpers import one_line_failure
 
 

@@ -192,7 +192,7 @@ def publish_sequences(site: Path, sequences: dict[str, Path], registry: Path) ->
 def mark_as_eas_vo_output(folder: Path) -> None:
     """Give `folder` the marker eas-vo leaves, listing all its files (as `eas-vo simulate` leaves
     a dataset): only the checks against writing over inputs stand in the way of --overwrite."""
-    from eas_vo.io import OUTPUT_MARKER
+    from eas_vo.io.outputs import OUTPUT_MARKER
 
     files = sorted(p.relative_to(folder).as_posix() for p in folder.rglob("*") if p.is_file())
     (folder / OUTPUT_MARKER).write_text("".join(f"{line}\n" for line in ["written by eas-vo:", *files]))
