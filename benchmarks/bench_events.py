@@ -221,7 +221,7 @@ def make_bag(text: Path, n_events: int, storage: str) -> Path:
     from eas_vo.eventfile import file_identity, load_event_text
     from eas_vo.io.cache import cache_folder
     from eas_vo.plugins import Dataset
-    from eas_vo.types import CameraModel
+    from eas_vo.camera import CameraModel
 
     folder = cache_folder("bench", BENCH_ABOUT) / f"ros2_{storage}_{n_events}"
     if (folder / "metadata.yaml").exists():

@@ -23,7 +23,8 @@ from eas_vo.errors import DataError, DataWarnings
 from eas_vo.eventfile import Validator, cache_key, load_cached, write_behind
 from eas_vo.eventfile.packets import DECODERS, decoder_class
 from eas_vo.plugins import Dataset
-from eas_vo.types import CameraModel, ImuSeries, empty_events
+from eas_vo.camera import CameraModel
+from eas_vo.types import ImuSeries, empty_events
 
 #: Event messages are decoded and checked in groups of about this many bytes (a worker thread
 #: does it while the next group is read).

@@ -28,7 +28,7 @@ import numpy as np
 
 from eas_vo.errors import DataError
 from eas_vo.io.tables import text_bytes
-from eas_vo.types import LENS_MODELS, CameraModel
+from eas_vo.camera import LENS_MODELS, CameraModel
 
 
 #: The largest sensor side [px] a calibration or a dataset may have (the largest event sensors

@@ -34,7 +34,8 @@ from eas_vo.errors import DataError, DataWarnings
 from eas_vo.eventfile import load_event_text, write_events_text
 from eas_vo.io.atomic import atomic_path, write_text_atomic
 from eas_vo.io.tables import clock_time, text_bytes
-from eas_vo.types import CameraModel, ImuSeries, PoseSeries, empty_events
+from eas_vo.camera import CameraModel
+from eas_vo.types import ImuSeries, PoseSeries, empty_events
 from eas_vo.validation import check_range
 
 

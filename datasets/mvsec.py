@@ -35,7 +35,8 @@ from eas_vo.errors import DataError, DataWarnings
 from eas_vo.eventfile import (Validator, cache_key, file_identity, load_cached, pack_rows, pack_table,
                               write_behind)
 from eas_vo.geometry.rotations import quats_from_matrices
-from eas_vo.types import CameraModel, ImuSeries, PoseSeries, empty_events
+from eas_vo.camera import CameraModel
+from eas_vo.types import ImuSeries, PoseSeries, empty_events
 from eas_vo.validation import check_choice, check_range
 
 #: How an HDF5 file begins (its superblock signature; at byte 0 unless a user block precedes it).

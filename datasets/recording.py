@@ -15,7 +15,8 @@ from eas_vo.datasets.calibration import read_calibration
 from eas_vo.errors import DataError, DataWarnings
 from eas_vo.io.tables import data_line, parse_table
 from eas_vo.plugins import Dataset
-from eas_vo.types import TIME_UNITS, CameraModel, PoseSeries
+from eas_vo.camera import CameraModel
+from eas_vo.types import TIME_UNITS, PoseSeries
 from eas_vo.validation import check_range
 
 

@@ -18,7 +18,7 @@ from eas_vo.datasets.simulator.generate import SENSORS, SimCamera
 from eas_vo.datasets.simulator.sensor import DvsModel
 from eas_vo.errors import ConfigError, EasVoError
 from eas_vo.io.cache import cache_folder
-from eas_vo.types import LENS_MODELS
+from eas_vo.camera import LENS_MODELS
 from eas_vo.validation import check_choice, check_range
 
 #: Named sequences. `default` is the embedded sequence `eas-vo run` uses. `walk` (and its short

@@ -1,3 +1,3 @@
-from eas_vo.cli import main
+from eas_vo.cli.main import main
 
 raise SystemExit(main())

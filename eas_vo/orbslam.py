@@ -20,7 +20,8 @@ from eas_vo.errors import DataError, EasVoError
 from eas_vo.io.atomic import json_text, write_text_atomic
 from eas_vo.io.outputs import output_folder
 from eas_vo.io.tables import data_line, figure_text, markdown_cell, parse_table
-from eas_vo.types import LENS_MODELS, CameraModel, PoseSeries
+from eas_vo.camera import LENS_MODELS, CameraModel
+from eas_vo.types import PoseSeries
 
 FORMATS = ("tum", "euroc")
 

@@ -25,7 +25,8 @@ from typing import Callable, ClassVar, Iterator, Sequence
 import numpy as np
 
 from eas_vo.errors import EasVoError
-from eas_vo.types import CameraModel, FrameRecord, ImuSeries, PoseSeries, RelativeRotation, Sample, search_times
+from eas_vo.camera import CameraModel
+from eas_vo.types import FrameRecord, ImuSeries, PoseSeries, RelativeRotation, Sample, search_times
 
 
 @dataclass(frozen=True)

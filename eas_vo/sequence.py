@@ -20,7 +20,8 @@ from eas_vo.config import ResolvedConfig
 from eas_vo.datasets.recording import recording_clock_problems
 from eas_vo.errors import EasVoError
 from eas_vo.io.outputs import output_folder
-from eas_vo.types import CameraModel, ImuSeries, PoseSeries, search_times
+from eas_vo.camera import CameraModel
+from eas_vo.types import ImuSeries, PoseSeries, search_times
 
 
 @dataclass(frozen=True)

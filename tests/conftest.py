@@ -74,7 +74,7 @@ def short_sequence(tmp_path_factory) -> Path:
 def walk_vocabulary(tmp_path_factory) -> Path:
     """A DBoW2 vocabulary (k=10, L=4) trained by `eas-vo vocabulary` on the original frames of
     synthetic:walk_short (the translating walk, simulated once per session into the cache)."""
-    from eas_vo.cli import main
+    from eas_vo.cli.main import main
 
     path = tmp_path_factory.mktemp("vocabulary") / "walk.voc.txt"
     assert main(["vocabulary", "--dataset", "synthetic:walk_short", "--frontend", "original", "--out", str(path), "--quiet"]) == 0

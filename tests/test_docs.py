@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from eas_vo.cli import build_parser, main
+from eas_vo.cli.main import build_parser, main
 from helpers import REPOSITORY
 
 PAGES = [REPOSITORY / "README.md", *sorted((REPOSITORY / "docs").glob("*.md"))]

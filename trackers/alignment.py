@@ -19,7 +19,7 @@ import numpy as np
 from eas_vo import concurrency
 from eas_vo.geometry.rotations import geodesic_angle
 from eas_vo.trackers.motion import scaled_rotation
-from eas_vo.types import CameraModel
+from eas_vo.camera import CameraModel
 
 #: Focal lengths [px] of the resolutions the alignment and the score work at, whatever the
 #: sensor: each view is resized to them, so every figure below in pixels of a resolution is an

@@ -8,7 +8,8 @@ import numpy as np
 
 from eas_vo.trackers.measurement import PixelScale, TwoViewConfig, measure, weakness
 from eas_vo.trackers.motion import lk_params, lk_track
-from eas_vo.types import CameraModel, RelativeRotation
+from eas_vo.camera import CameraModel
+from eas_vo.types import RelativeRotation
 
 DETECTORS = ("orb", "sift")  # AKAZE left OpenCV's main modules in 5.0
 MATCHINGS = ("ratio", "crosscheck")

@@ -23,7 +23,8 @@ from eas_vo.trackers.features import DETECTORS, Features, RefinedMatching
 from eas_vo.trackers.loops import LoopClosureConfig, LoopCloser
 from eas_vo.trackers.measurement import PixelScale, StepBound, TwoViewConfig, frame_record, measure, weakness
 from eas_vo.trackers.motion import lk_params, lk_track, scaled_rotation
-from eas_vo.types import CameraModel, FrameRecord, ImuSeries, RelativeRotation
+from eas_vo.camera import CameraModel
+from eas_vo.types import FrameRecord, ImuSeries, RelativeRotation
 from eas_vo.validation import check_choice, check_range
 
 PREDICTIONS = ("none", "gyro", "velocity", "auto")

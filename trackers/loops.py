@@ -14,7 +14,8 @@ import numpy as np
 from eas_vo.geometry.rotations import geodesic_angle
 from eas_vo.trackers.features import DETECTORS, Features, RefinedMatching
 from eas_vo.trackers.measurement import PixelScale, TwoViewConfig
-from eas_vo.types import CameraModel, RelativeRotation
+from eas_vo.camera import CameraModel
+from eas_vo.types import RelativeRotation
 from eas_vo.validation import check_choice, check_range
 
 LOOP_GEOMETRIES = ("rotation", "homography")

@@ -10,7 +10,8 @@ import numpy as np
 
 from eas_vo.geometry.rotations import matrix_to_rotvec
 from eas_vo.geometry.two_view import ESSENTIAL_METHODS, GEOMETRIES, bearings, explains, rotation_from_correspondences
-from eas_vo.types import CameraModel, FrameRecord, RelativeRotation
+from eas_vo.camera import CameraModel
+from eas_vo.types import FrameRecord, RelativeRotation
 from eas_vo.validation import check_choice, check_range
 
 

@@ -7,7 +7,7 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from eas_vo.types import CameraModel
+from eas_vo.camera import CameraModel
 
 
 def scaled_rotation(R: np.ndarray, factor: float) -> np.ndarray:

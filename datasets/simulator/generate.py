@@ -18,7 +18,8 @@ from eas_vo.datasets.simulator.motion import HandHeldMotion
 from eas_vo.datasets.simulator.scene import Scene
 from eas_vo.datasets.simulator.sensor import ApsModel, DvsModel, EventSimulator, ImuModel
 from eas_vo.geometry.rotations import quats_from_matrices
-from eas_vo.types import EVENT_DTYPE, CameraModel, ImuSeries, PoseSeries
+from eas_vo.camera import CameraModel
+from eas_vo.types import EVENT_DTYPE, ImuSeries, PoseSeries
 
 SIMULATOR_VERSION = 3  # bump when the output for a given config changes (invalidates caches)
 

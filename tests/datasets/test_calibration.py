@@ -14,7 +14,7 @@ from eas_vo.datasets.calibration import (
     read_kalibr_camchain,
 )
 from eas_vo.errors import DataError
-from eas_vo.types import LENS_MODELS, CameraModel
+from eas_vo.camera import LENS_MODELS, CameraModel
 from helpers import ECD_DAVIS240, MVSEC_LEFT
 
 # A DAVIS346 with a fisheye lens (values of the size MVSEC's kalibr calibrations have) and one

@@ -9,7 +9,8 @@ from hypothesis import strategies as st
 
 from eas_vo.datasets.ecd import CAMCHAIN, EcdFolderDataset, camchain_yaml, write_ecd_folder
 from eas_vo.errors import DataError
-from eas_vo.types import EVENT_DTYPE, CameraModel
+from eas_vo.camera import CameraModel
+from eas_vo.types import EVENT_DTYPE
 from helpers import SHAPES_ROTATION, hostile_number, hostile_settings, numeric_rows, require
 
 

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from eas_vo import config, pipeline
-from eas_vo.cli import main
+from eas_vo.cli.main import main
 from eas_vo.datasets.ecd import EcdConfig, EcdFolderDataset
 from eas_vo.geometry.rotations import matrix_to_rotvec
 from helpers import EVENT_WINDOWS, require

@@ -13,7 +13,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 from scipy.spatial.transform import Rotation
 
-from eas_vo.cli import main
+from eas_vo.cli.main import main
 from eas_vo.datasets import mvsec
 from eas_vo.datasets.mvsec import MvsecConfig, MvsecDataset
 from eas_vo.errors import DataError, EasVoError

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from eas_vo import registry
-from eas_vo.cli import main
+from eas_vo.cli.main import main
 from eas_vo.datasets.prophesee import PropheseeConfig, PropheseeDataset
 from eas_vo.errors import DataError
 from helpers import one_line_failure

@@ -12,7 +12,8 @@ import numpy as np
 import pytest
 
 from eas_vo.datasets.ecd import write_ecd_folder
-from eas_vo.types import EVENT_DTYPE, CameraModel, ImuSeries, PoseSeries
+from eas_vo.camera import CameraModel
+from eas_vo.types import EVENT_DTYPE, ImuSeries, PoseSeries
 from helpers import InMemoryDataset, flipped_copies, read_each_bounded, seeded_flips, write_mvsec
 
 WIDTH, HEIGHT = 40, 30  # not the DAVIS240's

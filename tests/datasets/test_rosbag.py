@@ -138,7 +138,7 @@ def test_truncated_or_damaged_bag_is_named_or_read_whole(bag_path, sequence, tmp
 
 def test_a_fisheye_camera_info_is_read_back_as_written(short_sequence, tmp_path):
     from eas_vo.datasets.ecd import CAMCHAIN, camchain_yaml
-    from eas_vo.types import CameraModel
+    from eas_vo.camera import CameraModel
     import shutil
 
     fisheye = CameraModel(240, 180, np.array([[150.5, 0.0, 120.25], [0.0, 150.75, 89.5], [0.0, 0.0, 1.0]]),

@@ -167,7 +167,7 @@ def test_paper_and_best_runs_give_the_same_trajectory_from_each_storage(simulate
 
 
 def test_equidistant_camera_and_custom_topics(excerpt, tmp_path):
-    from eas_vo.types import CameraModel
+    from eas_vo.camera import CameraModel
 
     fisheye = CameraModel(excerpt.camera.width, excerpt.camera.height, excerpt.camera.K, np.array([0.1, -0.02, 0.003, -0.0004]),
                           model="equidistant")

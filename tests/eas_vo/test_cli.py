@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from eas_vo.cli import main
+from eas_vo.cli.main import main
 from helpers import one_line_failure, run_eas_vo
 
 OUTPUTS = ("trajectory.tum", "groundtruth.tum", "metrics.json", "frames.csv", "config.toml", "rotation.png")

@@ -72,7 +72,7 @@ def test_overwrite_replaces_only_a_file_of_the_kind_the_command_writes(short_seq
     args = [command[0], "--dataset", str(short_sequence), *command[1:]]
     err = one_line_failure([*args, "--out", str(note), "--overwrite"], capsys)
     assert "so not a file eas-vo wrote" in err and note.read_text() == "important\n"
-    from eas_vo.cli import main
+    from eas_vo.cli.main import main
 
     own = tmp_path / "own"
     assert main([*args, "--out", str(own)]) == 0

@@ -8,7 +8,7 @@ import sys
 import numpy as np
 import pytest
 
-from eas_vo.cli import main
+from eas_vo.cli.main import main
 from eas_vo.frontends.intensity import OriginalFrontend
 
 

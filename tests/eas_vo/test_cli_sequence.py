@@ -8,7 +8,7 @@ import json
 import numpy as np
 import pytest
 
-from eas_vo.cli import main
+from eas_vo.cli.main import main
 from helpers import N_EVENTS, N_FRAMES, known_sequence, one_line_failure
 
 

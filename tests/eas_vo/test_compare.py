@@ -15,7 +15,7 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from eas_vo.cli import main
+from eas_vo.cli.main import main
 from eas_vo.compare import Cell, plan, table_markdown
 from helpers import hostile_settings
 

@@ -89,12 +89,12 @@ def test_among_set_assignments_the_later_wins_whatever_the_spelling(first, then)
 def test_the_lenient_option_is_an_option_that_set_overrides(short_sequence):
     from argparse import Namespace
 
-    from eas_vo.cli import _assignments
+    from eas_vo.cli.options import set_assignments
 
     args = Namespace(assignments=["dataset.lenient=false"], lenient=True)
-    assert not resolve(None, {"dataset": str(short_sequence)}, _assignments(args)).dataset.lenient
+    assert not resolve(None, {"dataset": str(short_sequence)}, set_assignments(args)).dataset.lenient
     args = Namespace(assignments=[], lenient=True)
-    assert resolve(None, {"dataset": str(short_sequence)}, _assignments(args)).dataset.lenient
+    assert resolve(None, {"dataset": str(short_sequence)}, set_assignments(args)).dataset.lenient
 
 
 def test_per_plugin_tables_apply_only_to_their_plugin(tmp_path):

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from eas_vo.cli import main
+from eas_vo.cli.main import main
 from eas_vo.evaluation import estimate_time_offset, imu_agreement, rotation_errors, tum_rotation_errors
 from eas_vo.geometry.rotations import geodesic_angle, gyro_rotation, interpolate_poses, quats_from_matrices
 from eas_vo.pipeline import format_tum

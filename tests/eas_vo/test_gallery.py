@@ -1,7 +1,7 @@
 """`eas-vo render`: every frontend's image of chosen frames (the paper's Fig. 1)."""
 
 from eas_vo import config, registry
-from eas_vo.cli import main
+from eas_vo.cli.main import main
 from eas_vo.gallery import frontend_images
 
 

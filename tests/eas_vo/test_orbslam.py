@@ -244,7 +244,7 @@ def test_a_huge_error_is_printed_readably(short_sequence, tmp_path, capsys):
     (no 150-digit number), each the metrics.json value to the digits shown."""
     import re
 
-    from eas_vo.cli import main
+    from eas_vo.cli.main import main
 
     gt = np.loadtxt(short_sequence / "groundtruth.txt")[::10]
     gt[:, 1:4] = gt[:, 1:4] * 1e150 + 1e150
@@ -269,7 +269,7 @@ def test_a_huge_error_is_printed_readably(short_sequence, tmp_path, capsys):
 ])
 def test_settings_yaml_names_the_lens_as_orbslam3_reads_it(tmp_path, model, dist, camera_type):
     from eas_vo.orbslam import settings_yaml
-    from eas_vo.types import LENS_MODELS, CameraModel
+    from eas_vo.camera import LENS_MODELS, CameraModel
 
     K = np.array([[226.4, 0.0, 173.6], [0.0, 226.2, 133.7], [0.0, 0.0, 1.0]])
     (tmp_path / "settings.yaml").write_text(settings_yaml(CameraModel(346, 260, K, np.array(dist), model), 20.0))
@@ -287,7 +287,7 @@ def test_evaluate_reads_an_estimate_on_the_recordings_own_clock(tmp_path, capsys
     back): its own ground truth scores it exactly, and the files written keep those times."""
     from helpers import sequence_with
 
-    from eas_vo.cli import main
+    from eas_vo.cli.main import main
 
     folder = sequence_with(tmp_path / "seq", None, 1, shift_s)
     out = tmp_path / "ev"
@@ -302,7 +302,7 @@ def test_evaluate_reads_an_estimate_on_the_recordings_own_clock(tmp_path, capsys
 def test_evaluate_refuses_an_estimate_in_microseconds_and_warns_on_a_partial_ground_truth(tmp_path, capsys):
     from helpers import one_line_failure, retimed, sequence_with
 
-    from eas_vo.cli import main
+    from eas_vo.cli.main import main
 
     folder = sequence_with(tmp_path / "seq", None, 1)
     micro = tmp_path / "micro.tum"

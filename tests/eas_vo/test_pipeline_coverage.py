@@ -8,7 +8,7 @@ import json
 
 from helpers import one_line_failure
 
-from eas_vo.cli import main
+from eas_vo.cli.main import main
 
 
 def keep_poses(folder, keep) -> None:

@@ -9,7 +9,8 @@ import cv2
 import numpy as np
 import pytest
 
-from eas_vo.cli import WEAK_MEANS, main
+from eas_vo.cli.main import main
+from eas_vo.cli.run import WEAK_MEANS
 from eas_vo.trackers.measurement import TwoViewConfig
 
 FRONTENDS = ("original", "histeq", "slice", "ts", "sits", "eas")

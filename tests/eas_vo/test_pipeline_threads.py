@@ -10,7 +10,7 @@ import json
 import pytest
 
 from eas_vo import concurrency
-from eas_vo.cli import main
+from eas_vo.cli.main import main
 from helpers import SHAPES_ROTATION, require
 
 #: metrics.json's keys that measure time, not results.

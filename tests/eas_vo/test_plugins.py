@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from eas_vo import registry
-from eas_vo.cli import main
+from eas_vo.cli.main import main
 from helpers import REPOSITORY, run_eas_vo
 
 PLUGIN_PACKAGE = REPOSITORY / "tests" / "plugin_example"

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from eas_vo.cli import main
+from eas_vo.cli.main import main
 from eas_vo.reproduce import PAPER_TABLE1, PAPER_TABLE2
 from helpers import publish_sequences
 

@@ -5,7 +5,7 @@ import cv2
 import numpy as np
 import pytest
 
-from eas_vo.types import CameraModel
+from eas_vo.camera import CameraModel
 from helpers import ECD_DAVIS240, MVSEC_LEFT, opencv_rotated, random_events
 
 

@@ -6,7 +6,8 @@ import pytest
 from helpers import EVENT_WINDOWS, require
 from eas_vo.datasets.ecd import EcdFolderDataset
 from eas_vo.frontends.surfaces import SitsConfig, SitsFrontend, TsConfig, TsFrontend
-from eas_vo.types import EVENT_DTYPE, CameraModel, Sample
+from eas_vo.camera import CameraModel
+from eas_vo.types import EVENT_DTYPE, Sample
 
 
 def random_events(n, width, height, seed=0, t_scale=1.0):

@@ -10,7 +10,8 @@ import numpy as np
 import pytest
 
 from eas_vo.plugins import Dataset
-from eas_vo.types import EVENT_DTYPE, CameraModel, ImuSeries, PoseSeries
+from eas_vo.camera import CameraModel
+from eas_vo.types import EVENT_DTYPE, ImuSeries, PoseSeries
 
 SHARED_DATA = Path(__file__).resolve().parents[3] / "shared" / "data"
 SHAPES_ROTATION = SHARED_DATA / "ecd" / "shapes_rotation_0-30s"
@@ -95,7 +96,7 @@ def run_eas_vo(*argv: str, env: dict | None = None):
 
 def one_line_failure(argv, capsys) -> str:
     """Run the CLI in-process; it must fail with status 2 and exactly one line on stderr."""
-    from eas_vo.cli import main
+    from eas_vo.cli.main import main
 
     try:
         status = main(argv)

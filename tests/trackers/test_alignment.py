@@ -7,7 +7,7 @@ from scipy.spatial.transform import Rotation
 
 from eas_vo.trackers.alignment import SCORE_FOCAL_PX, PhotometricAlignment
 from eas_vo.trackers.klt import KltConfig, KltTracker
-from eas_vo.types import CameraModel
+from eas_vo.camera import CameraModel
 from helpers import CAMERA, assert_rotations_close, large_rotation, textured_image, warp_by_rotation
 
 #: The real excerpt's calibration: strong radial distortion.

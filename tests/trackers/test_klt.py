@@ -7,7 +7,7 @@ from scipy.spatial.transform import Rotation
 
 from eas_vo.errors import ConfigError
 from eas_vo.trackers.klt import KltConfig, KltTracker
-from eas_vo.types import CameraModel
+from eas_vo.camera import CameraModel
 from helpers import CAMERA, K, assert_rotations_close, large_rotation, textured_image, warp_by_rotation
 
 @pytest.mark.parametrize("seed", range(6))

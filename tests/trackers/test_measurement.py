@@ -8,7 +8,7 @@ from eas_vo.geometry.rotations import geodesic_angle, rotvec_to_matrix
 from eas_vo.geometry.two_view import bearings, explains, rotation_from_correspondences
 from eas_vo.trackers.klt import KltConfig, KltTracker
 from eas_vo.trackers.measurement import REFERENCE_FOCAL_PX, PixelScale, TwoViewConfig, measure, weakness
-from eas_vo.types import CameraModel
+from eas_vo.camera import CameraModel
 
 
 def camera_of_focal(focal_px: float) -> CameraModel:

@@ -103,7 +103,7 @@ def test_events_that_end_leave_no_weak_half_turn_in_the_trajectory(sequence_copy
     at 200 px): no weak step is off by a half turn."""
     import csv
 
-    from eas_vo.cli import main
+    from eas_vo.cli.main import main
 
     events = sequence_copy / "events.txt"
     rows = events.read_text().splitlines()

@@ -7,7 +7,7 @@ import tarfile
 
 from helpers import one_line_failure
 
-from eas_vo.cli import main
+from eas_vo.cli.main import main
 from eas_vo.slam.orbvoc import NAME, fetch_orb_vocabulary
 
 TEXT = "10 6 0 0\n0 1 " + "7 " * 32 + "0.5"

@@ -21,7 +21,7 @@ from helpers import one_line_failure
 
 pytest.importorskip("pyorbslam3", reason="the slam extra (pyorbslam3) is not installed")
 
-from eas_vo.cli import main  # noqa: E402
+from eas_vo.cli.main import main
 from eas_vo.slam import run as slam_run  # noqa: E402
 
 WALK = "synthetic:walk_short"

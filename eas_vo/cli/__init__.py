@@ -1,0 +1,1 @@
+"""The command line, one module a command; `eas_vo.cli.main` is its entry point."""

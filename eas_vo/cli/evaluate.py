@@ -1,0 +1,44 @@
+"""`eas-vo evaluate`: an external TUM trajectory scored against a dataset's ground truth."""
+
+from __future__ import annotations
+
+import sys
+from eas_vo.cli.options import add_dataset, add_output_options, dataset_inputs, refuse_inputs_inside, seconds
+
+
+
+def add_parser(sub) -> None:
+    parser = sub.add_parser(
+        "evaluate",
+        help="score an external TUM trajectory (e.g. ORB-SLAM2's KeyFrameTrajectory.txt) against ground truth",
+        description="Associate the estimate's poses with the dataset's ground truth (nearest time within "
+        "--max-diff), align them (sim3: Umeyama with scale, for monocular SLAM; se3; origin) and report the "
+        "translation APE [m] and rotation APE [rad], as evo_ape tum GT EST -as / -a / --align_origin does. "
+        "With --out: metrics.json, table2_row.md, groundtruth.tum, estimate_aligned.tum.",
+    )
+    add_dataset(parser, help="the dataset the estimate was made on", required=True)
+    parser.add_argument("--estimate", required=True, metavar="FILE", help="TUM trajectory: t tx ty tz qx qy qz qw")
+    parser.add_argument("--align", choices=("sim3", "se3", "origin"), default="sim3", help="default sim3 (evo_ape -as)")
+    parser.add_argument("--max-diff", type=seconds(allow_zero=True), default=0.01, metavar="S",
+                          help="largest time difference of an associated pose pair (default 0.01 s, evo's)")
+    parser.add_argument("--label", metavar="TEXT", help="the row's name in table2_row.md (default: the file's name)")
+    add_output_options(parser, required=False)
+    parser.set_defaults(func=run)
+
+
+def run(args) -> int:
+    from eas_vo.io.outputs import check_output_folder
+    from eas_vo.io.tables import figure_text
+    from eas_vo.orbslam import evaluate_estimate
+
+    if args.out:
+        out = check_output_folder(args.out, replace=args.overwrite)
+        refuse_inputs_inside(out, dataset_inputs(args.dataset), ("the --estimate", args.estimate))
+    m = evaluate_estimate(args.dataset, args.estimate, args.align, args.max_diff, args.out, args.label,
+                          replace=args.overwrite)
+    for line in m["warnings"]:
+        print(f"eas-vo: warning: {line}", file=sys.stderr)
+    print(f"{args.estimate} vs {m['dataset']} ({m['align']}, {m['matched_poses']} of {m['estimate_poses']} poses matched, "
+          f"scale {m['scale']:.4g}): translation APE mean {figure_text(m['ape_trans_mean_m'], 4)} m, "
+          f"RMSE {figure_text(m['ape_trans_rmse_m'], 4)} m; rotation APE mean {m['ape_rot_mean_rad']:.4f} rad" + (f" -> {args.out}" if args.out else ""))
+    return 0
