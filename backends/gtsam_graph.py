@@ -10,7 +10,7 @@ import numpy as np
 
 from eas_vo.errors import ConfigError
 from eas_vo.geometry.rotations import geodesic_angle
-from eas_vo.imu_check import confident_steps, disagreement
+from eas_vo.imu.verdict import confident_steps, disagreement
 from eas_vo.plugins import Backend
 from eas_vo.types import ImuSeries, RelativeRotation
 from eas_vo.validation import check_choice, check_range

@@ -61,7 +61,7 @@ def main() -> None:
     parser.add_argument("--repeat", type=int, default=3)
     args = parser.parse_args()
 
-    from eas_vo.orbslam import settings_yaml
+    from eas_vo.slam.export import settings_yaml
     from eas_vo.slam.run import find_vocabulary, require_extra
     from eas_vo.slam.train import train_vocabulary
 

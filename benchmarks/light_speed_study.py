@@ -25,9 +25,10 @@ import subprocess
 import sys
 from pathlib import Path
 
-from eas_vo import compare
-from eas_vo.compare import Method
-from eas_vo.gallery import PAPER_COLOURS, PAPER_ORDER
+from eas_vo.experiments import grid
+from eas_vo.experiments.cells import Cell, dataset_names
+from eas_vo.experiments.grid import Method
+from eas_vo.experiments.gallery import PAPER_COLOURS, PAPER_ORDER
 from eas_vo.io.atomic import json_text, write_text_atomic
 from eas_vo.io.cache import cache_folder
 
@@ -66,13 +67,13 @@ def run_seed(seed: int, methods: list[str], conditions: list[tuple], duration: f
     """`methods` on one seed's sequences: a compare folder per configuration file, which a
     later call with more methods extends. A row per cell, with its seed and condition."""
     folders = {str(sequence(seed, duration, *condition)): condition for condition in conditions}
-    names = compare.dataset_names(list(folders))
+    names = dataset_names(list(folders))
     rows = []
     for config_file in dict.fromkeys(METHODS[m][0] for m in methods):
         labels = {(m.tracker, m.backend, m.settings, f): label for label, (c, m, f) in METHODS.items()
                   if c == config_file and label in methods}
-        cells = [compare.Cell(d, f, t, b, (), names[d], s) for d in folders for (t, b, s, f) in labels]
-        cell_rows, _ = compare.run_experiment(cells, out / f"seed-{seed}" / config_file, config_file, [], {}, jobs, progress=True)
+        cells = [Cell(d, f, t, b, (), names[d], s) for d in folders for (t, b, s, f) in labels]
+        cell_rows, _ = grid.run_experiment(cells, out / f"seed-{seed}" / config_file, config_file, [], {}, jobs, progress=True)
         for row in cell_rows:
             metrics_file = out / f"seed-{seed}" / config_file / row["folder"] / "metrics.json"
             counts = json.loads(metrics_file.read_text()).get("status_counts", {}) if metrics_file.exists() else {}

@@ -24,7 +24,8 @@ import numpy as np
 
 from eas_vo.concurrency import in_order
 from eas_vo.datasets.aedat4_packets import MAGIC, Aedat4File, DvFrame, Scratch
-from eas_vo.datasets.recording import CALIBRATION_FORMATS, RecordingReader, StreamConfig, check_increasing, clock_origin_ns
+from eas_vo.datasets.recording import CALIBRATION_FORMATS, RecordingReader, StreamConfig, clock_origin_ns
+from eas_vo.io.tables import check_increasing
 from eas_vo.errors import DataError, DataWarnings
 from eas_vo.eventfile import Validator, cache_key, file_identity, load_cached
 from eas_vo.eventfile.kernels import check_and_pack_dv

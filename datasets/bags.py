@@ -18,7 +18,9 @@ import cv2
 import numpy as np
 
 from eas_vo.datasets.calibration import camera_from_camera_info, check_frame_size
-from eas_vo.datasets.recording import CALIBRATION_FORMATS, RecordingReader, StreamConfig, check_increasing, clock_origin_ns, pose_series
+from eas_vo.datasets.recording import CALIBRATION_FORMATS, RecordingReader, StreamConfig, clock_origin_ns
+from eas_vo.io.tables import check_increasing
+from eas_vo.io.tum import pose_series
 from eas_vo.errors import DataError, DataWarnings
 from eas_vo.eventfile import Validator, cache_key, load_cached, write_behind
 from eas_vo.eventfile.packets import DECODERS, decoder_class

@@ -28,7 +28,9 @@ import numpy as np
 
 from eas_vo.datasets import ecd_catalogue
 from eas_vo.datasets.calibration import MAX_SENSOR_PX, check_frame_size, parse_ecd_calib, parse_kalibr_camchain
-from eas_vo.datasets.recording import RecordingReader, StreamConfig, clock_origin_ns, ground_truth_table, timed_table
+from eas_vo.datasets.recording import RecordingReader, StreamConfig, clock_origin_ns
+from eas_vo.io.tum import parse_tum
+from eas_vo.io.tables import timed_table
 from eas_vo.datasets.sources import MARKERS, open_source
 from eas_vo.errors import DataError, DataWarnings
 from eas_vo.eventfile import load_event_text, write_events_text
@@ -44,9 +46,6 @@ from eas_vo.validation import check_range
 CAMCHAIN = "camchain.yaml"
 
 
-from eas_vo.errors import DataError, EasVoError
-
-
 @contextmanager
 def silenced_stderr():
     """Send what C libraries write to file descriptor 2 to /dev/null for the block (libpng
@@ -60,6 +59,7 @@ def silenced_stderr():
         os.dup2(saved, 2)
         os.close(saved)
         os.close(devnull)
+
 
 @dataclass(frozen=True)
 class EcdConfig(StreamConfig):
@@ -317,8 +317,8 @@ class EcdFolderDataset(RecordingReader):
             return self.ground_truth_file()
         if not self.source.exists("groundtruth.txt"):
             return None
-        return ground_truth_table(self.source.read_bytes("groundtruth.txt"), self.source.label("groundtruth.txt"),
-                                  self.config.ground_truth_time_offset_s, self.clock_origin_ns, self.tolerated)
+        return parse_tum(self.source.read_bytes("groundtruth.txt"), self.source.label("groundtruth.txt"),
+                         self.config.ground_truth_time_offset_s, self.clock_origin_ns, self.tolerated, min_poses=2)
 
     def _read_imu(self) -> ImuSeries | None:
         if not self.source.exists("imu.txt"):

@@ -30,7 +30,8 @@ from typing import Callable
 import numpy as np
 
 from eas_vo.datasets.calibration import MAX_SENSOR_PX, read_calibration
-from eas_vo.datasets.recording import RecordingReader, StreamConfig, check_increasing, clock_origin_ns
+from eas_vo.datasets.recording import RecordingReader, StreamConfig, clock_origin_ns
+from eas_vo.io.tables import check_increasing
 from eas_vo.errors import DataError, DataWarnings
 from eas_vo.eventfile import (Validator, cache_key, file_identity, load_cached, pack_rows, pack_table,
                               write_behind)

@@ -4,16 +4,13 @@ Not a plugin."""
 
 from __future__ import annotations
 
-import functools
-from collections.abc import Callable
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 
 from eas_vo.datasets.calibration import read_calibration
-from eas_vo.errors import DataError, DataWarnings
-from eas_vo.io.tables import data_line, parse_table
+from eas_vo.errors import DataWarnings
+from eas_vo.io.tum import read_tum
 from eas_vo.plugins import Dataset
 from eas_vo.camera import CameraModel
 from eas_vo.types import TIME_UNITS, PoseSeries
@@ -166,92 +163,22 @@ def event_sample_times(event_t: np.ndarray, rate_hz: float, every_events: int) -
     return np.arange(float(event_t[0]), float(event_t[-1]), 1.0 / rate_hz)
 
 
-def _row_number(row: int) -> int:
-    return row + 1
 
 
-def check_increasing(where: str, t: np.ndarray, line_of=_row_number, warnings: DataWarnings | None = None,
-                     row_word: str = "line") -> np.ndarray:
-    """The indices of the rows to keep of a series whose time [s] must increase; `line_of(row)`
-    turns a row index into what messages name (a file line; default: the row from 1), and
-    `row_word` says what that is in a warning ("line", "message").
-
-    A time that goes back is a DataError naming its row. A time equal to the previous one (a
-    bag's IMU often repeats a stamp) is one too, unless `warnings` (--lenient) is given: then
-    the repeating rows are dropped, the first kept, and counted there."""
-    step = np.diff(t)
-    back = np.flatnonzero(step < 0)
-    if len(back):
-        i = int(back[0]) + 1
-        raise DataError(where, f"timestamp {t[i]:.9f} does not increase (previous {t[i - 1]:.9f})", line_of(i))
-    repeated = np.flatnonzero(step == 0) + 1
-    if len(repeated) and warnings is None:
-        i = int(repeated[0])
-        raise DataError(where, f"timestamp {t[i]:.9f} repeats the previous row's ({len(repeated)} such row(s); "
-                        "--lenient drops them)", line_of(i))
-    if len(repeated):
-        warnings.add(where, "repeated timestamp", f"{row_word} {line_of(int(repeated[0]))}", len(repeated))
-    return np.flatnonzero(np.concatenate([[True], step > 0])) if len(t) else np.arange(0)
 
 
 #: Calibration formats, for messages.
 CALIBRATION_FORMATS = "a DV calibration XML, a kalibr camchain YAML, a ROS camera_info YAML or an ECD calib.txt"
 
 
-#: A quaternion this close to unit norm is kept as read: one written with 9 decimals (the ECD's
-#: and the writer's groundtruth.txt) is up to 1e-9 off unit, and normalising it changed its
-#: 9th decimal, so a written sequence did not read back as it was.
-UNIT_NORM_TOLERANCE = 1e-8
 
 
-def pose_series(where: str, table: np.ndarray, line_of=_row_number) -> PoseSeries:
-    """`t px py pz qx qy qz qw` rows -> PoseSeries, checking that quaternions are unit
-    (`line_of` as for check_increasing)."""
-    q = table[:, 4:8]
-    with np.errstate(over="ignore"):  # a component of 1e300: its norm is inf, refused below
-        norms = np.linalg.norm(q, axis=1)
-    off = ~(np.abs(norms - 1.0) <= 1e-2)
-    if off.any():
-        i = int(np.argmax(off))
-        raise DataError(where, f"quaternion norm {norms[i]:.3f} is not 1", line_of(i))
-    # Normalise only what is not unit already, so that re-reading written poses is exact.
-    q = np.where(np.abs(norms - 1.0)[:, None] > UNIT_NORM_TOLERANCE, q / norms[:, None], q)
-    return PoseSeries(t=table[:, 0], p_w_c=table[:, 1:4], q_w_c=q)
 
 
-def timed_table(data: bytes, where: str, ncols: int, what: str,
-                warnings: DataWarnings | None = None) -> tuple[np.ndarray, Callable[[int], int]]:
-    """The rows of a whitespace table (`what` describes one; `#` comments) whose first column, a
-    time [s], increases (with `warnings`, --lenient: rows repeating a time dropped, check_increasing),
-    and row index -> file line; at least 2 rows (to interpolate between)."""
-    table = parse_table(data, where, ncols, what)
-    if len(table) < 2:
-        raise DataError(where, f"holds {len(table)} row(s) of '{what}'; at least 2 are needed to interpolate (or remove the file)")
-    keep = check_increasing(where, table[:, 0], functools.partial(data_line, data), warnings)
-    return table[keep], lambda row: data_line(data, int(keep[row]))
 
 
-def ground_truth_table(data: bytes, where: str, time_offset_s: float = 0.0, origin_ns: int = 0,
-                       warnings: DataWarnings | None = None) -> PoseSeries:
-    """TUM rows `t px py pz qx qy qz qw` (camera-to-world; t [s], p [m], unit q) -> PoseSeries,
-    `time_offset_s` added to each t (the ground truth's clock -> the recording's), read after
-    the recording's clock origin `origin_ns` (Dataset.clock_origin_ns); `warnings` as for timed_table."""
-    table, line_of = timed_table(data, where, 8, "t px py pz qx qy qz qw", warnings)
-    poses = pose_series(where, table, line_of)
-    if time_offset_s == 0.0 and origin_ns == 0:
-        return poses
-    # offset and origin first: a ground truth from 0 beside a Unix-time recording loses no digits
-    return PoseSeries(poses.t + (time_offset_s - origin_ns / 1e9), poses.p_w_c, poses.q_w_c)
 
 
-def read_tum_ground_truth(path: str | Path, time_offset_s: float = 0.0, origin_ns: int = 0,
-                          warnings: DataWarnings | None = None) -> PoseSeries:
-    """A TUM ground-truth file (see ground_truth_table), errors naming the file and its line."""
-    try:
-        data = Path(path).read_bytes()
-    except OSError as exc:
-        raise DataError(str(path), f"cannot read the ground truth: {exc.strerror or exc}") from None
-    return ground_truth_table(data, str(path), time_offset_s, origin_ns, warnings)
 
 
 class RecordingReader(Dataset):
@@ -283,7 +210,8 @@ class RecordingReader(Dataset):
         c = self.config
         if not c.ground_truth:
             return None
-        return read_tum_ground_truth(c.ground_truth, c.ground_truth_time_offset_s, self.clock_origin_ns, self.tolerated)
+        return read_tum(c.ground_truth, c.ground_truth_time_offset_s, self.clock_origin_ns, self.tolerated, min_poses=2,
+                        what="ground truth")
 
     @property
     def tolerated(self) -> DataWarnings | None:

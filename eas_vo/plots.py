@@ -90,7 +90,7 @@ def rotation_figure(result, title: str = ""):
 def _draw_angular_velocity(ax, result, t0: float) -> None:
     """The angular velocity per camera axis [deg/s] the consecutive edges measured (dots) over
     the ground truth's over the same intervals (lines), evaluation.angular_velocities."""
-    from eas_vo.evaluation import angular_velocities
+    from eas_vo.evaluation.motion import angular_velocities
 
     errors = result.errors if result.errors is not None and result.errors.valid.any() else None
     mid, est, gt = angular_velocities(result.t, result.edges, errors)

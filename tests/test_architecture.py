@@ -4,6 +4,7 @@ mirror the package."""
 
 import ast
 import re
+from pathlib import Path
 
 import pytest
 
@@ -17,13 +18,19 @@ PACKAGES = {
     "backends": "eas_vo.backends",
     "datasets": "eas_vo.datasets",
 }
-BOTTOM = {"eas_vo.types", "eas_vo.errors", "eas_vo.validation", "eas_vo.geometry", "eas_vo.concurrency"}
-MIDDLE = {"eas_vo.plugins", "eas_vo.registry", "eas_vo.io", "eas_vo.eventfile", "eas_vo.evaluation", "eas_vo.imu_check", "eas_vo.plots",
-          "eas_vo.orb"}
-TOP = {"eas_vo.config", "eas_vo.pipeline", "eas_vo.compare", "eas_vo.gallery", "eas_vo.orbslam", "eas_vo.reproduce", "eas_vo.sequence",
-       "eas_vo.slam",
-       "eas_vo.cli", "eas_vo.__main__"}
-PLUGIN_KINDS = {"eas_vo.frontends", "eas_vo.trackers", "eas_vo.backends", "eas_vo.datasets"}
+#: The layers, bottom to top, and what is in each: a package (a folder) or a module. Imports only
+#: go down (ALLOWED); docs/architecture.md's layout table is this one, each row's purpose the
+#: first sentence of its docstring (test_the_documented_layout_is_the_layer_table).
+LAYERS = {
+    "bottom": ("eas_vo.types", "eas_vo.errors", "eas_vo.validation", "eas_vo.geometry", "eas_vo.camera",
+               "eas_vo.concurrency"),
+    "middle": ("eas_vo.plugins", "eas_vo.registry", "eas_vo.io", "eas_vo.eventfile", "eas_vo.evaluation", "eas_vo.imu",
+               "eas_vo.plots", "eas_vo.orb"),
+    "top": ("eas_vo.config", "eas_vo.pipeline", "eas_vo.experiments", "eas_vo.sequence", "eas_vo.slam", "eas_vo.cli",
+            "eas_vo.__main__"),
+    "plugins": ("eas_vo.frontends", "eas_vo.trackers", "eas_vo.backends", "eas_vo.datasets"),
+}
+PLUGIN_KINDS = set(LAYERS["plugins"])
 
 
 def modules() -> dict[str, ast.Module]:
@@ -60,7 +67,7 @@ def imports(name: str, tree: ast.Module, known: set[str]) -> set[str]:
 
 
 def layer(module: str) -> str:
-    for group, members in (("bottom", BOTTOM), ("middle", MIDDLE), ("top", TOP), ("plugins", PLUGIN_KINDS)):
+    for group, members in LAYERS.items():
         if any(module == m or module.startswith(m + ".") for m in members):
             return group
     return "root" if module == "eas_vo" else "unassigned"
@@ -118,14 +125,17 @@ def test_no_import_cycle(graph):
 
 def test_core_code_names_no_plugin():
     """Core modules choose plugins through the registry only: no built-in plugin's name as a string
-    (except defaults in config and cli, and the paper's own experiment: its sources in gallery,
-    its tables in reproduce)."""
+    (except defaults in config and the commands, and the paper's own experiment: its sources in
+    the gallery, its tables in reproduce)."""
     from eas_vo import registry
 
     names = {n for kind in registry.KINDS for n in registry.available(kind)}
-    core = [p for p in (REPOSITORY / "eas_vo").rglob("*.py") if p.stem not in {"config", "cli", "gallery", "reproduce"}]
+    core = REPOSITORY / "eas_vo"
+    allowed = {core / "config.py", core / "experiments" / "gallery.py", core / "experiments" / "reproduce.py"}
     found = []
-    for path in core:
+    for path in core.rglob("*.py"):
+        if path in allowed or path.is_relative_to(core / "cli"):
+            continue
         for node in ast.walk(ast.parse(path.read_text())):
             if isinstance(node, ast.Constant) and isinstance(node.value, str) and node.value in names:
                 found.append(f"{path.name}:{node.lineno} {node.value!r}")
@@ -145,3 +155,76 @@ def test_tests_mirror_the_package():
         if not any((REPOSITORY / folder / f"{c}.py").exists() or (REPOSITORY / folder / c).is_dir() for c in candidates):
             orphans.append(str(test.relative_to(REPOSITORY)))
     assert orphans == []
+
+
+def source_of(name: str) -> Path:
+    """The folder (a package) or file (a module) of the installed name `name`, in the repository."""
+    for folder, package in sorted(PACKAGES.items(), key=lambda item: -len(item[1])):  # eas_vo.frontends before eas_vo
+        if name == package or name.startswith(package + "."):
+            path = REPOSITORY.joinpath(folder, *name[len(package):].strip(".").split("."))
+            return path if path.is_dir() else path.with_suffix(".py")
+    raise AssertionError(f"{name} is in no installed root")
+
+
+def purpose(path: Path) -> str:
+    """The first sentence of the docstring of a module or package (its __init__.py)."""
+    file = path / "__init__.py" if path.is_dir() else path
+    text = " ".join((ast.get_docstring(ast.parse(file.read_text())) or "").split("\n\n")[0].split())
+    return re.split(r"(?<=\.)\s(?=[A-Z`])", text, maxsplit=1)[0].rstrip(".")
+
+
+def documented_layout() -> str:
+    """docs/architecture.md's layout table as LAYERS says it: a row per package or module."""
+    rows = ["| layer | where | what it holds |", "|---|---|---|"]
+    for group, members in LAYERS.items():
+        for k, name in enumerate(members):
+            path = source_of(name)
+            shown = f"{path.relative_to(REPOSITORY)}/" if path.is_dir() else str(path.relative_to(REPOSITORY))
+            rows.append(f"| {group if k == 0 else ''} | `{shown}` | {purpose(path)} |")
+    return "\n".join(rows) + "\n"
+
+
+def test_the_documented_layout_is_the_layer_table():
+    """docs/architecture.md holds LAYERS's table between its markers, so the page cannot go stale:
+    a package added, moved or re-described fails here, and the message holds the table to paste."""
+    page = (REPOSITORY / "docs" / "architecture.md").read_text()
+    start, end = "<!-- layout: tests/test_architecture.py -->\n", "<!-- end of layout -->"
+    assert start in page and end in page, "docs/architecture.md lost its layout markers"
+    shown = page.split(start, 1)[1].split(end, 1)[0]
+    assert shown == documented_layout(), "docs/architecture.md's layout table, as it should read:\n" + documented_layout()
+
+
+def test_every_package_of_the_tree_has_a_layer_and_a_purpose():
+    """Each folder with an __init__.py under the installed roots, and each top-level core module,
+    belongs to a layer and says in its docstring what it holds."""
+    missing = []
+    for name in modules():
+        if layer(name) == "unassigned":
+            missing.append(f"{name}: no layer")
+    for path in sorted((REPOSITORY / "eas_vo").rglob("*.py")):
+        if not (ast.get_docstring(ast.parse(path.read_text())) or "").strip():
+            missing.append(f"{path.relative_to(REPOSITORY)}: no docstring")
+    assert missing == []
+
+
+@pytest.mark.slow
+def test_a_wheel_holds_every_subpackage_of_the_tree(tmp_path):
+    """A normal (non-editable) install gets every package of the tree: setup.py finds them with
+    setuptools' package discovery, so a new subpackage needs no hand-kept list."""
+    import subprocess
+    import sys
+    import zipfile
+
+    source = tmp_path / "source"
+    tracked = subprocess.run(["git", "ls-files", "-z"], cwd=REPOSITORY, capture_output=True, check=True).stdout
+    for name in filter(None, tracked.decode().split("\0")):
+        if (REPOSITORY / name).is_file():
+            (source / name).parent.mkdir(parents=True, exist_ok=True)
+            (source / name).write_bytes((REPOSITORY / name).read_bytes())
+    subprocess.run([sys.executable, "-m", "pip", "wheel", "--quiet", "--no-deps", "--wheel-dir", str(tmp_path / "wheel"),
+                    str(source)], check=True, capture_output=True)
+    (wheel,) = (tmp_path / "wheel").glob("*.whl")
+    held = {n.removesuffix("/__init__.py").replace("/", ".") for n in zipfile.ZipFile(wheel).namelist()
+            if n.endswith("/__init__.py")}
+    expected = {name for name in modules() if source_of(name).is_dir()} | {"eas_vo.configs"}
+    assert expected <= held, sorted(expected - held)

@@ -40,11 +40,12 @@ def add_parser(sub) -> None:
 
 
 def run(args) -> int:
-    from eas_vo import compare
+    from eas_vo.experiments import grid, results
+    from eas_vo.experiments.cells import grid_methods, plan
     from eas_vo import config as config_mod
-    from eas_vo.gallery import PAPER_ORDER
+    from eas_vo.experiments.gallery import PAPER_ORDER
     from eas_vo.io.outputs import check_grid_folder, check_writable_folder
-    from eas_vo.reproduce import default_methods
+    from eas_vo.experiments.reproduce import default_methods
 
     out = check_writable_folder(args.out)
     run_defaults = config_mod.run_section(args.config, args.assignments)  # e.g. best.toml's tracker and backend
@@ -53,15 +54,15 @@ def run(args) -> int:
                           ("the --config", args.config))
     check_grid_folder(out)
     if args.trackers or args.backends:
-        methods = compare.grid_methods(name_list("--trackers", args.trackers or run_defaults.tracker),
+        methods = grid_methods(name_list("--trackers", args.trackers or run_defaults.tracker),
                                        name_list("--backends", args.backends or run_defaults.backend))
     else:
         methods = default_methods(run_defaults.tracker, run_defaults.backend)
-    cells = compare.plan(datasets, name_list("--frontends", args.frontends or ",".join(PAPER_ORDER)), methods, args.sweeps)
+    cells = plan(datasets, name_list("--frontends", args.frontends or ",".join(PAPER_ORDER)), methods, args.sweeps)
     if args.executor == "dask" and not args.scheduler:
         raise EasVoError("--executor dask needs --scheduler ADDRESS")
     overrides = {**shared_overrides(args), "orb_stats": True if args.orb else None}
-    rows, n_run = compare.run_experiment(cells, out, args.config, args.assignments, overrides, args.jobs,
+    rows, n_run = grid.run_experiment(cells, out, args.config, args.assignments, overrides, args.jobs,
                                          progress=shows_progress(args),
                                          scheduler=args.scheduler if args.executor == "dask" else None)
-    return report_cells(rows, n_run, out / "table.md", compare.table_markdown(rows))
+    return report_cells(rows, n_run, out / "table.md", results.table_markdown(rows))

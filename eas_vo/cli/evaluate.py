@@ -29,7 +29,7 @@ def add_parser(sub) -> None:
 def run(args) -> int:
     from eas_vo.io.outputs import check_output_folder
     from eas_vo.io.tables import figure_text
-    from eas_vo.orbslam import evaluate_estimate
+    from eas_vo.experiments.external import evaluate_estimate
 
     if args.out:
         out = check_output_folder(args.out, replace=args.overwrite)

@@ -30,7 +30,7 @@ def add_parser(sub) -> None:
 def run(args) -> int:
     from eas_vo import config as config_mod
     from eas_vo.io.outputs import check_output_folder
-    from eas_vo.orbslam import export
+    from eas_vo.slam.export import export
 
     config = config_mod.resolve(
         args.config,

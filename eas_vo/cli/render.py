@@ -26,7 +26,7 @@ def add_parser(sub) -> None:
 
 def run(args) -> int:
     from eas_vo import config as config_mod
-    from eas_vo.gallery import frontend_images
+    from eas_vo.experiments.gallery import frontend_images
     from eas_vo.io.atomic import atomic_path
     from eas_vo.io.outputs import check_output_file, refuse_foreign_file
     from eas_vo.plots import plot_gallery

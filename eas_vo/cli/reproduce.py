@@ -43,7 +43,7 @@ def add_parser(sub) -> None:
 
 
 def run(args) -> int:
-    from eas_vo import reproduce
+    from eas_vo.experiments import reproduce
     from eas_vo.datasets.ecd_catalogue import data_dir
     from eas_vo.io.outputs import check_grid_folder, check_writable_folder
 

@@ -1,4 +1,4 @@
-"""Geometry kernels (bottom layer: numpy, scipy, OpenCV; no I/O, no plugins).
+"""Geometry kernels: rotations and two-view geometry (numpy, scipy, OpenCV; no I/O, no plugins).
 
 - `rotations`: SO(3) helpers: quaternion <-> matrix (the one place), geodesic angle,
   slerp of a ground-truth series, Euler angles for plots.

@@ -294,15 +294,14 @@ def score(ground_truth, path: Path, shown_as: Path, max_diff_s: float = 0.01) ->
     """Sim(3) APE of a TUM trajectory against ground truth, and the trajectory so aligned
     beside it (NAME_aligned.tum, in the ground truth's world); "ape_problem" when it cannot
     be scored: too few poses, poses on a line, times out of order (naming the file `shown_as`)."""
-    from eas_vo.evaluation import trajectory_ape
+    from eas_vo.evaluation.trajectory import trajectory_ape
     from eas_vo.geometry.rotations import matrices_from_quats
-    from eas_vo.orbslam import read_estimate
-    from eas_vo.pipeline import format_tum
+    from eas_vo.io.tum import format_tum, read_tum
 
     if not path.exists() or not path.stat().st_size:
         return {"ape_problem": "no poses"}
     try:
-        estimate = read_estimate(path)
+        estimate = read_tum(path)
         ape = trajectory_ape(ground_truth, estimate, "sim3", max_diff_s)
     except (ValueError, EasVoError) as exc:
         return {"ape_problem": str(exc).replace(str(path), str(shown_as))}
@@ -314,14 +313,14 @@ def score(ground_truth, path: Path, shown_as: Path, max_diff_s: float = 0.01) ->
 def rotation_score(ground_truth, path: Path, time_offset_s: float) -> dict | None:
     """eas-vo's own rotation APE (Eq. 3: aligned at the first pose, evaluation.rotation_errors)
     of the rotations of a TUM trajectory (the frames ORB-SLAM3 tracked); None without poses."""
-    from eas_vo.evaluation import rotation_errors
+    from eas_vo.evaluation.ape import rotation_errors
     from eas_vo.geometry.rotations import matrices_from_quats
     from eas_vo.io.tum import read_tum
 
     if not path.exists() or not path.stat().st_size:
         return None
-    t, _, q = read_tum(path)
-    errors = rotation_errors(t, matrices_from_quats(q), ground_truth, time_offset_s)
+    frames = read_tum(path, ordered=False)
+    errors = rotation_errors(frames.t, matrices_from_quats(frames.q_w_c), ground_truth, time_offset_s)
     return {**errors.summary(), "frames": int(len(errors.ape_rad))} if len(errors.ape_rad) else None
 
 
@@ -372,8 +371,9 @@ def run_slam(config, out: str | Path, vocabulary: str | None = None, runs: int =
     docstring). A crashed run is kept (its frames.csv, metrics.json status `crashed`) and named
     in the result's `crashed`; the others go on."""
     from eas_vo.orb import OrbStats
-    from eas_vo.orbslam import settings_yaml
-    from eas_vo.pipeline import check_image, open_pipeline
+    from eas_vo.slam.export import settings_yaml
+    from eas_vo.pipeline import open_pipeline
+    from eas_vo.pipeline.tracking import check_image
 
     require_extra()
     vocabulary = find_vocabulary(vocabulary)

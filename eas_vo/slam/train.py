@@ -16,7 +16,7 @@ def orb_descriptors(image: np.ndarray) -> np.ndarray:
     """ORB descriptors (n, 32) uint8 of one image with ORB-SLAM's extractor settings
     (orbslam.ORB_EXTRACTOR: features, scale factor, levels, FAST threshold) in OpenCV's ORB,
     whose rBRIEF test pattern ORB-SLAM's extractor shares."""
-    from eas_vo.orbslam import ORB_EXTRACTOR
+    from eas_vo.slam.export import ORB_EXTRACTOR
 
     orb = cv2.ORB_create(nfeatures=ORB_EXTRACTOR["nFeatures"], scaleFactor=ORB_EXTRACTOR["scaleFactor"],
                          nlevels=ORB_EXTRACTOR["nLevels"], fastThreshold=ORB_EXTRACTOR["iniThFAST"])
@@ -29,7 +29,8 @@ def train_vocabulary(config, out: str | Path, k: int, levels: int, seed: int = 0
     `out` atomically. Returns what it holds (images, descriptors, nodes, words)."""
     from tqdm import tqdm
 
-    from eas_vo.pipeline import check_image, open_pipeline
+    from eas_vo.pipeline import open_pipeline
+    from eas_vo.pipeline.tracking import check_image
 
     check_shape(k, levels)  # before any image is read
     rc = config.run

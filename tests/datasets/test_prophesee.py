@@ -243,7 +243,8 @@ def test_an_event_only_raw_with_a_calibration_runs_cmax(tmp_path):
     out = tmp_path / "run"
     assert main(["run", "--dataset", str(path), "--tracker", "cmax", "--set", f"dataset.calibration={calibration}",
                  "--set", "dataset.sample_rate_hz=50", "--out", str(out), "--quiet"]) == 0
-    t, _, q_xyzw = read_tum(out / "trajectory.tum")
+    trajectory = read_tum(out / "trajectory.tum")
+    t, q_xyzw = trajectory.t, trajectory.q_w_c
     R = matrices_from_quats(q_xyzw)
     statuses = [row.split(",")[4] for row in (out / "frames.csv").read_text().splitlines()[1:]]
     ok = [k for k, status in enumerate(statuses) if status == "ok"]

@@ -7,7 +7,8 @@ import numpy as np
 import pytest
 
 from eas_vo import registry
-from eas_vo.datasets.recording import event_sample_times, pose_series
+from eas_vo.datasets.recording import event_sample_times
+from eas_vo.io.tum import pose_series
 from eas_vo.datasets.rosbag import write_bag
 from eas_vo.datasets.rosbag2 import write_bag2
 from eas_vo.registry import open_dataset

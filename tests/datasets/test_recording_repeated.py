@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from eas_vo.datasets.ecd import EcdConfig, EcdFolderDataset
-from eas_vo.datasets.recording import check_increasing
+from eas_vo.io.tables import check_increasing
 from eas_vo.errors import DataError, DataWarnings
 from helpers import known_sequence
 

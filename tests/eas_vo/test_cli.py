@@ -289,7 +289,7 @@ def test_evaluate_names_the_origin_alignment_for_a_rotation_only_trajectory(shor
     """eas-vo's own trajectory.tum: positions 0, which the default sim3 alignment cannot align."""
     from eas_vo.datasets.ecd import EcdFolderDataset
     from eas_vo.geometry.rotations import matrices_from_quats
-    from eas_vo.pipeline import format_tum
+    from eas_vo.io.tum import format_tum
 
     gt = EcdFolderDataset(short_sequence).ground_truth
     (tmp_path / "rotation_only.tum").write_text(format_tum(gt.t, np.zeros_like(gt.p_w_c), matrices_from_quats(gt.q_w_c)))

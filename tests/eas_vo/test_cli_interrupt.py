@@ -62,9 +62,9 @@ def test_compare_reruns_a_partial_cell(short_sequence, tmp_path, capsys):
 
 
 def test_compare_interrupted_writes_its_table_and_resumes(short_sequence, tmp_path, monkeypatch, capsys):
-    from eas_vo import compare
+    from eas_vo.experiments import grid
 
-    real_run_cell = compare.run_cell
+    real_run_cell = grid.run_cell
     calls = []
 
     def interrupting(cell, *args):
@@ -73,7 +73,7 @@ def test_compare_interrupted_writes_its_table_and_resumes(short_sequence, tmp_pa
             raise KeyboardInterrupt
         return real_run_cell(cell, *args)
 
-    monkeypatch.setattr(compare, "run_cell", interrupting)
+    monkeypatch.setattr(grid, "run_cell", interrupting)
     out = tmp_path / "cmp"
     argv = ["compare", "--dataset", str(short_sequence), "--frontends", "original,slice,eas",
             "--backends", "chain", "--out", str(out), "--jobs", "1", "--quiet"]
@@ -82,7 +82,7 @@ def test_compare_interrupted_writes_its_table_and_resumes(short_sequence, tmp_pa
     assert err == f"eas-vo compare: interrupted; the table of the 1 finished cells was written to {out}; the same command resumes the rest\n"
     rows = json.loads((out / "table.json").read_text())
     assert [r["status"] for r in rows] == ["ok", "not run", "not run"]
-    monkeypatch.setattr(compare, "run_cell", real_run_cell)
+    monkeypatch.setattr(grid, "run_cell", real_run_cell)
     capsys.readouterr()
     assert main(argv) == 0
     assert "3 cells (2 run, 1 already complete, 0 failed)" in capsys.readouterr().out

@@ -4,7 +4,7 @@ any work, warned about in one line, or gives an APE no worse than the run withou
 (plus TOLERANCE_RAD).
 
 Not covered, because it is not met: a constant bias between about 0.03 and 0.15 rad/s, which
-the images' own systematic error hides on a 2 s sequence (imu_check.MAX_BIAS_RAD_S) and the
+the images' own systematic error hides on a 2 s sequence (imu.verdict.MAX_BIAS_RAD_S) and the
 pose graph's bias prior (backend.gyro_bias_sigma) does not absorb: at 0.05 rad/s on seed 0 the
 run reads 0.069 rad against 0.031 without the IMU."""
 

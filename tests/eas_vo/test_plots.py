@@ -42,7 +42,7 @@ def _frontend_of(label: str) -> str:
 def test_a_frontend_has_one_colour_in_every_compare_figure():
     """Bars, time curves and sweep lines: each built-in frontend in its fixed colour whatever
     the order or the set of frontends, a plugin's in the first spare one; no two alike."""
-    from eas_vo.gallery import PAPER_COLOURS
+    from eas_vo.experiments.gallery import PAPER_COLOURS
 
     to_rgb = matplotlib.colors.to_rgb
     frontends = ["eas", "mine", "sits", "original", "histeq", "ts", "slice"]
@@ -90,7 +90,7 @@ def test_ape_over_time_has_a_panel_per_method_and_draws_an_equal_one_once():
 def test_the_rotation_plot_shows_where_tracking_was_weak_or_lost_and_where_loops_closed():
     from types import SimpleNamespace
 
-    from eas_vo.evaluation import rotation_errors
+    from eas_vo.evaluation.ape import rotation_errors
     from eas_vo.geometry.rotations import rotvec_to_matrix
     from eas_vo.types import FrameRecord, PoseSeries, RelativeRotation
 
@@ -134,7 +134,7 @@ def test_the_rotation_plot_shows_where_tracking_was_weak_or_lost_and_where_loops
 def test_the_rotation_plot_title_gives_the_ground_truth_time_offset_it_was_measured_with():
     from types import SimpleNamespace
 
-    from eas_vo.evaluation import rotation_errors
+    from eas_vo.evaluation.ape import rotation_errors
     from eas_vo.types import FrameRecord, PoseSeries
 
     t = 0.1 * np.arange(4)

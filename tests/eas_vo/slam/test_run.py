@@ -205,7 +205,7 @@ class ScriptedOrbSlam3:
 def test_the_trajectory_holds_each_tracked_frame_once(tmp_path, monkeypatch):
     """ORB-SLAM3's own file repeats the last pose for frames it lost; trajectory.tum holds the
     tracked frames only, each once at its own time, and `evaluate`'s reader takes it."""
-    from eas_vo.orbslam import read_estimate
+    from eas_vo.io.tum import read_tum as read_estimate
 
     states = ["not_initialised"] * 3 + ["ok"] * 4 + ["recently_lost"] * 2 + ["ok"] * 3
     monkeypatch.setattr(ScriptedOrbSlam3, "script", states)
@@ -272,7 +272,7 @@ def test_the_eq3_rotation_ape_of_a_trajectory_in_another_world_frame_is_zero(sho
     from scipy.spatial.transform import Rotation
 
     from eas_vo.geometry.rotations import matrices_from_quats
-    from eas_vo.pipeline import format_tum
+    from eas_vo.io.tum import format_tum
     from eas_vo.registry import open_dataset
 
     gt = open_dataset(str(short_sequence)).ground_truth

@@ -2,7 +2,7 @@
 
 from eas_vo import config, registry
 from eas_vo.cli.main import main
-from eas_vo.gallery import frontend_images
+from eas_vo.experiments.gallery import frontend_images
 
 
 def test_render_draws_a_gallery_of_every_installed_frontend(short_sequence, tmp_path, capsys):

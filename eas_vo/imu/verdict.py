@@ -1,14 +1,11 @@
-"""Whether a dataset's gyro can be right, before any work (check_readings), and whether the
-images agree with it, after tracking (judge_gyro).
+"""Whether the images agree with the gyro, after tracking (judge_gyro): the confidently measured
+frame-to-frame rotations against the gyro's over the same intervals, as configured.
 
 The readings are taken in the camera frame on the frames' clock (ImuSeries.in_camera_frame).
-What the readings alone can show is refused with one line: rates no gyro measures, a sensor
-that reads one value throughout, fewer readings than frames, no frame interval measured.
 What only the images can show (axes, sign, scale or clock wrong) is judged from the
 confidently measured frame-to-frame rotations: a gyro they contradict is not used. Where the
 gyro reads no rotation beyond its noise and an estimator's rotation (with its own sigma) turns
-beyond both noises, the scene moved, not the camera (still_gyro_pairs): such pairs judge nothing.
-"""
+beyond both noises, the scene moved, not the camera (still_gyro_pairs): such pairs judge nothing."""
 
 from __future__ import annotations
 
@@ -17,96 +14,45 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from eas_vo.errors import EasVoError
 from eas_vo.geometry.rotations import geodesic_angle, gyro_rotation, matrix_to_rotvec, rotvec_to_matrix
-from eas_vo.types import MAX_GAP_READINGS, TIME_UNITS, ImuSeries, RelativeRotation
-
-#: No MEMS gyro measures faster [rad/s]: the widest full scale sold is +-4000 deg/s (e.g.
-#: TDK InvenSense ICM-20649; the DAVIS240's MPU-6150 and the DAVIS346's MPU-6500 reach 2000).
-MAX_GYRO_RAD_S = float(np.radians(4000.0))
-
-
-def check_readings(imu: ImuSeries, frame_times: np.ndarray, label: str, offset_s: float) -> list[str]:
-    """Refuse (EasVoError) a gyro whose readings cannot be right for the frames at
-    `frame_times` [s] (the run's window); return warnings for what is only incomplete.
-
-    `offset_s`: the run's imu_time_offset_s, named in the messages about coverage."""
-    where = f"{label}: the IMU"
-    n = len(imu.t)
-    if n < 2:
-        raise EasVoError(f"{where} holds {n} reading(s): a gyro needs at least 2 to measure a rotation")
-    rates = np.abs(imu.gyro)
-    if not np.all(np.isfinite(rates)):
-        k = int(np.flatnonzero(~np.isfinite(rates).all(axis=1))[0])
-        raise EasVoError(f"{where}'s reading {k} (t={imu.t[k]:.6f} s) is not finite")
-    k = int(np.argmax(rates.max(axis=1)))
-    if rates[k].max() > MAX_GYRO_RAD_S:
-        raise EasVoError(
-            f"{where}'s reading {k} (t={imu.t[k]:.6f} s) turns at {rates[k].max():.4g} rad/s, faster than any MEMS "
-            f"gyro measures ({MAX_GYRO_RAD_S:.1f} rad/s = 4000 deg/s): the rates must be in rad/s (not deg/s), "
-            "and a glitch must be removed from the file")
-    if np.all(np.ptp(imu.gyro, axis=0) == 0):
-        raise EasVoError(f"{where} reads {_vector(imu.gyro[0])} rad/s in every one of its {n} readings: a gyro's own "
-                         "noise moves its readings, so this one is stuck or not connected")
-    steps = np.diff(frame_times)
-    frames_dt = float(np.median(steps[steps > 0])) if np.any(steps > 0) else np.inf  # repeated times are no interval
-    imu_dt = float(np.median(np.diff(imu.t)))
-    if imu_dt > frames_dt:
-        raise EasVoError(
-            f"{where} reads every {imu_dt:.4g} s ({1 / imu_dt:.4g} Hz), less often than the frames "
-            f"({1 / frames_dt:.4g} Hz): it cannot measure the rotation between two frames{_unit_hint(imu, frame_times)}")
-    t0, t1 = frame_times[:-1], frame_times[1:]
-    covered = imu.covered(t0, t1)
-    span = (f"readings {imu.t[0]:.3f}-{imu.t[-1]:.3f} s on the frames' clock with run.imu_time_offset_s = "
-            f"{offset_s:.10g}; frames {frame_times[0]:.3f}-{frame_times[-1]:.3f} s")
-    if not covered.any():
-        raise EasVoError(f"{where} measures none of the window's {len(t0)} frame intervals ({span}): check the IMU "
-                         f"file's clock and run.imu_time_offset_s{_unit_hint(imu, frame_times)}")
-    if covered.all():
-        return []
-    return [f"the gyro measures {int(covered.sum())} of the window's {len(t0)} frame intervals ({span}; a gap over "
-            f"{MAX_GAP_READINGS} reading intervals counts as none): the others are measured by the images alone"]
-
-
-def _unit_hint(imu: ImuSeries, frame_times: np.ndarray) -> str:
-    """'; are its timestamps in microseconds?' when the IMU's time span is about 1e3, 1e6 or
-    1e9 times the frames' (the readings' rate then looks that much lower)."""
-    ratio = np.ptp(imu.t) / max(np.ptp(frame_times), 1e-12)
-    for unit, factor in TIME_UNITS.items():
-        if abs(np.log10(ratio / factor)) < 0.5:
-            return f"; are its timestamps in {unit}? they must be in seconds"
-    return ""
-
-
-def _vector(v) -> str:
-    return "[" + ", ".join(f"{x:.6g}" for x in v) + "]"
+from eas_vo.types import ImuSeries, RelativeRotation
+from eas_vo.imu.thresholds import MIN_TURN_RAD
 
 
 #: A frame-to-frame rotation with this many inliers is a confident measurement of the images
 #: (the 2-point rotation model's RANSAC: 30 inliers leave well under one chance in a million
 #: that an outlier model explains them).
 CONFIDENT_INLIERS = 30
-#: Pairs over which neither the gyro nor the images turned this much [rad] carry no direction
-#: or size to compare (0.5 deg).
-MIN_TURN_RAD = float(np.radians(0.5))
+
+
 #: The gyro disagrees with a pair when the angle between the two rotations exceeds this part of
 #: the larger of them: a gyro read in the wrong unit or not at all gives 1 or more, a sign flip 2,
 #: an axis swap 1.4, a clock a frame interval off about 1 at constant motion; a right one on
 #: simulated and real sequences 0.1-0.3 (the images' own noise).
 DISAGREEMENT = 0.5
+
+
 #: The images can judge the gyro from this many confident pairs that turned.
 MIN_JUDGED_PAIRS = 10
+
+
 #: A gyro turning this much more or less than the images (its fitted scale off 1 by more, and
 #: by more than FIT_SIGMAS of the fit's standard error) is wrong: a MEMS gyro's sensitivity is
 #: within 3 % of its datasheet's; right gyros on 2 s simulated sequences fitted 0.88-1.01.
 MAX_SCALE_ERROR = 0.2
+
+
 #: A gyro reading this much [rad/s] more than the images turn, constantly (its fitted bias's
 #: norm, and beyond FIT_SIGMAS of the fit's standard error), has a bias the pose graph's prior
 #: cannot absorb (backend.gyro_bias_sigma: 0.01). The images' own systematic error looks like a
 #: bias of up to 0.09 on right gyros (2 s simulated sequences, mostly about the optical axis),
 #: so a smaller bias cannot be told from it.
 MAX_BIAS_RAD_S = 0.15
+
+
 FIT_SIGMAS = 4.0
+
+
 #: The scale and bias fits refute the gyro only over judged pairs spanning this long [s]: the
 #: images' systematic errors (the events' latency at one speed, one texture in view) last as long
 #: as the motion that causes them, and the fits' standard errors, taking the pairs for
@@ -115,8 +61,12 @@ FIT_SIGMAS = 4.0
 #: motion changes speed and axis within about a second. Most pairs disagreeing refutes it over
 #: any span: a wrong sign, axis or clock shows in every pair.
 MIN_FIT_SPAN_S = 1.0
+
+
 #: A gyro read in deg/s as rad/s (or the reverse) turns this many times as far as the images.
 DEG_PER_RAD = float(np.degrees(1.0))
+
+
 #: The gyro's white-noise density [rad/s/sqrt(Hz)] and the sigma of the constant bias it may keep
 #: [rad/s], for an IMU whose own calibration is not given: the MPU-6150-like DAVIS IMU the
 #: simulator models (datasets.simulator ImuModel) and the gtsam backend assumes (backend.gyro_noise,
@@ -124,7 +74,11 @@ DEG_PER_RAD = float(np.degrees(1.0))
 #: sqrt(GYRO_NOISE_DENSITY^2 dt + (GYRO_BIAS_RAD_S dt)^2): the white noise's angle random walk and
 #: the bias times the interval.
 GYRO_NOISE_DENSITY = 0.003
+
+
 GYRO_BIAS_RAD_S = 0.01
+
+
 #: The 0.999 quantile of the chi-square distribution with 3 degrees of freedom
 #: (scipy.stats.chi2.ppf(0.999, 3)): a 3-vector of independent unit Gaussians is this long
 #: squared once in a thousand draws.
@@ -221,7 +175,7 @@ class GyroVerdict:
     def warnings(self, retracked: bool, findings: list[str]) -> list[str]:
         """The run's warnings on the gyro: one line when it is not used (`retracked`: the frames
         were tracked again without it) or used without the images' check, joined with the first
-        of the `findings` of the axes and clock checks (evaluation.imu_agreement), then the rest."""
+        of the `findings` of the axes and clock checks (fit.imu_agreement), then the rest."""
         if retracked and not self.contradicts:
             findings = [f"the frames were tracked again without the gyro's predictions (with them the images measured "
                         f"too little to check it); {self.disagreeing} of {self.judged} confident frame pairs disagree with "

@@ -1,5 +1,5 @@
 """The ORB-SLAM2 path of the paper (§4.3): image sequences and camera settings a monocular
-ORB-SLAM2 / ORB-SLAM3 run reads, and the scoring of the trajectories it writes.
+ORB-SLAM2 / ORB-SLAM3 run reads.
 
 Layouts written by `export`:
     tum    rgb.txt (`timestamp rgb/NAME.png`, three comment lines first) and rgb/*.png,
@@ -16,17 +16,19 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from eas_vo.errors import DataError, EasVoError
-from eas_vo.io.atomic import json_text, write_text_atomic
+from eas_vo.errors import EasVoError
+from eas_vo.io.atomic import write_text_atomic
 from eas_vo.io.outputs import output_folder
-from eas_vo.io.tables import data_line, figure_text, markdown_cell, parse_table
 from eas_vo.camera import LENS_MODELS, CameraModel
-from eas_vo.types import PoseSeries
+
 
 FORMATS = ("tum", "euroc")
 
+
 #: ORB-SLAM2's own defaults for its ORB extractor and viewer (its TUM1.yaml).
 ORB_EXTRACTOR = {"nFeatures": 1000, "scaleFactor": 1.2, "nLevels": 8, "iniThFAST": 20, "minThFAST": 7}
+
+
 VIEWER = {"KeyFrameSize": 0.05, "KeyFrameLineWidth": 1, "GraphLineWidth": 0.9, "PointSize": 2, "CameraSize": 0.08,
           "CameraLineWidth": 3, "ViewpointX": 0, "ViewpointY": -0.7, "ViewpointZ": -1.8, "ViewpointF": 500}
 
@@ -69,7 +71,8 @@ def export(config, out: str | Path, fmt: str, progress: bool = False, replace: b
     (frames, fps, layout)."""
     from tqdm import tqdm
 
-    from eas_vo.pipeline import check_image, open_pipeline
+    from eas_vo.pipeline import open_pipeline
+    from eas_vo.pipeline.tracking import check_image
 
     if fmt not in FORMATS:
         raise EasVoError(f"--format {fmt!r}: choose one of {', '.join(FORMATS)}")
@@ -119,96 +122,3 @@ def _image_names(label: str, frames: np.ndarray, times: np.ndarray, fmt: str) ->
                              "(--start, --duration) or fix the dataset's times")
         first_of[name] = int(k)
     return names
-
-
-# ----------------------------------------------------------------------------- scoring external trajectories
-
-
-def read_estimate(path: str | Path) -> PoseSeries:
-    """A TUM trajectory file (`t tx ty tz qx qy qz qw` a line, `#` comments), times increasing,
-    quaternions non-zero; errors name the file line."""
-    path = Path(path)
-    try:
-        data = path.read_bytes()
-    except OSError as exc:
-        raise DataError(path, f"cannot read: {exc.strerror or exc}") from None
-    rows = parse_table(data, str(path), 8, "TUM pose 't tx ty tz qx qy qz qw'")
-    if len(rows) == 0:
-        raise DataError(path, "holds no pose")
-    back = np.flatnonzero(np.diff(rows[:, 0]) <= 0)
-    if len(back):
-        raise DataError(f"{path}:{data_line(data, int(back[0]) + 1)}", "timestamp does not increase")
-    zero = np.flatnonzero(np.linalg.norm(rows[:, 4:8], axis=1) < 1e-9)
-    if len(zero):
-        raise DataError(f"{path}:{data_line(data, int(zero[0]))}", "quaternion is zero")
-    return PoseSeries(rows[:, 0], rows[:, 1:4], rows[:, 4:8])
-
-
-def evaluate_estimate(dataset_spec: str, estimate_path: str | Path, align: str, max_diff_s: float,
-                      out: str | Path | None = None, label: str | None = None, replace: bool = False) -> dict:
-    """Score an external trajectory against a dataset's ground truth (evaluation.trajectory_ape);
-    with `out`, write metrics.json, table2_row.md, groundtruth.tum (what it was compared with)
-    and estimate_aligned.tum. Returns the metrics."""
-    from eas_vo.datasets.recording import clock_unit_problems, time_source
-    from eas_vo.evaluation import ALIGNMENTS, trajectory_ape
-    from eas_vo.geometry.rotations import matrices_from_quats
-    from eas_vo.pipeline import format_tum
-    from eas_vo.registry import open_dataset
-
-    if align not in ALIGNMENTS:
-        raise EasVoError(f"--align {align!r}: choose one of {', '.join(ALIGNMENTS)}")
-    read = read_estimate(estimate_path)
-    dataset = open_dataset(dataset_spec)
-    gt = dataset.ground_truth
-    if gt is None:
-        raise EasVoError(f"{dataset.label}: has no ground truth to evaluate against")
-    origin_ns = dataset.clock_origin_ns  # the estimate holds the recording's own times, the ground truth is after it
-    estimate = PoseSeries(read.t - origin_ns / 1e9, read.p_w_c, read.q_w_c)
-    spans = {"estimate": float(np.ptp(estimate.t)), "ground-truth": float(np.ptp(gt.t))}
-    clocks = clock_unit_problems(spans, {"estimate": str(estimate_path), "ground-truth": time_source(dataset, "ground-truth")})
-    if clocks:
-        raise EasVoError(next(iter(clocks.values())))
-    try:
-        ape = trajectory_ape(gt, estimate, align, max_diff_s)
-    except ValueError as exc:
-        raise EasVoError(f"{estimate_path}: {exc}") from None
-    label = label or Path(estimate_path).stem
-    metrics = {"estimate": str(estimate_path), "dataset": dataset.label, "align": align, "max_diff_s": max_diff_s,
-               "estimate_poses": len(estimate.t), **ape.summary(), **_coverage(estimate.t, gt.t, ape.summary())}
-    if out is not None:
-        with output_folder(out, replace) as staging:
-            write_text_atomic(staging / "metrics.json", json_text(metrics))
-            write_text_atomic(staging / "table2_row.md", table2_row(label, metrics))
-            write_text_atomic(staging / "groundtruth.tum", format_tum(gt.t, gt.p_w_c, matrices_from_quats(gt.q_w_c), origin_ns))
-            aligned = ape.aligned(estimate.p_w_c, matrices_from_quats(estimate.q_w_c))
-            write_text_atomic(staging / "estimate_aligned.tum", format_tum(estimate.t, *aligned, origin_ns))
-    return metrics
-
-
-def _coverage(t_est: np.ndarray, t_gt: np.ndarray, summary: dict) -> dict:
-    """How much of an estimate (times `t_est` [s]) its ground truth (`t_gt` [s]) scored:
-    matched_fraction (matched_poses / estimate poses), the ground truth's first and last time
-    from the estimate's first [s] (ground_truth_span_s), the estimate's span [s], and
-    `warnings`: one line below evaluation.MIN_SCORED_FRACTION matched."""
-    from eas_vo.evaluation import MIN_SCORED_FRACTION
-
-    matched, n = summary["matched_poses"], len(t_est)
-    start, end = float(t_gt[0] - t_est[0]), float(t_gt[-1] - t_est[0])
-    span = float(t_est[-1] - t_est[0])
-    warnings = []
-    if matched < MIN_SCORED_FRACTION * n:
-        warnings.append(f"the ground truth scores only {matched} of the estimate's {n} poses ({100 * matched / n:.0f} %, "
-                        f"under {100 * MIN_SCORED_FRACTION:.0f} %): it spans {start:.3f} to {end:.3f} s of the estimate's "
-                        f"0 to {span:.3f} s; the APE describes those poses only")
-    return {"matched_fraction": matched / n, "ground_truth_span_s": [start, end], "estimate_span_s": span,
-            "warnings": warnings}
-
-
-def table2_row(label: str, metrics: dict) -> str:
-    """A Markdown row as in the paper's Table 2: source, average (translation) APE [m], with
-    RMSE, rotation APE, scale and matched poses beside it."""
-    m = metrics
-    return ("| source | average APE [m] | RMSE [m] | rotation APE [rad] | scale | poses |\n|---|---|---|---|---|---|\n"
-            f"| {markdown_cell(label)} | {figure_text(m['ape_trans_mean_m'], 3)} | {figure_text(m['ape_trans_rmse_m'], 3)} | "
-            f"{m['ape_rot_mean_rad']:.3f} | "
-            f"{m['scale']:.3g} | {m['matched_poses']} |\n")

@@ -7,7 +7,7 @@ import numpy as np
 from eas_vo import config as config_mod
 from eas_vo import registry
 from eas_vo.errors import EasVoError
-from eas_vo.pipeline import check_frame
+from eas_vo.pipeline.parts import check_frame
 
 #: The paper's order of image sources (Fig. 1, Table 1); other frontends follow by name.
 PAPER_ORDER = ("original", "histeq", "slice", "ts", "sits", "eas")

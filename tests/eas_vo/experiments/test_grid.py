@@ -16,7 +16,8 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from eas_vo.cli.main import main
-from eas_vo.compare import Cell, plan, table_markdown
+from eas_vo.experiments.grid import Cell, plan
+from eas_vo.experiments.results import table_markdown
 from helpers import hostile_settings
 
 
@@ -109,7 +110,7 @@ def test_a_configuration_error_stops_compare_before_any_work(short_sequence, tmp
 
 
 def test_sweep_curves_follow_one_numeric_key():
-    from eas_vo.compare import sweep_curves, table_rows
+    from eas_vo.experiments.results import sweep_curves, table_rows
 
     cells = [Cell("d", f, "klt", "chain", (("dataset.illumination", v),)) for f in ("eas", "slice") for v in ("1", "0.1", "0.5")]
     results = {c: {"status": "ok", "nc_mean": 10.0 * float(c.sweep[0][1]), "ape_mean_rad": 1.0 / float(c.sweep[0][1])} for c in cells}
@@ -133,7 +134,7 @@ def test_one_and_two_jobs_give_the_same_table(grid, short_sequence, tmp_path):
 
 
 def test_plan_is_the_cartesian_product():
-    from eas_vo.compare import Method, grid_methods
+    from eas_vo.experiments.grid import Method, grid_methods
 
     cells = plan(["a", "b"], ["x"], grid_methods(["klt", "other"], ["chain", "gtsam"]), ["frontend.n=1,2", "frontend.beta=3,4,5"])
     assert len(cells) == 2 * 2 * 2 * 2 * 3
@@ -143,7 +144,7 @@ def test_plan_is_the_cartesian_product():
 
 
 def test_a_tracker_of_events_alone_is_one_cell_per_dataset_with_the_none_frontend():
-    from eas_vo.compare import grid_methods
+    from eas_vo.experiments.grid import grid_methods
 
     cells = plan(["a", "b"], ["original", "eas", "ts"], grid_methods(["klt", "cmax"], ["chain"]), [])
     assert len(cells) == 2 * 3 + 2
@@ -219,7 +220,7 @@ def test_markdown_marks_the_best_of_each_column():
 def test_an_nc_of_zero_is_never_the_best(ncs):
     """NC 0 counts no correspondence (nothing tracked, or an event tracker's): nothing to bold,
     in table.md or table.csv; the best of the real values still is."""
-    from eas_vo.compare import table_csv
+    from eas_vo.experiments.results import table_csv
 
     rows = [{"dataset": "d", "method": "cmax+chain", "frontend": f, "sweep": "", "status": "ok", "nc_mean": nc,
              "ape_mean_rad": ape, "same_as": ""} for f, nc, ape in (("no_image", ncs[0], 0.05), ("other", ncs[1], 0.08))]
@@ -231,7 +232,7 @@ def test_an_nc_of_zero_is_never_the_best(ncs):
 
 
 def test_the_motion_table_gives_angular_velocity_and_rpe_with_the_best_in_bold():
-    from eas_vo.compare import MOTION_FIGURES
+    from eas_vo.experiments.results import MOTION_FIGURES
 
     rows = [{"dataset": "d", "method": m, "frontend": f, "sweep": "", "status": "ok", "nc_mean": 0.0, "ape_mean_rad": 0.1,
              "omega_rms_deg_s": w, "rpe_1s_mean_deg": r, "same_as": ""}
@@ -262,7 +263,7 @@ def test_markdown_has_one_header_row_and_a_column_pair_per_distinct_method():
 
 
 def _write_tum(path: Path, t, R) -> None:
-    from eas_vo.pipeline import format_tum
+    from eas_vo.io.tum import format_tum
 
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text(format_tum(np.asarray(t, float), np.zeros((len(t), 3)), R))
@@ -274,7 +275,7 @@ def test_identical_methods_are_found_exactly(tmp_path):
     failed cell is not; a third copy names the first method, never the second."""
     from scipy.spatial.transform import Rotation
 
-    from eas_vo.compare import mark_identical, table_rows
+    from eas_vo.experiments.results import mark_identical, table_rows
 
     R = Rotation.from_rotvec(np.random.default_rng(0).normal(0, 0.5, (30, 3))).as_matrix()
     t = 0.05 * np.arange(30)
@@ -372,7 +373,7 @@ def test_a_pool_never_has_more_workers_than_cells(short_sequence, tmp_path, monk
     """`--jobs 100000` on two cells starts two workers, not a hundred thousand processes."""
     from concurrent.futures import ProcessPoolExecutor
 
-    from eas_vo import compare
+    from eas_vo.experiments import grid
 
     sizes = []
 
@@ -381,7 +382,7 @@ def test_a_pool_never_has_more_workers_than_cells(short_sequence, tmp_path, monk
             sizes.append(max_workers)
             super().__init__(max_workers, *args, **kwargs)
 
-    monkeypatch.setattr(compare, "ProcessPoolExecutor", Recording)
+    monkeypatch.setattr(grid, "ProcessPoolExecutor", Recording)
     argv = ["compare", "--dataset", str(short_sequence), "--frontends", "original,histeq", "--backends", "chain",
             "--duration", "0.5", "--out", str(tmp_path / "cmp"), "--jobs", "100000", "--quiet"]
     assert main(argv) == 0
@@ -403,7 +404,7 @@ def test_a_cell_is_run_again_when_the_code_that_made_it_changed(short_sequence, 
 
 
 def test_the_code_identity_follows_every_source_file_of_a_plugins_package(tmp_path, monkeypatch):
-    from eas_vo.pipeline import code_identity
+    from eas_vo.pipeline.identity import code_identity
 
     package = tmp_path / "eas_vo_probe"
     (package / "inner").mkdir(parents=True)

@@ -8,7 +8,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from eas_vo.cli.main import main
-from eas_vo.reproduce import PAPER_TABLE1, PAPER_TABLE2
+from eas_vo.experiments.reproduce import PAPER_TABLE1, PAPER_TABLE2
 from helpers import publish_sequences
 
 
@@ -79,7 +79,8 @@ def test_table1_in_one_command_beside_the_papers(paper_site, tmp_path, capsys):
 
 
 def test_table1_marks_a_cell_whose_time_offset_could_not_be_estimated():
-    from eas_vo.reproduce import PAPER_ORDER, SEQUENCES, table1_markdown
+    from eas_vo.experiments.reproduce import SEQUENCES, table1_markdown
+    from eas_vo.experiments.gallery import PAPER_ORDER
 
     cells = [(seq, source) for seq in SEQUENCES for source in PAPER_ORDER]
     rows = [{"dataset_name": seq, "method": "klt+chain", "settings": (), "frontend": source, "status": "ok", "nc_mean": 100.0,
@@ -92,15 +93,16 @@ def test_table1_marks_a_cell_whose_time_offset_could_not_be_estimated():
 
 
 def test_compares_default_methods_are_the_papers_chain_and_the_smoothed_pose_graph():
-    from eas_vo.compare import Method
-    from eas_vo.reproduce import PAPER, SMOOTHED, default_methods
+    from eas_vo.experiments.grid import Method
+    from eas_vo.experiments.reproduce import PAPER, SMOOTHED, default_methods
 
     assert default_methods("klt", "chain") == [PAPER, SMOOTHED] and SMOOTHED.settings == (("tracker.klt.keyframe_interval", "3"),)
     assert default_methods("klt", "gtsam") == [Method("klt", "gtsam")]  # a config's own method: as it is configured
 
 
 def test_table1s_grid_is_the_papers_chain_beside_the_smoothed_pose_graph():
-    from eas_vo.reproduce import PAPER, PAPER_ORDER, SEQUENCES, SMOOTHED, _cells, table1_markdown, table1_methods
+    from eas_vo.experiments.reproduce import PAPER, SEQUENCES, SMOOTHED, _cells, table1_markdown, table1_methods
+    from eas_vo.experiments.gallery import PAPER_ORDER
 
     assert table1_methods(("chain", "gtsam")) == [PAPER, SMOOTHED]
     cells = _cells(PAPER_ORDER, table1_methods(("chain", "gtsam")))
@@ -124,7 +126,7 @@ def without_slam_extra(monkeypatch):
 
 def test_table2_orb_statistics_and_a_slam_trajectorys_ape(paper_site, short_sequence, tmp_path, without_slam_extra):
     from eas_vo.geometry.rotations import matrices_from_quats
-    from eas_vo.pipeline import format_tum
+    from eas_vo.io.tum import format_tum
     from eas_vo.registry import open_dataset
 
     gt = open_dataset(str(short_sequence)).ground_truth
@@ -184,7 +186,7 @@ def test_an_estimate_the_ground_truth_cannot_score_is_refused_before_the_cells_r
     """A well-formed TUM file of two poses (sim3 needs three): refused once the ground truth is
     there, before any cell ran."""
     from eas_vo.geometry.rotations import matrices_from_quats
-    from eas_vo.pipeline import format_tum
+    from eas_vo.io.tum import format_tum
     from eas_vo.registry import open_dataset
 
     gt = open_dataset(str(short_sequence)).ground_truth
@@ -282,7 +284,8 @@ def test_table2_runs_orbslam3_on_each_cell_beside_the_papers(walk_site, walk_voc
 def test_a_table2_cell_reruns_slam_runs_made_under_another_protocol(tmp_path, monkeypatch):
     """A cell's summary.json is reused only when its runs were paced and judged as slam runs
     now are (slam.run.PROTOCOL): an older folder, whose statuses followed another rule, reruns."""
-    from eas_vo import compare, reproduce
+    from eas_vo.experiments import grid, reproduce
+    from eas_vo.experiments.cells import Cell
     from eas_vo.slam import run as slam_run
 
     calls = []
@@ -293,12 +296,12 @@ def test_a_table2_cell_reruns_slam_runs_made_under_another_protocol(tmp_path, mo
                 "ape_keyframes.ape_trans_mean_m": {"median": 0.02}}
 
     monkeypatch.setattr(slam_run, "run_slam", run_slam)
-    monkeypatch.setattr(compare, "cell_config", lambda *a: None)
+    monkeypatch.setattr(grid, "cell_config", lambda *a: None)
     folder = tmp_path / "slam" / "hdr_boxes_eas"
     folder.mkdir(parents=True)
     old = {"runs": 2, "vocabulary": "voc.txt", "statuses": {"ok": 2}, "ape_keyframes.ape_trans_mean_m": {"median": 0.5}}
     (folder / "summary.json").write_text(json.dumps(old))
-    cell = compare.Cell("ecd:hdr_boxes", "eas", "klt", "chain", (), "hdr_boxes")
+    cell = Cell("ecd:hdr_boxes", "eas", "klt", "chain", (), "hdr_boxes")
     got = reproduce._slam_cell(cell, "paper", {}, folder, "voc.txt", 2, False)
     assert calls == [folder] and got["ape_trans_mean_m"] == 0.02
     (folder / "summary.json").write_text(json.dumps({**old, "protocol": slam_run.PROTOCOL}))
@@ -310,7 +313,7 @@ def test_a_table2_cell_reruns_slam_runs_made_under_another_protocol(tmp_path, mo
 def test_table2s_vocabulary_is_checked_whole_and_a_broken_one_never_replaced(tmp_path, monkeypatch, where):
     """A vocabulary in $PYORBSLAM3_VOCAB or the data folder that is cut short is refused naming
     its line: neither handed to ORB-SLAM3 nor swapped for a download."""
-    from eas_vo import reproduce
+    from eas_vo.experiments import reproduce
     from eas_vo.errors import DataError
     from eas_vo.slam import orbvoc
     from eas_vo.slam.vocabulary import train
@@ -337,7 +340,8 @@ def test_table2s_rows_say_the_configuration_and_method_their_cells_ran(tmp_path,
     tracker and backend, as `--config best` runs it; each row's label names both."""
     import importlib.util
 
-    from eas_vo import compare, config, reproduce
+    from eas_vo import config
+    from eas_vo.experiments import grid, reproduce
 
     real = importlib.util.find_spec
     monkeypatch.setattr(importlib.util, "find_spec", lambda name, *a: object() if name == "pyorbslam3" else real(name, *a))
@@ -349,7 +353,7 @@ def test_table2s_rows_say_the_configuration_and_method_their_cells_ran(tmp_path,
                   "folder": c.folder, "ape_mean_rad": 0.1 * len(grids), "orb_keypoints_mean": 1.0,
                   "orb_matches_mean": 1.0} for c in cells], len(cells))
 
-    monkeypatch.setattr(compare, "run_experiment", run_experiment)
+    monkeypatch.setattr(grid, "run_experiment", run_experiment)
     monkeypatch.setattr(reproduce, "fetch_sequences", lambda progress: None)
     monkeypatch.setattr(reproduce, "_check", lambda *a: None)
     monkeypatch.setattr(reproduce, "_vocabulary", lambda progress: tmp_path / "voc.txt")

@@ -7,7 +7,8 @@ from scipy.spatial.transform import Rotation
 
 from eas_vo.errors import EasVoError
 from eas_vo.geometry.rotations import gyro_rotation, matrix_to_rotvec, rotvec_to_matrix
-from eas_vo.imu_check import CONFIDENT_INLIERS, MAX_GYRO_RAD_S, MIN_JUDGED_PAIRS, check_readings, judge_gyro
+from eas_vo.imu.readings import MAX_GYRO_RAD_S, check_readings
+from eas_vo.imu.verdict import CONFIDENT_INLIERS, MIN_JUDGED_PAIRS, judge_gyro
 from eas_vo.types import ImuSeries, RelativeRotation
 
 FRAMES = np.arange(0.0, 2.0, 0.05)  # 20 Hz
@@ -173,7 +174,7 @@ def test_a_fit_over_under_a_second_does_not_refute_the_gyro_but_a_wrong_sign_doe
 
 def still_gyro(seed=1) -> ImuSeries:
     """A 200 Hz gyro on a still camera: the noise model's white noise and a constant bias."""
-    from eas_vo.imu_check import GYRO_BIAS_RAD_S, GYRO_NOISE_DENSITY
+    from eas_vo.imu.verdict import GYRO_BIAS_RAD_S, GYRO_NOISE_DENSITY
 
     t = np.arange(-0.1, 2.1, 0.005)
     rng = np.random.default_rng(seed)
@@ -198,7 +199,7 @@ def test_the_noise_model_is_the_simulated_imus_and_the_pose_graphs_and_the_quant
 
     from eas_vo.backends.gtsam_graph import GtsamConfig
     from eas_vo.datasets.simulator.sensor import ImuModel
-    from eas_vo.imu_check import CHI2_3_999, GYRO_BIAS_RAD_S, GYRO_NOISE_DENSITY
+    from eas_vo.imu.verdict import CHI2_3_999, GYRO_BIAS_RAD_S, GYRO_NOISE_DENSITY
 
     assert (GYRO_NOISE_DENSITY, GYRO_BIAS_RAD_S) == (ImuModel().gyro_noise, ImuModel().gyro_bias)
     assert (GYRO_NOISE_DENSITY, GYRO_BIAS_RAD_S) == (GtsamConfig().gyro_noise, GtsamConfig().gyro_bias_sigma)
@@ -211,7 +212,7 @@ def test_the_noise_model_is_the_simulated_imus_and_the_pose_graphs_and_the_quant
     ((0.0, 0.0, 0.0), 0.1, 0),  # the events agree with the still gyro
 ])
 def test_edges_turning_while_the_gyro_reads_still_are_found_alone_or_over_a_stretch(omega_deg_s, sigma_deg, flagged):
-    from eas_vo.imu_check import still_gyro_pairs
+    from eas_vo.imu.verdict import still_gyro_pairs
 
     imu = still_gyro()
     compared, still = still_gyro_pairs(FRAMES, sigma_edges(imu, np.radians(omega_deg_s), np.radians(sigma_deg)), imu)
@@ -221,7 +222,7 @@ def test_edges_turning_while_the_gyro_reads_still_are_found_alone_or_over_a_stre
 def test_edges_erring_by_their_own_sigma_are_rarely_flagged():
     """Per-axis Gaussian errors of the stated sigma: under 1 % of the pairs (the per-pair test's
     rate is 0.1 %; over a stretch, a pair must also exceed the noise's mean)."""
-    from eas_vo.imu_check import still_gyro_pairs
+    from eas_vo.imu.verdict import still_gyro_pairs
 
     counts = []
     for seed in range(10):
@@ -231,7 +232,7 @@ def test_edges_erring_by_their_own_sigma_are_rarely_flagged():
 
 
 def test_a_turning_gyro_is_never_still_and_edges_without_a_sigma_are_not_compared():
-    from eas_vo.imu_check import still_gyro_pairs
+    from eas_vo.imu.verdict import still_gyro_pairs
 
     imu = gyro()
     assert still_gyro_pairs(FRAMES, sigma_edges(imu, np.radians([0, 30.0, 0]), np.radians(0.05)), imu)[1] == []

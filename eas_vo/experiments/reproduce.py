@@ -12,9 +12,10 @@ from pathlib import Path
 
 import numpy as np
 
-from eas_vo import compare
+from eas_vo.experiments import grid
+from eas_vo.experiments.cells import Cell, Method, plan
 from eas_vo.errors import DataError, EasVoError
-from eas_vo.gallery import PAPER_ORDER
+from eas_vo.experiments.gallery import PAPER_ORDER
 from eas_vo.io.atomic import atomic_path, json_text, remove_stale_temporaries, write_text_atomic
 from eas_vo.io.outputs import claim_grid_folder
 from eas_vo.io.tables import figure_text, slug
@@ -58,32 +59,32 @@ def fetch_sequences(progress: bool) -> None:
 
 
 #: The paper's method: klt's consecutive edges chained.
-PAPER = compare.Method("klt", "chain")
+PAPER = Method("klt", "chain")
 
 #: The smoothed method beside it in the default grids (reproduce table1, compare without
 #: --trackers/--backends): klt also measures keyframe edges (a keyframe every 3rd frame, as
 #: configs/best.toml has it) and the gtsam pose graph fits all edges. On consecutive edges
 #: alone a pose graph has nothing to smooth: its trajectory is the chain's.
-SMOOTHED = compare.Method("klt", "gtsam", (("tracker.klt.keyframe_interval", "3"),))
+SMOOTHED = Method("klt", "gtsam", (("tracker.klt.keyframe_interval", "3"),))
 
 
-def default_methods(tracker: str, backend: str) -> list[compare.Method]:
+def default_methods(tracker: str, backend: str) -> list[Method]:
     """compare's methods when neither trackers nor backends are given: the configuration's,
     and beside the paper's klt+chain the smoothed one (SMOOTHED)."""
-    method = compare.Method(tracker, backend)
+    method = Method(tracker, backend)
     return [method, SMOOTHED] if method == PAPER else [method]
 
 
-def table1_methods(backends) -> list[compare.Method]:
+def table1_methods(backends) -> list[Method]:
     """Table 1's columns: the paper's klt+chain, and klt with each other backend (a pose graph)
     fed klt's keyframe edges as SMOOTHED is: on the paper's consecutive edges alone it would
     only repeat the chain's trajectory."""
-    return [PAPER if b == PAPER.backend else compare.Method("klt", b, SMOOTHED.settings) for b in backends]
+    return [PAPER if b == PAPER.backend else Method("klt", b, SMOOTHED.settings) for b in backends]
 
 
-def _cells(frontends, methods) -> list[compare.Cell]:
+def _cells(frontends, methods) -> list[Cell]:
     """The grid, each sequence's cells in a folder named after it."""
-    cells = compare.plan(list(SPECS.values()), list(frontends), list(methods), [])
+    cells = plan(list(SPECS.values()), list(frontends), list(methods), [])
     names = {spec: name for name, spec in SPECS.items()}
     return [dataclasses.replace(c, dataset_name=names[c.dataset]) for c in cells]
 
@@ -103,7 +104,7 @@ def _check(cells, config: str, overrides: dict, out: Path) -> None:
     `out` claimed (new, empty or a grid folder: io.claim_grid_folder) before any download; then
     the temporary files of a reproduce killed while writing into `out` removed."""
     for cell in cells:
-        compare.cell_config(cell, config, [], overrides)
+        grid.cell_config(cell, config, [], overrides)
     claim_grid_folder(out)
     remove_stale_temporaries(out, OUTPUT_FILES)
 
@@ -120,7 +121,7 @@ def table1(out: Path, duration_s: float = PAPER_DURATION_S, backends=("chain", "
     cells, overrides = _cells(PAPER_ORDER, table1_methods(backends)), _overrides(duration_s, orb=False)
     _check(cells, config, overrides, out)
     fetch_sequences(progress)
-    rows, n_run = compare.run_experiment(cells, out, config, [], overrides, jobs, progress)
+    rows, n_run = grid.run_experiment(cells, out, config, [], overrides, jobs, progress)
     markdown = table1_markdown(rows, config, duration_s)
     write_text_atomic(out / "table1.md", markdown)
     write_text_atomic(out / "table1.json", json_text({"paper": PAPER_TABLE1, "ours": rows, "config": config,
@@ -185,9 +186,9 @@ def _spearman(ours: dict[str, float], paper: dict[str, float]) -> str:
     return f"{rho:+.2f}" if np.isfinite(rho) else "n/a"
 
 
-def _euler_figures(out: Path, cells: list[compare.Cell], rows: list[dict]) -> None:
+def _euler_figures(out: Path, cells: list[Cell], rows: list[dict]) -> None:
     """fig3_SEQUENCE_METHOD.png: the paper's Fig. 3, one column per source."""
-    from eas_vo.evaluation import tum_aligned_rotations
+    from eas_vo.evaluation.ape import tum_aligned_rotations
     from eas_vo.plots import plot_euler_grid
 
     panels: dict = {}
@@ -223,12 +224,13 @@ def table2(out: Path, estimates: dict[tuple[str, str], str], duration_s: float |
     table2 markdown)."""
     import importlib.util
 
-    from eas_vo.orbslam import evaluate_estimate, read_estimate
+    from eas_vo.io.tum import read_tum
+    from eas_vo.experiments.external import evaluate_estimate
 
     for (seq, source), path in estimates.items():
         if seq not in SEQUENCES or source not in frontends:
             raise EasVoError(f"--estimate {seq}:{source}: the Table 2 asked for has {', '.join(SEQUENCES)} x {', '.join(frontends)}")
-        read_estimate(path)  # a missing or malformed file is an error before any download
+        read_tum(path)  # a missing or malformed file is an error before any download
     with_slam = importlib.util.find_spec("pyorbslam3") is not None
     if with_slam and vocabulary:
         from eas_vo.slam.run import find_vocabulary
@@ -241,10 +243,10 @@ def table2(out: Path, estimates: dict[tuple[str, str], str], duration_s: float |
     slam = {key: evaluate_estimate(SPECS[key[0]], path, "sim3", 0.01, out / "slam" / f"{key[0]}_{key[1]}",
                                    label=f"{key[0]} {key[1]}", replace=True)
             for key, path in estimates.items()}
-    rows, n_run = compare.run_experiment(cells, out, config, [], overrides, jobs, progress)
+    rows, n_run = grid.run_experiment(cells, out, config, [], overrides, jobs, progress)
     best_rows = []
     if with_slam:  # eas-vo's most accurate configuration on the same images, as `--config best` runs it, for the rotation rows
-        best_rows, n_best = compare.run_experiment(_cells(frontends, [best_method()]), out / "best", "best", [],
+        best_rows, n_best = grid.run_experiment(_cells(frontends, [best_method()]), out / "best", "best", [],
                                                    _overrides(duration_s, orb=False), jobs, progress)
         best_rows = [{**r, "folder": f"best/{r['folder']}"} for r in best_rows]  # (relative to `out`, as the others)
         n_run += n_best
@@ -262,12 +264,12 @@ def table2(out: Path, estimates: dict[tuple[str, str], str], duration_s: float |
     return rows + best_rows, n_run, markdown
 
 
-def best_method() -> compare.Method:
+def best_method() -> Method:
     """configs/best.toml's tracker and backend, as `--config best` runs them."""
     from eas_vo.config import run_section
 
     run = run_section("best")
-    return compare.Method(run.tracker, run.backend)
+    return Method(run.tracker, run.backend)
 
 
 def _vocabulary(progress: bool) -> Path:
@@ -285,7 +287,7 @@ def _vocabulary(progress: bool) -> Path:
         return find_vocabulary(str(fetch_orb_vocabulary(progress=progress)))
 
 
-def _slam_cell(cell: compare.Cell, config: str, overrides: dict, folder: Path, vocabulary: str, runs: int,
+def _slam_cell(cell: Cell, config: str, overrides: dict, folder: Path, vocabulary: str, runs: int,
                progress: bool) -> dict:
     """`eas-vo slam` on one cell (its summary.json reused when it holds `runs` runs with
     `vocabulary` made under slam.run.PROTOCOL); the summary with its median keyframe APE as
@@ -297,13 +299,13 @@ def _slam_cell(cell: compare.Cell, config: str, overrides: dict, folder: Path, v
     summary_path = folder / "summary.json"
     summary = json.loads(summary_path.read_text()) if summary_path.is_file() else {}
     if summary.get("runs") != runs or summary.get("vocabulary") != vocabulary or summary.get("protocol") != PROTOCOL:
-        summary = run_slam(compare.cell_config(cell, config, [], overrides), folder, vocabulary, runs, progress, replace=True)
+        summary = run_slam(grid.cell_config(cell, config, [], overrides), folder, vocabulary, runs, progress, replace=True)
         summary.pop("crashed")
     median = (summary.get("ape_keyframes.ape_trans_mean_m") or {}).get("median")
     return {**summary, "ape_trans_mean_m": median, "folder": str(folder)}
 
 
-def _keyframe_figures(out: Path, cells: list[compare.Cell], slam: dict) -> None:
+def _keyframe_figures(out: Path, cells: list[Cell], slam: dict) -> None:
     """fig4_SEQUENCE.png: the paper's Fig. 4, a column per source: the keyframe positions of the
     run with the median keyframe APE, Sim(3)-aligned, per axis over ground truth, and each
     keyframe's APE."""
@@ -319,7 +321,8 @@ def _keyframe_figures(out: Path, cells: list[compare.Cell], slam: dict) -> None:
             continue
         run = sorted(scored, key=lambda r: r["ape_keyframes"]["ape_trans_mean_m"])[(len(scored) - 1) // 2]
         folder = Path(m["folder"]) / f"run_{run['run']}"
-        t, p, _ = read_tum(folder / "keyframes_aligned.tum")
+        keyframes = read_tum(folder / "keyframes_aligned.tum", ordered=False)
+        t, p = keyframes.t, keyframes.p_w_c
         gt = open_dataset(SPECS[cell.dataset_name]).ground_truth
         label = f"{cell.frontend} (run {run['run']}, APE {run['ape_keyframes']['ape_trans_mean_m']:.3f} m)"
         panels.setdefault(cell.dataset_name, []).append((label, t, p, gt))
