@@ -27,7 +27,7 @@ from pathlib import Path
 
 from eas_vo.experiments import grid
 from eas_vo.experiments.cells import Cell, dataset_names
-from eas_vo.experiments.grid import Method
+from eas_vo.experiments.cells import Method
 from eas_vo.experiments.gallery import PAPER_COLOURS, PAPER_ORDER
 from eas_vo.io.atomic import json_text, write_text_atomic
 from eas_vo.io.cache import cache_folder

@@ -18,6 +18,7 @@ EVENT_DTYPE = np.dtype([("t", "<f8"), ("x", "<u2"), ("y", "<u2"), ("p", "i1")])
 
 
 def empty_events() -> np.ndarray:
+    """No events: an empty array of EVENT_DTYPE."""
     return np.empty(0, dtype=EVENT_DTYPE)
 
 

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 
 def add_parser(sub) -> None:
+    """`eas-vo cache`: its arguments and help, added to `sub`, the command line's subparsers."""
     parser = sub.add_parser(
         "cache",
         help="show, or clear, what eas-vo keeps in its cache folder",
@@ -19,6 +20,7 @@ def add_parser(sub) -> None:
 
 
 def run(args) -> int:
+    """`eas-vo cache` on the parsed `args`; returns the exit status."""
     from eas_vo.io.cache import cache_dir, cache_usage, clear_cache
 
     if args.clear:

@@ -8,6 +8,7 @@ from eas_vo.cli.options import add_config, add_jobs, add_quiet, add_time_offset,
 
 
 def add_parser(sub) -> None:
+    """`eas-vo compare`: its arguments and help, added to `sub`, the command line's subparsers."""
     parser = sub.add_parser(
         "compare",
         help="run a grid of datasets x frontends x trackers x backends (x sweeps); write the paper's Table 1",
@@ -40,6 +41,7 @@ def add_parser(sub) -> None:
 
 
 def run(args) -> int:
+    """`eas-vo compare` on the parsed `args`; returns the exit status."""
     from eas_vo.experiments import grid, results
     from eas_vo.experiments.cells import grid_methods, plan
     from eas_vo import config as config_mod

@@ -8,6 +8,7 @@ from eas_vo.cli.options import add_config, add_dataset, add_lenient, add_output_
 
 
 def add_parser(sub) -> None:
+    """`eas-vo convert`: its arguments and help, added to `sub`, the command line's subparsers."""
     parser = sub.add_parser(
         "convert",
         help="write any readable sequence (or a window of it) as an Event Camera Dataset folder",
@@ -29,6 +30,7 @@ def add_parser(sub) -> None:
 
 
 def run(args) -> int:
+    """`eas-vo convert` on the parsed `args`; returns the exit status."""
     from eas_vo import config as config_mod
     from eas_vo.io.outputs import check_output_folder
     from eas_vo.sequence import convert

@@ -8,6 +8,7 @@ from eas_vo.cli.options import add_dataset, add_output_options, dataset_inputs, 
 
 
 def add_parser(sub) -> None:
+    """`eas-vo evaluate`: its arguments and help, added to `sub`, the command line's subparsers."""
     parser = sub.add_parser(
         "evaluate",
         help="score an external TUM trajectory (e.g. ORB-SLAM2's KeyFrameTrajectory.txt) against ground truth",
@@ -27,6 +28,7 @@ def add_parser(sub) -> None:
 
 
 def run(args) -> int:
+    """`eas-vo evaluate` on the parsed `args`; returns the exit status."""
     from eas_vo.io.outputs import check_output_folder
     from eas_vo.io.tables import figure_text
     from eas_vo.experiments.external import evaluate_estimate

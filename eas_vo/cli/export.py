@@ -7,6 +7,7 @@ from eas_vo.cli.options import add_config, add_dataset, add_output_options, add_
 
 
 def add_parser(sub) -> None:
+    """`eas-vo export`: its arguments and help, added to `sub`, the command line's subparsers."""
     parser = sub.add_parser(
         "export",
         help="write a frontend's images as a sequence ORB-SLAM2 reads (TUM or EuRoC layout) with its settings.yaml",
@@ -28,6 +29,7 @@ def add_parser(sub) -> None:
 
 
 def run(args) -> int:
+    """`eas-vo export` on the parsed `args`; returns the exit status."""
     from eas_vo import config as config_mod
     from eas_vo.io.outputs import check_output_folder
     from eas_vo.slam.export import export

@@ -11,6 +11,7 @@ ORB_VOCABULARY = "orb-vocabulary"
 
 
 def add_parser(sub) -> None:
+    """`eas-vo fetch`: its arguments and help, added to `sub`, the command line's subparsers."""
     parser = sub.add_parser(
         "fetch",
         help="download Event Camera Dataset sequences (verified against their published MD5) or ORB-SLAM3's vocabulary",
@@ -29,6 +30,7 @@ def add_parser(sub) -> None:
 
 
 def run(args) -> int:
+    """`eas-vo fetch` on the parsed `args`; returns the exit status."""
     from eas_vo.registry import fetchable
 
     wanted = [fetchable(spec) for spec in args.names if spec != ORB_VOCABULARY]  # every name checked before any download

@@ -7,6 +7,7 @@ from eas_vo.cli.options import add_config, add_dataset, add_lenient, set_assignm
 
 
 def add_parser(sub) -> None:
+    """`eas-vo info`: its arguments and help, added to `sub`, the command line's subparsers."""
     parser = sub.add_parser(
         "info",
         help="say what a recording holds (streams, sensor, camera, spans, rates) before any long work",
@@ -22,6 +23,7 @@ def add_parser(sub) -> None:
 
 
 def run(args) -> int:
+    """`eas-vo info` on the parsed `args`; returns the exit status."""
     from eas_vo import config as config_mod
     from eas_vo.sequence import describe
 

@@ -7,6 +7,7 @@ import sys
 
 
 def add_parser(sub) -> None:
+    """`eas-vo list`: its arguments and help, added to `sub`, the command line's subparsers."""
     parser = sub.add_parser(
         "list",
         help="list the installed datasets, frontends, trackers and backends with their config keys",
@@ -17,6 +18,7 @@ def add_parser(sub) -> None:
 
 
 def run(args) -> int:
+    """`eas-vo list` on the parsed `args`; returns the exit status."""
     from dataclasses import MISSING, fields
 
     from eas_vo import registry

@@ -21,6 +21,8 @@ COMMANDS = ("run", "compare", "list", "info", "render", "export", "slam", "vocab
 
 
 def main(argv: list[str] | None = None) -> int:
+    """The `eas-vo` command on `argv` (default: the process's); returns the exit status: 0, 2 for a
+    user error (one line on stderr), 130 / 143 for Ctrl-C / SIGTERM, 141 for a closed pipe."""
     args = build_parser().parse_args(argv)
     try:
         with sigterm_as_interrupt():
@@ -49,6 +51,7 @@ class _OneLineParser(argparse.ArgumentParser):
 
 
 def build_parser() -> argparse.ArgumentParser:
+    """The command line's parser: a subcommand a module of COMMANDS."""
     parser = _OneLineParser(
         prog="eas-vo",
         description="3-DoF rotation estimation from event cameras fused with frames (EAS and peers).",

@@ -45,6 +45,7 @@ def add_time_offset(parser) -> None:
 
 
 def add_quiet(parser, help: str = "no progress bar") -> None:
+    """--quiet: no progress bar."""
     parser.add_argument("--quiet", action="store_true", help=help)
 
 
@@ -66,12 +67,14 @@ def add_output_options(parser, required: bool, default: str | None = None) -> No
 
 
 def add_threads(parser) -> None:
+    """--threads N: the threads of eas-vo's own parallel work (concurrency.set_threads)."""
     parser.add_argument("--threads", type=positive_int, metavar="N",
                         help="threads for eas-vo's own parallel work (default: one per core; 1: the serial path, "
                              "which gives the same results)")
 
 
 def apply_threads(args) -> None:
+    """Use the --threads given (if any) for the rest of the process."""
     if getattr(args, "threads", None):
         from eas_vo import concurrency
 
@@ -79,6 +82,7 @@ def apply_threads(args) -> None:
 
 
 def add_jobs(parser) -> None:
+    """--jobs N: the parallel processes of a grid (default: one per core)."""
     parser.add_argument("--jobs", type=positive_int, default=os.cpu_count() or 1, help="parallel processes (default: all cores)")
 
 

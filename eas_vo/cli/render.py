@@ -8,6 +8,7 @@ from eas_vo.cli.options import add_config, add_dataset, dataset_inputs, refuse_i
 
 
 def add_parser(sub) -> None:
+    """`eas-vo render`: its arguments and help, added to `sub`, the command line's subparsers."""
     parser = sub.add_parser(
         "render",
         help="draw every frontend's image of chosen frames side by side (like the paper's Fig. 1)",
@@ -25,6 +26,7 @@ def add_parser(sub) -> None:
 
 
 def run(args) -> int:
+    """`eas-vo render` on the parsed `args`; returns the exit status."""
     from eas_vo import config as config_mod
     from eas_vo.experiments.gallery import frontend_images
     from eas_vo.io.atomic import atomic_path

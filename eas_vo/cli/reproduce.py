@@ -8,6 +8,7 @@ from eas_vo.cli.options import add_jobs, add_quiet, dataset_inputs, name_list, p
 
 
 def add_parser(sub) -> None:
+    """`eas-vo reproduce`: its arguments and help, added to `sub`, the command line's subparsers."""
     parser = sub.add_parser(
         "reproduce",
         help="the paper's Table 1 or Table 2 on its own data (hdr_boxes, hdr_poster), beside its figures",
@@ -43,6 +44,7 @@ def add_parser(sub) -> None:
 
 
 def run(args) -> int:
+    """`eas-vo reproduce` on the parsed `args`; returns the exit status."""
     from eas_vo.experiments import reproduce
     from eas_vo.datasets.ecd_catalogue import data_dir
     from eas_vo.io.outputs import check_grid_folder, check_writable_folder

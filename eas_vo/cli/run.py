@@ -28,6 +28,7 @@ examples:
 
 
 def add_parser(sub) -> None:
+    """`eas-vo run`: its arguments and help, added to `sub`, the command line's subparsers."""
     parser = sub.add_parser(
         "run",
         help="estimate rotation on a sequence and evaluate it",
@@ -58,6 +59,7 @@ def add_parser(sub) -> None:
 
 
 def run(args) -> int:
+    """`eas-vo run` on the parsed `args`; returns the exit status."""
     from eas_vo import config as config_mod
     from eas_vo import pipeline
     from eas_vo.io.outputs import check_output_folder

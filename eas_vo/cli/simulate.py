@@ -9,6 +9,7 @@ from eas_vo.cli.options import add_output_options
 
 
 def add_parser(sub) -> None:
+    """`eas-vo simulate`: its arguments and help, added to `sub`, the command line's subparsers."""
     parser = sub.add_parser(
         "simulate",
         help="write a synthetic dim-scene DAVIS sequence (ECD layout)",
@@ -34,6 +35,7 @@ def add_parser(sub) -> None:
 
 
 def run(args) -> int:
+    """`eas-vo simulate` on the parsed `args`; returns the exit status."""
     from eas_vo.config import build, parse_set
     from eas_vo.datasets.simulator import SimConfig, simulate
     from eas_vo.datasets.synthetic import SyntheticConfig

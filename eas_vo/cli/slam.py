@@ -29,6 +29,7 @@ examples:
 
 
 def add_parser(sub) -> None:
+    """`eas-vo slam`: its arguments and help, added to `sub`, the command line's subparsers."""
     parser = sub.add_parser(
         "slam",
         help="run monocular ORB-SLAM3 on a frontend's images and score it (the paper's Table 2; extra: parser)",
@@ -52,6 +53,7 @@ def add_parser(sub) -> None:
 
 
 def run(args) -> int:
+    """`eas-vo slam` on the parsed `args`; returns the exit status."""
     from eas_vo import config as config_mod
     from eas_vo.io.outputs import check_output_folder
     from eas_vo.io.tables import figure_text

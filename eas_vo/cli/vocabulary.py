@@ -7,6 +7,7 @@ from eas_vo.cli.options import add_config, add_dataset, add_quiet, add_window, d
 
 
 def add_parser(sub) -> None:
+    """`eas-vo vocabulary`: its arguments and help, added to `sub`, the command line's subparsers."""
     parser = sub.add_parser(
         "vocabulary",
         help="train a DBoW2 ORB vocabulary (ORB-SLAM's text format) on a sequence's own images",
@@ -29,6 +30,7 @@ def add_parser(sub) -> None:
 
 
 def run(args) -> int:
+    """`eas-vo vocabulary` on the parsed `args`; returns the exit status."""
     from eas_vo import config as config_mod
     from eas_vo.io.outputs import check_output_file, refuse_foreign_file
     from eas_vo.slam.train import train_vocabulary

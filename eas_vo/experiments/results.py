@@ -203,6 +203,7 @@ def equal_methods(rows: list[dict]) -> dict[tuple[str, str], list[str]]:
 
 
 def table_csv(rows: list[dict]) -> str:
+    """The rows as CSV, one a cell, with which cells are best per column (best_nc, best_ape)."""
     fields = ["dataset", "frontend", "tracker", "backend", "method", "sweep", "status", "nc_mean", "ape_mean_rad",
               *MOTION_KEYS, "orb_keypoints_mean", "orb_matches_mean", "best_nc", "best_ape", "same_as", "folder", "error"]
     best_nc, best_ape = _best(rows, "nc_mean", lower=False), _best(rows, "ape_mean_rad", lower=True)
@@ -217,6 +218,7 @@ def table_csv(rows: list[dict]) -> str:
 
 
 def write_tables(out_root: Path, rows: list[dict]) -> None:
+    """table.md (Table 1's layout), table_motion.md, table.csv and table.json in `out_root`."""
     write_text_atomic(out_root / "table.md", table_markdown(rows))
     write_text_atomic(out_root / "table_motion.md", table_markdown(rows, MOTION_FIGURES))
     write_text_atomic(out_root / "table.csv", table_csv(rows))

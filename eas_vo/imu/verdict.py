@@ -27,8 +27,8 @@ CONFIDENT_INLIERS = 30
 
 #: The gyro disagrees with a pair when the angle between the two rotations exceeds this part of
 #: the larger of them: a gyro read in the wrong unit or not at all gives 1 or more, a sign flip 2,
-#: an axis swap 1.4, a clock a frame interval off about 1 at constant motion; a right one on
-#: simulated and real sequences 0.1-0.3 (the images' own noise).
+#: an axis swap 1.4, a clock a frame interval off about 1 at constant motion; a right one stays
+#: well below (docs/imu.md, "How the check's thresholds were chosen").
 DISAGREEMENT = 0.5
 
 
@@ -38,15 +38,14 @@ MIN_JUDGED_PAIRS = 10
 
 #: A gyro turning this much more or less than the images (its fitted scale off 1 by more, and
 #: by more than FIT_SIGMAS of the fit's standard error) is wrong: a MEMS gyro's sensitivity is
-#: within 3 % of its datasheet's; right gyros on 2 s simulated sequences fitted 0.88-1.01.
+#: within 3 % of its datasheet's (docs/imu.md has what right gyros fit).
 MAX_SCALE_ERROR = 0.2
 
 
 #: A gyro reading this much [rad/s] more than the images turn, constantly (its fitted bias's
 #: norm, and beyond FIT_SIGMAS of the fit's standard error), has a bias the pose graph's prior
-#: cannot absorb (backend.gyro_bias_sigma: 0.01). The images' own systematic error looks like a
-#: bias of up to 0.09 on right gyros (2 s simulated sequences, mostly about the optical axis),
-#: so a smaller bias cannot be told from it.
+#: cannot absorb (backend.gyro_bias_sigma: 0.01); above the bias the images' own systematic error
+#: looks like on right gyros, which cannot be told from a gyro's (docs/imu.md).
 MAX_BIAS_RAD_S = 0.15
 
 
@@ -56,10 +55,9 @@ FIT_SIGMAS = 4.0
 #: The scale and bias fits refute the gyro only over judged pairs spanning this long [s]: the
 #: images' systematic errors (the events' latency at one speed, one texture in view) last as long
 #: as the motion that causes them, and the fits' standard errors, taking the pairs for
-#: independent, understate them over a short stretch (a right gyro over the first second of a
-#: simulated dim sequence, seed 91: a bias of 0.10 +- 0.02 rad/s); the simulated hand-held
-#: motion changes speed and axis within about a second. Most pairs disagreeing refutes it over
-#: any span: a wrong sign, axis or clock shows in every pair.
+#: independent, understate them over a short stretch (docs/imu.md); hand-held motion changes
+#: speed and axis within about a second. Most pairs disagreeing refutes it over any span: a
+#: wrong sign, axis or clock shows in every pair.
 MIN_FIT_SPAN_S = 1.0
 
 

@@ -56,11 +56,9 @@ def atomic_path(path: str | Path):
 def atomic_file(path: str | Path):
     """An open binary file to write, renamed over `path` on success (atomic_path's temporary).
 
-    The temporary is opened write-only without truncating it (it is empty): on ext4, an
-    open that truncates marks the file so that closing it writes all of it out at once (the
-    file system's safeguard for files rewritten in place), which took ~100 ms per 250 MB of
-    event cache on the close, with the caller waiting; opened read-write instead, Python's
-    buffered file took 10-20 % longer over the writes of a cache."""
+    The temporary is opened write-only without truncating it (it is empty): on ext4 an open
+    that truncates makes the close write the whole file out, with the caller waiting
+    (docs/speed.md, "The event parser and its cache")."""
     with atomic_path(path) as tmp, os.fdopen(os.open(tmp, os.O_WRONLY), "wb") as fh:
         yield fh
 
@@ -92,5 +90,6 @@ def json_text(obj) -> str:
 
 
 def write_text_atomic(path: str | Path, text: str) -> None:
+    """Write `text` to `path` atomically (atomic_path)."""
     with atomic_path(path) as tmp:
         tmp.write_text(text)

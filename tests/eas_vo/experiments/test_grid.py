@@ -16,7 +16,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from eas_vo.cli.main import main
-from eas_vo.experiments.grid import Cell, plan
+from eas_vo.experiments.cells import Cell, plan
 from eas_vo.experiments.results import table_markdown
 from helpers import hostile_settings
 
@@ -134,7 +134,7 @@ def test_one_and_two_jobs_give_the_same_table(grid, short_sequence, tmp_path):
 
 
 def test_plan_is_the_cartesian_product():
-    from eas_vo.experiments.grid import Method, grid_methods
+    from eas_vo.experiments.cells import Method, grid_methods
 
     cells = plan(["a", "b"], ["x"], grid_methods(["klt", "other"], ["chain", "gtsam"]), ["frontend.n=1,2", "frontend.beta=3,4,5"])
     assert len(cells) == 2 * 2 * 2 * 2 * 3
@@ -144,7 +144,7 @@ def test_plan_is_the_cartesian_product():
 
 
 def test_a_tracker_of_events_alone_is_one_cell_per_dataset_with_the_none_frontend():
-    from eas_vo.experiments.grid import grid_methods
+    from eas_vo.experiments.cells import grid_methods
 
     cells = plan(["a", "b"], ["original", "eas", "ts"], grid_methods(["klt", "cmax"], ["chain"]), [])
     assert len(cells) == 2 * 3 + 2

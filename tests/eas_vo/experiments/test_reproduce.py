@@ -93,7 +93,7 @@ def test_table1_marks_a_cell_whose_time_offset_could_not_be_estimated():
 
 
 def test_compares_default_methods_are_the_papers_chain_and_the_smoothed_pose_graph():
-    from eas_vo.experiments.grid import Method
+    from eas_vo.experiments.cells import Method
     from eas_vo.experiments.reproduce import PAPER, SMOOTHED, default_methods
 
     assert default_methods("klt", "chain") == [PAPER, SMOOTHED] and SMOOTHED.settings == (("tracker.klt.keyframe_interval", "3"),)
