@@ -3,7 +3,7 @@ a BetweenFactorRot3 per measured relative rotation (consecutive or skip edges)."
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Sequence
 
 import numpy as np
@@ -11,7 +11,7 @@ import numpy as np
 from eas_vo.errors import ConfigError
 from eas_vo.geometry.rotations import geodesic_angle
 from eas_vo.imu_check import confident_steps, disagreement
-from eas_vo.plugins import Backend
+from eas_vo.plugins import Backend, BackendResult
 from eas_vo.types import ImuSeries, RelativeRotation
 from eas_vo.validation import check_choice, check_range
 
@@ -31,7 +31,8 @@ CONVERGED_STEP_RAD = 1e-6
 class GtsamConfig:
     """Attributes:
         mode: `batch` (Levenberg-Marquardt over all frames) or `online` (iSAM2, frame by frame:
-            `causal_R_w_c` holds each frame's estimate as it was when that frame arrived).
+            BackendResult.causal_R_w_c holds each frame's estimate as it was when that frame
+            arrived).
         edge_noise: how an edge's noise [rad] follows from its quality: `inliers` (the default):
             sigma_rad * sqrt(reference_inliers / inliers); `residual`: the edge's own inlier
             noise over sqrt(inliers) divided by the inlier ratio (RelativeRotation.sigma_rad),
@@ -136,11 +137,11 @@ class GtsamBackend(Backend):
                 by_frame[k].append(gtsam.BetweenFactorRot3(k - 1, k, gtsam.Rot3(), gap))
         return by_frame
 
-    def _gyro_factors(self, gtsam, by_frame: dict, times: np.ndarray, imu, edges: Sequence[RelativeRotation]) -> None:
+    def _gyro_factors(self, gtsam, by_frame: dict, times: np.ndarray, imu, edges: Sequence[RelativeRotation]) -> list[str]:
         """AHRSFactors between consecutive frames (rates linear between readings: ImuSeries.rates_between)
         over the intervals the gyro measures (ImuSeries.covered) that last some time, except where a
-        confident measurement of the images contradicts the gyro (contradicted_intervals): a gate,
-        so that a glitch of the gyro never overrides the images."""
+        confident measurement of the images contradicts the gyro (_contradicted): a gate, so that a
+        glitch of the gyro never overrides the images. Returns the warning that says so, if any."""
         c = self.config
         params = gtsam.PreintegratedRotationParams()
         params.setGyroscopeCovariance(c.gyro_noise**2 * np.eye(3))
@@ -153,11 +154,11 @@ class GtsamBackend(Backend):
             for rate, dt in zip(*imu.rates_between(times[k - 1], times[k])):
                 pim.integrateMeasurement(rate, dt)
             by_frame[k].append(gtsam.AHRSFactor(k - 1, k, bias, pim))
-        if contradicted.any():
-            first = int(np.flatnonzero(contradicted)[0]) + 1
-            self.solver_warnings.append(
-                f"the gyro was left out of {int(contradicted.sum())} frame interval(s), where a confident measurement of "
-                f"the images contradicts it (the first ending at frame {first}, t={times[first]:.6f} s)")
+        if not contradicted.any():
+            return []
+        first = int(np.flatnonzero(contradicted)[0]) + 1
+        return [f"the gyro was left out of {int(contradicted.sum())} frame interval(s), where a confident measurement of "
+                f"the images contradicts it (the first ending at frame {first}, t={times[first]:.6f} s)"]
 
     @staticmethod
     def _contradicted(times: np.ndarray, edges: Sequence[RelativeRotation], imu: ImuSeries) -> np.ndarray:
@@ -175,37 +176,36 @@ class GtsamBackend(Backend):
 
     def solve(
         self, n_frames: int, edges: Sequence[RelativeRotation], *, times: np.ndarray | None = None, imu: ImuSeries | None = None
-    ) -> np.ndarray:
+    ) -> BackendResult:
         import gtsam
 
         from eas_vo.backends.chain import chain_rotations
 
         initial_R = chain_rotations(n_frames, edges)
         by_frame = self._factors(gtsam, n_frames, edges)
-        self.solver_warnings = []
-        self._with_bias = self.uses_imu and imu is not None
-        if self._with_bias and times is None:
+        with_bias = self.uses_imu and imu is not None
+        if with_bias and times is None:
             raise ValueError("gyro fusion needs the frame times")
-        if self._with_bias:
-            self._gyro_factors(gtsam, by_frame, np.asarray(times, float), imu, edges)
+        warnings = self._gyro_factors(gtsam, by_frame, np.asarray(times, float), imu, edges) if with_bias else []
         solve = self._batch if self.config.mode == "batch" else self._online
         try:
-            return solve(gtsam, n_frames, by_frame, initial_R)
+            solved = solve(gtsam, n_frames, by_frame, initial_R, with_bias)
         except RuntimeError as exc:  # gtsam's own errors (an indeterminate system, ...) are RuntimeErrors
             reason = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
-            self.causal_R_w_c = None
-            self.solver_warnings.append(f"the pose graph could not be solved ({self.config.mode}: {reason}): "
-                                        "the rotations are the chained measurements, unsmoothed")
-            return initial_R
+            failed = (f"the pose graph could not be solved ({self.config.mode}: {reason}): "
+                      "the rotations are the chained measurements, unsmoothed")
+            return BackendResult(initial_R, warnings=(*warnings, failed))
+        return replace(solved, warnings=(*warnings, *solved.warnings))
 
-    def _batch(self, gtsam, n_frames, by_frame, initial_R) -> np.ndarray:
+    def _batch(self, gtsam, n_frames: int, by_frame: dict, initial_R: np.ndarray, with_bias: bool) -> BackendResult:
+        """Levenberg-Marquardt over every frame from the chained rotations (and a zero bias)."""
         graph = gtsam.NonlinearFactorGraph()
         initial = gtsam.Values()
         for k in range(n_frames):
             for factor in by_frame[k]:
                 graph.add(factor)
             initial.insert(k, gtsam.Rot3(initial_R[k]))
-        if self._with_bias:
+        if with_bias:
             initial.insert(gtsam.symbol("b", 0), np.zeros(3))
         params = gtsam.LevenbergMarquardtParams()
         params.setMaxIterations(self.config.iterations)
@@ -217,14 +217,15 @@ class GtsamBackend(Backend):
         if not np.isfinite(optimizer.error()) or optimizer.error() > start_error:
             raise RuntimeError(f"Levenberg-Marquardt ended at error {optimizer.error():.6g}, above its start {start_error:.6g}")
         R_w_c = np.stack([result.atRot3(k).matrix() for k in range(n_frames)])
+        warnings = ()
         if optimizer.iterations() >= self.config.iterations:
             moved = self._next_step_rad(optimizer, R_w_c)
             if moved > CONVERGED_STEP_RAD:
-                self.solver_warnings.append(
+                warnings = (
                     f"the pose graph's Levenberg-Marquardt stopped at backend.iterations = {self.config.iterations} before "
                     f"converging (error {start_error:.6g} -> {optimizer.error():.6g}; one more step turns a frame by "
-                    f"{np.degrees(moved):.2g} deg): raise it")
-        return R_w_c
+                    f"{np.degrees(moved):.2g} deg): raise it",)
+        return BackendResult(R_w_c, warnings=warnings)
 
     @staticmethod
     def _next_step_rad(optimizer, R_w_c: np.ndarray) -> float:
@@ -238,7 +239,9 @@ class GtsamBackend(Backend):
         except RuntimeError:
             return float("inf")
 
-    def _online(self, gtsam, n_frames, by_frame, initial_R) -> np.ndarray:
+    def _online(self, gtsam, n_frames: int, by_frame: dict, initial_R: np.ndarray, with_bias: bool) -> BackendResult:
+        """iSAM2, one update per frame (its estimate then is the causal one), then
+        backend.iterations more updates for the final rotations."""
         params = gtsam.ISAM2Params()
         params.setRelinearizeThreshold(1e-6)
         params.relinearizeSkip = 1
@@ -253,7 +256,7 @@ class GtsamBackend(Backend):
             # the new frame starts where the chain puts it relative to the current estimate of k-1
             step = initial_R[k - 1].T @ initial_R[k] if k else np.eye(3)
             values.insert(k, gtsam.Rot3(previous @ step))
-            if k == 0 and self._with_bias:
+            if k == 0 and with_bias:
                 values.insert(gtsam.symbol("b", 0), np.zeros(3))
             isam.update(graph, values)
             estimate = isam.calculateEstimate()
@@ -261,7 +264,6 @@ class GtsamBackend(Backend):
             previous = causal[k]
         for _ in range(self.config.iterations):
             isam.update()
-        self.causal_R_w_c = causal
         estimate = isam.calculateEstimate()
-        return np.stack([estimate.atRot3(k).matrix() for k in range(n_frames)])
+        return BackendResult(np.stack([estimate.atRot3(k).matrix() for k in range(n_frames)]), causal_R_w_c=causal)
 

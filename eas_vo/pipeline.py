@@ -113,14 +113,15 @@ def _run_into(parts: Pipeline, config: ResolvedConfig, out: Path | None, progres
         agreement = None if parts.imu is None else imu_agreement(t, without(tracked.edges, still), parts.imu)
         fused = None if verdict is None or verdict.contradicts else parts.imu
         imu, imu_offset = _backend_imu(config, parts.backend, fused, agreement)
-        R_w_c = parts.backend.solve(len(t), tracked.edges, times=t, imu=imu)
+        solved = parts.backend.solve(len(t), tracked.edges, times=t, imu=imu)
+        R_w_c = solved.R_w_c
         errors, offset, offset_estimated = evaluate(config, parts.dataset, t, R_w_c, tracked.edges)
         metrics = summarise(config, parts.dataset, tracked, errors, offset, offset_estimated,
                             time.perf_counter() - started, load_s, agreement, imu_offset, verdict, retracked)
         metrics["data_warnings"] = (parts.imu_warnings + metrics["data_warnings"] + list(parts.tracker.tracker_warnings)
-                                  + list(parts.backend.solver_warnings))
+                                  + list(solved.warnings))
         metrics["gyro_use"] = _gyro_use(parts, config, verdict, retracked)
-        result = RunResult(t, R_w_c, tracked.records, tracked.edges, errors, metrics, parts.backend.causal_R_w_c,
+        result = RunResult(t, R_w_c, tracked.records, tracked.edges, errors, metrics, solved.causal_R_w_c,
                            parts.dataset.clock_origin_ns)
         if out is not None:
             write_outputs(out, result, parts.dataset.label, config.origin)
