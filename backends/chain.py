@@ -6,7 +6,7 @@ from typing import Sequence
 
 import numpy as np
 
-from eas_vo.plugins import Backend
+from eas_vo.plugins import Backend, BackendResult
 from eas_vo.types import ImuSeries, RelativeRotation
 
 
@@ -33,5 +33,5 @@ class ChainBackend(Backend):
 
     def solve(
         self, n_frames: int, edges: Sequence[RelativeRotation], *, times: np.ndarray | None = None, imu: ImuSeries | None = None
-    ) -> np.ndarray:
-        return chain_rotations(n_frames, edges)
+    ) -> BackendResult:
+        return BackendResult(chain_rotations(n_frames, edges))

@@ -1,9 +1,13 @@
 """Rotation-only pose graph with GTSAM: one Rot3 per frame, a prior on the first,
-a BetweenFactorRot3 per measured relative rotation (consecutive or skip edges)."""
+a BetweenFactorRot3 per measured relative rotation (consecutive or skip edges).
+
+Keys (gtsam.symbol_shorthand): A(k) frame k's attitude R_w_ck, B(0) the gyro's bias [rad/s].
+Every A key sorts below B(0), as the plain frame numbers did: GTSAM's elimination order depends
+on the keys' order, and another order changes the results' last bits."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Sequence
 
 import numpy as np
@@ -11,7 +15,7 @@ import numpy as np
 from eas_vo.errors import ConfigError
 from eas_vo.geometry.rotations import geodesic_angle
 from eas_vo.imu.verdict import confident_steps, disagreement
-from eas_vo.plugins import Backend
+from eas_vo.plugins import Backend, BackendResult
 from eas_vo.types import ImuSeries, RelativeRotation
 from eas_vo.validation import check_choice, check_range
 
@@ -19,19 +23,41 @@ MODES = ("batch", "online")
 ROBUST = ("none", "huber", "cauchy")
 EDGE_NOISE = ("inliers", "residual")
 #: A gyro interval a confident edge contradicts is left out only when the two differ by more
-#: than this many times their median difference over the sequence: on synthetic:default's first
-#: 2 s with its right gyro the images' worst confident step was 7.8 times the median off.
+#: than this many times their median difference over the sequence (chosen above what the images'
+#: errors showed beside a right gyro: docs/imu.md, "A gyro that cannot be right is not used").
 GATE_SPREAD = 10.0
 #: Levenberg-Marquardt stopped by backend.iterations has converged for every purpose when one
 #: more step turns no frame by more than this [rad] (a thousandth of the smallest APE reported).
 CONVERGED_STEP_RAD = 1e-6
+#: The prior holding frame 0 at the identity (as Backend.solve promises) [rad]: every other
+#: factor is relative, so it fixes the graph's one free global rotation; this far below any
+#: edge's noise, frame 0 stays put.
+FIRST_FRAME_SIGMA_RAD = 1e-9
+#: The loosest edge noise [rad]: an edge's own (RelativeRotation.sigma_rad, infinite without
+#: inliers) is capped here, since GTSAM's noise models need a finite sigma; an edge this loose
+#: carries no information.
+LOOSEST_EDGE_SIGMA_RAD = 1e3
+#: Levenberg-Marquardt stops when an iteration lowers the graph's error by less than this fraction
+#: of it (relative) or this amount (absolute; the error is half the sum of squared whitened
+#: residuals). Far below GTSAM's defaults (1e-5 each), so the solve runs to the error's numerical
+#: floor or to backend.iterations, where CONVERGED_STEP_RAD judges whether it had converged.
+LM_RELATIVE_ERROR_TOL = 1e-12
+LM_ABSOLUTE_ERROR_TOL = 1e-15
+#: iSAM2 relinearises a variable whose estimate moved by more than this since it was last
+#: linearised [rad for a frame, rad/s for the bias], checking at every update (skip 1). With
+#: GTSAM's defaults (0.1, every 10th update) stale linearisation points keep the online estimates,
+#: causal and final, short of the optimum the batch solve finds; tests/backends/test_gtsam_graph.py
+#: holds them to it.
+ISAM2_RELINEARIZE_THRESHOLD = 1e-6
+ISAM2_RELINEARIZE_SKIP = 1
 
 
 @dataclass(frozen=True)
 class GtsamConfig:
     """Attributes:
         mode: `batch` (Levenberg-Marquardt over all frames) or `online` (iSAM2, frame by frame:
-            `causal_R_w_c` holds each frame's estimate as it was when that frame arrived).
+            BackendResult.causal_R_w_c holds each frame's estimate as it was when that frame
+            arrived).
         edge_noise: how an edge's noise [rad] follows from its quality: `inliers` (the default):
             sigma_rad * sqrt(reference_inliers / inliers); `residual`: the edge's own inlier
             noise over sqrt(inliers) divided by the inlier ratio (RelativeRotation.sigma_rad),
@@ -52,10 +78,9 @@ class GtsamConfig:
         gyro_bias_sigma: prior on the gyro bias [rad/s]: its standard deviation about zero.
             Both default to the DAVIS IMU the simulator models (ImuModel: gyro_noise,
             gyro_bias); for another IMU, take them from its calibration (e.g. Kalibr's
-            gyroscope_noise_density). A looser prior (0.05, the earlier default) let the
-            images' own systematic errors (lag, blur) pass for a gyro bias that the graph then
-            integrated: on the development sequences (synthetic:default, seeds 1-3, and seeds
-            71-73 at speed 4) best.toml's geometric-mean APE fell from 0.064 to 0.039.
+            gyroscope_noise_density). A looser prior lets the images' own systematic errors
+            (lag, blur) pass for a gyro bias that the graph then integrates (docs/imu.md,
+            "How readings are integrated").
     """
 
     mode: str = "batch"
@@ -110,7 +135,7 @@ class GtsamBackend(Backend):
             return max(edge.estimated_sigma_rad, c.sigma_floor_rad)
         if c.edge_noise == "inliers":
             return c.sigma_rad * np.sqrt(c.reference_inliers / max(edge.inliers, 1))
-        return max(min(edge.sigma_rad, 1e3), c.sigma_floor_rad)
+        return max(min(edge.sigma_rad, LOOSEST_EDGE_SIGMA_RAD), c.sigma_floor_rad)
 
     def _noise(self, gtsam, sigma: float):
         c = self.config
@@ -122,48 +147,54 @@ class GtsamBackend(Backend):
 
     def _factors(self, gtsam, n_frames: int, edges: Sequence[RelativeRotation]) -> dict[int, list]:
         """Factors grouped by the newest frame they involve (what an online solver gets when)."""
+        from gtsam.symbol_shorthand import A
+
         c = self.config
         by_frame: dict[int, list] = {k: [] for k in range(n_frames)}
-        by_frame[0].append(gtsam.PriorFactorRot3(0, gtsam.Rot3(), gtsam.noiseModel.Isotropic.Sigma(3, 1e-9)))
+        at_identity = gtsam.noiseModel.Isotropic.Sigma(3, FIRST_FRAME_SIGMA_RAD)
+        by_frame[0].append(gtsam.PriorFactorRot3(A(0), gtsam.Rot3(), at_identity))
         measured = set()
         for e in edges:
             sigma = self.edge_sigma(e)
-            by_frame[e.j].append(gtsam.BetweenFactorRot3(e.i, e.j, gtsam.Rot3(e.R_i_j), self._noise(gtsam, sigma)))
+            by_frame[e.j].append(gtsam.BetweenFactorRot3(A(e.i), A(e.j), gtsam.Rot3(e.R_i_j), self._noise(gtsam, sigma)))
             measured.add(e.j)
         gap = gtsam.noiseModel.Isotropic.Sigma(3, c.gap_sigma_rad)
         for k in range(1, n_frames):
             if k not in measured:
-                by_frame[k].append(gtsam.BetweenFactorRot3(k - 1, k, gtsam.Rot3(), gap))
+                by_frame[k].append(gtsam.BetweenFactorRot3(A(k - 1), A(k), gtsam.Rot3(), gap))
         return by_frame
 
-    def _gyro_factors(self, gtsam, by_frame: dict, times: np.ndarray, imu, edges: Sequence[RelativeRotation]) -> None:
+    def _gyro_factors(self, gtsam, by_frame: dict, times: np.ndarray, imu, edges: Sequence[RelativeRotation]) -> list[str]:
         """AHRSFactors between consecutive frames (rates linear between readings: ImuSeries.rates_between)
         over the intervals the gyro measures (ImuSeries.covered) that last some time, except where a
-        confident measurement of the images contradicts the gyro (contradicted_intervals): a gate,
-        so that a glitch of the gyro never overrides the images."""
+        confident measurement of the images contradicts the gyro (_contradicted): a gate, so that a
+        glitch of the gyro never overrides the images. Returns the warning that says so, if any.
+
+        The bias is sought about zero: its prior's mean and the preintegration's bias estimate."""
+        from gtsam.symbol_shorthand import A, B
+
         c = self.config
         params = gtsam.PreintegratedRotationParams()
         params.setGyroscopeCovariance(c.gyro_noise**2 * np.eye(3))
-        bias = gtsam.symbol("b", 0)
-        by_frame[0].append(gtsam.PriorFactorVector(bias, np.zeros(3), gtsam.noiseModel.Isotropic.Sigma(3, c.gyro_bias_sigma)))
+        by_frame[0].append(gtsam.PriorFactorVector(B(0), np.zeros(3), gtsam.noiseModel.Isotropic.Sigma(3, c.gyro_bias_sigma)))
         measured = imu.covered(times[:-1], times[1:]) & (np.diff(times) > 0)  # no factor over no time
         contradicted = self._contradicted(times, edges, imu)
         for k in np.flatnonzero(measured & ~contradicted) + 1:
             pim = gtsam.PreintegratedAhrsMeasurements(params, np.zeros(3))
             for rate, dt in zip(*imu.rates_between(times[k - 1], times[k])):
                 pim.integrateMeasurement(rate, dt)
-            by_frame[k].append(gtsam.AHRSFactor(k - 1, k, bias, pim))
-        if contradicted.any():
-            first = int(np.flatnonzero(contradicted)[0]) + 1
-            self.solver_warnings.append(
-                f"the gyro was left out of {int(contradicted.sum())} frame interval(s), where a confident measurement of "
-                f"the images contradicts it (the first ending at frame {first}, t={times[first]:.6f} s)")
+            by_frame[k].append(gtsam.AHRSFactor(A(k - 1), A(k), B(0), pim))
+        if not contradicted.any():
+            return []
+        first = int(np.flatnonzero(contradicted)[0]) + 1
+        return [f"the gyro was left out of {int(contradicted.sum())} frame interval(s), where a confident measurement of "
+                f"the images contradicts it (the first ending at frame {first}, t={times[first]:.6f} s)"]
 
     @staticmethod
     def _contradicted(times: np.ndarray, edges: Sequence[RelativeRotation], imu: ImuSeries) -> np.ndarray:
         """Which consecutive frame intervals (len(times) - 1,) a confident edge
-        (imu_check.confident_steps) contradicts: the two rotations differ by more than
-        imu_check.DISAGREEMENT of the larger and by more than GATE_SPREAD times their median
+        (imu.verdict.confident_steps) contradicts: the two rotations differ by more than
+        imu.verdict.DISAGREEMENT of the larger and by more than GATE_SPREAD times their median
         difference over the sequence (the images' own errors are heavy-tailed: a gate on their
         modelled sigma would leave out a right gyro where the images erred)."""
         steps, R_vision, R_gyro = confident_steps(times, edges, imu)
@@ -175,73 +206,81 @@ class GtsamBackend(Backend):
 
     def solve(
         self, n_frames: int, edges: Sequence[RelativeRotation], *, times: np.ndarray | None = None, imu: ImuSeries | None = None
-    ) -> np.ndarray:
+    ) -> BackendResult:
         import gtsam
 
         from eas_vo.backends.chain import chain_rotations
 
         initial_R = chain_rotations(n_frames, edges)
         by_frame = self._factors(gtsam, n_frames, edges)
-        self.solver_warnings = []
-        self._with_bias = self.uses_imu and imu is not None
-        if self._with_bias and times is None:
+        with_bias = self.uses_imu and imu is not None
+        if with_bias and times is None:
             raise ValueError("gyro fusion needs the frame times")
-        if self._with_bias:
-            self._gyro_factors(gtsam, by_frame, np.asarray(times, float), imu, edges)
+        warnings = self._gyro_factors(gtsam, by_frame, np.asarray(times, float), imu, edges) if with_bias else []
         solve = self._batch if self.config.mode == "batch" else self._online
         try:
-            return solve(gtsam, n_frames, by_frame, initial_R)
+            solved = solve(gtsam, n_frames, by_frame, initial_R, with_bias)
         except RuntimeError as exc:  # gtsam's own errors (an indeterminate system, ...) are RuntimeErrors
             reason = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
-            self.causal_R_w_c = None
-            self.solver_warnings.append(f"the pose graph could not be solved ({self.config.mode}: {reason}): "
-                                        "the rotations are the chained measurements, unsmoothed")
-            return initial_R
+            failed = (f"the pose graph could not be solved ({self.config.mode}: {reason}): "
+                      "the rotations are the chained measurements, unsmoothed")
+            return BackendResult(initial_R, warnings=(*warnings, failed))
+        return replace(solved, warnings=(*warnings, *solved.warnings))
 
-    def _batch(self, gtsam, n_frames, by_frame, initial_R) -> np.ndarray:
+    def _batch(self, gtsam, n_frames: int, by_frame: dict, initial_R: np.ndarray, with_bias: bool) -> BackendResult:
+        """Levenberg-Marquardt over every frame from the chained rotations (and a zero bias)."""
+        from gtsam.symbol_shorthand import A, B
+
         graph = gtsam.NonlinearFactorGraph()
         initial = gtsam.Values()
         for k in range(n_frames):
             for factor in by_frame[k]:
                 graph.add(factor)
-            initial.insert(k, gtsam.Rot3(initial_R[k]))
-        if self._with_bias:
-            initial.insert(gtsam.symbol("b", 0), np.zeros(3))
+            initial.insert(A(k), gtsam.Rot3(initial_R[k]))
+        if with_bias:
+            initial.insert(B(0), np.zeros(3))
         params = gtsam.LevenbergMarquardtParams()
         params.setMaxIterations(self.config.iterations)
-        params.setRelativeErrorTol(1e-12)
-        params.setAbsoluteErrorTol(1e-15)
+        params.setRelativeErrorTol(LM_RELATIVE_ERROR_TOL)
+        params.setAbsoluteErrorTol(LM_ABSOLUTE_ERROR_TOL)
         optimizer = gtsam.LevenbergMarquardtOptimizer(graph, initial, params)
         start_error = graph.error(initial)
         result = optimizer.optimize()
         if not np.isfinite(optimizer.error()) or optimizer.error() > start_error:
             raise RuntimeError(f"Levenberg-Marquardt ended at error {optimizer.error():.6g}, above its start {start_error:.6g}")
-        R_w_c = np.stack([result.atRot3(k).matrix() for k in range(n_frames)])
+        R_w_c = np.stack([result.atRot3(A(k)).matrix() for k in range(n_frames)])
+        warnings = ()
         if optimizer.iterations() >= self.config.iterations:
             moved = self._next_step_rad(optimizer, R_w_c)
             if moved > CONVERGED_STEP_RAD:
-                self.solver_warnings.append(
+                warnings = (
                     f"the pose graph's Levenberg-Marquardt stopped at backend.iterations = {self.config.iterations} before "
                     f"converging (error {start_error:.6g} -> {optimizer.error():.6g}; one more step turns a frame by "
-                    f"{np.degrees(moved):.2g} deg): raise it")
-        return R_w_c
+                    f"{np.degrees(moved):.2g} deg): raise it",)
+        return BackendResult(R_w_c, warnings=warnings)
 
     @staticmethod
     def _next_step_rad(optimizer, R_w_c: np.ndarray) -> float:
         """How far [rad] the optimizer's next Levenberg-Marquardt iteration (from where it stopped,
         its damping as it was) turns the frame it turns most from R_w_c (0 where no step lowers
         the error: a minimum; infinite where the step fails)."""
+        from gtsam.symbol_shorthand import A
+
         try:
             optimizer.iterate()
             step = optimizer.values()
-            return float(geodesic_angle(R_w_c, np.stack([step.atRot3(k).matrix() for k in range(len(R_w_c))])).max())
+            return float(geodesic_angle(R_w_c, np.stack([step.atRot3(A(k)).matrix() for k in range(len(R_w_c))])).max())
         except RuntimeError:
             return float("inf")
 
-    def _online(self, gtsam, n_frames, by_frame, initial_R) -> np.ndarray:
+    def _online(self, gtsam, n_frames: int, by_frame: dict, initial_R: np.ndarray, with_bias: bool) -> BackendResult:
+        """iSAM2, one update per frame (its estimate then is the causal one), then
+        backend.iterations more updates for the final rotations."""
+        from gtsam.symbol_shorthand import A, B
+
         params = gtsam.ISAM2Params()
-        params.setRelinearizeThreshold(1e-6)
-        params.relinearizeSkip = 1
+        params.setRelinearizeThreshold(ISAM2_RELINEARIZE_THRESHOLD)
+        params.relinearizeSkip = ISAM2_RELINEARIZE_SKIP
         isam = gtsam.ISAM2(params)
         causal = np.empty((n_frames, 3, 3))
         previous = np.eye(3)
@@ -252,16 +291,15 @@ class GtsamBackend(Backend):
             values = gtsam.Values()
             # the new frame starts where the chain puts it relative to the current estimate of k-1
             step = initial_R[k - 1].T @ initial_R[k] if k else np.eye(3)
-            values.insert(k, gtsam.Rot3(previous @ step))
-            if k == 0 and self._with_bias:
-                values.insert(gtsam.symbol("b", 0), np.zeros(3))
+            values.insert(A(k), gtsam.Rot3(previous @ step))
+            if k == 0 and with_bias:
+                values.insert(B(0), np.zeros(3))
             isam.update(graph, values)
             estimate = isam.calculateEstimate()
-            causal[k] = estimate.atRot3(k).matrix()
+            causal[k] = estimate.atRot3(A(k)).matrix()
             previous = causal[k]
         for _ in range(self.config.iterations):
             isam.update()
-        self.causal_R_w_c = causal
         estimate = isam.calculateEstimate()
-        return np.stack([estimate.atRot3(k).matrix() for k in range(n_frames)])
+        return BackendResult(np.stack([estimate.atRot3(A(k)).matrix() for k in range(n_frames)]), causal_R_w_c=causal)
 

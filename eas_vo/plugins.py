@@ -269,23 +269,34 @@ class Tracker:
         return lambda: result
 
 
+@dataclass(frozen=True)
+class BackendResult:
+    """What `Backend.solve` returns: everything one solve found, nothing kept on the backend.
+
+    Attributes:
+        R_w_c: (n_frames, 3, 3) camera-to-world rotations, frame 0 at the identity.
+        causal_R_w_c: (n_frames, 3, 3) each frame's rotation as an online backend estimated it
+            when that frame arrived (written as trajectory_causal.tum); None for a batch solve.
+        warnings: one line per way the solution falls short (a solver that failed or did not
+            converge, measurements it left out), which the run prints as warnings.
+    """
+
+    R_w_c: np.ndarray
+    causal_R_w_c: np.ndarray | None = None
+    warnings: tuple[str, ...] = ()
+
+
 class Backend:
     """Turns relative rotations into absolute camera-to-world rotations, one per frame.
 
-    Required: `solve(n_frames, edges, *, times, imu)`. Optional: `causal_R_w_c`, `solver_warnings`, `needs_imu`,
-    `uses_imu`, `imu_use`.
+    Required: `solve(n_frames, edges, *, times, imu)` returning a `BackendResult`. Optional:
+    `needs_imu`, `uses_imu`, `imu_use`. A backend keeps nothing of one solve for the next.
     """
 
     name: ClassVar[str] = "backend"
     description: ClassVar[str] = ""
     Config: ClassVar[type] = NoConfig
 
-    #: Set by `solve` in an online backend: each frame's rotation as estimated when that
-    #: frame arrived, (n_frames, 3, 3). None (the default) for a batch backend.
-    causal_R_w_c: np.ndarray | None = None
-    #: Set by `solve`: one line per way the solution falls short (a solver that did not
-    #: converge, measurements it left out), which the run prints as warnings. Empty by default.
-    solver_warnings: tuple[str, ...] = ()
     #: What the backend reads the gyro for when `uses_imu`, for the run's summary ("gyro used
     #: ... by the NAME backend as ...").
     imu_use: ClassVar[str] = "measurements fused with the tracker's rotations"
@@ -312,8 +323,8 @@ class Backend:
         *,
         times: np.ndarray | None = None,
         imu: ImuSeries | None = None,
-    ) -> np.ndarray:
-        """(n_frames, 3, 3) rotations R_w_c, frame 0 at the identity, from the edges and, where
-        the backend uses them, the frame times [s] (the pipeline always gives them) and the
+    ) -> BackendResult:
+        """The rotations of `n_frames` frames (BackendResult) from the edges and, where the
+        backend uses them, the frame times [s] (the pipeline always gives them) and the
         dataset's IMU in the camera frame on the frames' clock (None when it has none)."""
         raise NotImplementedError

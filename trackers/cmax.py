@@ -218,7 +218,7 @@ class CmaxTracker(Tracker):
         elif not np.isfinite(sigma):
             status, reason, sigma = "weak", "flat objective", FLAT_SIGMA_RAD
         # the edge's inliers: the events an ok estimate rests on, none for a weak one (what makes an
-        # edge confident for the gyro's check, imu_check.CONFIDENT_INLIERS: a weak window is not)
+        # edge confident for the gyro's check, imu.verdict.CONFIDENT_INLIERS: a weak window is not)
         record = FrameRecord(k, t, 0, n, status, False, residual_px=residual, reason=reason, events=n, contrast_gain=gain)
         confident = n if status == "ok" else 0
         return record, [RelativeRotation(k - 1, k, R, inliers=confident, estimated_sigma_rad=min(sigma, FLAT_SIGMA_RAD))]

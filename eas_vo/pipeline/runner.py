@@ -22,6 +22,8 @@ from eas_vo.pipeline.outputs import RunResult, write_outputs
 from eas_vo.pipeline.parts import Pipeline, open_pipeline
 from eas_vo.pipeline.summary import evaluate, summarise
 from eas_vo.pipeline.tracking import FrameLog, Tracked, track
+from eas_vo.errors import EasVoError
+from eas_vo.plugins import BackendResult
 
 
 def run(config: ResolvedConfig, out_dir: str | Path | None = None, progress: bool = False, replace: bool = False) -> RunResult:
@@ -50,13 +52,17 @@ def _run_into(parts: Pipeline, config: ResolvedConfig, out: Path | None, progres
     try:
         tracked, gyro = _track_and_assess_gyro(parts, config, out, progress)
         t = tracked.times
-        R_w_c = parts.backend.solve(len(t), tracked.edges, times=t, imu=gyro.backend_imu)
+        solved = parts.backend.solve(len(t), tracked.edges, times=t, imu=gyro.backend_imu)
+        if not isinstance(solved, BackendResult):
+            raise EasVoError(f"backend {config.run.backend!r} returned {type(solved).__name__}: Backend.solve returns "
+                             "an eas_vo.plugins.BackendResult (docs/plugins.md)")
+        R_w_c = solved.R_w_c
         evaluation = evaluate(config, parts.dataset, t, R_w_c, tracked.edges)
         metrics = summarise(config, parts.dataset, tracked, evaluation, time.perf_counter() - started, load_s, gyro)
         metrics["data_warnings"] = (parts.imu_warnings + metrics["data_warnings"] + list(parts.tracker.tracker_warnings)
-                                  + list(parts.backend.solver_warnings))
+                                  + list(solved.warnings))
         metrics["gyro_use"] = gyro.readers
-        result = RunResult(t, R_w_c, tracked.records, tracked.edges, evaluation.errors, metrics, parts.backend.causal_R_w_c,
+        result = RunResult(t, R_w_c, tracked.records, tracked.edges, evaluation.errors, metrics, solved.causal_R_w_c,
                            parts.dataset.clock_origin_ns)
         if out is not None:
             write_outputs(out, result, parts.dataset.label, config.origin)

@@ -44,16 +44,16 @@ def test_consecutive_edges_only_equals_the_chain(mode):
     R = truth()
     edges = edges_for(R)
     del edges[10]  # a frame without a measurement: both keep the previous rotation
-    chain = ChainBackend().solve(len(R), edges)
-    graph = GtsamBackend(GtsamConfig(mode=mode)).solve(len(R), edges)
+    chain = ChainBackend().solve(len(R), edges).R_w_c
+    graph = GtsamBackend(GtsamConfig(mode=mode)).solve(len(R), edges).R_w_c
     assert_rotations_close(graph, chain, 1e-9)
 
 
 def test_multi_frame_edges_beat_the_chain():
     R = truth(seed=2)
     edges = edges_for(R, seed=3, skip=5)
-    chain = ape(ChainBackend().solve(len(R), edges), R)
-    graph = ape(GtsamBackend().solve(len(R), edges), R)
+    chain = ape(ChainBackend().solve(len(R), edges).R_w_c, R)
+    graph = ape(GtsamBackend().solve(len(R), edges).R_w_c, R)
     assert graph < 0.7 * chain, (graph, chain)
 
 
@@ -61,13 +61,13 @@ def test_batch_and_online_agree_and_online_is_causal():
     R = truth(n=60, seed=4)
     edges = edges_for(R, seed=5, noise_rad=0.01, skip=3)
     batch = GtsamBackend(GtsamConfig(mode="batch")).solve(len(R), edges)
-    online = GtsamBackend(GtsamConfig(mode="online"))
-    final = online.solve(len(R), edges)
-    assert_rotations_close(final, batch, 1e-6)
+    online = GtsamBackend(GtsamConfig(mode="online")).solve(len(R), edges)
+    assert batch.causal_R_w_c is None
+    assert_rotations_close(online.R_w_c, batch.R_w_c, 1e-6)
     for k in (10, 30):  # frame k's estimate as it was then: ~ the batch solution of frames 0..k
         past = [e for e in edges if e.j <= k]  # (iSAM2 takes one relinearisation step per frame)
-        assert_rotations_close(online.causal_R_w_c[k], GtsamBackend().solve(k + 1, past)[k], 5e-5)
-        assert not np.allclose(online.causal_R_w_c[k], final[k], atol=1e-6)  # later frames did move it
+        assert_rotations_close(online.causal_R_w_c[k], GtsamBackend().solve(k + 1, past).R_w_c[k], 5e-5)
+        assert not np.allclose(online.causal_R_w_c[k], online.R_w_c[k], atol=1e-6)  # later frames did move it
 
 
 def test_robust_kernel_resists_outlier_edges():
@@ -77,10 +77,10 @@ def test_robust_kernel_resists_outlier_edges():
     outliers = [
         RelativeRotation(k - 4, k, Rotation.from_rotvec(rng.normal(0, 0.5, 3)).as_matrix(), 100) for k in range(20, 110, 15)
     ]
-    clean = ape(GtsamBackend(GtsamConfig(robust="huber")).solve(len(R), edges), R)
-    plain = ape(GtsamBackend(GtsamConfig(robust="none")).solve(len(R), edges + outliers), R)
+    clean = ape(GtsamBackend(GtsamConfig(robust="huber")).solve(len(R), edges).R_w_c, R)
+    plain = ape(GtsamBackend(GtsamConfig(robust="none")).solve(len(R), edges + outliers).R_w_c, R)
     for kernel in ("huber", "cauchy"):
-        robust = ape(GtsamBackend(GtsamConfig(robust=kernel)).solve(len(R), edges + outliers), R)
+        robust = ape(GtsamBackend(GtsamConfig(robust=kernel)).solve(len(R), edges + outliers).R_w_c, R)
         assert robust < 1.5 * clean + 1e-4, (kernel, robust, clean)
     assert plain > 3 * clean, (plain, clean)
 
@@ -89,7 +89,7 @@ def test_edge_noise_follows_inliers():
     """Two contradicting edges: the one with more inliers wins."""
     a = Rotation.from_rotvec([0, 0, 0.1]).as_matrix()
     b = Rotation.from_rotvec([0, 0, 0.2]).as_matrix()
-    out = GtsamBackend().solve(2, [RelativeRotation(0, 1, a, 400), RelativeRotation(0, 1, b, 100)])
+    out = GtsamBackend().solve(2, [RelativeRotation(0, 1, a, 400), RelativeRotation(0, 1, b, 100)]).R_w_c
     angle = Rotation.from_matrix(out[1]).as_rotvec()[2]
     assert angle == pytest.approx(0.1 + 0.1 * 1 / 5, abs=1e-4)  # weights 4 : 1
 
@@ -113,22 +113,22 @@ def test_gyro_fusion_cuts_the_error_of_the_chain():
     imu = ImuSeries(t_imu, np.zeros_like(gyro), gyro)
     consecutive = edges_for(R, seed=10, noise_rad=np.radians(0.3))
     with_keyframes = edges_for(R, seed=10, noise_rad=np.radians(0.3), skip=10)
-    chain = ape(ChainBackend().solve(len(R), consecutive), R)
+    chain = ape(ChainBackend().solve(len(R), consecutive).R_w_c, R)
     for mode in ("batch", "online"):
         gyro = GtsamConfig(gyro=True, mode=mode)
         # consecutive edges only: the gyro helps, but its bias is barely observable
-        assert ape(GtsamBackend(gyro).solve(len(R), consecutive, times=t_imu[frames], imu=imu), R) < 0.85 * chain
+        assert ape(GtsamBackend(gyro).solve(len(R), consecutive, times=t_imu[frames], imu=imu).R_w_c, R) < 0.85 * chain
         # with multi-frame edges the bias is pinned down (measured 0.05 x the chain)
-        fused = ape(GtsamBackend(gyro).solve(len(R), with_keyframes, times=t_imu[frames], imu=imu), R)
-        vision_only = ape(GtsamBackend(GtsamConfig(mode=mode)).solve(len(R), with_keyframes), R)
+        fused = ape(GtsamBackend(gyro).solve(len(R), with_keyframes, times=t_imu[frames], imu=imu).R_w_c, R)
+        vision_only = ape(GtsamBackend(GtsamConfig(mode=mode)).solve(len(R), with_keyframes).R_w_c, R)
         assert fused <= 0.3 * chain and fused < vision_only, (mode, fused, vision_only, chain)
     # `auto` fuses the gyro when there is one, and is the vision-only graph without
     auto = GtsamBackend(GtsamConfig(gyro="auto"))
     assert not auto.needs_imu
-    np.testing.assert_array_equal(auto.solve(len(R), with_keyframes, times=t_imu[frames], imu=imu),
-                                  GtsamBackend(GtsamConfig(gyro=True)).solve(len(R), with_keyframes, times=t_imu[frames], imu=imu))
-    np.testing.assert_array_equal(auto.solve(len(R), with_keyframes, times=t_imu[frames], imu=None),
-                                  GtsamBackend(GtsamConfig()).solve(len(R), with_keyframes))
+    np.testing.assert_array_equal(auto.solve(len(R), with_keyframes, times=t_imu[frames], imu=imu).R_w_c,
+                                  GtsamBackend(GtsamConfig(gyro=True)).solve(len(R), with_keyframes, times=t_imu[frames], imu=imu).R_w_c)
+    np.testing.assert_array_equal(auto.solve(len(R), with_keyframes, times=t_imu[frames], imu=None).R_w_c,
+                                  GtsamBackend(GtsamConfig()).solve(len(R), with_keyframes).R_w_c)
 
 
 @pytest.mark.parametrize("mode", ["batch", "online"])
@@ -143,7 +143,7 @@ def test_the_gyro_alone_turns_the_frames_by_its_exact_integral(mode):
     t_imu = np.arange(0.0, 1.2, 0.005)
     imu = ImuSeries(t_imu, np.zeros((len(t_imu), 3)), 4.0 * t_imu[:, None] * axis)  # 4 rad/s^2
     times = np.arange(0.0113, 1.0, 0.05)
-    R = GtsamBackend(GtsamConfig(gyro=True, mode=mode)).solve(len(times), [], times=times, imu=imu)
+    R = GtsamBackend(GtsamConfig(gyro=True, mode=mode)).solve(len(times), [], times=times, imu=imu).R_w_c
     exact = Rotation.from_rotvec(2.0 * (times[:, None] ** 2 - times[0] ** 2) * axis).as_matrix()
     assert np.degrees(geodesic_angle(R, exact)).max() < 0.01
 
@@ -156,8 +156,8 @@ def test_edge_quality_sets_the_noise_and_a_weak_edge_yields():
              RelativeRotation(0, 1, bad, 300, inlier_ratio=0.4, residual_rad=0.004)]
     backend = GtsamBackend(GtsamConfig(edge_noise="residual"))
     assert backend.edge_sigma(edges[0]) < backend.edge_sigma(edges[1]) / 5
-    assert_rotations_close(backend.solve(2, edges)[1], good, np.radians(0.2))
-    by_inliers = GtsamBackend(GtsamConfig(edge_noise="inliers")).solve(2, edges)[1]  # today's default trusts the count
+    assert_rotations_close(backend.solve(2, edges).R_w_c[1], good, np.radians(0.2))
+    by_inliers = GtsamBackend(GtsamConfig(edge_noise="inliers")).solve(2, edges).R_w_c[1]  # today's default trusts the count
     assert_rotations_close(by_inliers, bad, np.radians(1.0))
 
 
@@ -201,10 +201,10 @@ def test_a_repeated_frame_time_gets_no_gyro_factor_and_the_graph_still_fuses(mod
     times, R, imu, _ = gyro_rig()
     times, R = np.insert(times, 10, times[9]), np.insert(R, 10, R[9], axis=0)
     edges = [e for e in edges_for(R, seed=10, noise_rad=np.radians(0.3)) if e.j != 10]
-    backend = GtsamBackend(GtsamConfig(gyro=True, mode=mode))
-    fused = ape(backend.solve(len(R), edges, times=times, imu=imu), R)
-    chain = ape(ChainBackend().solve(len(R), edges), R)
-    assert fused < 0.5 * chain and backend.solver_warnings == [], (fused, chain)
+    solved = GtsamBackend(GtsamConfig(gyro=True, mode=mode)).solve(len(R), edges, times=times, imu=imu)
+    fused = ape(solved.R_w_c, R)
+    chain = ape(ChainBackend().solve(len(R), edges).R_w_c, R)
+    assert fused < 0.5 * chain and solved.warnings == (), (fused, chain)
 
 
 def test_a_gyro_glitch_within_range_never_overrides_confident_images():
@@ -216,15 +216,13 @@ def test_a_gyro_glitch_within_range_never_overrides_confident_images():
     rates = imu.gyro.copy()
     glitch = int(np.searchsorted(imu.t, times[20])) + 3  # inside frame interval 20 -> 21
     rates[glitch, 2] += 30.0
-    backend = GtsamBackend(GtsamConfig(gyro=True))
-    fused = backend.solve(len(R), edges, times=times, imu=ImuSeries(imu.t, imu.acc, rates))
+    fused = GtsamBackend(GtsamConfig(gyro=True)).solve(len(R), edges, times=times, imu=ImuSeries(imu.t, imu.acc, rates))
     step = lambda R_w, k: R_w[k - 1].T @ R_w[k]
-    assert np.degrees(geodesic_angle(step(fused, 21), step(R, 21))) < 1.0
-    assert len(backend.solver_warnings) == 1 and "left out of 1 frame interval" in backend.solver_warnings[0]
-    assert "frame 21" in backend.solver_warnings[0]
-    right = GtsamBackend(GtsamConfig(gyro=True))
-    right.solve(len(R), edges, times=times, imu=imu)
-    assert right.solver_warnings == []  # a right gyro is never gated by the images' noise
+    assert np.degrees(geodesic_angle(step(fused.R_w_c, 21), step(R, 21))) < 1.0
+    assert len(fused.warnings) == 1 and "left out of 1 frame interval" in fused.warnings[0]
+    assert "frame 21" in fused.warnings[0]
+    right = GtsamBackend(GtsamConfig(gyro=True)).solve(len(R), edges, times=times, imu=imu)
+    assert right.warnings == ()  # a right gyro is never gated by the images' noise
 
 
 @pytest.mark.parametrize("mode", ["batch", "online"])
@@ -237,17 +235,16 @@ def test_a_solver_that_fails_is_a_warning_and_the_chain(mode, monkeypatch):
 
     monkeypatch.setattr(backend, f"_{mode}", fails)
     out = backend.solve(len(R), edges, times=times, imu=imu)
-    assert_rotations_close(out, ChainBackend().solve(len(R), edges), 1e-12)
-    assert backend.solver_warnings == [f"the pose graph could not be solved ({mode}: Indeterminant linear system detected "
-                                       "while working near variable 7): the rotations are the chained measurements, unsmoothed"]
-    assert backend.causal_R_w_c is None
+    assert_rotations_close(out.R_w_c, ChainBackend().solve(len(R), edges).R_w_c, 1e-12)
+    assert out.warnings == (f"the pose graph could not be solved ({mode}: Indeterminant linear system detected "
+                            "while working near variable 7): the rotations are the chained measurements, unsmoothed",)
+    assert out.causal_R_w_c is None
 
 
 def test_levenberg_marquardt_stopped_early_is_said():
     times, R, imu, edges = gyro_rig()
-    backend = GtsamBackend(GtsamConfig(gyro=True, iterations=1))
-    backend.solve(len(R), edges, times=times, imu=imu)
-    assert len(backend.solver_warnings) == 1 and "stopped at backend.iterations = 1" in backend.solver_warnings[0]
+    warnings = GtsamBackend(GtsamConfig(gyro=True, iterations=1)).solve(len(R), edges, times=times, imu=imu).warnings
+    assert len(warnings) == 1 and "stopped at backend.iterations = 1" in warnings[0]
 
 
 def test_levenberg_marquardt_at_its_limit_but_converged_is_not_said():
@@ -256,16 +253,52 @@ def test_levenberg_marquardt_at_its_limit_but_converged_is_not_said():
     from eas_vo.backends.gtsam_graph import CONVERGED_STEP_RAD
 
     times, R, imu, edges = gyro_rig()
-    free = GtsamBackend(GtsamConfig(gyro=True, iterations=10_000))
-    free.solve(len(R), edges, times=times, imu=imu)
+    free = GtsamBackend(GtsamConfig(gyro=True, iterations=10_000)).solve(len(R), edges, times=times, imu=imu)
     original = GtsamBackend._next_step_rad
     steps = {}  # the limit -> how far the step after it turns a frame [rad]
     for limit in range(1, 30):
         backend = GtsamBackend(GtsamConfig(gyro=True, iterations=limit))
         backend._next_step_rad = lambda optimizer, R_w_c, limit=limit: steps.setdefault(limit, original(optimizer, R_w_c))
-        backend.solve(len(R), edges, times=times, imu=imu)
+        warnings = backend.solve(len(R), edges, times=times, imu=imu).warnings
         if limit not in steps:  # converged by its tolerances before the limit
             break
-        assert (steps[limit] > CONVERGED_STEP_RAD) == bool(backend.solver_warnings), (limit, steps)
+        assert (steps[limit] > CONVERGED_STEP_RAD) == bool(warnings), (limit, steps)
     assert steps[1] > CONVERGED_STEP_RAD and min(steps.values()) <= CONVERGED_STEP_RAD, steps  # both cases met
-    assert free.solver_warnings == []
+    assert free.warnings == ()
+
+
+@pytest.mark.parametrize("mode", ["batch", "online"])
+def test_a_reused_backend_returns_nothing_of_its_previous_solve(mode, monkeypatch):
+    """A solve's warnings and causal estimate are its result's alone: the same backend solving
+    again (a shorter sequence with a right gyro, after one with a glitch) returns what a new
+    backend returns and leaves the first result as it was; a solve that fails then has no
+    causal estimate."""
+    from eas_vo.types import ImuSeries
+
+    times, R, imu, edges = gyro_rig()
+    rates = imu.gyro.copy()
+    rates[int(np.searchsorted(imu.t, times[20])) + 3, 2] += 30.0  # a glitch the gate leaves out, warned
+    backend = GtsamBackend(GtsamConfig(gyro=True, mode=mode))
+    first = backend.solve(len(R), edges, times=times, imu=ImuSeries(imu.t, imu.acc, rates))
+    first_causal = None if first.causal_R_w_c is None else first.causal_R_w_c.copy()
+    assert len(first.warnings) == 1 and (first_causal is None) == (mode == "batch")
+
+    n = 30
+    short = [e for e in edges if e.j < n]
+    second = backend.solve(n, short, times=times[:n], imu=imu)
+    new = GtsamBackend(GtsamConfig(gyro=True, mode=mode)).solve(n, short, times=times[:n], imu=imu)
+    assert second.warnings == new.warnings == ()
+    np.testing.assert_array_equal(second.R_w_c, new.R_w_c)
+    if mode == "online":
+        np.testing.assert_array_equal(second.causal_R_w_c, new.causal_R_w_c)
+        np.testing.assert_array_equal(first.causal_R_w_c, first_causal)
+    else:
+        assert second.causal_R_w_c is None
+    assert len(first.warnings) == 1 and "left out of 1 frame interval" in first.warnings[0]
+
+    def fails(*args):
+        raise RuntimeError("Indeterminant linear system detected while working near variable 7")
+
+    monkeypatch.setattr(backend, f"_{mode}", fails)
+    failed = backend.solve(n, short, times=times[:n], imu=imu)
+    assert failed.causal_R_w_c is None and len(failed.warnings) == 1 and "could not be solved" in failed.warnings[0]
