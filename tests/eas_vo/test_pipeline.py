@@ -144,3 +144,15 @@ def test_the_trackers_own_warnings_reach_the_run(sequence_copy, monkeypatch):
     monkeypatch.setattr(KltTracker, "tracker_warnings", property(lambda self: ("the align fallback is off",)))
     cfg = config.resolve(None, {"dataset": str(sequence_copy), "duration_s": 0.5})
     assert pipeline.run(cfg).metrics["data_warnings"].count("the align fallback is off") == 1
+
+
+def test_a_backend_that_returns_no_backend_result_is_named_in_one_line(sequence_copy, monkeypatch):
+    """Backend.solve returns a BackendResult; a plugin written for the older contract (a bare
+    array of rotations) is refused naming the backend and the contract, not with an AttributeError."""
+    from eas_vo.backends.chain import ChainBackend
+    from eas_vo.errors import EasVoError
+
+    monkeypatch.setattr(ChainBackend, "solve", lambda self, n, edges, **kw: np.tile(np.eye(3), (n, 1, 1)))
+    cfg = config.resolve(None, {"dataset": str(sequence_copy), "duration_s": 0.5, "backend": "chain"})
+    with pytest.raises(EasVoError, match="backend 'chain' returned ndarray: Backend.solve returns an eas_vo.plugins.BackendResult"):
+        pipeline.run(cfg)
