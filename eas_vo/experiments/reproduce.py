@@ -199,9 +199,9 @@ def _euler_figures(out: Path, cells: list[Cell], rows: list[dict]) -> None:
         if aligned is not None:
             label = f"{cell.frontend} (APE {row['ape_mean_rad']:.3f})"
             panels.setdefault((cell.dataset_name, row["method"]), []).append((label, *aligned))
-    for (seq, method), grid in panels.items():
+    for (seq, method), figure_panels in panels.items():
         with atomic_path(out / f"fig3_{seq}_{slug(method)}.png") as tmp:
-            plot_euler_grid(tmp, grid, title=f"{seq}, {method}: estimated (red) and true Euler angles")
+            plot_euler_grid(tmp, figure_panels, title=f"{seq}, {method}: estimated (red) and true Euler angles")
 
 
 # ----------------------------------------------------------------------------- Table 2
@@ -326,9 +326,9 @@ def _keyframe_figures(out: Path, cells: list[Cell], slam: dict) -> None:
         gt = open_dataset(SPECS[cell.dataset_name]).ground_truth
         label = f"{cell.frontend} (run {run['run']}, APE {run['ape_keyframes']['ape_trans_mean_m']:.3f} m)"
         panels.setdefault(cell.dataset_name, []).append((label, t, p, gt))
-    for seq, grid in panels.items():
+    for seq, figure_panels in panels.items():
         with atomic_path(out / f"fig4_{seq}.png") as tmp:
-            plot_keyframes(tmp, grid, title=f"{seq}: ORB-SLAM3 keyframes (Sim(3)-aligned, red) over ground truth")
+            plot_keyframes(tmp, figure_panels, title=f"{seq}: ORB-SLAM3 keyframes (Sim(3)-aligned, red) over ground truth")
 
 
 def table2_markdown(rows: list[dict], slam: dict, duration_s: float | None, frontends=TABLE2_SOURCES,

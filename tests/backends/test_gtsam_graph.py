@@ -217,7 +217,9 @@ def test_a_gyro_glitch_within_range_never_overrides_confident_images():
     glitch = int(np.searchsorted(imu.t, times[20])) + 3  # inside frame interval 20 -> 21
     rates[glitch, 2] += 30.0
     fused = GtsamBackend(GtsamConfig(gyro=True)).solve(len(R), edges, times=times, imu=ImuSeries(imu.t, imu.acc, rates))
-    step = lambda R_w, k: R_w[k - 1].T @ R_w[k]
+    def step(R_w, k):
+        return R_w[k - 1].T @ R_w[k]
+
     assert np.degrees(geodesic_angle(step(fused.R_w_c, 21), step(R, 21))) < 1.0
     assert len(fused.warnings) == 1 and "left out of 1 frame interval" in fused.warnings[0]
     assert "frame 21" in fused.warnings[0]

@@ -202,7 +202,7 @@ ENCODERS = {"EVT3": encode_evt3, "EVT2": encode_evt2, "EVT21": encode_evt21}
 
 def write_raw(path: Path, words: np.ndarray, fmt: str, width: int, height: int, header: list[str] | None = None) -> Path:
     """A `.raw` file: Metavision's header lines (or `header`), `% end`, then the words little-endian."""
-    lines = header if header is not None else [f"% camera_integrator_name Prophesee", f"% date 2024-01-01 00:00:00",
+    lines = header if header is not None else ["% camera_integrator_name Prophesee", "% date 2024-01-01 00:00:00",
                                                f"% format {fmt};height={height};width={width}", "% end"]
     path.write_bytes("".join(line + "\n" for line in lines).encode() + words.astype(words.dtype.newbyteorder("<")).tobytes())
     return path
