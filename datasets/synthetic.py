@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 import hashlib
+import logging
 import math
 import os
 import shutil
@@ -20,6 +21,8 @@ from eas_vo.errors import ConfigError, EasVoError
 from eas_vo.io import cache_folder
 from eas_vo.types import LENS_MODELS
 from eas_vo.validation import check_choice, check_range
+
+logger = logging.getLogger(__name__)
 
 #: Named sequences. `default` is the embedded sequence `eas-vo run` uses. `walk` (and its short
 #: first 5 s, `walk_short`) is a hand-held walk through a lit room: the translation ten times the
@@ -130,7 +133,7 @@ def sequence_folder(name: str, config: SyntheticConfig | None = None, progress: 
     folder = cache_folder("synthetic", "simulated sequences; simulated again when next needed (about 40 s each)") / f"{name}-{digest}"
     if not (folder / "images.txt").exists():
         if progress:
-            print(f"eas-vo: simulating synthetic:{name} ({config.duration_s:g} s) into {folder} (once)", file=sys.stderr)
+            logger.info(f"simulating synthetic:{name} ({config.duration_s:g} s) into {folder} (once)")
         tmp = folder.with_name(f".{folder.name}.{os.getpid()}.tmp")
         shutil.rmtree(tmp, ignore_errors=True)
         try:

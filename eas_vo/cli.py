@@ -21,6 +21,7 @@ from eas_vo.errors import EasVoError, Interrupted, sigterm_as_interrupt
 
 
 def main(argv: list[str] | None = None) -> int:
+    from eas_vo.logs import to_stderr; to_stderr()  # noqa: E702  (the library's log records on stderr)
     args = build_parser().parse_args(argv)
     try:
         with sigterm_as_interrupt():

@@ -17,7 +17,7 @@ PACKAGES = {
     "backends": "eas_vo.backends",
     "datasets": "eas_vo.datasets",
 }
-BOTTOM = {"eas_vo.types", "eas_vo.errors", "eas_vo.validation", "eas_vo.geometry", "eas_vo.concurrency"}
+BOTTOM = {"eas_vo.types", "eas_vo.errors", "eas_vo.validation", "eas_vo.geometry", "eas_vo.concurrency", "eas_vo.logs"}
 MIDDLE = {"eas_vo.plugins", "eas_vo.registry", "eas_vo.io", "eas_vo.eventfile", "eas_vo.evaluation", "eas_vo.imu_check", "eas_vo.plots",
           "eas_vo.orb"}
 TOP = {"eas_vo.config", "eas_vo.pipeline", "eas_vo.compare", "eas_vo.gallery", "eas_vo.orbslam", "eas_vo.reproduce", "eas_vo.sequence",

@@ -15,8 +15,8 @@ from __future__ import annotations
 import errno
 import functools
 import hashlib
+import logging
 import os
-import sys
 from pathlib import Path
 from collections.abc import Iterable
 from concurrent.futures import ThreadPoolExecutor
@@ -28,6 +28,8 @@ from eas_vo.errors import DataError, DataWarnings
 from eas_vo.eventfile.convert import convert_text_to_cache
 from eas_vo.io import atomic_file, cache_folder
 from eas_vo.types import EVENT_DTYPE
+
+logger = logging.getLogger(__name__)
 
 CACHE_MAGIC = b"EASVOEV3"
 HEADER_BYTES = 24
@@ -66,7 +68,7 @@ def cache_path(key: str) -> Path:
 def open_cache(path: Path) -> np.ndarray | None:
     """Memory-map a cache file whose header, size and checksum hold; None if it is absent. A
     damaged one (another format, a wrong size, a checksum that fails) is removed with a notice
-    on stderr, and None returned: the caller rebuilds it."""
+    (logged), and None returned: the caller rebuilds it."""
     if not path.exists():
         return None
     try:
@@ -80,7 +82,7 @@ def open_cache(path: Path) -> np.ndarray | None:
     except OSError:
         sound = False
     if not sound:
-        print(f"eas-vo: the event cache {path} is damaged or of another version; rebuilding it", file=sys.stderr)
+        logger.info(f"the event cache {path} is damaged or of another version; rebuilding it")
         path.unlink(missing_ok=True)
         return None
     return _map_records(path, count)
@@ -180,8 +182,8 @@ def _cache_unwritable(exc: OSError, folder: Path) -> bool:
 
 @functools.cache  # once per folder and reason
 def _say_unwritable(folder: Path, reason: str) -> None:
-    print(f"eas-vo: warning: the event cache folder {folder} cannot be written ({reason}); events are read into "
-          "memory, and again next time (EAS_VO_CACHE_DIR chooses another folder)", file=sys.stderr)
+    logger.warning(f"the event cache folder {folder} cannot be written ({reason}); events are read into "
+                   "memory, and again next time (EAS_VO_CACHE_DIR chooses another folder)")
 
 
 class _MemoryWriter:
@@ -234,7 +236,7 @@ def load_cached(
         if kept is not None:
             warnings.merge(kept)
             return cached
-        print(f"eas-vo: the warnings of the event cache {path} are missing or damaged; rebuilding it", file=sys.stderr)
+        logger.info(f"the warnings of the event cache {path} are missing or damaged; rebuilding it")
         path.unlink(missing_ok=True)
     local = DataWarnings()
     target = tolerant if lenient else strict
