@@ -4,7 +4,8 @@ Cache file: 24-byte header (8-byte magic, uint64 event count, uint64 checksum) +
 EVENT_DTYPE records (13 B/event), named by a hash of what identifies the source (for a file:
 device, inode, size, modification and change times in ns, and a hash of samples of its
 content). Written atomically, read by memory-mapping it once its checksum (XXH3-64 of the
-records, ~25 GB/s from memory) matched; a damaged cache is rebuilt with a one-line notice.
+records, at memory speed: docs/speed.md, "The event parser and its cache") matched; a damaged
+cache is rebuilt with a one-line notice.
 A lenient build's warnings sidecar is part of it: missing or unreadable, both are rebuilt.
 A cache folder that cannot be written (read-only, not the user's, full) costs speed, not the
 run: the events are read into memory, with one notice per folder.
