@@ -50,7 +50,7 @@ def is_aedat4(path: Path) -> bool:
 
 
 #: Compressed bytes of event packets decoded as one task: several milliseconds of work, so
-#: that handing tasks between threads costs little (one packet per task lost half the second core).
+#: that handing tasks between threads costs little (docs/speed.md, "Recordings in other formats").
 GROUP_BYTES = 1 << 20
 #: Groups decoded ahead of the one being written (bounded memory).
 GROUPS_AHEAD = 6

@@ -24,10 +24,10 @@ damage is a one-line DataError naming the stream and the packet.
 
 `Aedat4File` finds the packets once (8 bytes read per packet) and decodes any of them
 independently. cramjam's LZ4 and Zstandard decoders release the GIL (python-lz4's frame
-decoder does not: two threads took as long as one), so event packets decompress on worker
-threads (eas_vo.concurrency.in_order), each into a reused buffer (`Scratch`): a fresh buffer
-per packet cost more in page faults, and in the address-space lock both threads' faults queue
-on, than the decompression itself.
+decoder does not), so event packets decompress on worker threads
+(eas_vo.concurrency.in_order), each into a reused buffer (`Scratch`), sparing a fresh
+buffer's page faults (docs/speed.md, "Recordings in other formats", has what each choice
+costs or saves; benchmarks/bench_events.py --only aedat4 times the reader).
 """
 
 from __future__ import annotations

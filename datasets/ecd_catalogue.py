@@ -13,9 +13,9 @@ Environment:
 
 from __future__ import annotations
 
+import logging
 import os
 import re
-import sys
 from importlib import resources
 from pathlib import Path
 from urllib.parse import unquote, urlsplit
@@ -24,6 +24,8 @@ from eas_vo.errors import DataError, EasVoError
 from eas_vo.io.atomic import atomic_path, current_umask
 from eas_vo.io.cache import cache_folder
 from eas_vo.io.tables import text_bytes
+
+logger = logging.getLogger(__name__)
 
 BASE_URL = "https://rpg.ifi.uzh.ch/datasets/davis/"
 _MD5 = re.compile(r"[0-9a-fA-F]{32}")
@@ -70,13 +72,11 @@ def local_path(name: str, folder: str | Path | None = None) -> Path:
 def fetch(name: str, folder: str | Path | None = None, progress: bool = False) -> Path:
     """The verified zip of sequence `name`, downloaded first unless already there and whole.
 
-    A one-line notice (with the size) goes to stderr before a download. Raises EasVoError
+    A one-line notice (with the size) is logged before a download. Raises EasVoError
     for an unknown name, a server that cannot be reached or does not have the file (before
     any notice), a failed download or a checksum mismatch (nothing is left under the final
     name in either case).
     """
-    import logging
-
     import pooch
     import requests
 
@@ -96,8 +96,7 @@ def fetch(name: str, folder: str | Path | None = None, progress: bool = False) -
     if urlsplit(url).scheme not in ("http", "https", "ftp"):
         raise EasVoError(f"EAS_VO_DATA_URL={url!r}: expected an http://, https:// or ftp:// address, "
                          "or a local folder (a path or a file:// URL)")
-    print(f"eas-vo: fetching {name}.zip ({_size_text(url + target.name)}) from {url} into {target.parent}",
-          file=sys.stderr)
+    logger.info(f"fetching {name}.zip ({_size_text(url + target.name)}) from {url} into {target.parent}")
     pooch.get_logger().setLevel(logging.WARNING)  # our notice above replaces its own
     store = pooch.create(path=target.parent, base_url=url, registry={target.name: known}, retry_if_failed=2)
     try:
@@ -135,8 +134,7 @@ def _copy_verified(source: Path, target: Path, md5: str) -> Path:
 
     if not source.is_file():
         raise EasVoError(f"{source}: not in the local mirror (EAS_VO_DATA_URL), nothing was copied")
-    print(f"eas-vo: copying {source.name} ({source.stat().st_size / 1e6:.1f} MB) from {source.parent} into {target.parent}",
-          file=sys.stderr)
+    logger.info(f"copying {source.name} ({source.stat().st_size / 1e6:.1f} MB) from {source.parent} into {target.parent}")
     with atomic_path(target) as tmp:
         shutil.copyfile(source, tmp)
         found = pooch.file_hash(str(tmp), alg="md5")

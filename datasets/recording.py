@@ -68,9 +68,9 @@ def clock_origin_ns(first_ns: int) -> int:
 
 #: Two streams of one recording whose time spans differ by this factor or more do not count
 #: time in one unit: an excerpt may keep a few milliseconds of one stream beside tens of
-#: seconds of another (the real shapes_rotation excerpt: 0.5 s of events beside 30 s of
-#: frames, a factor 60; a few ms of events beside 30 s would be 1e4), while a stream in
-#: microseconds beside one in seconds spans 1e6 times as long, in nanoseconds 1e9.
+#: seconds of another (a few ms of events beside 30 s would be 1e4; docs/time_offsets.md,
+#: "Every clock in seconds"), while a stream in microseconds beside one in seconds spans 1e6
+#: times as long, in nanoseconds 1e9.
 SPAN_RATIO_LIMIT = 1e5
 #: No recording's stream lasts longer than a day [s]: a longer span is a clock read in a
 #: smaller unit than seconds (60 s in microseconds span 6e7 "s").

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 import hashlib
+import logging
 import math
 import os
 import shutil
@@ -21,11 +22,12 @@ from eas_vo.io.cache import cache_folder
 from eas_vo.camera import LENS_MODELS
 from eas_vo.validation import check_choice, check_range
 
+logger = logging.getLogger(__name__)
+
 #: Named sequences. `default` is the embedded sequence `eas-vo run` uses. `walk` (and its short
 #: first 5 s, `walk_short`) is a hand-held walk through a lit room: the translation ten times the
-#: default's (40-50 cm amplitude per axis, the boxes 1.7-3.7 m away, the back wall 5 m), the
-#: default's rotation at a constant pace, a hundred times the light (original frames about
-#: 80 DN mean, 300-400 ORB features): the parallax and texture monocular SLAM needs.
+#: default's, the default's rotation at a constant pace, a hundred times the light: the parallax
+#: and texture monocular SLAM needs (docs/synthetic.md, "A walk for monocular SLAM").
 _WALK = {"illumination": 100.0, "translation_scale": 10.0, "speed_growth": 0.0}
 PRESETS = {
     "default": SimConfig(duration_s=10.0, seed=0),
@@ -44,9 +46,9 @@ class SyntheticConfig(DvsModel):
     Attributes:
         illumination: scale of the scene's light (1.0: the preset's; the default one is the dim
             room, 0.1 ten times darker).
-        speed: scale of the motion's speed (1.0: the preset's; the default one is hand-held,
-            44 deg/s mean; 4.0: 177 deg/s, more than the real excerpt's 147 over its 30 s); the
-            same path, travelled faster.
+        speed: scale of the motion's speed (1.0: the preset's; the default one is hand-held);
+            the same path, travelled faster (docs/synthetic.md, "Simulating other sequences",
+            gives the speeds).
         translation_scale: scale of the motion's translation (1.0: the preset's; the default
             one moves 4-5 cm per axis, `walk` tens of cm); the same path, its positions scaled.
         sensor: the camera's preset (SENSORS): `davis240` (240x180, radial-tangential lens) or
@@ -130,7 +132,7 @@ def sequence_folder(name: str, config: SyntheticConfig | None = None, progress: 
     folder = cache_folder("synthetic", "simulated sequences; simulated again when next needed (about 40 s each)") / f"{name}-{digest}"
     if not (folder / "images.txt").exists():
         if progress:
-            print(f"eas-vo: simulating synthetic:{name} ({config.duration_s:g} s) into {folder} (once)", file=sys.stderr)
+            logger.info(f"simulating synthetic:{name} ({config.duration_s:g} s) into {folder} (once)")
         tmp = folder.with_name(f".{folder.name}.{os.getpid()}.tmp")
         shutil.rmtree(tmp, ignore_errors=True)
         try:

@@ -23,7 +23,7 @@ PACKAGES = {
 #: first sentence of its docstring (test_the_documented_layout_is_the_layer_table).
 LAYERS = {
     "bottom": ("eas_vo.types", "eas_vo.errors", "eas_vo.validation", "eas_vo.geometry", "eas_vo.camera",
-               "eas_vo.concurrency"),
+               "eas_vo.concurrency", "eas_vo.logs"),
     "middle": ("eas_vo.plugins", "eas_vo.registry", "eas_vo.io", "eas_vo.eventfile", "eas_vo.evaluation", "eas_vo.imu",
                "eas_vo.plots", "eas_vo.orb"),
     "top": ("eas_vo.config", "eas_vo.pipeline", "eas_vo.experiments", "eas_vo.sequence", "eas_vo.slam", "eas_vo.cli",

@@ -35,10 +35,11 @@ FINEST_PIXEL_RAD = 1.0 / ALIGN_FOCAL_PX[-1]
 #: Blur [px of the coarsest resolution] where the search ranks its first candidates: it widens the
 #: score's peak beyond the grid's half step for scenes of fine texture.
 SEARCH_BLUR_PX = 1.0
-#: Pans and tilts [deg] scored at the coarsest resolution besides the given starts: the 43 deg
-#: between frames of the real excerpt's p95 speed at half its frame rate, in steps of 7.5 deg
-#: (3.3 px there, inside the basin); each with these rolls [deg] (half their step, 7.5 deg,
-#: moves the DAVIS240's view's edges by about as much as half a step of pan).
+#: Pans and tilts [deg] scored at the coarsest resolution besides the given starts: as far as a
+#: fast hand-held turn goes between every other frame, in steps that stay inside the score's
+#: basin at that resolution (3.3 px); each with these rolls [deg] (half their step moves the
+#: DAVIS240's view's edges by about as much as half a step of pan). docs/best_config.md, "How
+#: the fallback works", says which speed the span covers.
 SEARCH_GRID_DEG = np.arange(-45.0, 45.1, 7.5)
 SEARCH_ROLL_DEG = (-15.0, 0.0, 15.0)
 #: How many candidates go on to each resolution of ALIGN_FOCAL_PX (the best-scoring after the last).
@@ -57,19 +58,17 @@ PARALLEL_CANDIDATES = 64
 MIN_OVERLAP = 0.2
 #: A rotation explains two views only where it leaves at most this fraction of the mismatch
 #: (1 - score) that no motion leaves: what beats no motion by less is what noise, a sensor's
-#: fixed pattern or a featureless view give (on dim simulated frames 93 of the 109 alignments
-#: more than 2 deg off leave more; on the real excerpt thinned to every 3rd frame the right
-#: ones leave 0.02-0.64).
+#: fixed pattern or a featureless view give (docs/best_config.md, "How the fallback works", has
+#: what wrong and right alignments leave).
 IDENTITY_MARGIN = 0.7
 
 
 #: A run stops using a fallback once more than half of its judged steps, and at least
 #: AUDIT_MIN_JUDGED of them, disagree with the primary measurements beside them (FallbackAudit).
 #: A right fallback's steps disagree only where the motion itself changes by more than the bound
-#: between two frames: on the ground truth of synthetic:default and of the real excerpt
-#: (20-23 Hz) a step's constant-velocity extrapolation misses the next by more than
-#: FINEST_PIXEL_RAD plus its own angle on 3 % and 19 % of the steps. With one in four, 10 judged
-#: steps of a right fallback are a majority against it with a chance of 2 % (binomial).
+#: between two frames, a minority of the steps at hand-held speeds, so that at least 10 judged
+#: steps turn a right fallback off only rarely (docs/best_config.md, "How the fallback works",
+#: has how often the motion does so and the chance).
 AUDIT_MIN_JUDGED = 10
 
 

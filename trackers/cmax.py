@@ -26,9 +26,7 @@ INITS = ("auto", "previous", "search")
 
 #: The uncertainty of a window's omega is SIGMA_SCALE times the objective's curvature radius
 #: (Window.sigma_rad_s), so that the per-axis errors of the rotations between frames have unit
-#: RMS on the development sequences (simulator seeds 51 and 52, their first 2 s, defaults:
-#: 0.038 and 0.030 times the curvature radius; the radius measures how far the gain falls, not
-#: how far the peak moves with the events' noise).
+#: RMS on the development sequences (docs/cmax.md, "How it works", step 4, has their figures).
 SIGMA_SCALE = 0.034
 #: The 1-sigma [rad] of a rotation whose objective has no curvature (a flat optimum): a
 #: backend weighing it by its sigma all but ignores it.
@@ -37,18 +35,16 @@ FLAT_SIGMA_RAD = 1.0
 #: far [px over half the window]: about the width of the peak a sharp edge makes (sigma_px 1).
 FOCUS_STEP_PX = 1.0
 #: A hot pixel has fired this many times the mean pixel's count (CmaxTracker._without_hot_pixels):
-#: the simulator's hot pixels fire 500 Hz, its signal pixels 18 Hz on average (synthetic:default),
-#: an edge-rich pixel in 1000 deg/s motion under 15 times the mean within a window.
+#: more than an edge-rich pixel in fast motion fires within a window, less than a hot pixel's
+#: rate over a signal pixel's (docs/cmax.md, "Status: ok, weak, lost", has the rates measured).
 HOT_PIXEL_FACTOR = 20.0
 #: The solver (_newton) works on the contrast over that at no motion, in px of displacement over
 #: half a window, with Newton steps in the metric of the objective's curvature (central
 #: differences of the analytic gradient 1 px apart: the scale on which the bilinear votes'
 #: kinks are smoothed over), which the window before measured at its optimum. It stops once a
-#: step would be under NEWTON_TOL_PX (the peak's curvature on synthetic:default is 0.004-0.1 per
-#: px^2, and its position is good to about 0.1 px: bilinear votes, texture). scipy's L-BFGS-B
-#: (gtol 1e-4) spent 69 evaluations a window on synthetic:default for 7 iterations, its line
-#: search failing on those kinks in two windows of three; this takes 6 (median; 4-10 in 80 % of
-#: the windows of the whole sequence), the start's included.
+#: step would be under NEWTON_TOL_PX, well below how precisely the peak's position is known; a
+#: line-search solver (scipy's L-BFGS-B) fails on those kinks (docs/cmax.md, "How it works",
+#: step 3, has the curvatures and evaluation counts measured).
 NEWTON_TOL_PX = 0.01
 #: A step is at most this long [px] (the curvature's 1 px scale; halved after a step that lowered
 #: the contrast, back to this after one that raised it); the solver evaluates at most NEWTON_EVALS points.
@@ -77,11 +73,10 @@ class CmaxConfig:
         min_events: a window with fewer events (hot pixels left out) is not measured (the frame is `lost`).
         lost_focus, lost_gain: a focus (the optimum's contrast over that of warps FOCUS_STEP_PX
             away) at or below lost_focus with a contrast gain (over no motion) at or below
-            lost_gain measures nothing: nothing was brought into focus and no blur removed
-            (noise alone: focus 1.000 +- 0.002, gains up to 1.11 where the search found warps
-            that crowd the events together). Neither alone is a test: slow motion, well
-            measured, has gains near 1; fast motion in dim light, gains of 1.2 and a focus of
-            1.005 (the events' latency spread blurs its sharpest image beyond a pixel).
+            lost_gain measures nothing: nothing was brought into focus and no blur removed.
+            Neither alone is a test: slow motion, well measured, has gains near 1, and fast
+            motion in dim light a focus near 1 (the events' latency spread blurs its sharpest
+            image beyond a pixel); docs/cmax.md, "Status: ok, weak, lost", has the figures.
         weak_focus: a focus below this makes the frame `weak`.
         max_residual_px: the frame is `weak` when the image quadrants' own optima lie further
             apart than this [px of displacement over half a window]: one rotation does not
@@ -343,7 +338,7 @@ class CmaxTracker(Tracker):
         """`events` less those of hot pixels: pixels that fired HOT_PIXEL_FACTOR times the mean
         pixel's count since the sequence began (and at least HOT_PIXEL_MIN_EVENTS). Their
         events stay where they are under any warp, so they would pass for a focused image of
-        no motion (the simulator's 500 Hz hot pixels, a 0.05 % of them, did on noise alone)."""
+        no motion (docs/cmax.md, "Status: ok, weak, lost")."""
         pixel = events["y"].astype(np.intp) * self.camera.width + events["x"].astype(np.intp)
         self._counts += np.bincount(pixel, minlength=self._counts.size)
         hot = self._counts > max(HOT_PIXEL_MIN_EVENTS, HOT_PIXEL_FACTOR * self._counts.mean())

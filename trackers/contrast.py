@@ -135,9 +135,8 @@ def gather_gradient(x, y, dt, omega, fx, fy, cx, cy, B):
 #: chunk order, so a result does not depend on how many threads ran them.
 CHUNK = 4096
 #: A thread takes at least this many chunks: a window of under 2 * MIN_CHUNKS * CHUNK events
-#: runs on one. Handing half of a 40 000-event window's warp and gather to a second thread cost
-#: 10-20 % per evaluation on a 2-core machine with other work on it (a 160 000-event window's
-#: split neither gained nor lost there).
+#: runs on one, as splitting the default window costs more than it gains (docs/speed.md,
+#: "Rotation from events alone (`cmax`)").
 MIN_CHUNKS = 8
 #: The images a pass can vote into: the whole window's, then its four quadrants' (about the
 #: optical axis: x > 0, y > 0; x > 0, y < 0; x < 0, y > 0; x < 0, y < 0).

@@ -40,9 +40,9 @@ class LoopClosureConfig:
         loop_geometry: the geometry of the LK refinement: `rotation`, or `homography`, which
             keeps the parallax of the camera's translation out of the rotation where the
             homography determines it (else the loop is measured rotation-only). A loop spans
-            seconds in which a hand-held camera moves by centimetres: over the real excerpt a
-            rotation-only loop is off by about 0.6 deg per cm the camera moved (its scene
-            about 1 m away), the error of the chain it should correct.
+            seconds in which a hand-held camera moves by centimetres, whose parallax a
+            rotation-only loop takes for rotation: an error the size of the chain's it should
+            correct (docs/best_config.md, "Loops and the hand's translation").
     """
 
     loop_closure: bool = False

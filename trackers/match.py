@@ -27,8 +27,8 @@ class MatchConfig(LoopClosureConfig, TwoViewConfig):
         matching: `ratio` (Lowe's test) or `crosscheck` (mutual nearest neighbours).
         ratio: Lowe's ratio (nearest / second-nearest descriptor distance).
         min_matches: with fewer matches, or a model with fewer inliers, nothing is measured
-            (the frame is `lost`): a rotation 7 matches support is noise (on synthetic:default
-            such edges turned by 70-155 degrees and wrecked the chain).
+            (the frame is `lost`): a rotation so few matches support is noise (docs/method.md,
+            "Another tracker: `match`").
         geometry: as TwoViewConfig; `auto` by default here (GRIC picks rotation-only or the
             essential matrix per pair).
         ransac_threshold_px, max_residual_px: twice TwoViewConfig's (see features.RANSAC_THRESHOLD_PX).

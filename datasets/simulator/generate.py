@@ -77,9 +77,9 @@ class SimConfig:
         frame_rate_hz: APS frame rate; gt_rate_hz: ground-truth and IMU rate.
         max_flow_px: largest image motion between two render steps [px] (ESIM's adaptive step).
         speed_growth: the motion's speed grows by the factor (1 + speed_growth) over the sequence.
-        speed: the motion's speed scale: 1 is the hand-held default (44 deg/s mean, 90 deg/s p95
-            over 10 s), 4 gives 177 / 343-353 (seeds 71, 72; the real excerpt: 147 / 380 over its
-            30 s); the same path and scene, travelled faster.
+        speed: the motion's speed scale: 1 is the hand-held default; the same path and scene,
+            travelled faster (docs/synthetic.md, "Simulating other sequences", gives the
+            speeds).
         translation_scale: the motion's translation scale (1: the hand-held default, 4-5 cm
             amplitude per axis; 5: a hand-held walk's tens of cm); the same path, its positions
             scaled, the rotation unchanged.

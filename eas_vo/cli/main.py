@@ -13,6 +13,7 @@ import os
 import sys
 
 from eas_vo.errors import EasVoError, Interrupted, sigterm_as_interrupt
+from eas_vo.logs import to_stderr
 
 
 #: The commands, in the order `eas-vo --help` lists them: each a module of this package.
@@ -23,6 +24,7 @@ COMMANDS = ("run", "compare", "list", "info", "render", "export", "slam", "vocab
 def main(argv: list[str] | None = None) -> int:
     """The `eas-vo` command on `argv` (default: the process's); returns the exit status: 0, 2 for a
     user error (one line on stderr), 130 / 143 for Ctrl-C / SIGTERM, 141 for a closed pipe."""
+    to_stderr()  # the library's log records reach stderr here, and only here
     args = build_parser().parse_args(argv)
     try:
         with sigterm_as_interrupt():

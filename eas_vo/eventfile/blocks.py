@@ -90,8 +90,9 @@ class BlockParser:
     if it started the stream; the caller accepts a piece when its first time is not before
     the previous piece's last, and takes the sequential path otherwise.
 
-    Packed records live in one of two alternating buffer sets that are reused (fresh ones
-    would cost more in page faults than the parse): valid until the block after next.
+    Packed records live in one of two alternating buffer sets that are reused, sparing fresh
+    ones' page faults (docs/speed.md, "The event parser and its cache"): valid until the
+    block after next.
     """
 
     def __init__(self, width: int, height: int, tolerance_s: float, threads: int = 2):

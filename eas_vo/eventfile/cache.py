@@ -4,7 +4,8 @@ Cache file: 24-byte header (8-byte magic, uint64 event count, uint64 checksum) +
 EVENT_DTYPE records (13 B/event), named by a hash of what identifies the source (for a file:
 device, inode, size, modification and change times in ns, and a hash of samples of its
 content). Written atomically, read by memory-mapping it once its checksum (XXH3-64 of the
-records, ~25 GB/s from memory) matched; a damaged cache is rebuilt with a one-line notice.
+records, at memory speed: docs/speed.md, "The event parser and its cache") matched; a damaged
+cache is rebuilt with a one-line notice.
 A lenient build's warnings sidecar is part of it: missing or unreadable, both are rebuilt.
 A cache folder that cannot be written (read-only, not the user's, full) costs speed, not the
 run: the events are read into memory, with one notice per folder.
@@ -15,8 +16,8 @@ from __future__ import annotations
 import errno
 import functools
 import hashlib
+import logging
 import os
-import sys
 from pathlib import Path
 from collections.abc import Iterable
 from concurrent.futures import ThreadPoolExecutor
@@ -29,6 +30,8 @@ from eas_vo.eventfile.convert import convert_text_to_cache
 from eas_vo.io.atomic import atomic_file
 from eas_vo.io.cache import cache_folder
 from eas_vo.types import EVENT_DTYPE
+
+logger = logging.getLogger(__name__)
 
 CACHE_MAGIC = b"EASVOEV3"
 HEADER_BYTES = 24
@@ -67,7 +70,7 @@ def cache_path(key: str) -> Path:
 def open_cache(path: Path) -> np.ndarray | None:
     """Memory-map a cache file whose header, size and checksum hold; None if it is absent. A
     damaged one (another format, a wrong size, a checksum that fails) is removed with a notice
-    on stderr, and None returned: the caller rebuilds it."""
+    (logged), and None returned: the caller rebuilds it."""
     if not path.exists():
         return None
     try:
@@ -81,7 +84,7 @@ def open_cache(path: Path) -> np.ndarray | None:
     except OSError:
         sound = False
     if not sound:
-        print(f"eas-vo: the event cache {path} is damaged or of another version; rebuilding it", file=sys.stderr)
+        logger.info(f"the event cache {path} is damaged or of another version; rebuilding it")
         path.unlink(missing_ok=True)
         return None
     return _map_records(path, count)
@@ -181,8 +184,8 @@ def _cache_unwritable(exc: OSError, folder: Path) -> bool:
 
 @functools.cache  # once per folder and reason
 def _say_unwritable(folder: Path, reason: str) -> None:
-    print(f"eas-vo: warning: the event cache folder {folder} cannot be written ({reason}); events are read into "
-          "memory, and again next time (EAS_VO_CACHE_DIR chooses another folder)", file=sys.stderr)
+    logger.warning(f"the event cache folder {folder} cannot be written ({reason}); events are read into "
+                   "memory, and again next time (EAS_VO_CACHE_DIR chooses another folder)")
 
 
 class _MemoryWriter:
@@ -235,7 +238,7 @@ def load_cached(
         if kept is not None:
             warnings.merge(kept)
             return cached
-        print(f"eas-vo: the warnings of the event cache {path} are missing or damaged; rebuilding it", file=sys.stderr)
+        logger.info(f"the warnings of the event cache {path} are missing or damaged; rebuilding it")
         path.unlink(missing_ok=True)
     local = DataWarnings()
     target = tolerant if lenient else strict

@@ -96,8 +96,9 @@ def parse_and_pack(buf, width, height, tolerance_s, last_t, out):
     Returns (rows, byte offset of the first line that is not in that form or not valid, or
     -1, newlines before it, first time, last time).
 
-    The digit loops are written out on purpose: factored into an inlined helper they ran
-    at half the speed. The scan index is unsigned to spare numba's negative-index checks.
+    The digit loops are written out on purpose, as an inlined helper runs slower
+    (docs/speed.md, "The event parser and its cache"). The scan index is unsigned to spare
+    numba's negative-index checks.
     """
     scratch = np.empty(1, np.float64)
     first_t = -np.inf
@@ -293,9 +294,10 @@ def check_and_pack_dv(words, origin_us, last_t, width, height, tolerance_s, even
     / 1e6 as numpy computes them (the clock origin: Dataset.clock_origin_ns). Returns (index of the first row with any problem or -1, the last
     timestamp); rows before a problem are packed.
 
-    The same verdicts and records as check_and_pack on the records' fields, 2-3x faster: each
-    record is two loads, and a pixel is checked as one unsigned compare (a negative int16 is
-    65535 or less as unsigned; below min(size, 32768) means 0 <= value < size)."""
+    The same verdicts and records as check_and_pack on the records' fields, faster (docs/speed.md,
+    "Recordings in other formats"): each record is two loads, and a pixel is checked as one
+    unsigned compare (a negative int16 is 65535 or less as unsigned; below min(size, 32768)
+    means 0 <= value < size)."""
     n = words.shape[0]
     x_end, y_end = min(width, 32768), min(height, 32768)
     for a in range(0, n, TABLE_CHUNK_ROWS):

@@ -3,13 +3,15 @@ into the data folder, downloaded through pooch against the archive's published S
 
 from __future__ import annotations
 
+import logging
 import os
-import sys
 import tarfile
 from pathlib import Path
 
 from eas_vo.errors import EasVoError
 from eas_vo.io.atomic import atomic_file
+
+logger = logging.getLogger(__name__)
 
 #: Where ORB-SLAM3 publishes it, and the SHA-1 of the archive: both as pyorbslam3's vocab.py
 #: (0.1.1) gives them. EAS_VO_ORB_VOCABULARY_URL names a mirror of the same archive.
@@ -23,8 +25,6 @@ def fetch_orb_vocabulary(folder: str | Path | None = None, progress: bool = Fals
     """FOLDER/ORBvoc.txt (default: the data folder), downloaded and extracted unless there. The
     archive is verified by pooch before anything is extracted; the text file appears whole
     or not at all; the archive is removed after."""
-    import logging
-
     import pooch
     import requests
 
@@ -35,7 +35,7 @@ def fetch_orb_vocabulary(folder: str | Path | None = None, progress: bool = Fals
     if target.is_file():
         return target
     url = url or os.environ.get("EAS_VO_ORB_VOCABULARY_URL") or URL
-    print(f"eas-vo: fetching {url} (about 40 MB; ORBvoc.txt is 139 MB) into {folder}", file=sys.stderr)
+    logger.info(f"fetching {url} (about 40 MB; ORBvoc.txt is 139 MB) into {folder}")
     pooch.get_logger().setLevel(logging.WARNING)
     try:
         archive = Path(pooch.retrieve(url, known_hash=f"sha1:{sha1}", fname=f"{NAME}.tar.gz", path=folder,

@@ -2,6 +2,7 @@
 costs speed, not the run: the events are read into memory with one notice per folder."""
 
 import errno
+import logging
 import tempfile
 from pathlib import Path
 
@@ -35,18 +36,20 @@ def read_only_cache(tmp_path, monkeypatch):
     return cache
 
 
-def test_events_are_read_into_memory_with_one_notice(read_only_cache, tmp_path, capsys):
+def test_events_are_read_into_memory_with_one_notice(read_only_cache, tmp_path, caplog):
     from eas_vo.eventfile.text import format_events
 
+    caplog.set_level(logging.INFO, logger="eas_vo")
     events = random_events(2000, seed=8)
     path = tmp_path / "events.txt"
     path.write_bytes(format_events(events))
     for _ in range(2):
         loaded = load_event_file(path)
         np.testing.assert_array_equal(loaded["x"], events["x"])
-    err = capsys.readouterr().err
-    assert err.count("\n") == 1 and f"the event cache folder {read_only_cache / 'events'} cannot be written " \
-        "(Read-only file system); events are read into memory" in err
+    said = [(r.levelno, r.getMessage()) for r in caplog.records if r.name.startswith("eas_vo")]
+    assert len(said) == 1 and said[0][0] == logging.WARNING, said
+    assert said[0][1].startswith(f"the event cache folder {read_only_cache / 'events'} cannot be written "
+                                 "(Read-only file system); events are read into memory")
     assert not read_only_cache.exists()
 
 
