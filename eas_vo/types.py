@@ -110,9 +110,8 @@ class ImuSeries:
         """[t0, t1] (t0 <= t1) cut at the readings' times: the mean gyro rate over each piece
         (K, 3) [rad/s] and its duration (K,) [s]. Each reading is the rate at its time, linear
         in between (the midpoint rule of VINS-Mono's preintegration): holding a reading until
-        the next one instead reads the gyro half a sample late (2.5 ms at 200 Hz: on a speed-4
-        simulated sequence its rotation between frames was 0.47 deg off the truth, median;
-        0.075 deg so). Before the first and after the last reading, held."""
+        the next one instead reads the gyro half a sample late (docs/imu.md, "How readings are
+        integrated"). Before the first and after the last reading, held."""
         t = self.t
         first, end = np.searchsorted(t, t0, side="right"), np.searchsorted(t, t1, side="left")
         cuts = np.concatenate([[t0], t[first:end], [t1]])

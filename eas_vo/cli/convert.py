@@ -33,7 +33,7 @@ def run(args) -> int:
     """`eas-vo convert` on the parsed `args`; returns the exit status."""
     from eas_vo import config as config_mod
     from eas_vo.io.outputs import check_output_folder
-    from eas_vo.sequence import convert
+    from eas_vo.sequence.convert import convert
 
     config = config_mod.resolve(args.config, {"dataset": args.dataset, **window_overrides(args)}, set_assignments(args))
     out = check_output_folder(args.out, replace=args.overwrite)

@@ -30,7 +30,7 @@ def add_parser(sub) -> None:
 def run(args) -> int:
     """`eas-vo evaluate` on the parsed `args`; returns the exit status."""
     from eas_vo.io.outputs import check_output_folder
-    from eas_vo.io.tables import figure_text
+    from eas_vo.io.text import figure_text
     from eas_vo.experiments.external import evaluate_estimate
 
     if args.out:

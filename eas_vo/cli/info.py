@@ -25,7 +25,7 @@ def add_parser(sub) -> None:
 def run(args) -> int:
     """`eas-vo info` on the parsed `args`; returns the exit status."""
     from eas_vo import config as config_mod
-    from eas_vo.sequence import describe
+    from eas_vo.sequence.info import describe
 
     config = config_mod.resolve(args.config, {"dataset": args.dataset}, set_assignments(args))
     print("\n".join(describe(config).lines()))

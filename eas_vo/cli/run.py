@@ -63,7 +63,7 @@ def run(args) -> int:
     from eas_vo import config as config_mod
     from eas_vo import pipeline
     from eas_vo.io.outputs import check_output_folder
-    from eas_vo.io.tables import slug
+    from eas_vo.io.text import slug
 
     apply_threads(args)
     config = config_mod.resolve(

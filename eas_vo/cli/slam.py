@@ -56,7 +56,7 @@ def run(args) -> int:
     """`eas-vo slam` on the parsed `args`; returns the exit status."""
     from eas_vo import config as config_mod
     from eas_vo.io.outputs import check_output_folder
-    from eas_vo.io.tables import figure_text
+    from eas_vo.io.text import figure_text
     from eas_vo.slam.run import SUMMARISED, find_vocabulary, require_extra, run_slam
 
     require_extra()

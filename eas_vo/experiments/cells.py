@@ -12,7 +12,7 @@ from pathlib import Path
 from eas_vo import registry
 from eas_vo.config import NO_IMAGES, parse_set
 from eas_vo.errors import EasVoError
-from eas_vo.io.tables import slug
+from eas_vo.io.text import slug
 
 
 

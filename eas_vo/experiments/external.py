@@ -10,7 +10,7 @@ import numpy as np
 from eas_vo.errors import EasVoError
 from eas_vo.io.atomic import json_text, write_text_atomic
 from eas_vo.io.outputs import output_folder
-from eas_vo.io.tables import figure_text, markdown_cell
+from eas_vo.io.text import figure_text, markdown_cell
 from eas_vo.types import PoseSeries
 
 

@@ -18,7 +18,7 @@ from eas_vo.errors import DataError, EasVoError
 from eas_vo.experiments.gallery import PAPER_ORDER
 from eas_vo.io.atomic import atomic_path, json_text, remove_stale_temporaries, write_text_atomic
 from eas_vo.io.outputs import claim_grid_folder
-from eas_vo.io.tables import figure_text, slug
+from eas_vo.io.text import figure_text, slug
 
 SEQUENCES = ("hdr_boxes", "hdr_poster")
 

@@ -13,7 +13,7 @@ import numpy as np
 
 from eas_vo.errors import EasVoError
 from eas_vo.io.atomic import json_text, write_text_atomic
-from eas_vo.io.tables import markdown_cell, slug
+from eas_vo.io.text import markdown_cell, slug
 from eas_vo.experiments.cells import Cell
 
 

@@ -56,7 +56,7 @@ class ImuAgreement:
 
 #: How far around its last estimate the IMU's clock is searched [s], in 1 ms steps (about a
 #: DAVIS frame interval), and how many times the fit and the search are redone at the new
-#: estimate (the pairs that agree depend on the clock: a 30 ms error is under-read the first time).
+#: estimate (the pairs that agree depend on the clock: a large error is under-read the first time).
 CLOCK_SEARCH_S = 0.05
 
 

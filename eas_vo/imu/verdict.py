@@ -131,9 +131,9 @@ class GyroVerdict:
         calibration of another resolution or binning: a factor of 2), then at a gyro read with
         the wrong full-scale setting, not at its axes, signs or clock. The rates alone cannot
         tell the two apart (a focal length off scales cmax's roll too, as the gyro's scale
-        would: 0.54 about the optical axis, 0.68 across it, on a 2 s simulated sequence, seed
-        7, without distortion, read with half its focal length), so the gyro is not fused with
-        images it is one scale apart from (contradicts), and the warning names the camera first."""
+        would; docs/imu.md, "A gyro that cannot be right is not used"), so the gyro is not
+        fused with images it is one scale apart from (contradicts), and the warning names the
+        camera first."""
         if not (self.scale_off and self.scale > 0 and self.rescaled_disagreeing <= self.judged / 2):
             return False
         return min(abs(np.log(self.scale * f)) for f in (DEG_PER_RAD, 1 / DEG_PER_RAD)) > np.log(1.1)

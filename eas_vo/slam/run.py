@@ -36,7 +36,7 @@ import numpy as np
 from eas_vo.errors import DataError, EasVoError, Interrupted
 from eas_vo.io.atomic import json_text, write_text_atomic
 from eas_vo.io.outputs import output_folder
-from eas_vo.io.tables import figure_text
+from eas_vo.io.text import figure_text
 
 EXTRA_HINT = "monocular ORB-SLAM3 runs through the optional extra: pip install 'eas-vo[slam]' (pyorbslam3, GPL-3.0)"
 FRAMES_FIELDS = ("index", "t", "state", "tracked_points", "tx", "ty", "tz", "qx", "qy", "qz", "qw")

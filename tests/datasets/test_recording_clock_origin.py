@@ -14,7 +14,7 @@ from eas_vo.datasets.rosbag import write_bag
 from eas_vo.datasets.rosbag2 import write_bag2
 from eas_vo.io.tables import clock_time
 from eas_vo.plugins import Dataset
-from eas_vo.sequence import describe
+from eas_vo.sequence.info import describe
 
 #: 2023-11-14 22:13:20 UTC [ns].
 UNIX_NS = 1_700_000_000 * 10**9

@@ -13,7 +13,7 @@ from helpers import ECD_FILES, UNIX_S, known_sequence, one_line_failure, retimed
 from eas_vo.config import resolve
 from eas_vo.datasets import recording
 from eas_vo.datasets.ecd import EcdFolderDataset
-from eas_vo.sequence import describe
+from eas_vo.sequence.info import describe
 
 UNITS = {"microseconds": 10**6, "nanoseconds": 10**9}
 

@@ -12,7 +12,8 @@ import pytest
 from eas_vo.config import resolve
 from eas_vo.datasets.ecd import EcdFolderDataset
 from eas_vo.errors import DataError, EasVoError
-from eas_vo.sequence import convert, describe
+from eas_vo.sequence.convert import convert
+from eas_vo.sequence.info import describe
 from eas_vo.camera import CameraModel
 from helpers import (FRAME_HZ, FRAME_T0, N_EVENTS, N_FRAMES, N_POSES, N_READINGS, SHAPES_ROTATION, known_sequence,
                      require)
