@@ -371,7 +371,7 @@ def slow(self, k, scratch=None):
     time.sleep(0.3)
     return decode(self, k, scratch)
 aedat4_packets.Aedat4File.event_records = slow
-from eas_vo.cli import main
+from eas_vo.cli.main import main
 sys.exit(main(sys.argv[1:]))
 """
 

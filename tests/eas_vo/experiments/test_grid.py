@@ -392,13 +392,13 @@ def test_a_pool_never_has_more_workers_than_cells(short_sequence, tmp_path, monk
 
 def test_a_cell_is_run_again_when_the_code_that_made_it_changed(short_sequence, tmp_path, capsys, monkeypatch):
     """A tracker edited in place (or another release at the same version number) is another
-    run: the identity holds a hash of the code (pipeline.code_identity)."""
-    from eas_vo import pipeline
+    run: the identity holds a hash of the code (pipeline.identity.code_identity)."""
+    from eas_vo.pipeline import identity
 
     argv = ["compare", "--dataset", str(short_sequence), "--frontends", "original", "--backends", "chain",
             "--duration", "1", "--out", str(tmp_path / "cmp"), "--jobs", "1", "--quiet"]
     for code, runs in (("A", 1), ("A", 0), ("B", 1)):
-        monkeypatch.setattr(pipeline, "code_identity", lambda packages, code=code: code)
+        monkeypatch.setattr(identity, "code_identity", lambda packages, code=code: code)
         assert main(argv) == 0
         assert f"1 cells ({runs} run, {1 - runs} already complete" in capsys.readouterr().out
 
