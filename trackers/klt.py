@@ -1,15 +1,18 @@
 """`klt`, the paper's tracker: Shi-Tomasi corners, pyramidal Lucas-Kanade flow from frame
 to frame, five-point essential matrix, thresholds 1 and 2 -- and, off by default, what keeps
 it on track through fast motion: LK started from a predicted rotation (gyro or constant
-angular velocity), a forward-backward check, and descriptor matching when LK's measurement is
-weak or lost.
+angular velocity), a forward-backward check, and a fallback where LK's measurement falls short
+(descriptor matching, or an alignment of the whole images).
 
 It only ever sees uint8 images; the geometry is the shared `eas_vo.geometry.two_view`.
 """
 
 from __future__ import annotations
 
+from collections import deque
+from concurrent.futures import Future
 from dataclasses import dataclass, replace
+from typing import Callable
 
 import cv2
 import numpy as np
@@ -34,14 +37,14 @@ FALLBACKS = ("none", "match", "align")
 @dataclass(frozen=True)
 class KltConfig(LoopClosureConfig, TwoViewConfig):
     """Corner detection and optical flow settings, (TwoViewConfig) the geometry and
-    (LoopClosureConfig) loop closure.
+    (LoopClosureConfig) loop closure. docs/method.md#fast-motion describes the options that are
+    off by default, docs/best_config.md what they give.
 
     Attributes:
         max_corners, quality_level, min_distance_px, block_size: Shi-Tomasi detection.
         lk_win_size, lk_max_level: pyramidal Lucas-Kanade window [px] and pyramid levels.
-            These four extents are stated for a 200 px focal length (the DAVIS240's) and
-            follow the camera's (measurement.PixelScale: at 400 px, corners 14 px apart in
-            blocks of 14 px, one pyramid level more of the same window).
+            These four extents are stated for a 200 px focal length (the DAVIS240's); the
+            tracker converts them to its camera (measurement.PixelScale).
         lk_max_iterations, lk_epsilon_px: each pyramid level stops after this many iterations
             or once a step is shorter than this [px] (OpenCV's defaults 30 and 0.01).
         threshold1: with fewer correspondences the previous rotation is kept.
@@ -50,40 +53,23 @@ class KltConfig(LoopClosureConfig, TwoViewConfig):
             each frame with the corners tracked since it, a new keyframe every N frames and
             at each redetection (multi-frame edges i -> j for the gtsam backend).
         predict: where LK starts each corner: `none` (where it was: the paper), `gyro` (moved
-            by the rotation the gyro measured since the previous frame), `velocity` (by the
-            last measured rotation, scaled to this frame interval) or `auto` (gyro when the
-            dataset has an IMU, else velocity); the gyro in the camera frame as the run's
-            `imu_rotvec_cam` puts it.
+            by the rotation the gyro measured since the previous frame, in the camera frame),
+            `velocity` (by the last measured rotation, scaled to this frame interval) or `auto`
+            (gyro when the dataset has an IMU, else velocity).
         fb_max_px: 0 (the paper) or the forward-backward check: a corner tracked back into the
             previous frame must land within this many pixels of where it started.
-        fallback: `none` (the paper), `match` or `align`. `match`: when LK's measurement is weak or missing
-            (the frame is `weak` or `lost`), the previous and current images are matched by
-            descriptors (`fallback_detector`), refined by LK from the matched rotation
-            (features.RefinedMatching), and that measurement replaces LK's if it is not weak
-            and more certain (RelativeRotation.sigma_rad); corners are then detected again.
-            Every kind of weakness counts: LK lost on a 15-25 deg turn still finds enough
-            chance inliers and is weak by its inlier ratio (tests/trackers), and falling back
-            only below `min_inliers` inliers gave 0.0254 rad on the real excerpt's first 20 s
-            against 0.0249 (best.toml otherwise).
-            `align`: when LK's measurement is missing or has under `min_inliers` inliers and
-            no gyro predicted it (a gyro's prediction does not miss: LK then failed on the
-            images, which aligning the same images rarely repairs, and the gyro carries the
-            gtsam graph; at four times the synthetic speed it made the run 2.5x slower for no
-            gain), the two views are aligned by their
-            intensities (a coarse search over pan, tilt and roll, then Gauss-Newton coarse to
-            fine, at resolutions of fixed focal length whatever the sensor) and, where that
-            rotation explains them clearly better than no motion, LK tracks corners detected
-            afresh from that rotation (where it does not, LK's step stays if it does, else the
-            frame is `lost`: no measurement). That measurement
-            replaces LK's if it is not weak and agrees with the alignment within a pixel of its
-            finest resolution (alignment.FINEST_PIXEL_RAD); otherwise whichever of LK's step,
-            the retried one and the alignment alone explains the two images best (the alignment
-            alone: an edge without correspondences, inliers 0, `weak`). Across the run, its steps
-            are compared with LK's steps beside them (alignment.FallbackAudit): once most of
-            them disagree, the fallback is off for the rest of the run and `tracker_warnings`
-            names the frames. It keeps frames-only tracking through
-            motion LK cannot follow: blur that differs between two frames defeats LK's
-            patches, not an alignment of whole images.
+        fallback: what measures a frame LK's measurement falls short on (where it replaces
+            LK's, corners are detected again): `none` (the paper). `match`: where the frame is
+            `weak` (for any reason: LK lost on a large turn is often weak by its inlier ratio
+            alone) or `lost`, matched descriptors (`fallback_detector`) refined by LK
+            (features.RefinedMatching), kept if not weak and more certain
+            (RelativeRotation.sigma_rad); docs/best_config.md#each-tracker-on-the-real-excerpt.
+            `align`: where LK's step is missing or has under `min_inliers` inliers and no gyro
+            predicted it (LK then failed on the images themselves, which aligning them rarely
+            repairs), the two views aligned by their intensities and LK retried from that
+            rotation (KltTracker._aligned_step), judged over the run by alignment.FallbackAudit;
+            docs/best_config.md#how-the-fallback-works.
+        fallback_detector: the `match` fallback's keypoints, `orb` or `sift`.
     """
 
     max_corners: int = 500
@@ -124,13 +110,46 @@ class KltConfig(LoopClosureConfig, TwoViewConfig):
             raise ConfigError(f"threshold1 ({self.threshold1}) must not exceed threshold2 ({self.threshold2})")
 
 
+@dataclass(frozen=True)
+class _View:
+    """The image a frame is tracked from, as the tracker held it then."""
+
+    image: np.ndarray
+    pts: np.ndarray  # the corners tracked from it, (N, 2) [px]
+    corners: np.ndarray | None  # its Shi-Tomasi corners [px], when they were detected in it
+
+
+@dataclass
+class _Frame:
+    """A frame from its tracking to its result: what the steps after its two-view geometry read."""
+
+    k: int
+    t: float  # [s]
+    t_prev: float  # the previous frame's time [s]
+    image: np.ndarray
+    previous: _View
+    predicted: np.ndarray | None  # R_{k-1}_{k} LK started from (None: no prediction)
+    nc: int  # corners tracked into the frame
+    geometry: Future  # _measured's (record, edges, step)
+    result: tuple[FrameRecord, list[RelativeRotation]] | None = None  # once finished
+
+
 class KltTracker(Tracker):
     """Tracks corners frame to frame and measures the relative rotation of each pair.
 
-    Its `config` holds the extents in pixels converted to its camera (measurement.PixelScale).
-    Feed frames in order with `process`; it returns what happened and the measured
-    rotations: `R_{k-1}_{k}` between the previous and this frame (the paper) and, with
-    `keyframe_interval` > 0, `R_{kf}_{k}` from the corners tracked since the keyframe kf.
+    Its `config` is the one given; `extents` holds its extents in pixels converted to its camera
+    (measurement.PixelScale). Feed frames in order with `process` or `submit`; each gives what
+    happened and the measured rotations: `R_{k-1}_{k}` between the previous and this frame (the
+    paper) and, with `keyframe_interval` > 0, `R_{kf}_{k}` from the corners tracked since the
+    keyframe kf.
+
+    One per-frame path, `submit` (`process` takes its result at once): the frame is tracked, its
+    two-view geometry is started as a future (on another thread when there are several), and the
+    steps after the geometry (`_after_geometry`: the fallback, the step bound, loop closing) run
+    in frame order, in the caller's thread, when the result is taken. What the next frame's
+    tracking reads of them (the last step a velocity prediction extrapolates, whether a fallback
+    detected corners afresh) it reads only after `_finish` ran them, so taking a result later
+    changes nothing but the time (tests/trackers/test_klt.py tries every choice of KltConfig).
     """
 
     name = "klt"
@@ -138,9 +157,10 @@ class KltTracker(Tracker):
     Config = KltConfig
 
     def __init__(self, config: KltConfig | None = None, camera: CameraModel | None = None, *, imu: ImuSeries | None = None):
-        super().__init__(PixelScale.of(camera).config(config or KltConfig()), camera, imu=imu)
-        c = self.config
-        self._lk_params = lk_params(c.lk_win_size, c.lk_max_level, c.lk_max_iterations, c.lk_epsilon_px)
+        super().__init__(config, camera, imu=imu)
+        self.extents = PixelScale.of(camera).extents(self.config)
+        c, e = self.config, self.extents
+        self._lk_params = lk_params(e.lk_win_size, e.lk_max_level, c.lk_max_iterations, c.lk_epsilon_px)
         self._predict = c.predict if c.predict != "auto" else ("gyro" if imu is not None else "velocity")
         self._matching = RefinedMatching(Features(c.fallback_detector), camera, c, c.min_inliers) if c.fallback == "match" else None
         self._alignment = PhotometricAlignment(camera) if c.fallback == "align" else None
@@ -156,6 +176,7 @@ class KltTracker(Tracker):
         self._kf_index = 0
         self._k = -1
         self._last_step: tuple[np.ndarray, float] | None = None  # (R_{k-2}_{k-1}, its interval [s]) for velocity
+        self._unfinished: deque[_Frame] = deque()  # frames submitted whose steps after the geometry have not run
         self._loops = LoopCloser(self.config, self.camera) if self.config.loop_closure else None
         self._audit = FallbackAudit("align") if self.config.fallback == "align" else None
         self._bound = StepBound(self.config, self.camera)
@@ -180,10 +201,8 @@ class KltTracker(Tracker):
 
     def detect(self, image: np.ndarray) -> np.ndarray:
         """Shi-Tomasi corners of `image`, (N, 2) float32 [px]."""
-        c = self.config
-        pts = cv2.goodFeaturesToTrack(
-            image, c.max_corners, c.quality_level, c.min_distance_px, blockSize=c.block_size
-        )
+        c, e = self.config, self.extents
+        pts = cv2.goodFeaturesToTrack(image, c.max_corners, c.quality_level, e.min_distance_px, blockSize=e.block_size)
         return np.empty((0, 2), np.float32) if pts is None else pts.reshape(-1, 2).astype(np.float32)
 
     def track(self, image: np.ndarray, R_prev_cur: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
@@ -195,10 +214,32 @@ class KltTracker(Tracker):
         """R_{k-1}_{k} expected before measuring it (None: no prediction, as the paper)."""
         if self._predict == "gyro" and self.imu is not None:
             return gyro_rotation(self.imu, t_prev, t)
-        if self._predict == "velocity" and self._last_step is not None:
-            R_last, dt_last = self._last_step
-            return scaled_rotation(R_last, (t - t_prev) / dt_last)
+        if self._predict == "velocity":
+            self._finish()  # the last step is the last frame's, once its steps after the geometry ran
+            if self._last_step is not None:
+                R_last, dt_last = self._last_step
+                return scaled_rotation(R_last, (t - t_prev) / dt_last)
         return None
+
+    def process(self, image: np.ndarray, t: float) -> tuple[FrameRecord, list[RelativeRotation]]:
+        """Track into `image` (uint8, sensor size) taken at `t` [s]: `submit`'s result, taken at once."""
+        return self.submit(image, t)()
+
+    def submit(self, image: np.ndarray, t: float) -> Callable[[], tuple[FrameRecord, list[RelativeRotation]]]:
+        """Track into `image` (uint8, sensor size) taken at `t` [s] and start its two-view
+        geometry; returns the function that gives the frame's (record, edges)."""
+        k, t_prev, done = self._begins(image, t)
+        if done is not None:
+            return lambda: done
+        previous = _View(self._prev_image, self._prev_pts, self._prev_corners)
+        predicted = self.predicted_rotation(t_prev, t)
+        cur, ok = self.track(image, predicted)
+        nc = int(ok.sum())
+        geometry = concurrency.submit(self._measured, k, t, nc, self._prev_pts[ok], cur[ok], self._kf_pts[ok], self._kf_index)
+        frame = _Frame(k, t, t_prev, image, previous, predicted, nc, geometry)
+        self._unfinished.append(frame)
+        self._advance(image, self._redetects(frame), cur, ok, k)
+        return lambda: self._finish(frame)
 
     def _begins(self, image: np.ndarray, t: float) -> tuple[int, float, tuple | None]:
         """The frame's start: (its index, the previous frame's time [s], and for a first frame or
@@ -220,7 +261,8 @@ class KltTracker(Tracker):
                   kf_index: int) -> tuple[FrameRecord, list[RelativeRotation], RelativeRotation | None]:
         """Frame k's record, its edges (from the previous frame; from the keyframe, when
         keyframe_interval > 0) and its step from the previous frame, from the tracked corners
-        (`prev_pts`, `kf_pts` -> `cur`; `nc` of them)."""
+        (`prev_pts`, `kf_pts` -> `cur`; `nc` of them). Reads nothing that changes: it runs on
+        another thread while the next frame is tracked."""
         c = self.config
         edges, step = [], None
         if nc >= c.threshold1:
@@ -233,6 +275,40 @@ class KltTracker(Tracker):
                         edges.append(skip)
         return frame_record(c, self.camera, k, t, nc, step, nc < c.threshold2, nc >= c.threshold1), edges, step
 
+    def _redetects(self, frame: _Frame) -> bool:
+        """Whether corners are detected afresh in `frame` for the next one: too few were tracked
+        (threshold2), or a fallback replaced LK's measurement, known once the frame is finished."""
+        if self.config.fallback == "none":
+            return frame.nc < self.config.threshold2
+        return self._finish(frame)[0].redetected
+
+    def _finish(self, frame: _Frame | None = None) -> tuple[FrameRecord, list[RelativeRotation]] | None:
+        """Run the steps after the geometry of the frames submitted, in their order, up to
+        `frame` (all, when None); `frame`'s result."""
+        while self._unfinished and (frame is None or frame.result is None):
+            unfinished = self._unfinished.popleft()
+            unfinished.result = self._after_geometry(unfinished)
+        return None if frame is None else frame.result
+
+    def _after_geometry(self, frame: _Frame) -> tuple[FrameRecord, list[RelativeRotation]]:
+        """Frame's (record, edges) from its two-view geometry: the fallback where LK's measurement
+        falls short, the step bound, the fallback's audit, the step a velocity prediction
+        extrapolates, and loop closing."""
+        record, edges, step = frame.geometry.result()
+        if self._matching is not None:
+            record, edges, step = self._matched(frame, record, edges, step)
+        aligned = False
+        if self._alignment is not None:
+            record, edges, step, aligned = self._aligned(frame, record, edges, step)
+        record, edges = self._bound.judge(record, edges, frame.t_prev, frame.t)
+        step = edges[0] if edges else None
+        if self._audit is not None:
+            self._audited(frame.k, frame.t_prev, frame.t, step, aligned and step is not None, record.status == "ok")
+        self._last_step = (step.R_i_j, frame.t - frame.t_prev) if step is not None else None
+        if self._loops is not None:
+            edges = edges + self._loops.step(frame.k, frame.image, edges, lost=record.status == "lost")
+        return record, edges
+
     def _advance(self, image: np.ndarray, redetected: bool, cur: np.ndarray, ok: np.ndarray, k: int) -> None:
         """This image becomes the previous one: corners detected anew, or those tracked kept."""
         c = self.config
@@ -243,74 +319,45 @@ class KltTracker(Tracker):
             if c.keyframe_interval > 0 and k - self._kf_index >= c.keyframe_interval:
                 self._kf_index, self._kf_pts = k, cur[ok]
 
-    @property
-    def _in_turn(self) -> bool:
-        """Whether the next frame's tracking reads this frame's measured rotation (a prediction
-        from the previous step, a fallback, loop closure): then a frame is measured before the
-        next is tracked. The paper's tracker reads only how many corners were tracked."""
-        c = self.config
-        return self._predict == "velocity" or c.fallback != "none" or c.loop_closure
-
-    def submit(self, image: np.ndarray, t: float):
-        """As `process`, with the two-view geometry on another thread while the caller goes on
-        to the next frame, when nothing the next frame's tracking reads depends on it (not
-        `_in_turn`); in turn otherwise."""
-        if self._in_turn:
-            return super().submit(image, t)
-        k, t_prev, done = self._begins(image, t)
-        if done is not None:
-            return lambda: done
-        cur, ok = self.track(image, self.predicted_rotation(t_prev, t))
-        nc = int(ok.sum())
-        measured = concurrency.submit(self._measured, k, t, nc, self._prev_pts[ok], cur[ok], self._kf_pts[ok], self._kf_index)
-        self._advance(image, nc < self.config.threshold2, cur, ok, k)
-        return lambda: self._bound.judge(*measured.result()[:2], t_prev, t)  # results are taken in order
-
-    def process(self, image: np.ndarray, t: float) -> tuple[FrameRecord, list[RelativeRotation]]:
-        """Track into `image` (uint8, sensor size) taken at `t` [s]."""
-        c = self.config
-        k, t_prev, done = self._begins(image, t)
-        if done is not None:
-            return done
-        predicted = self.predicted_rotation(t_prev, t)
-        cur, ok = self.track(image, predicted)
-        nc = int(ok.sum())
-        record, edges, step = self._measured(k, t, nc, self._prev_pts[ok], cur[ok], self._kf_pts[ok], self._kf_index)
+    def _matched(self, frame: _Frame, record: FrameRecord, edges: list[RelativeRotation],
+                 step: RelativeRotation | None) -> tuple[FrameRecord, list[RelativeRotation], RelativeRotation | None]:
+        """The `match` fallback: where LK's frame is weak or lost, the rotation from matched
+        descriptors refined by LK replaces LK's if it is more certain. (record, edges, step)."""
         detected = None
-        if self._matching is not None and record.status in ("weak", "lost"):
+        if record.status in ("weak", "lost"):
             detect = self._matching.features.detect
-            detected = detect(image)
-            matched, n_matched = self._matching.rotation(
-                self._prev_image, self._prev_pts, self._prev_detected or detect(self._prev_image), image, detected, k - 1, k)
+            detected = detect(frame.image)
+            previous = frame.previous
+            previous_detected = self._prev_detected or detect(previous.image)
+            matched, n_matched = self._matching.rotation(previous.image, previous.pts, previous_detected, frame.image, detected,
+                                                         frame.k - 1, frame.k)
             if matched is not None and (step is None or matched.sigma_rad < step.sigma_rad):
                 step, edges = matched, [matched]
-                record = frame_record(self._matching.coarse, self.camera, k, t, n_matched, matched, True, True)
+                record = frame_record(self._matching.coarse, self.camera, frame.k, frame.t, n_matched, matched, True, True)
         self._prev_detected = detected
-        pyramid = None
-        by_gyro = self._predict == "gyro" and predicted is not None
-        aligned = None
-        if (self._alignment is not None and not self._audit.off and not by_gyro
-                and (step is None or step.inliers < c.min_inliers)):
-            pyramid = self._alignment.pyramid(image)
-            aligned = self._aligned_step(image, pyramid, predicted, step, k)
+        return record, edges, step
+
+    def _aligned(self, frame: _Frame, record: FrameRecord, edges: list[RelativeRotation], step: RelativeRotation | None
+                 ) -> tuple[FrameRecord, list[RelativeRotation], RelativeRotation | None, bool]:
+        """The `align` fallback: where LK's step is missing or has under `min_inliers` inliers, no
+        gyro predicted it and the audit left it on, `_aligned_step`. (record, edges, step, and
+        whether the fallback's own step replaced LK's)."""
+        c = self.config
+        by_gyro = self._predict == "gyro" and frame.predicted is not None
+        pyramid, aligned = None, None
+        if not self._audit.off and not by_gyro and (step is None or step.inliers < c.min_inliers):
+            pyramid = self._alignment.pyramid(frame.image)
+            aligned = self._aligned_step(frame, pyramid, step)
             if aligned is not None:
                 step, n_aligned = aligned
                 edges = [step] if step is not None else []
-                record = frame_record(c, self.camera, k, t, n_aligned if step is not None else nc, step, True, True)
+                record = frame_record(c, self.camera, frame.k, frame.t, n_aligned if step is not None else frame.nc, step, True, True)
                 if step is None:
                     record = replace(record, reason="no rotation explains the two images clearly better than no motion")
                 elif n_aligned == 0:
                     record = replace(record, reason="aligned by intensities alone (no correspondences)")
         self._prev_pyramid = pyramid
-        record, edges = self._bound.judge(record, edges, t_prev, t)
-        step = edges[0] if edges else None
-        if self._audit is not None:
-            self._audited(k, t_prev, t, step, aligned is not None and step is not None, record.status == "ok")
-        self._last_step = (step.R_i_j, t - t_prev) if step is not None else None
-        self._advance(image, record.redetected, cur, ok, k)
-        if self._loops is not None:
-            edges = edges + self._loops.step(k, image, edges, lost=record.status == "lost")
-        return record, edges
+        return record, edges, step, aligned is not None
 
     def _audited(self, k: int, t_prev: float, t: float, step: RelativeRotation | None, by_fallback: bool, ok: bool) -> None:
         """Frame k's step shown to the fallback's audit: the fallback's, LK's own where it is not
@@ -318,22 +365,26 @@ class KltTracker(Tracker):
         kind = "fallback" if by_fallback else "primary" if ok and step is not None else "other"
         self._audit.observe(k, kind, None if step is None else step.R_i_j, t - t_prev)
 
-    def _aligned_step(self, image: np.ndarray, pyramid: dict, predicted: np.ndarray | None, step: RelativeRotation | None, k: int):
-        """A missing LK step, or one with too few inliers, replaced by direct alignment (see
-        KltConfig.fallback): (the new step, its correspondence count), or None to keep LK's;
-        (None, 0) where neither the alignment nor LK's step explains the two images clearly
-        better than no motion (PhotometricAlignment.explains): no measurement."""
-        align = self._alignment
-        source = self._prev_pyramid or align.pyramid(self._prev_image)
+    def _aligned_step(self, frame: _Frame, pyramid: dict, step: RelativeRotation | None):
+        """A missing LK step, or one with too few inliers, replaced by direct alignment: the views
+        aligned (from the prediction, if any, and from no motion), LK retried on the previous
+        image's corners from that rotation; the retry if it is not weak and agrees with the
+        alignment within alignment.FINEST_PIXEL_RAD, else whichever of the alignment alone (an
+        edge without correspondences) and the retry explains the two images best, if better than
+        LK's step. (The new step, its correspondence count), or None to keep LK's; (None, 0)
+        where neither the alignment nor LK's step explains the two images clearly better than no
+        motion (PhotometricAlignment.explains): no measurement."""
+        align, previous, k = self._alignment, frame.previous, frame.k
+        source = self._prev_pyramid or align.pyramid(previous.image)
 
         def score(R_prev_cur: np.ndarray) -> float:
             return align.score(source, pyramid, R_prev_cur)
 
-        R_aligned = align.align(source, pyramid, [np.eye(3)] if predicted is None else [predicted, np.eye(3)])
+        R_aligned = align.align(source, pyramid, [np.eye(3)] if frame.predicted is None else [frame.predicted, np.eye(3)])
         if R_aligned is None:
             return None if step is None or align.explains(source, pyramid, step.R_i_j) else (None, 0)
-        corners = self.detect(self._prev_image) if self._prev_corners is None else self._prev_corners
-        cur, ok = lk_track(self.camera, self._prev_image, corners, image, self._lk_params, R_aligned, self.config.fb_max_px)
+        corners = self.detect(previous.image) if previous.corners is None else previous.corners
+        cur, ok = lk_track(self.camera, previous.image, corners, frame.image, self._lk_params, R_aligned, self.config.fb_max_px)
         retried = measure(self.config, self.camera, corners[ok], cur[ok], k - 1, k) if ok.sum() >= self.config.threshold1 else None
         if (retried is not None and not weakness(self.config, retried, self.camera.focal_px)
                 and geodesic_angle(retried.R_i_j, R_aligned) <= FINEST_PIXEL_RAD):

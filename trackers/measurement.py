@@ -54,12 +54,23 @@ class PixelScale:
         `window_px` per level."""
         return max(0, levels + self.octaves), max(3, round(window_px * self.factor / 2.0**self.octaves))
 
-    def config(self, config):
-        """A KLT-like `config` (a frozen dataclass) with its extents converted:
-        `min_distance_px` and `block_size` (corners), `lk_max_level` and `lk_win_size` (flow)."""
+    def extents(self, config) -> "TrackingExtents":
+        """A KLT-like `config`'s (a frozen dataclass) corner and flow extents, stated at
+        REFERENCE_FOCAL_PX, for this camera: `min_distance_px` and `block_size` (corners),
+        `lk_max_level` and `lk_win_size` (flow)."""
         min_distance_px, block_size = self.corners(config.min_distance_px, config.block_size)
         lk_max_level, lk_win_size = self.pyramid(config.lk_max_level, config.lk_win_size)
-        return replace(config, min_distance_px=min_distance_px, block_size=block_size, lk_max_level=lk_max_level, lk_win_size=lk_win_size)
+        return TrackingExtents(min_distance_px, block_size, lk_max_level, lk_win_size)
+
+
+@dataclass(frozen=True)
+class TrackingExtents:
+    """Shi-Tomasi's and pyramidal Lucas-Kanade's extents in one camera's pixels (PixelScale.extents)."""
+
+    min_distance_px: float  # between two corners [px]
+    block_size: int  # a corner's block [px]
+    lk_max_level: int  # pyramid levels above the full image
+    lk_win_size: int  # the flow's window at each level [px]
 
 
 @dataclass(frozen=True)
@@ -78,21 +89,17 @@ class TwoViewConfig:
             lower inlier ratio or a larger inlier noise (per-axis sigma from the median
             residual [px]) is `weak`: less reliable than a typical one, not necessarily wrong
             (the frame is marked so; the edge is still used unless `measure` drops it as too
-            doubtful: an essential matrix with fewer inliers, or a weak rotation that does not
-            explain its correspondences). The ratio and the residual are
-            calibrated against ground truth (benchmarks/status_calibration.py,
-            docs/frame_status.md): with the paper's configuration on the choice data, at most
-            10 % of the right measurements are weak and as many wrong ones as possible are.
+            doubtful). The ratio and the residual are the thresholds that, with the paper's
+            configuration, call at most 10 % of the right measurements weak and as many wrong
+            ones as possible (benchmarks/status_calibration.py; docs/frame_status.md#protocol).
             The residual is in pixels, not per focal length: LK's localisation noise and the
             1 px inlier threshold it is cut at are properties of image patches in pixels.
             15 inliers is three times the five-point minimum (a count follows the scene's
             corners, so data cannot calibrate it for every frontend).
         max_angular_acceleration_deg_s2: a step whose rotation departs from the rate of the
-            last `ok` step by more than this acceleration allows is doubted (StepBound: an
-            `ok` one becomes `weak`, a `weak` one `lost`). 10 000 deg/s^2 is above the most abrupt
-            rotations a person's head is put through (the head impulse test's peaks, 3 000 to
-            6 000 deg/s^2: Halmagyi and Curthoys 1988, MacDougall et al. 2009), so hand-held
-            and head-mounted motion keeps its weak steps; raise it for a drone or a vehicle.
+            last `ok` step by more than this acceleration allows is doubted (StepBound). The
+            default lies above the most abrupt rotations a person's head is put through
+            (docs/frame_status.md cites the measurements); raise it for a drone or a vehicle.
     """
 
     geometry: str = "essential"
@@ -125,8 +132,8 @@ def measure(
     - an essential matrix with fewer than `min_inliers` inliers: support a robust fit finds
       by chance (the five-point solver fits any 5 points, and hundreds of hypotheses find a
       few more within a pixel of their epipolar lines: a band across the image, where the
-      rotation and homography models need a point within a pixel of a point); on frames
-      whose events had ended such steps turned the camera by 116-180 degrees;
+      rotation and homography models need a point within a pixel of a point; what such
+      steps did: docs/frame_status.md);
     - weak otherwise, with a rotation that does not explain the correspondences (all of
       them, two_view.explains): it turns them far further than they moved.
 

@@ -1,13 +1,21 @@
-"""The paper's tracker on frames warped by known rotations, and its threshold logic."""
+"""The paper's tracker on frames warped by known rotations, its threshold logic, and its
+results taken late (the next frame tracked meanwhile) equal to its results taken at once."""
+
+import dataclasses
+import functools
+import re
+import typing
 
 import cv2
 import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
+from eas_vo import concurrency
 from eas_vo.errors import ConfigError
 from eas_vo.trackers.klt import KltConfig, KltTracker
 from eas_vo.camera import CameraModel
+from eas_vo.types import ImuSeries
 from helpers import CAMERA, K, assert_rotations_close, large_rotation, textured_image, warp_by_rotation
 
 @pytest.mark.parametrize("seed", range(6))
@@ -190,3 +198,103 @@ def test_the_same_views_through_more_pixels_are_tracked_alike(seed):
         record, edges = tracker.process(np.repeat(np.repeat(second, n, 0), n, 1), 0.05)
         assert record.inlier_ratio > 0.5 and (record.status == "ok" or n == 4), (n, record)
         assert_rotations_close(edges[0].R_i_j, step, np.radians(0.15 if n > 1 else 0.4))
+
+
+# ----------------------------------------------------------------------------- threads
+
+
+@functools.cache
+def turning_sequence() -> tuple[list[float], list[np.ndarray], ImuSeries]:
+    """Times [s], images and the gyro (camera frame) of 30 frames: a pan out at 1.5 deg a frame,
+    then after a gap of three frame intervals a turn of 25 deg that LK loses and either fallback
+    measures, then back to the first view in 18 steps (where a loop closes with frame 0)."""
+    out = Rotation.from_rotvec(np.radians([0.3, 1.5, 0.2]))
+    turn = Rotation.from_rotvec(np.radians([12.0, -18.0, -12.0]))
+    R_c0_c11 = Rotation.from_rotvec(10 * out.as_rotvec()) * turn
+    back = Rotation.from_rotvec(-R_c0_c11.as_rotvec() / 18)
+    steps = [(out, 0.05)] * 10 + [(turn, 0.15)] + [(back, 0.05)] * 18  # (R_{k-1}_{k}, interval [s])
+    base = textured_image(4, shapes=300)
+    times, images, R_c0_ck = [0.0], [base], Rotation.identity()
+    for step, dt_s in steps:
+        R_c0_ck = R_c0_ck * step
+        times.append(times[-1] + dt_s)
+        images.append(warp_by_rotation(base, R_c0_ck.as_matrix().T))
+    t_imu = np.arange(0.0, times[-1] + 0.01, 0.005)
+    interval = np.clip(np.searchsorted(times, t_imu, side="right") - 1, 0, len(steps) - 1)
+    rates = np.array([step.as_rotvec() / dt_s for step, dt_s in steps])[interval]
+    return times, images, ImuSeries(t_imu, np.zeros_like(rates), rates)
+
+
+def allowed_values(name: str) -> list[str]:
+    """The values KltConfig's validation allows for its text field `name`."""
+    try:
+        dataclasses.replace(KltConfig(), **{name: ""}).validate()
+    except ConfigError as refused:
+        allowed = re.fullmatch(rf"{name} = ''; allowed: (.+)", str(refused))
+        if allowed:
+            return allowed.group(1).split(", ")
+    raise AssertionError(f"KltConfig.{name} is text but not a choice: give the thread test its values")
+
+
+def choices() -> list[tuple[str, object]]:
+    """(field, value): every value of every choice field of KltConfig (a bool's both, a text
+    field's every allowed value), so a new option is tried without being listed here."""
+    types = typing.get_type_hints(KltConfig)
+    return [(f.name, value) for f in dataclasses.fields(KltConfig)
+            for value in ((False, True) if types[f.name] is bool else allowed_values(f.name) if types[f.name] is str else ())]
+
+
+#: What a choice needs switched on to act at all: its values are tried with these set.
+ENABLED_BY = {"fallback_detector": {"fallback": "match"}, "loop_detector": {"loop_closure": True},
+              "loop_geometry": {"loop_closure": True}}
+
+
+@functools.cache
+def tracked(config: KltConfig, threads: int) -> tuple:
+    """The turning sequence's (record, edges as bytes) per frame and the tracker's warnings: with
+    one thread, each frame's result taken at once (`process`, as the run with --threads 1);
+    with more, each taken after the next frame was submitted (as the run with --threads 2)."""
+    times, images, imu = turning_sequence()
+    before = concurrency.threads()
+    concurrency.set_threads(threads)
+    try:
+        tracker = KltTracker(config, CAMERA, imu=imu)
+        if threads == 1:
+            results = [tracker.process(image, t) for t, image in zip(times, images)]
+        else:
+            results, pending = [], None
+            for t, image in zip(times, images):
+                submitted = tracker.submit(image, t)
+                if pending is not None:
+                    results.append(pending())
+                pending = submitted
+            results.append(pending())
+    finally:
+        concurrency.set_threads(before)
+    return tuple((record, tuple(repr(dataclasses.replace(e, R_i_j=e.R_i_j.tobytes())) for e in edges))
+                 for record, edges in results), tracker.tracker_warnings
+
+
+@pytest.mark.parametrize("field, value", choices(), ids=lambda value: str(value))
+def test_results_taken_late_equal_those_taken_at_once(field, value):
+    """Whatever a choice field says, a frame finished while the next one is tracked gives what
+    the serial path gives, to the bit: what the next frame's tracking reads of it is there."""
+    config = dataclasses.replace(KltConfig(), **{**ENABLED_BY.get(field, {}), field: value})
+    config.validate()
+    assert tracked(config, 2) == tracked(config, 1)
+
+
+def test_the_thread_tests_sequence_exercises_the_options():
+    """LK loses the turn (frame 11), which either fallback measures; a loop closes; each
+    prediction changes what is measured."""
+    def frame(config: KltConfig, k: int):
+        return tracked(config, 1)[0][k]
+
+    assert frame(KltConfig(), 11)[0].status == "lost"
+    for fallback in ("match", "align"):
+        record, edges = frame(KltConfig(fallback=fallback), 11)
+        assert record.status == "ok" and record.redetected and len(edges) == 1, fallback
+    frames, _ = tracked(KltConfig(loop_closure=True), 1)
+    assert any("loop=True" in edge for _, edges in frames for edge in edges)
+    paper = tracked(KltConfig(), 1)
+    assert all(tracked(KltConfig(predict=predict), 1) != paper for predict in ("gyro", "velocity"))

@@ -7,7 +7,7 @@ import pytest
 from eas_vo.geometry.rotations import geodesic_angle, rotvec_to_matrix
 from eas_vo.geometry.two_view import bearings, explains, rotation_from_correspondences
 from eas_vo.trackers.klt import KltConfig, KltTracker
-from eas_vo.trackers.measurement import REFERENCE_FOCAL_PX, PixelScale, TwoViewConfig, measure, weakness
+from eas_vo.trackers.measurement import REFERENCE_FOCAL_PX, PixelScale, TrackingExtents, TwoViewConfig, measure, weakness
 from eas_vo.camera import CameraModel
 
 
@@ -24,19 +24,20 @@ def camera_of_focal(focal_px: float) -> CameraModel:
     (100.0, 2, 21, 3.5, 4),    # half the reference: a level less
 ])
 def test_extents_follow_the_focal_length(focal_px, levels, window, min_distance, block):
-    config = PixelScale.of(camera_of_focal(focal_px)).config(KltConfig())
-    assert (config.lk_max_level, config.lk_win_size, config.block_size) == (levels, window, block)
-    assert config.min_distance_px == pytest.approx(min_distance, abs=1e-3)
-    # precisions stay the sensor's pixels
-    reference = KltConfig()
-    assert (config.ransac_threshold_px, config.max_residual_px, config.lk_epsilon_px, config.fb_max_px) == (
-        reference.ransac_threshold_px, reference.max_residual_px, reference.lk_epsilon_px, reference.fb_max_px)
+    extents = PixelScale.of(camera_of_focal(focal_px)).extents(KltConfig())
+    assert (extents.lk_max_level, extents.lk_win_size, extents.block_size) == (levels, window, block)
+    assert extents.min_distance_px == pytest.approx(min_distance, abs=1e-3)
 
 
-def test_the_tracker_works_with_the_converted_extents():
-    tracker = KltTracker(KltConfig(lk_max_level=2), camera_of_focal(2 * REFERENCE_FOCAL_PX))
-    assert (tracker.config.lk_max_level, tracker.config.lk_win_size, tracker.config.min_distance_px) == (3, 21, 14.0)
-    assert KltTracker(KltConfig(), None).config == KltConfig()
+def test_the_tracker_works_with_the_converted_extents_and_keeps_its_config():
+    """The extents go into `extents`; `config` stays what the run's config.toml records, and
+    precisions in pixels (thresholds, LK's step, forward-backward) stay the sensor's."""
+    config = KltConfig(lk_max_level=2, fb_max_px=1.0)
+    tracker = KltTracker(config, camera_of_focal(2 * REFERENCE_FOCAL_PX))
+    assert (tracker.extents.lk_max_level, tracker.extents.lk_win_size, tracker.extents.min_distance_px) == (3, 21, 14.0)
+    assert (tracker._lk_params["winSize"], tracker._lk_params["maxLevel"], tracker._lk_params["criteria"][1:]) == ((21, 21), 3, (30, 0.01))
+    assert tracker.config is config
+    assert KltTracker(KltConfig(), None).extents == TrackingExtents(7.0, 7, 3, 21)
 
 
 #: Sensors of two sizes with the same field of view (focal length in proportion to the width).
