@@ -119,5 +119,6 @@ class _ZipMember:
 
 
 def open_source(spec: str | Path) -> FolderSource | ZipSource:
+    """The recording at `spec`: the dataset's `.zip`, read in place, or a folder."""
     path = Path(spec)
     return ZipSource(path) if path.suffix.lower() == ".zip" else FolderSource(path)

@@ -18,8 +18,9 @@ import numpy as np
 
 from eas_vo import concurrency
 from eas_vo.geometry.rotations import geodesic_angle
-from eas_vo.trackers.motion import scaled_rotation
+from eas_vo.geometry.rotations import scaled_rotation
 from eas_vo.camera import CameraModel
+from eas_vo.geometry.rotations import exp_so3, rotvec_to_matrix
 
 #: Focal lengths [px] of the resolutions the alignment and the score work at, whatever the
 #: sensor: each view is resized to them, so every figure below in pixels of a resolution is an
@@ -134,7 +135,7 @@ class PhotometricAlignment:
         self._maps = camera.undistort_maps()
         seen = self._undistort(np.full((camera.height, camera.width), 255, np.uint8)) == 255
         self._levels = {f: _Level(camera, seen, f) for f in sorted({SCORE_FOCAL_PX, *ALIGN_FOCAL_PX})}
-        self._grid = np.array([cv2.Rodrigues(np.radians([tilt, pan, roll]))[0]
+        self._grid = np.array([rotvec_to_matrix(np.radians([tilt, pan, roll]))
                                for roll in SEARCH_ROLL_DEG for pan in SEARCH_GRID_DEG for tilt in SEARCH_GRID_DEG])
         self._grid_warps = self._levels[ALIGN_FOCAL_PX[0]].warps(self._grid)  # the same for every pair of views
         # the last pair of views scored and its scores by rotation (one tracker's, not shared across threads)
@@ -431,26 +432,12 @@ def _refine(source, target, J, K, Rs, bearings, seen, min_count, iterations, sto
         deltas = _gauss_newton_steps(source, target, J, KRs, bearings, seen, min_count)
         still = np.empty(len(moving), np.bool_)
         for m, c in enumerate(moving):
-            Rs[c] = Rs[c] @ _exp_so3(-deltas[m])
+            Rs[c] = Rs[c] @ exp_so3(-deltas[m])
             still[m] = np.sqrt(deltas[m, 0] ** 2 + deltas[m, 1] ** 2 + deltas[m, 2] ** 2) >= stop_rad
         moving = moving[still]
         if len(moving) == 0:
             break
     return Rs
-
-
-@numba.njit(cache=True, nogil=True)
-def _exp_so3(d):
-    """The rotation matrix of rotation vector d [rad] (Rodrigues' formula)."""
-    theta = np.sqrt(d[0] ** 2 + d[1] ** 2 + d[2] ** 2)
-    if theta < 1e-300:
-        return np.eye(3)
-    x, y, z = d[0] / theta, d[1] / theta, d[2] / theta
-    c, s = np.cos(theta), np.sin(theta)
-    c1 = 1.0 - c
-    return np.array([[c + c1 * x * x, c1 * x * y - s * z, c1 * x * z + s * y],
-                     [c1 * x * y + s * z, c + c1 * y * y, c1 * y * z - s * x],
-                     [c1 * x * z - s * y, c1 * y * z + s * x, c + c1 * z * z]])
 
 
 @numba.njit(cache=True, nogil=True)

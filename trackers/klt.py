@@ -25,7 +25,8 @@ from eas_vo.trackers.alignment import FINEST_PIXEL_RAD, FallbackAudit, Photometr
 from eas_vo.trackers.features import DETECTORS, Features, RefinedMatching
 from eas_vo.trackers.loops import LoopClosureConfig, LoopCloser
 from eas_vo.trackers.measurement import PixelScale, StepBound, TwoViewConfig, frame_record, measure, weakness
-from eas_vo.trackers.motion import lk_params, lk_track, scaled_rotation
+from eas_vo.trackers.motion import lk_params, lk_track
+from eas_vo.geometry.rotations import scaled_rotation
 from eas_vo.camera import CameraModel
 from eas_vo.types import FrameRecord, ImuSeries, RelativeRotation
 from eas_vo.validation import check_choice, check_range

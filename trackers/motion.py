@@ -10,12 +10,6 @@ import numpy as np
 from eas_vo.camera import CameraModel
 
 
-def scaled_rotation(R: np.ndarray, factor: float) -> np.ndarray:
-    """The rotation about the same axis by `factor` times the angle (constant angular velocity)."""
-    rotvec, _ = cv2.Rodrigues(np.asarray(R, float))
-    return cv2.Rodrigues(rotvec * factor)[0]
-
-
 def lk_params(win_size: int = 21, max_level: int = 3, max_iterations: int = 30, epsilon_px: float = 0.01) -> dict:
     """Pyramidal Lucas-Kanade settings: window [px], pyramid levels, and when each level stops:
     after `max_iterations` or once a step is below `epsilon_px` [px] (OpenCV's defaults)."""

@@ -39,6 +39,7 @@ SAMPLE_BYTES = 1 << 16  # content sampled for a file's identity: its start, midd
 
 
 def cache_key(*parts) -> str:
+    """A cache file's name: the SHA-1 of `parts` (a source's identity and the reading options)."""
     return hashlib.sha1("|".join(map(str, parts)).encode()).hexdigest()
 
 
@@ -64,6 +65,7 @@ def records_checksum(payload) -> int:
 
 
 def cache_path(key: str) -> Path:
+    """Where the cache of `key` lives: the cache folder's `events` part."""
     return cache_folder("events", "binary event caches; rebuilt from their source when next read") / f"{key}.ev"
 
 

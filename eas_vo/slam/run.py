@@ -148,6 +148,9 @@ class OrbSlam3Process:
 
 @dataclass
 class FrameResult:
+    """One frame of an ORB-SLAM3 run: its index, time [s], tracking state, tracked map points and
+    the pose ORB-SLAM3 gave then (camera-to-world, 4x4, its map's frame; None while not tracking)."""
+
     index: int
     t: float
     state: str
@@ -350,6 +353,8 @@ def summarise(runs: list[dict]) -> dict:
 
 
 def summary_markdown(label: str, frontend: str, summary: dict, orb: dict) -> str:
+    """summary.md: the runs' statuses and each figure's median, min and max over the runs, with the
+    ORB statistics of the images (`orb`)."""
     lines = [f"# ORB-SLAM3 (monocular) on {frontend} images of {label}", "",
              f"{summary['runs']} run(s): " + ", ".join(f"{n} {s}" for s, n in summary["statuses"].items()), "",
              "| figure | median | min | max | runs |", "|---|---|---|---|---|"]

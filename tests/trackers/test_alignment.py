@@ -205,13 +205,6 @@ def test_a_grid_too_large_to_tabulate_is_projected_with_the_same_rotation(monkey
         projected._levels[25.0].scores([a[50.0]], [b["pixels"][25.0]], np.eye(3)[None])
 
 
-def test_the_refinements_rotation_update_is_rodrigues_formula():
-    from eas_vo.trackers.alignment import _exp_so3
-
-    for d in ([0.0, 0.0, 0.0], [1e-12, 0.0, -2e-12], [0.01, -0.02, 0.005], [0.5, 1.0, -2.0]):
-        np.testing.assert_allclose(_exp_so3(np.array(d)), cv2.Rodrigues(np.array(d))[0], rtol=0, atol=1e-15)
-
-
 @pytest.mark.parametrize("threads", [1, 2, 3])
 def test_scores_do_not_depend_on_the_thread_count(threads):
     from eas_vo import concurrency

@@ -1,10 +1,10 @@
-"""Rotation helpers: the gyro's rotation over an interval."""
+"""Rotation helpers: the one SO(3) exponential (scipy and compiled) and the gyro's rotation over an interval."""
 
 import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from eas_vo.geometry.rotations import geodesic_angle, gyro_rotation
+from eas_vo.geometry.rotations import geodesic_angle, gyro_rotation, matrix_to_rotvec, rotvec_to_matrix
 from eas_vo.types import ImuSeries
 
 
@@ -43,3 +43,25 @@ def test_readings_in_the_camera_frame_turn_the_camera_as_seen_from_it(rotvec):
     np.testing.assert_allclose(cam.acc[0], [0.0, 9.81, 0.0], atol=1e-12)
     np.testing.assert_allclose(cam.t, t_imu - 0.02)
     assert geodesic_angle(gyro_rotation(cam, 0.3, 0.35), Rotation.from_rotvec(omega_cam * 0.05).as_matrix()) < 1e-12
+
+
+def test_the_compiled_exponential_is_rodrigues_formula_as_opencv_and_scipy_compute_it():
+    """exp_so3 (for numba kernels) against OpenCV's Rodrigues and scipy (rotvec_to_matrix), from
+    no rotation through tiny ones to beyond a half turn."""
+    import cv2
+
+    from eas_vo.geometry.rotations import exp_so3
+
+    for d in ([0.0, 0.0, 0.0], [1e-12, 0.0, -2e-12], [0.01, -0.02, 0.005], [0.5, 1.0, -2.0], [3.0, -1.0, 0.5]):
+        np.testing.assert_allclose(exp_so3(np.array(d)), cv2.Rodrigues(np.array(d))[0], rtol=0, atol=1e-15)
+        np.testing.assert_allclose(exp_so3(np.array(d)), rotvec_to_matrix(np.array(d)), rtol=0, atol=1e-15)
+
+
+@pytest.mark.parametrize("factor", [0.0, 0.5, 1.0, 2.5])
+def test_a_scaled_rotation_turns_about_the_same_axis_by_the_factor(factor):
+    from eas_vo.geometry.rotations import scaled_rotation
+
+    R = rotvec_to_matrix(np.array([0.2, -0.4, 0.1]))
+    np.testing.assert_allclose(matrix_to_rotvec(scaled_rotation(R, factor)), factor * np.array([0.2, -0.4, 0.1]),
+                               rtol=0, atol=1e-14)
+
