@@ -32,6 +32,11 @@ class ChainBackend(Backend):
     description = "multiply consecutive relative rotations, no optimisation (the paper)"
 
     def solve(
-        self, n_frames: int, edges: Sequence[RelativeRotation], *, times: np.ndarray | None = None, imu: ImuSeries | None = None
+        self,
+        n_frames: int,
+        edges: Sequence[RelativeRotation],
+        *,
+        times: np.ndarray | None = None,
+        imu: ImuSeries | None = None,
     ) -> BackendResult:
         return BackendResult(chain_rotations(n_frames, edges))

@@ -55,32 +55,32 @@ ISAM2_RELINEARIZE_SKIP = 1
 @dataclass(frozen=True)
 class GtsamConfig:
     """Attributes:
-        mode: `batch` (Levenberg-Marquardt over all frames) or `online` (iSAM2, frame by frame:
-            BackendResult.causal_R_w_c holds each frame's estimate as it was when that frame
-            arrived).
-        edge_noise: how an edge's noise [rad] follows from its quality: `inliers` (the default):
-            sigma_rad * sqrt(reference_inliers / inliers); `residual`: the edge's own inlier
-            noise over sqrt(inliers) divided by the inlier ratio (RelativeRotation.sigma_rad),
-            never below sigma_floor_rad. An edge with its estimator's own sigma
-            (RelativeRotation.estimated_sigma_rad, e.g. cmax's) gets that in either mode.
-        sigma_rad: (`inliers`) noise of an edge measured with `reference_inliers` inliers.
-        reference_inliers: see sigma_rad.
-        sigma_floor_rad: (`residual`) the smallest edge noise [rad].
-        gap_sigma_rad: a frame without a measurement is tied to the previous one by an
-            identity edge this loose (the chain's "keep the previous rotation").
-        robust, robust_k: robust kernel (`none`, `huber`, `cauchy`) and its threshold in sigmas.
-        iterations: Levenberg-Marquardt iterations (batch) or extra iSAM2 updates at the end.
-        gyro: fuse the dataset's gyro: `true` (a dataset without an IMU is refused), `false`,
-            or `auto` (when the dataset has an IMU): readings preintegrated between frames
-            (PreintegratedAhrsMeasurements) in AHRSFactors sharing one bias variable; the
-            readings come in the camera frame (the run's `imu_rotvec_cam`).
-        gyro_noise: gyro white-noise density [rad/s/sqrt(Hz)].
-        gyro_bias_sigma: prior on the gyro bias [rad/s]: its standard deviation about zero.
-            Both default to the DAVIS IMU the simulator models (ImuModel: gyro_noise,
-            gyro_bias); for another IMU, take them from its calibration (e.g. Kalibr's
-            gyroscope_noise_density). A looser prior lets the images' own systematic errors
-            (lag, blur) pass for a gyro bias that the graph then integrates (docs/imu.md,
-            "How readings are integrated").
+    mode: `batch` (Levenberg-Marquardt over all frames) or `online` (iSAM2, frame by frame:
+        BackendResult.causal_R_w_c holds each frame's estimate as it was when that frame
+        arrived).
+    edge_noise: how an edge's noise [rad] follows from its quality: `inliers` (the default):
+        sigma_rad * sqrt(reference_inliers / inliers); `residual`: the edge's own inlier
+        noise over sqrt(inliers) divided by the inlier ratio (RelativeRotation.sigma_rad),
+        never below sigma_floor_rad. An edge with its estimator's own sigma
+        (RelativeRotation.estimated_sigma_rad, e.g. cmax's) gets that in either mode.
+    sigma_rad: (`inliers`) noise of an edge measured with `reference_inliers` inliers.
+    reference_inliers: see sigma_rad.
+    sigma_floor_rad: (`residual`) the smallest edge noise [rad].
+    gap_sigma_rad: a frame without a measurement is tied to the previous one by an
+        identity edge this loose (the chain's "keep the previous rotation").
+    robust, robust_k: robust kernel (`none`, `huber`, `cauchy`) and its threshold in sigmas.
+    iterations: Levenberg-Marquardt iterations (batch) or extra iSAM2 updates at the end.
+    gyro: fuse the dataset's gyro: `true` (a dataset without an IMU is refused), `false`,
+        or `auto` (when the dataset has an IMU): readings preintegrated between frames
+        (PreintegratedAhrsMeasurements) in AHRSFactors sharing one bias variable; the
+        readings come in the camera frame (the run's `imu_rotvec_cam`).
+    gyro_noise: gyro white-noise density [rad/s/sqrt(Hz)].
+    gyro_bias_sigma: prior on the gyro bias [rad/s]: its standard deviation about zero.
+        Both default to the DAVIS IMU the simulator models (ImuModel: gyro_noise,
+        gyro_bias); for another IMU, take them from its calibration (e.g. Kalibr's
+        gyroscope_noise_density). A looser prior lets the images' own systematic errors
+        (lag, blur) pass for a gyro bias that the graph then integrates (docs/imu.md,
+        "How readings are integrated").
     """
 
     mode: str = "batch"
@@ -156,7 +156,9 @@ class GtsamBackend(Backend):
         measured = set()
         for e in edges:
             sigma = self.edge_sigma(e)
-            by_frame[e.j].append(gtsam.BetweenFactorRot3(A(e.i), A(e.j), gtsam.Rot3(e.R_i_j), self._noise(gtsam, sigma)))
+            by_frame[e.j].append(
+                gtsam.BetweenFactorRot3(A(e.i), A(e.j), gtsam.Rot3(e.R_i_j), self._noise(gtsam, sigma))
+            )
             measured.add(e.j)
         gap = gtsam.noiseModel.Isotropic.Sigma(3, c.gap_sigma_rad)
         for k in range(1, n_frames):
@@ -164,7 +166,9 @@ class GtsamBackend(Backend):
                 by_frame[k].append(gtsam.BetweenFactorRot3(A(k - 1), A(k), gtsam.Rot3(), gap))
         return by_frame
 
-    def _gyro_factors(self, gtsam, by_frame: dict, times: np.ndarray, imu, edges: Sequence[RelativeRotation]) -> list[str]:
+    def _gyro_factors(
+        self, gtsam, by_frame: dict, times: np.ndarray, imu, edges: Sequence[RelativeRotation]
+    ) -> list[str]:
         """AHRSFactors between consecutive frames (rates linear between readings: ImuSeries.rates_between)
         over the intervals the gyro measures (ImuSeries.covered) that last some time, except where a
         confident measurement of the images contradicts the gyro (_contradicted): a gate, so that a
@@ -176,7 +180,9 @@ class GtsamBackend(Backend):
         c = self.config
         params = gtsam.PreintegratedRotationParams()
         params.setGyroscopeCovariance(c.gyro_noise**2 * np.eye(3))
-        by_frame[0].append(gtsam.PriorFactorVector(B(0), np.zeros(3), gtsam.noiseModel.Isotropic.Sigma(3, c.gyro_bias_sigma)))
+        by_frame[0].append(
+            gtsam.PriorFactorVector(B(0), np.zeros(3), gtsam.noiseModel.Isotropic.Sigma(3, c.gyro_bias_sigma))
+        )
         measured = imu.covered(times[:-1], times[1:]) & (np.diff(times) > 0)  # no factor over no time
         contradicted = self._contradicted(times, edges, imu)
         for k in np.flatnonzero(measured & ~contradicted) + 1:
@@ -187,8 +193,10 @@ class GtsamBackend(Backend):
         if not contradicted.any():
             return []
         first = int(np.flatnonzero(contradicted)[0]) + 1
-        return [f"the gyro was left out of {int(contradicted.sum())} frame interval(s), where a confident measurement of "
-                f"the images contradicts it (the first ending at frame {first}, t={times[first]:.6f} s)"]
+        return [
+            f"the gyro was left out of {int(contradicted.sum())} frame interval(s), where a confident measurement of "
+            f"the images contradicts it (the first ending at frame {first}, t={times[first]:.6f} s)"
+        ]
 
     @staticmethod
     def _contradicted(times: np.ndarray, edges: Sequence[RelativeRotation], imu: ImuSeries) -> np.ndarray:
@@ -205,7 +213,12 @@ class GtsamBackend(Backend):
         return out
 
     def solve(
-        self, n_frames: int, edges: Sequence[RelativeRotation], *, times: np.ndarray | None = None, imu: ImuSeries | None = None
+        self,
+        n_frames: int,
+        edges: Sequence[RelativeRotation],
+        *,
+        times: np.ndarray | None = None,
+        imu: ImuSeries | None = None,
     ) -> BackendResult:
         import gtsam
 
@@ -222,8 +235,10 @@ class GtsamBackend(Backend):
             solved = solve(gtsam, n_frames, by_frame, initial_R, with_bias)
         except RuntimeError as exc:  # gtsam's own errors (an indeterminate system, ...) are RuntimeErrors
             reason = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
-            failed = (f"the pose graph could not be solved ({self.config.mode}: {reason}): "
-                      "the rotations are the chained measurements, unsmoothed")
+            failed = (
+                f"the pose graph could not be solved ({self.config.mode}: {reason}): "
+                "the rotations are the chained measurements, unsmoothed"
+            )
             return BackendResult(initial_R, warnings=(*warnings, failed))
         return replace(solved, warnings=(*warnings, *solved.warnings))
 
@@ -247,7 +262,9 @@ class GtsamBackend(Backend):
         start_error = graph.error(initial)
         result = optimizer.optimize()
         if not np.isfinite(optimizer.error()) or optimizer.error() > start_error:
-            raise RuntimeError(f"Levenberg-Marquardt ended at error {optimizer.error():.6g}, above its start {start_error:.6g}")
+            raise RuntimeError(
+                f"Levenberg-Marquardt ended at error {optimizer.error():.6g}, above its start {start_error:.6g}"
+            )
         R_w_c = np.stack([result.atRot3(A(k)).matrix() for k in range(n_frames)])
         warnings = ()
         if optimizer.iterations() >= self.config.iterations:
@@ -256,7 +273,8 @@ class GtsamBackend(Backend):
                 warnings = (
                     f"the pose graph's Levenberg-Marquardt stopped at backend.iterations = {self.config.iterations} before "
                     f"converging (error {start_error:.6g} -> {optimizer.error():.6g}; one more step turns a frame by "
-                    f"{np.degrees(moved):.2g} deg): raise it",)
+                    f"{np.degrees(moved):.2g} deg): raise it",
+                )
         return BackendResult(R_w_c, warnings=warnings)
 
     @staticmethod
@@ -302,4 +320,3 @@ class GtsamBackend(Backend):
             isam.update()
         estimate = isam.calculateEstimate()
         return BackendResult(np.stack([estimate.atRot3(A(k)).matrix() for k in range(n_frames)]), causal_R_w_c=causal)
-

@@ -89,8 +89,11 @@ def main() -> None:
         for every in args.every:
             metrics, seconds, found = instrumented_run(thinned(args.real, Path(tmp) / f"every-{every}", every))
             ms = 1e3 * np.array(seconds)
-            print(f"| every {every} | {len(ms)} | {np.median(ms):.1f} / {ms.mean():.1f} | {metrics['frames_per_s']:.0f} "
-                  f"| {metrics['ape_mean_rad']:.4f} |", flush=True)
+            print(
+                f"| every {every} | {len(ms)} | {np.median(ms):.1f} / {ms.mean():.1f} | {metrics['frames_per_s']:.0f} "
+                f"| {metrics['ape_mean_rad']:.4f} |",
+                flush=True,
+            )
             rotations = np.array([np.full((3, 3), np.nan) if R is None else R for R in found]).reshape(-1, 3, 3)
             saved[f"every{every}"], saved[f"every{every}_ape"] = rotations, metrics["ape_mean_rad"]
             if reference is not None:
@@ -100,8 +103,10 @@ def main() -> None:
                     continue
                 none_differs = int((np.isnan(theirs[:, 0, 0]) != np.isnan(rotations[:, 0, 0])).sum())
                 angles = [angle_deg(a, b) for a, b in zip(rotations, theirs) if not np.isnan(a[0, 0] + b[0, 0])]
-                print(f"  every {every}: found/none differs on {none_differs}; largest angle between the rotations "
-                      f"{max(angles, default=0.0):.4f} deg; APE {metrics['ape_mean_rad'] - float(reference[f'every{every}_ape']):+.2e} rad")
+                print(
+                    f"  every {every}: found/none differs on {none_differs}; largest angle between the rotations "
+                    f"{max(angles, default=0.0):.4f} deg; APE {metrics['ape_mean_rad'] - float(reference[f'every{every}_ape']):+.2e} rad"
+                )
     if args.save:
         np.savez(args.save, **saved)
 

@@ -25,8 +25,23 @@ SOURCES = "original,histeq,slice,ts,sits,eas"
 def grid_seconds(dataset: str, jobs: int, folder: Path) -> tuple[float, int]:
     """Wall time [s] of one `eas-vo compare` of the six sources with --config paper into a new
     folder, and how many cells it ran."""
-    argv = [sys.executable, "-m", "eas_vo", "compare", "--dataset", dataset, "--frontends", SOURCES, "--config", "paper",
-            "--jobs", str(jobs), "--quiet", "--out", str(folder)]
+    argv = [
+        sys.executable,
+        "-m",
+        "eas_vo",
+        "compare",
+        "--dataset",
+        dataset,
+        "--frontends",
+        SOURCES,
+        "--config",
+        "paper",
+        "--jobs",
+        str(jobs),
+        "--quiet",
+        "--out",
+        str(folder),
+    ]
     t = time.perf_counter()
     done = subprocess.run(argv, capture_output=True, text=True)
     seconds = time.perf_counter() - t
@@ -48,7 +63,9 @@ def main() -> None:
             for jobs in seconds:
                 took, cells = grid_seconds(args.dataset, jobs, Path(tmp) / f"jobs{jobs}-{r}")
                 seconds[jobs].append(took)
-    print(f"compare, the six sources with paper.toml on {args.dataset}: {cells} cells (best of {args.repeat}, alternated):")
+    print(
+        f"compare, the six sources with paper.toml on {args.dataset}: {cells} cells (best of {args.repeat}, alternated):"
+    )
     for jobs, times in seconds.items():
         print(f"  --jobs {jobs}: {min(times):6.1f} s  ({cells / min(times):.2f} cells/s)")
     if args.jobs > 1:

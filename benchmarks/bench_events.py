@@ -89,8 +89,12 @@ def make_aedat4(text: Path) -> Path:
         for start in range(0, len(events), 100_000):
             chunk = events[start : start + 100_000]
             store = dv.EventStore()
-            for t, x, y, p in zip(np.round(chunk["t"] * 1e6).astype(np.int64).tolist(), chunk["x"].tolist(),
-                                  chunk["y"].tolist(), chunk["p"].tolist()):
+            for t, x, y, p in zip(
+                np.round(chunk["t"] * 1e6).astype(np.int64).tolist(),
+                chunk["x"].tolist(),
+                chunk["y"].tolist(),
+                chunk["p"].tolist(),
+            ):
                 store.push_back(t, x, y, p > 0)
             writer.writeEvents(store)
         del writer  # closing writes the file's index
@@ -142,8 +146,9 @@ def make_mvsec_file(text: Path) -> Path:
         step = 1 << 20
         for start in range(0, len(events), step):
             chunk = events[start : start + step]
-            dset[start : start + len(chunk)] = np.column_stack([chunk["x"], chunk["y"], chunk["t"],
-                                                               np.where(chunk["p"] > 0, 1.0, -1.0)])
+            dset[start : start + len(chunk)] = np.column_stack(
+                [chunk["x"], chunk["y"], chunk["t"], np.where(chunk["p"] > 0, 1.0, -1.0)]
+            )
     return path
 
 
@@ -160,8 +165,9 @@ def mvsec_reads(path: Path) -> tuple:
 
     from eas_vo.datasets.mvsec import MvsecConfig, MvsecDataset
 
-    config = MvsecConfig(calibration=str(path.with_name(path.name.replace("_data.hdf5", "_camchain.yaml"))),
-                         width=240, height=180)
+    config = MvsecConfig(
+        calibration=str(path.with_name(path.name.replace("_data.hdf5", "_camchain.yaml"))), width=240, height=180
+    )
 
     def library():
         with h5py.File(path, "r") as f:
@@ -201,8 +207,13 @@ def format_stage(name: str, path: Path, repeat: int, out: dict) -> None:
                 out["events"] = read()
                 times[part].append(time.perf_counter() - t0)
         out["seconds"] = min(times["first"])
-        out.update({f"{part}_{stat}": fn(values) for part, values in times.items()
-                    for stat, fn in (("best_s", min), ("median_s", statistics.median))})
+        out.update(
+            {
+                f"{part}_{stat}": fn(values)
+                for part, values in times.items()
+                for stat, fn in (("best_s", min), ("median_s", statistics.median))
+            }
+        )
     else:
         open_events()  # build the cache once
 
@@ -217,11 +228,11 @@ def make_bag(text: Path, n_events: int, storage: str) -> Path:
     """The first n_events of `text` as a rosbag2 folder (camera info and events only)."""
     import shutil
 
+    from eas_vo.camera import CameraModel
     from eas_vo.datasets.rosbag2 import write_bag2
     from eas_vo.eventfile import file_identity, load_event_text
     from eas_vo.io.cache import cache_folder
     from eas_vo.plugins import Dataset
-    from eas_vo.camera import CameraModel
 
     folder = cache_folder("bench", BENCH_ABOUT) / f"ros2_{storage}_{n_events}"
     if (folder / "metadata.yaml").exists():
@@ -230,7 +241,9 @@ def make_bag(text: Path, n_events: int, storage: str) -> Path:
     class Stream(Dataset):
         def __init__(self):
             self.camera = CameraModel.from_calib([200.0, 200.0, 120.0, 90.0], 240, 180)
-            self._events = load_event_text(lambda: open(text, "rb"), file_identity(text), str(text), 240, 180)[:n_events]
+            self._events = load_event_text(lambda: open(text, "rb"), file_identity(text), str(text), 240, 180)[
+                :n_events
+            ]
 
         def frame_times(self):
             return np.empty(0)
@@ -257,6 +270,7 @@ def ros2_stage(name: str, bag: Path, repeat: int) -> dict:
         return float(events.view(np.uint8).sum(dtype=np.uint64)), len(events)
 
     if name == "ros2_first":
+
         def first():
             fresh_cache()
             return read_all()
@@ -276,7 +290,9 @@ def ros2_stage(name: str, bag: Path, repeat: int) -> dict:
             with Reader(bag) as reader:
                 events = [c for c in reader.connections if c.topic == "/dvs/events"]
                 for conn, _, raw in reader.messages(connections=events):
-                    n += len(store.deserialize_cdr(raw, conn.msgtype).events) if name == "rosbags_messages" else len(raw)
+                    n += (
+                        len(store.deserialize_cdr(raw, conn.msgtype).events) if name == "rosbags_messages" else len(raw)
+                    )
             return n
 
         out["seconds"], n = timed(iterate, repeat)
@@ -329,8 +345,14 @@ def stage(name: str, path: Path, repeat: int) -> dict:
         import pandas as pd
 
         def parse():
-            return pd.read_csv(path, sep=" ", header=None, names=["t", "x", "y", "p"], engine="c",
-                               dtype={"t": np.float64, "x": np.uint16, "y": np.uint16, "p": np.int8})
+            return pd.read_csv(
+                path,
+                sep=" ",
+                header=None,
+                names=["t", "x", "y", "p"],
+                engine="c",
+                dtype={"t": np.float64, "x": np.uint16, "y": np.uint16, "p": np.int8},
+            )
 
         out["seconds"], frame = timed(parse, repeat)
         out["events"] = len(frame)
@@ -359,12 +381,14 @@ def stage(name: str, path: Path, repeat: int) -> dict:
 
         out["seconds"], out["events"] = timed(parse if name == "parse" else parse_to_cache, repeat)
     else:
+
         def load():
             return load_event_text(lambda: open(path, "rb"), file_identity(path), str(path), 240, 180)
 
         load()  # build the cache once
         rss0 = peak_rss_mb()
         if name == "cached":
+
             def read_all():  # map, then read every byte of every record once
                 events = load()
                 return float(events.view(np.uint8).sum(dtype=np.uint64)), len(events)
@@ -376,6 +400,7 @@ def stage(name: str, path: Path, repeat: int) -> dict:
             out["seconds"], (_, out["events"]) = timed(read_all, repeat)
             out["times_seconds"], _ = timed(read_times, repeat)
         else:
+
             def window():  # map, find a 1 s window, read it
                 events = load()
                 start = float(events["t"][0])
@@ -391,16 +416,32 @@ def stage(name: str, path: Path, repeat: int) -> dict:
 #: Each format: how its file is made from the events.txt, its stages (the library's own reader
 #: first) and their labels.
 ROS2_STAGES = ["rosbags_raw", "rosbags_messages", "ros2_first", "ros2_cached"]
-ROS2_LABELS = ["rosbags iteration, raw bytes", "rosbags iteration, deserialised", "eas-vo rosbag2 first read (validated + cache write)",
-               "eas-vo rosbag2 cached read (open + map)"]
+ROS2_LABELS = [
+    "rosbags iteration, raw bytes",
+    "rosbags iteration, deserialised",
+    "eas-vo rosbag2 first read (validated + cache write)",
+    "eas-vo rosbag2 cached read (open + map)",
+]
 FORMATS = {
     "text": (lambda path, args: path, ["pandas", "parse", "parse_to_cache", "cached", "window"], []),
-    "aedat4": (lambda path, args: make_aedat4(path), ["aedat4_library", "aedat4_first", "aedat4_cached"],
-               ["dv-processing batch reading", "eas-vo aedat4 first read (validated + cache write)",
-                "eas-vo aedat4 cached read (map + read all)"]),
-    "mvsec": (lambda path, args: make_mvsec_file(path), ["mvsec_library", "mvsec_first", "mvsec_cached"],
-              ["h5py, whole array (unchecked)", "eas-vo mvsec first read (validated + cache write)",
-               "eas-vo mvsec cached read (map + read all)"]),
+    "aedat4": (
+        lambda path, args: make_aedat4(path),
+        ["aedat4_library", "aedat4_first", "aedat4_cached"],
+        [
+            "dv-processing batch reading",
+            "eas-vo aedat4 first read (validated + cache write)",
+            "eas-vo aedat4 cached read (map + read all)",
+        ],
+    ),
+    "mvsec": (
+        lambda path, args: make_mvsec_file(path),
+        ["mvsec_library", "mvsec_first", "mvsec_cached"],
+        [
+            "h5py, whole array (unchecked)",
+            "eas-vo mvsec first read (validated + cache write)",
+            "eas-vo mvsec cached read (map + read all)",
+        ],
+    ),
     "ros2_sqlite3": (lambda path, args: make_bag(path, args.bag_events, "sqlite3"), ROS2_STAGES, ROS2_LABELS),
     "ros2_mcap": (lambda path, args: make_bag(path, args.bag_events, "mcap"), ROS2_STAGES, ROS2_LABELS),
 }
@@ -412,9 +453,14 @@ def main() -> None:
     parser.add_argument("--bag-events", type=int, default=2_000_000, help="events in the ROS 2 bags")
     parser.add_argument("--repeat", type=int, default=3, help="runs per stage; the best is reported")
     parser.add_argument("--only", choices=list(FORMATS), help="run only this format's rows")
-    parser.add_argument("--alternate", type=int, default=0, metavar="N",
-                        help="also alternate the library's read and the first read N times each in one process "
-                             "(AEDAT4, MVSEC): best and median of each, and their ratios")
+    parser.add_argument(
+        "--alternate",
+        type=int,
+        default=0,
+        metavar="N",
+        help="also alternate the library's read and the first read N times each in one process "
+        "(AEDAT4, MVSEC): best and median of each, and their ratios",
+    )
     parser.add_argument("--stage", help=argparse.SUPPRESS)
     parser.add_argument("--path", help=argparse.SUPPRESS)
     args = parser.parse_args()
@@ -429,22 +475,41 @@ def main() -> None:
             continue
         source = make(path, args)
         for name in stages:
-            out = subprocess.run([sys.executable, __file__, "--stage", name, "--path", str(source), "--repeat", str(args.repeat)],
-                                 capture_output=True, text=True, check=True)
+            out = subprocess.run(
+                [sys.executable, __file__, "--stage", name, "--path", str(source), "--repeat", str(args.repeat)],
+                capture_output=True,
+                text=True,
+                check=True,
+            )
             results[name] = json.loads(out.stdout.strip().splitlines()[-1])
         if fmt == "text":
             print_text_rows(path, results, args.repeat)
         else:
             print_format_rows(source, results, stages, FORMATS[fmt][2], args.repeat)
         if args.alternate and fmt in READS:
-            out = subprocess.run([sys.executable, __file__, "--stage", f"{fmt}_alternate", "--path", str(source),
-                                  "--repeat", str(args.alternate)], capture_output=True, text=True, check=True)
+            out = subprocess.run(
+                [
+                    sys.executable,
+                    __file__,
+                    "--stage",
+                    f"{fmt}_alternate",
+                    "--path",
+                    str(source),
+                    "--repeat",
+                    str(args.alternate),
+                ],
+                capture_output=True,
+                text=True,
+                check=True,
+            )
             r = json.loads(out.stdout.strip().splitlines()[-1])
             rate = lambda seconds: r["events"] / seconds / 1e6  # noqa: E731
-            print(f"  alternated in one process, {args.alternate} times each: library {rate(r['library_best_s']):.1f} "
-                  f"(median {rate(r['library_median_s']):.1f}), first read {rate(r['first_best_s']):.1f} "
-                  f"(median {rate(r['first_median_s']):.1f}) M events/s; first read / library "
-                  f"{r['library_best_s'] / r['first_best_s']:.2f}x best, {r['library_median_s'] / r['first_median_s']:.2f}x median")
+            print(
+                f"  alternated in one process, {args.alternate} times each: library {rate(r['library_best_s']):.1f} "
+                f"(median {rate(r['library_median_s']):.1f}), first read {rate(r['first_best_s']):.1f} "
+                f"(median {rate(r['first_median_s']):.1f}) M events/s; first read / library "
+                f"{r['library_best_s'] / r['first_best_s']:.2f}x best, {r['library_median_s'] / r['first_median_s']:.2f}x median"
+            )
 
 
 def print_format_rows(source: Path, results: dict, stages: list, labels: list, repeat: int) -> None:
@@ -459,21 +524,32 @@ def print_format_rows(source: Path, results: dict, stages: list, labels: list, r
 def print_text_rows(path: Path, results: dict, repeat: int) -> None:
     size = results["parse"]["size_mb"]
     print(f"{path.name}: {results['parse']['events']:,} events, {size:.0f} MB of text")
-    for name, label in (("pandas", "pandas.read_csv (C engine)"), ("parse", "eas-vo parse (validated)"),
-                        ("parse_to_cache", "eas-vo parse + cache write")):
+    for name, label in (
+        ("pandas", "pandas.read_csv (C engine)"),
+        ("parse", "eas-vo parse (validated)"),
+        ("parse_to_cache", "eas-vo parse + cache write"),
+    ):
         r = results[name]
-        print(f"  {label:30s} {r['events'] / r['seconds'] / 1e6:7.1f} M events/s  {size / r['seconds']:7.1f} MB/s  "
-              f"peak RSS {r['peak_rss_mb']:7.0f} MB")
+        print(
+            f"  {label:30s} {r['events'] / r['seconds'] / 1e6:7.1f} M events/s  {size / r['seconds']:7.1f} MB/s  "
+            f"peak RSS {r['peak_rss_mb']:7.0f} MB"
+        )
     for name in ("parse", "parse_to_cache"):
         print(f"  {name} vs pandas: {results['pandas']['seconds'] / results[name]['seconds']:.2f}x")
-    print(f"  (best of {repeat} each; excluded: eas-vo's one-time kernel load {results['parse']['jit_load_s']:.2f} s, pandas' import)")
+    print(
+        f"  (best of {repeat} each; excluded: eas-vo's one-time kernel load {results['parse']['jit_load_s']:.2f} s, pandas' import)"
+    )
     r = results["cached"]
-    print(f"  cached load (map + read all)  {r['events'] / r['seconds'] / 1e6:7.1f} M events/s  "
-          f"RSS growth {r['rss_growth_mb']:.0f} MB = {r['rss_growth_mb'] * 1e6 / r['events']:.1f} B/event")
+    print(
+        f"  cached load (map + read all)  {r['events'] / r['seconds'] / 1e6:7.1f} M events/s  "
+        f"RSS growth {r['rss_growth_mb']:.0f} MB = {r['rss_growth_mb'] * 1e6 / r['events']:.1f} B/event"
+    )
     print(f"  cached load (map + read every timestamp) {r['events'] / r['times_seconds'] / 1e6:7.1f} M events/s")
     r = results["window"]
-    print(f"  1 s window of the cached stream: {r['events']:,} events in {r['seconds'] * 1e3:.1f} ms, "
-          f"RSS growth {r['rss_growth_mb']:.0f} MB = {r['rss_growth_mb'] * 1e6 / max(r['events'], 1):.1f} B/event in the window")
+    print(
+        f"  1 s window of the cached stream: {r['events']:,} events in {r['seconds'] * 1e3:.1f} ms, "
+        f"RSS growth {r['rss_growth_mb']:.0f} MB = {r['rss_growth_mb'] * 1e6 / max(r['events'], 1):.1f} B/event in the window"
+    )
 
 
 if __name__ == "__main__":

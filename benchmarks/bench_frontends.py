@@ -33,7 +33,9 @@ def best_of(fn, repeat: int) -> float:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--dataset", default="synthetic:default")
-    parser.add_argument("--sits-events", type=int, default=2_000_000, help="events for the SITS comparison with dv-processing")
+    parser.add_argument(
+        "--sits-events", type=int, default=2_000_000, help="events for the SITS comparison with dv-processing"
+    )
     parser.add_argument("--repeat", type=int, default=3)
     args = parser.parse_args()
 
@@ -80,7 +82,9 @@ def main() -> None:
         print("  dv-processing SITS: not installed (pip install dv-processing)")
         return
     store = dv.EventStore()
-    for ts, x, y, p in zip((subset["t"] * 1e6).astype(np.int64).tolist(), subset["x"].tolist(), subset["y"].tolist(), subset["p"].tolist()):
+    for ts, x, y, p in zip(
+        (subset["t"] * 1e6).astype(np.int64).tolist(), subset["x"].tolist(), subset["y"].tolist(), subset["p"].tolist()
+    ):
         store.push_back(ts, x, y, bool(p))
 
     def peer():
@@ -88,8 +92,10 @@ def main() -> None:
         surface.accept(store)
 
     t_dv = best_of(peer, args.repeat)
-    print(f"  dv-processing SITS     {len(subset) / t_dv / 1e6:6.1f} M events/s on the same events "
-          f"(ours with its window: {t_dv / t_ours:.2f}x its throughput)")
+    print(
+        f"  dv-processing SITS     {len(subset) / t_dv / 1e6:6.1f} M events/s on the same events "
+        f"(ours with its window: {t_dv / t_ours:.2f}x its throughput)"
+    )
 
 
 if __name__ == "__main__":

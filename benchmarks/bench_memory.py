@@ -46,9 +46,25 @@ def run(folder, frontend: str) -> tuple[float, float]:
     """(wall seconds, peak RSS of the run process [MiB])."""
     t0 = time.perf_counter()
     subprocess.run(
-        [sys.executable, "-m", "eas_vo", "run", "--dataset", str(folder), "--frontend", frontend,
-         "--set", "dataset.sample_rate_hz=20", "--quiet", "--out", str(folder / f"run_{frontend}"), "--overwrite"],
-        check=True, stdout=subprocess.DEVNULL, cwd=folder,  # not the repository root: see tests/conftest.py
+        [
+            sys.executable,
+            "-m",
+            "eas_vo",
+            "run",
+            "--dataset",
+            str(folder),
+            "--frontend",
+            frontend,
+            "--set",
+            "dataset.sample_rate_hz=20",
+            "--quiet",
+            "--out",
+            str(folder / f"run_{frontend}"),
+            "--overwrite",
+        ],
+        check=True,
+        stdout=subprocess.DEVNULL,
+        cwd=folder,  # not the repository root: see tests/conftest.py
     )
     elapsed = time.perf_counter() - t0
     return elapsed, resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024
@@ -64,7 +80,9 @@ def main() -> None:
     print(f"{args.events:,} events ({size_gb:.1f} GB of text), event-only, sampled at 20 Hz, frontend {args.frontend}")
     for label in ("first run (parse + cache)", "second run (cached)"):
         elapsed, peak = run(folder, args.frontend)
-        print(f"  {label:28s} {elapsed:6.1f} s, peak RSS so far {peak:7.0f} MiB ({peak * 2**20 / args.events:.1f} B/event)")
+        print(
+            f"  {label:28s} {elapsed:6.1f} s, peak RSS so far {peak:7.0f} MiB ({peak * 2**20 / args.events:.1f} B/event)"
+        )
     print("  (peak RSS counts the mapped cache pages the run touched; the limit asked is 4 GiB)")
 
 

@@ -61,17 +61,19 @@ def contrast_evaluations(cfg, repeat: int) -> None:
     dataset = registry.open_dataset(cfg.run.dataset, cfg.dataset)
     events = dataset.events()
     n = cfg.tracker.window_events
-    window = events[max(0, len(events) // 2 - n // 2):][:n]
+    window = events[max(0, len(events) // 2 - n // 2) :][:n]
     tracker = CmaxTracker(cfg.tracker, dataset.camera)
     xy = tracker._bearing[window["y"].astype(np.intp), window["x"].astype(np.intp)]
     dt = window["t"] - 0.5 * (window["t"][0] + window["t"][-1])
     contrast = Contrast(xy, dt, tracker._grid, cfg.tracker.sigma_px)
     omega = np.radians([20.0, -40.0, 10.0])
     contrast.value_and_gradient(omega)  # compiled outside the timing
-    rows = (("numba value", lambda: contrast.value(omega), 50),
-            ("numba value+gradient", lambda: contrast.value_and_gradient(omega), 50),
-            ("numba + quadrants", lambda: contrast.with_quadrants(omega), 50),
-            ("numpy value", lambda: variance_numpy(xy, dt, omega, tracker._grid, cfg.tracker.sigma_px), 5))
+    rows = (
+        ("numba value", lambda: contrast.value(omega), 50),
+        ("numba value+gradient", lambda: contrast.value_and_gradient(omega), 50),
+        ("numba + quadrants", lambda: contrast.with_quadrants(omega), 50),
+        ("numpy value", lambda: variance_numpy(xy, dt, omega, tracker._grid, cfg.tracker.sigma_px), 5),
+    )
     print(f"cmax objective on {len(window):,} events ({dataset.camera.width}x{dataset.camera.height}):")
     for label, fn, count in rows:
         seconds = min(_timed(lambda: [fn() for _ in range(count)]) for _ in range(repeat)) / count
@@ -99,12 +101,17 @@ def kernel_share(cfg) -> tuple[float, dict]:
                 return fn(*args, **kwargs)
             finally:
                 spent[kind] += time.perf_counter() - t0
+
         return timed
 
     originals = [(cv2, name, fn) for name, fn in vars(cv2).items() if isinstance(fn, types.BuiltinFunctionType)]
-    originals += [(module, name, obj) for module in list(sys.modules.values())
-                  if getattr(module, "__name__", "").startswith("eas_vo")
-                  for name, obj in list(vars(module).items()) if isinstance(obj, CPUDispatcher)]
+    originals += [
+        (module, name, obj)
+        for module in list(sys.modules.values())
+        if getattr(module, "__name__", "").startswith("eas_vo")
+        for name, obj in list(vars(module).items())
+        if isinstance(obj, CPUDispatcher)
+    ]
     threads = concurrency.threads()
     try:
         for module, name, fn in originals:
@@ -128,8 +135,12 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     for kind in ("dataset", "frontend", "tracker", "backend"):
         parser.add_argument(f"--{kind}", help=f"the {kind} (default: the config's, else eas-vo run's)")
-    parser.add_argument("--config", help="a config file or bundled name (its [run] plugins unless the flags name others)")
-    parser.add_argument("--set", action="append", default=[], metavar="SECTION.KEY=VALUE", help="a config override, as eas-vo run --set")
+    parser.add_argument(
+        "--config", help="a config file or bundled name (its [run] plugins unless the flags name others)"
+    )
+    parser.add_argument(
+        "--set", action="append", default=[], metavar="SECTION.KEY=VALUE", help="a config override, as eas-vo run --set"
+    )
     parser.add_argument("--repeat", type=int, default=3)
     args = parser.parse_args()
     chosen = {"dataset": args.dataset, "frontend": args.frontend, "tracker": args.tracker, "backend": args.backend}
@@ -146,28 +157,40 @@ def main() -> None:
     concurrency.set_threads(cores)
     fastest = {threads: min(ms, key=lambda m: m["elapsed_s"]) for threads, ms in runs.items()}
     best = fastest[cores]
-    print(f"{rc.frontend}+{rc.tracker}+{rc.backend} on {rc.dataset}: {best['frames']} frames, {best['sequence_s']:.2f} s of data")
+    print(
+        f"{rc.frontend}+{rc.tracker}+{rc.backend} on {rc.dataset}: {best['frames']} frames, {best['sequence_s']:.2f} s of data"
+    )
     for threads, m in fastest.items():
         label = "serial (--threads 1)" if threads == 1 else f"concurrent ({threads} threads)"
-        print(f"  whole run, {label:24s} best of {args.repeat}: {m['elapsed_s']:.2f} s, "
-              f"{m['frames_per_s']:.1f} frames/s, real-time factor {m['realtime_factor']:.2f}x")
+        print(
+            f"  whole run, {label:24s} best of {args.repeat}: {m['elapsed_s']:.2f} s, "
+            f"{m['frames_per_s']:.1f} frames/s, real-time factor {m['realtime_factor']:.2f}x"
+        )
     if cores > 1:
         print(f"  concurrent / serial: {fastest[cores]['frames_per_s'] / fastest[1]['frames_per_s']:.2f}x")
     elapsed, inside = kernel_share(cfg)
     floor = sum(inside.values())
-    print(f"  inside compiled kernels, serial run of {elapsed:.2f} s: " + ", ".join(
-        f"{kind} {100 * s / elapsed:.0f} %" for kind, s in inside.items())
-          + f": {100 * floor / elapsed:.0f} %, a floor of {floor:.2f} s ({best['frames'] / max(floor, 1e-9):.0f} frames/s) on one core")
+    print(
+        f"  inside compiled kernels, serial run of {elapsed:.2f} s: "
+        + ", ".join(f"{kind} {100 * s / elapsed:.0f} %" for kind, s in inside.items())
+        + f": {100 * floor / elapsed:.0f} %, a floor of {floor:.2f} s ({best['frames'] / max(floor, 1e-9):.0f} frames/s) on one core"
+    )
     stages = min((stage_times(cfg) for _ in range(args.repeat)), key=lambda s: s["frontend"] + s["tracker"])
     total = sum(stages[k] for k in ("load", "frontend", "tracker", "backend"))
     for k in ("load", "frontend", "tracker", "backend"):
-        print(f"  {k:9s} {stages[k]:7.3f} s  ({100 * stages[k] / total:4.1f} %)  {stages['frames'] / max(stages[k], 1e-9):9.1f} frames/s")
+        print(
+            f"  {k:9s} {stages[k]:7.3f} s  ({100 * stages[k] / total:4.1f} %)  {stages['frames'] / max(stages[k], 1e-9):9.1f} frames/s"
+        )
     if stages["events"]:
-        print(f"  frontend: {stages['events'] / max(stages['frontend'], 1e-9) / 1e6:.1f} M events/s aggregated "
-              f"({stages['events']:,} events in {stages['frames']} slices)")
+        print(
+            f"  frontend: {stages['events'] / max(stages['frontend'], 1e-9) / 1e6:.1f} M events/s aggregated "
+            f"({stages['events']:,} events in {stages['frames']} slices)"
+        )
     if stages["tracker_events"]:
-        print(f"  tracker: {stages['tracker_events'] / max(stages['tracker'], 1e-9) / 1e6:.2f} M events/s "
-              f"({stages['tracker_events']:,} events)")
+        print(
+            f"  tracker: {stages['tracker_events'] / max(stages['tracker'], 1e-9) / 1e6:.2f} M events/s "
+            f"({stages['tracker_events']:,} events)"
+        )
     print(f"  APE {best.get('ape_mean_rad', np.nan):.4f} rad, NC {best['nc_mean']:.1f}")
     if rc.tracker == "cmax":
         contrast_evaluations(cfg, args.repeat)
@@ -179,9 +202,13 @@ def main() -> None:
     for name, changes in (("chain", []), ("gtsam", ["backend.mode=batch"]), ("gtsam", ["backend.mode=online"])):
         bcfg = config.resolve(args.config, {**chosen, "backend": name}, changes)
         backend = registry.get("backends", name)(bcfg.backend)
-        seconds = min(_timed(lambda: backend.solve(n, result.edges, times=result.t, imu=imu)) for _ in range(args.repeat))
+        seconds = min(
+            _timed(lambda: backend.solve(n, result.edges, times=result.t, imu=imu)) for _ in range(args.repeat)
+        )
         label = name + (f" ({changes[0].split('=')[1]})" if changes else "")
-        print(f"  {label:16s} {1e3 * seconds / n:7.3f} ms/frame  (+{100 * seconds / best['elapsed_s']:5.1f} % of the whole run)")
+        print(
+            f"  {label:16s} {1e3 * seconds / n:7.3f} ms/frame  (+{100 * seconds / best['elapsed_s']:5.1f} % of the whole run)"
+        )
 
 
 if __name__ == "__main__":

@@ -46,8 +46,15 @@ def evt3_words(ev: np.ndarray) -> np.ndarray:
     new_high = first | (np.diff(t >> 12, prepend=0) != 0)
     new_low = new_high | (np.diff(t, prepend=-1) != 0)
     new_row = new_low | (np.diff(y, prepend=-1) != 0)
-    return interleave([(0x8000 | (t >> 12) & 0xFFF, new_high), (0x6000 | t & 0xFFF, new_low), (y, new_row),
-                       (0x2000 | ev["p"].astype(np.int64) << 11 | ev["x"], np.ones(len(ev), bool))], np.uint16)
+    return interleave(
+        [
+            (0x8000 | (t >> 12) & 0xFFF, new_high),
+            (0x6000 | t & 0xFFF, new_low),
+            (y, new_row),
+            (0x2000 | ev["p"].astype(np.int64) << 11 | ev["x"], np.ones(len(ev), bool)),
+        ],
+        np.uint16,
+    )
 
 
 def evt2_words(ev: np.ndarray) -> np.ndarray:
@@ -129,12 +136,16 @@ def main() -> None:
             rows = []
             if name != "dat":
                 rows.append(("eas-vo decoder", *best(lambda: decode_only(path, name.upper()), args.repeat)))
-            rows.append(("eas-vo reader, first read", *best(lambda: reader(path), args.repeat, lambda: clear_cache(cache))))
+            rows.append(
+                ("eas-vo reader, first read", *best(lambda: reader(path), args.repeat, lambda: clear_cache(cache)))
+            )
             rows.append(("eas-vo reader, cached", *best(lambda: reader(path), args.repeat)))
             rows.append(("expelliarmus", *best(lambda: expelliarmus_read(path, name), args.repeat)))
             size_mb = path.stat().st_size / 1e6
             for label, seconds, count in rows:
-                print(f"  {name:5s} {label:28s} {count / seconds / 1e6:8.1f} M events/s  ({size_mb:.0f} MB in {seconds:.3f} s)")
+                print(
+                    f"  {name:5s} {label:28s} {count / seconds / 1e6:8.1f} M events/s  ({size_mb:.0f} MB in {seconds:.3f} s)"
+                )
 
 
 if __name__ == "__main__":

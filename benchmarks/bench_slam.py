@@ -82,8 +82,9 @@ def main() -> None:
         runs = {"ORB-SLAM3 (monocular)": lambda: orbslam3_seconds(images, times, vocabulary, settings, folder)}
         for name in ("paper", "best"):
             cfg = config.resolve(name, base, [])
-            runs[f"eas-vo --config {name} ({cfg.run.tracker}+{cfg.run.backend})"] = (
-                lambda cfg=cfg: eas_vo_seconds(cfg, images, times))
+            runs[f"eas-vo --config {name} ({cfg.run.tracker}+{cfg.run.backend})"] = lambda cfg=cfg: eas_vo_seconds(
+                cfg, images, times
+            )
         print(f"{len(images)} {args.frontend} images of {args.dataset} ({span:.1f} s), best of {args.repeat}:")
         for label, timed in runs.items():
             seconds = min(timed() for _ in range(args.repeat))

@@ -44,8 +44,13 @@ def main() -> None:
     parser.add_argument("--real", type=Path, default=Path("../shared/data/ecd/shapes_rotation_0-30s"))
     parser.add_argument("--every", type=int, nargs="+", default=[1, 2, 3], help="keep every N-th frame")
     parser.add_argument("--trackers", nargs="+", default=list(TRACKERS), choices=list(TRACKERS))
-    parser.add_argument("--set", action="append", default=[], metavar="SECTION.KEY=VALUE",
-                        help="change best.toml for every tracker's runs (repeatable; a key a tracker lacks is an error)")
+    parser.add_argument(
+        "--set",
+        action="append",
+        default=[],
+        metavar="SECTION.KEY=VALUE",
+        help="change best.toml for every tracker's runs (repeatable; a key a tracker lacks is an error)",
+    )
     args = parser.parse_args()
     if not (args.real / "images.txt").is_file():
         raise SystemExit(f"{args.real}: no images.txt (give the real excerpt's folder with --real)")
@@ -61,9 +66,18 @@ def main() -> None:
                     clock = [f"run.imu_time_offset_s={GYRO_CLOCK_S}"] if source is rig else []
                     cells = []
                     for start, duration in WINDOWS.values():
-                        cfg = config.resolve("best", {"dataset": str(folder), "frontend": "histeq", "tracker": tracker,
-                                                      "start_s": start, "duration_s": duration, "time_offset_s": 0.01},
-                                             changes + clock + args.set)
+                        cfg = config.resolve(
+                            "best",
+                            {
+                                "dataset": str(folder),
+                                "frontend": "histeq",
+                                "tracker": tracker,
+                                "start_s": start,
+                                "duration_s": duration,
+                                "time_offset_s": 0.01,
+                            },
+                            changes + clock + args.set,
+                        )
                         cells.append(f"{pipeline.run(cfg).metrics['ape_mean_rad']:.3f}")
                     print(f"| every {every} | {imu} | {name} | " + " | ".join(cells) + " |", flush=True)
 

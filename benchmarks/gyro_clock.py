@@ -44,8 +44,12 @@ def main() -> None:
     parser.add_argument("--real", type=Path, default=Path("../shared/data/ecd/shapes_rotation_0-30s"))
     parser.add_argument("--offsets", type=float, nargs="+", default=[0.0, 0.008, 0.009, 0.01, 0.011])
     parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument("--bias", type=float, default=0.01, help="standard deviation of the gyro's bias per axis [rad/s]")
-    parser.add_argument("--set", action="append", default=[], metavar="SECTION.KEY=VALUE", help="change best.toml (repeatable)")
+    parser.add_argument(
+        "--bias", type=float, default=0.01, help="standard deviation of the gyro's bias per axis [rad/s]"
+    )
+    parser.add_argument(
+        "--set", action="append", default=[], metavar="SECTION.KEY=VALUE", help="change best.toml (repeatable)"
+    )
     args = parser.parse_args()
     with tempfile.TemporaryDirectory() as tmp:
         rig = with_gyro_from_ground_truth(args.real, Path(tmp) / "rig", args.seed, args.bias)
@@ -55,12 +59,23 @@ def main() -> None:
         for label, changes in rows + [("auto (from 0)", ["run.imu_time_offset_auto=true"])]:
             cells, said = [], []
             for start, duration in WINDOWS.values():
-                cfg = config.resolve("best", {"dataset": str(rig), "frontend": "histeq", "start_s": start,
-                                              "duration_s": duration, "time_offset_s": 0.01}, changes + args.set)
+                cfg = config.resolve(
+                    "best",
+                    {
+                        "dataset": str(rig),
+                        "frontend": "histeq",
+                        "start_s": start,
+                        "duration_s": duration,
+                        "time_offset_s": 0.01,
+                    },
+                    changes + args.set,
+                )
                 metrics = pipeline.run(cfg).metrics
                 cells.append(f"{metrics['ape_mean_rad']:.4f}")
-                said += ["looks like " + line.split("run.imu_time_offset_s = ")[-1].split(" would")[0]
-                         for line in metrics["data_warnings"]]
+                said += [
+                    "looks like " + line.split("run.imu_time_offset_s = ")[-1].split(" would")[0]
+                    for line in metrics["data_warnings"]
+                ]
                 if metrics["imu_time_offset_estimated"]:
                     said.append(f"read at {metrics['imu_time_offset_s']:.4f}")
             print(f"| {label} | " + " | ".join(cells) + f" | {'; '.join(said) or '-'} |", flush=True)

@@ -26,8 +26,7 @@ import sys
 from pathlib import Path
 
 from eas_vo.experiments import grid
-from eas_vo.experiments.cells import Cell, dataset_names
-from eas_vo.experiments.cells import Method
+from eas_vo.experiments.cells import Cell, Method, dataset_names
 from eas_vo.experiments.gallery import PAPER_COLOURS, PAPER_ORDER
 from eas_vo.io.atomic import json_text, write_text_atomic
 from eas_vo.io.cache import cache_folder
@@ -48,45 +47,89 @@ FIGURES = {"ape_mean_rad": "APE [rad]", "omega_rms_deg_s": "omega RMS [deg/s]", 
 #: Head-to-head counts in table.md: (method, against it); ANY_SOURCE: on each seed, the lowest
 #: figure of the six sources with klt + chain (an oracle's choice of source, after the fact).
 ANY_SOURCE = "the best source + klt + chain"
-PAIRS = (("cmax + chain", "eas + klt + chain"), ("cmax + chain", ANY_SOURCE), ("cmax + chain (no gyro)", "eas + klt + chain"),
-         ("cmax + chain (no gyro)", ANY_SOURCE), ("cmax + gtsam (gyro)", "best.toml (eas)"))
+PAIRS = (
+    ("cmax + chain", "eas + klt + chain"),
+    ("cmax + chain", ANY_SOURCE),
+    ("cmax + chain (no gyro)", "eas + klt + chain"),
+    ("cmax + chain (no gyro)", ANY_SOURCE),
+    ("cmax + gtsam (gyro)", "best.toml (eas)"),
+)
 
 
 def sequence(seed: int, duration: float, illumination: float, speed: float) -> Path:
     """The default room simulated with `seed` for `duration` s, its light and speed scaled (once)."""
     name = f"seed-{seed}-{duration:g}s-illumination-{illumination:g}-speed-{speed:g}"
-    folder = cache_folder("light_speed", "sequences of benchmarks/light_speed_study.py (simulated once; minutes each)") / name
+    folder = (
+        cache_folder("light_speed", "sequences of benchmarks/light_speed_study.py (simulated once; minutes each)")
+        / name
+    )
     if not (folder / "images.txt").exists():
-        subprocess.run([sys.executable, "-m", "eas_vo", "simulate", "--seed", str(seed), "--duration", f"{duration:g}",
-                        "--illumination", f"{illumination:g}", "--speed", f"{speed:g}", "--out", str(folder), "--overwrite"],
-                       check=True)
+        subprocess.run(
+            [
+                sys.executable,
+                "-m",
+                "eas_vo",
+                "simulate",
+                "--seed",
+                str(seed),
+                "--duration",
+                f"{duration:g}",
+                "--illumination",
+                f"{illumination:g}",
+                "--speed",
+                f"{speed:g}",
+                "--out",
+                str(folder),
+                "--overwrite",
+            ],
+            check=True,
+        )
     return folder
 
 
-def run_seed(seed: int, methods: list[str], conditions: list[tuple], duration: float, out: Path, jobs: int) -> list[dict]:
+def run_seed(
+    seed: int, methods: list[str], conditions: list[tuple], duration: float, out: Path, jobs: int
+) -> list[dict]:
     """`methods` on one seed's sequences: a compare folder per configuration file, which a
     later call with more methods extends. A row per cell, with its seed and condition."""
     folders = {str(sequence(seed, duration, *condition)): condition for condition in conditions}
     names = dataset_names(list(folders))
     rows = []
     for config_file in dict.fromkeys(METHODS[m][0] for m in methods):
-        labels = {(m.tracker, m.backend, m.settings, f): label for label, (c, m, f) in METHODS.items()
-                  if c == config_file and label in methods}
+        labels = {
+            (m.tracker, m.backend, m.settings, f): label
+            for label, (c, m, f) in METHODS.items()
+            if c == config_file and label in methods
+        }
         cells = [Cell(d, f, t, b, (), names[d], s) for d in folders for (t, b, s, f) in labels]
-        cell_rows, _ = grid.run_experiment(cells, out / f"seed-{seed}" / config_file, config_file, [], {}, jobs, progress=True)
+        cell_rows, _ = grid.run_experiment(
+            cells, out / f"seed-{seed}" / config_file, config_file, [], {}, jobs, progress=True
+        )
         for row in cell_rows:
             metrics_file = out / f"seed-{seed}" / config_file / row["folder"] / "metrics.json"
             counts = json.loads(metrics_file.read_text()).get("status_counts", {}) if metrics_file.exists() else {}
             illumination, speed = folders[row["dataset"]]
-            rows.append({"seed": seed, "illumination": illumination, "speed": speed,
-                         "method": labels[(row["tracker"], row["backend"], tuple(row["settings"]), row["frontend"])],
-                         "status": row["status"], "status_counts": counts, **{k: row[k] for k in FIGURES}})
+            rows.append(
+                {
+                    "seed": seed,
+                    "illumination": illumination,
+                    "speed": speed,
+                    "method": labels[(row["tracker"], row["backend"], tuple(row["settings"]), row["frontend"])],
+                    "status": row["status"],
+                    "status_counts": counts,
+                    **{k: row[k] for k in FIGURES},
+                }
+            )
     return rows
 
 
 def summary(rows: list[dict], condition: tuple, method: str, key: str) -> tuple | None:
     """(median, low, high, n) of `key` over the seeds, for one condition and method."""
-    values = [r[key] for r in rows if (r["illumination"], r["speed"]) == condition and r["method"] == method and r[key] is not None]
+    values = [
+        r[key]
+        for r in rows
+        if (r["illumination"], r["speed"]) == condition and r["method"] == method and r[key] is not None
+    ]
     return (statistics.median(values), min(values), max(values), len(values)) if values else None
 
 
@@ -102,19 +145,32 @@ def per_seed(rows: list[dict], condition: tuple, method: str, key: str) -> dict:
 
 def table_markdown(rows: list[dict], conditions: list[tuple]) -> str:
     seeds = sorted({r["seed"] for r in rows})
-    lines = [f"Median [min-max] over seeds {', '.join(map(str, seeds))}.", "",
-             "| illumination | speed | method | " + " | ".join(FIGURES.values()) + " |", "|---" * (3 + len(FIGURES)) + "|"]
+    lines = [
+        f"Median [min-max] over seeds {', '.join(map(str, seeds))}.",
+        "",
+        "| illumination | speed | method | " + " | ".join(FIGURES.values()) + " |",
+        "|---" * (3 + len(FIGURES)) + "|",
+    ]
     for condition in conditions:
         for method in METHODS:
             cells = []
             for key in FIGURES:
                 s = summary(rows, condition, method, key)
                 digits = 3 if key == "ape_mean_rad" else 1
-                cells.append("-" if s is None else f"{s[0]:.{digits}f} [{s[1]:.{digits}f}-{s[2]:.{digits}f}]"
-                             + (f" (n={s[3]})" if s[3] != len(seeds) else ""))
+                cells.append(
+                    "-"
+                    if s is None
+                    else f"{s[0]:.{digits}f} [{s[1]:.{digits}f}-{s[2]:.{digits}f}]"
+                    + (f" (n={s[3]})" if s[3] != len(seeds) else "")
+                )
             lines.append(f"| {condition[0]:g} | {condition[1]:g} | {method} | " + " | ".join(cells) + " |")
-    lines += ["", "Seeds on which the first method's figure is lower (better) than the second's, of the seeds both ran:", "",
-              "| illumination | speed | methods | " + " | ".join(FIGURES.values()) + " |", "|---" * (3 + len(FIGURES)) + "|"]
+    lines += [
+        "",
+        "Seeds on which the first method's figure is lower (better) than the second's, of the seeds both ran:",
+        "",
+        "| illumination | speed | methods | " + " | ".join(FIGURES.values()) + " |",
+        "|---" * (3 + len(FIGURES)) + "|",
+    ]
     for first, second in PAIRS:
         for condition in conditions:
             cells = []
@@ -122,7 +178,9 @@ def table_markdown(rows: list[dict], conditions: list[tuple]) -> str:
                 value = {method: per_seed(rows, condition, method, key) for method in (first, second)}
                 both = sorted(value[first].keys() & value[second].keys())
                 cells.append(f"{sum(value[first][n] < value[second][n] for n in both)} of {len(both)}")
-            lines.append(f"| {condition[0]:g} | {condition[1]:g} | {first} against {second} | " + " | ".join(cells) + " |")
+            lines.append(
+                f"| {condition[0]:g} | {condition[1]:g} | {first} against {second} | " + " | ".join(cells) + " |"
+            )
     return "\n".join(lines) + "\n"
 
 
@@ -135,16 +193,20 @@ def figure(rows: list[dict], illuminations: list[float], speeds: list[float], pa
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    styles = {**{f"{f} + klt + chain": dict(color=PAPER_COLOURS[f], lw=1.0, alpha=0.6) for f in PAPER_ORDER},
-              "eas + klt + chain": dict(color=PAPER_COLOURS["eas"], lw=2.5),
-              "cmax + chain": dict(color="black", lw=2.5),
-              "cmax + chain (no gyro)": dict(color="tab:gray", lw=2.0, ls=":"),
-              "cmax + gtsam (gyro)": dict(color="black", lw=2.0, ls="--"),
-              "best.toml (eas)": dict(color=PAPER_COLOURS["eas"], lw=2.0, ls="--")}
+    styles = {
+        **{f"{f} + klt + chain": dict(color=PAPER_COLOURS[f], lw=1.0, alpha=0.6) for f in PAPER_ORDER},
+        "eas + klt + chain": dict(color=PAPER_COLOURS["eas"], lw=2.5),
+        "cmax + chain": dict(color="black", lw=2.5),
+        "cmax + chain (no gyro)": dict(color="tab:gray", lw=2.0, ls=":"),
+        "cmax + gtsam (gyro)": dict(color="black", lw=2.0, ls="--"),
+        "best.toml (eas)": dict(color=PAPER_COLOURS["eas"], lw=2.0, ls="--"),
+    }
     banded = ("eas + klt + chain", "cmax + chain")
     fig, axes = plt.subplots(len(FIGURES), 2, figsize=(11, 3.2 * len(FIGURES)), sharey="row", squeeze=False)
-    axis_points = ((("illumination (speed 1)"), [(i, 1.0) for i in illuminations], 0),
-                   (("speed (illumination 1)"), [(1.0, s) for s in speeds], 1))
+    axis_points = (
+        (("illumination (speed 1)"), [(i, 1.0) for i in illuminations], 0),
+        (("speed (illumination 1)"), [(1.0, s) for s in speeds], 1),
+    )
     for column, (xlabel, conditions, index) in enumerate(axis_points):
         for row_k, (key, ylabel) in enumerate(FIGURES.items()):
             ax = axes[row_k][column]
@@ -156,7 +218,9 @@ def figure(rows: list[dict], illuminations: list[float], speeds: list[float], pa
                 x = [p[0] for p in points]
                 ax.plot(x, [p[1][0] for p in points], marker="o", ms=3, label=method, **style)
                 if method in banded:
-                    ax.fill_between(x, [p[1][1] for p in points], [p[1][2] for p in points], color=style["color"], alpha=0.2, lw=0)
+                    ax.fill_between(
+                        x, [p[1][1] for p in points], [p[1][2] for p in points], color=style["color"], alpha=0.2, lw=0
+                    )
             ax.set_xscale("log")
             ax.set_yscale("log")
             ax.set_xticks([c[index] for c in conditions], [f"{c[index]:g}" for c in conditions])
@@ -166,7 +230,9 @@ def figure(rows: list[dict], illuminations: list[float], speeds: list[float], pa
             if column == 0:
                 ax.set_ylabel(ylabel)
     seeds = sorted({r["seed"] for r in rows})
-    fig.suptitle(f"Simulated dim room, 3 s, seeds {', '.join(map(str, seeds))}: median; band: min-max over seeds (eas + klt + chain, cmax + chain)")
+    fig.suptitle(
+        f"Simulated dim room, 3 s, seeds {', '.join(map(str, seeds))}: median; band: min-max over seeds (eas + klt + chain, cmax + chain)"
+    )
     handles, labels = axes[0][0].get_legend_handles_labels()
     fig.legend(handles, labels, loc="lower center", ncol=5, fontsize=9, frameon=False)
     fig.tight_layout(rect=(0, 0.06, 1, 0.97))
@@ -176,7 +242,9 @@ def figure(rows: list[dict], illuminations: list[float], speeds: list[float], pa
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--seeds", type=int, nargs="+", default=[91, 92, 93, 94, 95], help="simulator seeds that chose nothing")
+    parser.add_argument(
+        "--seeds", type=int, nargs="+", default=[91, 92, 93, 94, 95], help="simulator seeds that chose nothing"
+    )
     parser.add_argument("--illumination", type=float, nargs="+", default=[0.1, 0.3, 1.0], help="lights, at speed 1")
     parser.add_argument("--speed", type=float, nargs="+", default=[1.0, 2.0, 4.0], help="speeds, at illumination 1")
     parser.add_argument("--duration", type=float, default=3.0, help="seconds per sequence (default 3)")
@@ -185,7 +253,9 @@ def main() -> None:
     parser.add_argument("--report-only", action="store_true", help="rewrite table and figure from study.json")
     args = parser.parse_args()
     if set(args.seeds) & USED_SEEDS:
-        raise SystemExit(f"seeds {sorted(set(args.seeds) & USED_SEEDS)} chose something or were looked at before: use others")
+        raise SystemExit(
+            f"seeds {sorted(set(args.seeds) & USED_SEEDS)} chose something or were looked at before: use others"
+        )
     conditions = list(dict.fromkeys([(i, 1.0) for i in args.illumination] + [(1.0, s) for s in args.speed]))
     study = args.out / "study.json"
     if args.report_only:

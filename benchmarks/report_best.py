@@ -23,8 +23,14 @@ from eas_vo import config, pipeline
 
 #: v0.1's configs/best.toml (f472285), as `--set` assignments on top of today's defaults. Checked
 #: against that commit's own code on the 22 report seeds: within 13 % of it on each (README).
-V01_BEST = ["tracker.geometry=rotation", "tracker.max_corners=1000", "tracker.lk_max_level=5",
-            "tracker.threshold2=300", "tracker.keyframe_interval=3", "backend.robust=huber"]
+V01_BEST = [
+    "tracker.geometry=rotation",
+    "tracker.max_corners=1000",
+    "tracker.lk_max_level=5",
+    "tracker.threshold2=300",
+    "tracker.keyframe_interval=3",
+    "backend.robust=huber",
+]
 CONFIGS = {"paper.toml": ("paper", []), "v0.1's best.toml": (None, V01_BEST), "best.toml": ("best", [])}
 REAL_WINDOWS = {"real 20-30 s": (20.0, 10.0), "real 25-30 s": (25.0, 5.0), "real 0-30 s": (0.0, 30.0)}
 
@@ -39,29 +45,62 @@ def run(name: str, dataset: str, frontend: str, extra: dict, best_sets: list[str
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--real", default="../shared/data/ecd/shapes_rotation_0-30s", help="the real excerpt's folder ('' to leave it out)")
+    parser.add_argument(
+        "--real",
+        default="../shared/data/ecd/shapes_rotation_0-30s",
+        help="the real excerpt's folder ('' to leave it out)",
+    )
     parser.add_argument("--seeds", type=int, nargs="*", default=[41, 42, 43], help="simulator seeds not used to choose")
-    parser.add_argument("--fast-seeds", type=int, nargs="*", default=[], metavar="N",
-                        help="also seeds simulated at --fast-speed (e.g. 74 75 76; not 71-73, which the gyro model was corrected on)")
+    parser.add_argument(
+        "--fast-seeds",
+        type=int,
+        nargs="*",
+        default=[],
+        metavar="N",
+        help="also seeds simulated at --fast-speed (e.g. 74 75 76; not 71-73, which the gyro model was corrected on)",
+    )
     parser.add_argument("--fast-speed", type=float, default=4.0, help="the speed of --fast-seeds (default 4)")
-    parser.add_argument("--sequence", action="append", default=[], metavar="DIR",
-                        help="also report on this sequence with eas (repeatable; e.g. eas-vo simulate --illumination 0.1)")
+    parser.add_argument(
+        "--sequence",
+        action="append",
+        default=[],
+        metavar="DIR",
+        help="also report on this sequence with eas (repeatable; e.g. eas-vo simulate --illumination 0.1)",
+    )
     parser.add_argument("--no-speed", action="store_true", help="skip the speed measurement")
-    parser.add_argument("--set", action="append", default=[], metavar="SECTION.KEY=VALUE",
-                        help="report best.toml with this value changed (repeatable)")
+    parser.add_argument(
+        "--set",
+        action="append",
+        default=[],
+        metavar="SECTION.KEY=VALUE",
+        help="report best.toml with this value changed (repeatable)",
+    )
     args = parser.parse_args()
     if set(args.seeds) & set(SELECTION_SEEDS):
-        raise SystemExit(f"seeds {sorted(set(args.seeds) & set(SELECTION_SEEDS))} took part in a selection (select_best.py): report on others")
+        raise SystemExit(
+            f"seeds {sorted(set(args.seeds) & set(SELECTION_SEEDS))} took part in a selection (select_best.py): report on others"
+        )
     if args.fast_speed == 4.0 and set(args.fast_seeds) & set(DEVELOPMENT_FAST_SEEDS):
-        raise SystemExit(f"seeds {sorted(set(args.fast_seeds) & set(DEVELOPMENT_FAST_SEEDS))} at speed 4 were developed on: report on others")
+        raise SystemExit(
+            f"seeds {sorted(set(args.fast_seeds) & set(DEVELOPMENT_FAST_SEEDS))} at speed 4 were developed on: report on others"
+        )
     columns = {}
     if args.real and Path(args.real).is_dir():
-        columns.update({label: (args.real, "histeq", {"start_s": s, "duration_s": d, "time_offset_s": 0.01})
-                        for label, (s, d) in REAL_WINDOWS.items()})
+        columns.update(
+            {
+                label: (args.real, "histeq", {"start_s": s, "duration_s": d, "time_offset_s": 0.01})
+                for label, (s, d) in REAL_WINDOWS.items()
+            }
+        )
     elif args.real:
         print(f"{args.real}: not found, real columns skipped", file=sys.stderr)
     columns.update({f"seed {n}": (str(seed_folder(n)), "eas", {}) for n in args.seeds})
-    columns.update({f"seed {n} (speed {args.fast_speed:g})": (str(seed_folder(n, args.fast_speed)), "eas", {}) for n in args.fast_seeds})
+    columns.update(
+        {
+            f"seed {n} (speed {args.fast_speed:g})": (str(seed_folder(n, args.fast_speed)), "eas", {})
+            for n in args.fast_seeds
+        }
+    )
     names = [Path(d).name for d in args.sequence]
     columns.update({(name if names.count(name) == 1 else d): (d, "eas", {}) for name, d in zip(names, args.sequence)})
     print("| | " + " | ".join(columns) + " |")
@@ -76,7 +115,9 @@ def main() -> None:
         speed["real 0-30 s"] = columns["real 0-30 s"]
     for label, column in speed.items():
         m = max((run("best.toml", *column, args.set) for _ in range(3)), key=lambda m: m["realtime_factor"])
-        print(f"best.toml on {label} (best of 3): {m['frames_per_s']:.0f} frames/s, {m['realtime_factor']:.1f}x real time")
+        print(
+            f"best.toml on {label} (best of 3): {m['frames_per_s']:.0f} frames/s, {m['realtime_factor']:.1f}x real time"
+        )
 
 
 if __name__ == "__main__":

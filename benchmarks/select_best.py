@@ -51,8 +51,22 @@ def seed_folder(seed: int, speed: float = 1.0) -> Path:
     name = f"seed-{seed}" if speed == 1.0 else f"seed-{seed}-speed-{speed:g}"
     folder = cache_folder("simulated", "simulator seeds of benchmarks/select_best.py and report_best.py") / name
     if not (folder / "images.txt").exists():
-        subprocess.run([sys.executable, "-m", "eas_vo", "simulate", "--seed", str(seed), "--speed", str(speed),
-                        "--out", str(folder), "--overwrite"], check=True)
+        subprocess.run(
+            [
+                sys.executable,
+                "-m",
+                "eas_vo",
+                "simulate",
+                "--seed",
+                str(seed),
+                "--speed",
+                str(speed),
+                "--out",
+                str(folder),
+                "--overwrite",
+            ],
+            check=True,
+        )
     return folder
 
 
@@ -82,10 +96,21 @@ def geometric_mean(values) -> float:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--real", default="../shared/data/ecd/shapes_rotation_0-30s", help="the real excerpt's folder")
-    parser.add_argument("--selection-seeds", type=int, nargs="*", default=[], metavar="N",
-                        help="simulator seeds added to the synthetic selection data (never report on them)")
-    parser.add_argument("--vary", action="append", default=[], metavar="KEY=V1,V2",
-                        help="the values tried, replacing the default candidates (repeatable)")
+    parser.add_argument(
+        "--selection-seeds",
+        type=int,
+        nargs="*",
+        default=[],
+        metavar="N",
+        help="simulator seeds added to the synthetic selection data (never report on them)",
+    )
+    parser.add_argument(
+        "--vary",
+        action="append",
+        default=[],
+        metavar="KEY=V1,V2",
+        help="the values tried, replacing the default candidates (repeatable)",
+    )
     args = parser.parse_args()
     candidates = varied(args.vary) if args.vary else CANDIDATES
     if not Path(args.real).is_dir():
@@ -98,21 +123,33 @@ def main() -> None:
         ape_default, rtf_syn = measure("synthetic:default", "eas", {}, assignments)
         apes_syn = [ape_default] + [measure(folder, "eas", {}, assignments, runs=1)[0] for folder in seeds]
         ape_syn = geometric_mean(apes_syn)
-        rows.append({"values": values, "ape": (ape_real, ape_syn), "rtf": (rtf_real, rtf_syn),
-                     "geomean": math.sqrt(ape_real * ape_syn), "fast": min(rtf_real, rtf_syn) >= REAL_TIME_BAR})
+        rows.append(
+            {
+                "values": values,
+                "ape": (ape_real, ape_syn),
+                "rtf": (rtf_real, rtf_syn),
+                "geomean": math.sqrt(ape_real * ape_syn),
+                "fast": min(rtf_real, rtf_syn) >= REAL_TIME_BAR,
+            }
+        )
         r = rows[-1]
-        print(" ".join(f"{k.split('.')[-1]}={v}" for k, v in zip(candidates, values)),
-              f"APE real {ape_real:.4f}, synthetic {ape_syn:.4f} ({' '.join(f'{a:.4f}' for a in apes_syn)}),",
-              f"geomean {r['geomean']:.4f}, real time x{rtf_real:.1f} / x{rtf_syn:.1f}",
-              "" if r["fast"] else "(too slow)", flush=True)
+        print(
+            " ".join(f"{k.split('.')[-1]}={v}" for k, v in zip(candidates, values)),
+            f"APE real {ape_real:.4f}, synthetic {ape_syn:.4f} ({' '.join(f'{a:.4f}' for a in apes_syn)}),",
+            f"geomean {r['geomean']:.4f}, real time x{rtf_real:.1f} / x{rtf_syn:.1f}",
+            "" if r["fast"] else "(too slow)",
+            flush=True,
+        )
     fast = [r for r in rows if r["fast"]]
     if not fast:
         print(f"no candidate is {REAL_TIME_BAR:g}x real time on both: nothing chosen")
         return
     best = min(r["geomean"] for r in fast)
     chosen = max((r for r in fast if r["geomean"] <= best * (1 + WITHIN)), key=lambda r: min(r["rtf"]))
-    print(f"{len(fast)} of {len(rows)} pass the speed bar; lowest geometric mean {best:.4f}; chosen:",
-          " ".join(f"{k}={v}" for k, v in zip(candidates, chosen["values"])))
+    print(
+        f"{len(fast)} of {len(rows)} pass the speed bar; lowest geometric mean {best:.4f}; chosen:",
+        " ".join(f"{k}={v}" for k, v in zip(candidates, chosen["values"])),
+    )
 
 
 if __name__ == "__main__":

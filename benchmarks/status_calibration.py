@@ -51,8 +51,21 @@ CONFIGS = ("paper", "best")
 SYNTHETIC_FRONTENDS = ("eas", "histeq", "ts")
 REAL_FRONTENDS = ("histeq", "original")  # the real excerpt has events for its first 0.5 s only
 REAL_OFFSET_S = 0.01  # the excerpt's frames lead its ground truth by 10 ms (its README)
-FIELDS = ("data", "split", "config", "frontend", "index", "status", "reason", "inliers", "inlier_ratio",
-          "residual_px", "focal_px", "gt_angle_deg", "error_deg")
+FIELDS = (
+    "data",
+    "split",
+    "config",
+    "frontend",
+    "index",
+    "status",
+    "reason",
+    "inliers",
+    "inlier_ratio",
+    "residual_px",
+    "focal_px",
+    "gt_angle_deg",
+    "error_deg",
+)
 #: The share of right measurements the chosen thresholds may call weak (on the choice data).
 MAX_RIGHT_WEAK = 0.10
 #: The grid the thresholds are chosen on. min_inliers stays 15: a count of inliers follows how
@@ -71,8 +84,16 @@ def columns(real: str, seeds: list[int]) -> dict:
     found = {"synthetic:default": ("choice", "synthetic:default", SYNTHETIC_FRONTENDS, {})}
     found.update({f"seed {n}": ("held-out", str(seed_folder(n)), SYNTHETIC_FRONTENDS, {}) for n in seeds})
     if real and Path(real).is_dir():
-        for label, split, (start, duration) in (("real 0-20 s", "choice", (0.0, 20.0)), ("real 20-30 s", "held-out", (20.0, 10.0))):
-            found[label] = (split, real, REAL_FRONTENDS, {"start_s": start, "duration_s": duration, "time_offset_s": REAL_OFFSET_S})
+        for label, split, (start, duration) in (
+            ("real 0-20 s", "choice", (0.0, 20.0)),
+            ("real 20-30 s", "held-out", (20.0, 10.0)),
+        ):
+            found[label] = (
+                split,
+                real,
+                REAL_FRONTENDS,
+                {"start_s": start, "duration_s": duration, "time_offset_s": REAL_OFFSET_S},
+            )
     elif real:
         print(f"{real}: not found, real data skipped", file=sys.stderr)
     return found
@@ -91,9 +112,21 @@ def measurements(label: str, split: str, dataset: str, file: str, frontend: str,
     R_gt[valid] = R_w_c_gt
     rows = []
     for r in result.records[1:]:
-        row = {"data": label, "split": split, "config": file, "frontend": frontend, "index": r.index, "status": r.status,
-               "reason": r.reason.split(" (")[0], "inliers": r.inliers, "inlier_ratio": r.inlier_ratio,
-               "residual_px": r.residual_px, "focal_px": focal_px, "gt_angle_deg": np.nan, "error_deg": np.nan}
+        row = {
+            "data": label,
+            "split": split,
+            "config": file,
+            "frontend": frontend,
+            "index": r.index,
+            "status": r.status,
+            "reason": r.reason.split(" (")[0],
+            "inliers": r.inliers,
+            "inlier_ratio": r.inlier_ratio,
+            "residual_px": r.residual_px,
+            "focal_px": focal_px,
+            "gt_angle_deg": np.nan,
+            "error_deg": np.nan,
+        }
         if valid[r.index - 1] and valid[r.index]:
             R_gt_ij = R_gt[r.index - 1].T @ R_gt[r.index]
             row["gt_angle_deg"] = float(np.degrees(geodesic_angle(np.eye(3), R_gt_ij)))
@@ -130,21 +163,32 @@ class Table:
         self.inliers = np.array([r["inliers"] for r in measured])
         self.ratio = np.array([r["inlier_ratio"] for r in measured])
         self.residual = np.array([r["residual_px"] for r in measured])
-        self.edges = [RelativeRotation(0, 1, np.eye(3), r["inliers"], r["inlier_ratio"], r["residual_px"]) for r in measured]
+        self.edges = [
+            RelativeRotation(0, 1, np.eye(3), r["inliers"], r["inlier_ratio"], r["residual_px"]) for r in measured
+        ]
 
     def weak(self, min_inliers: float, min_inlier_ratio: float, max_residual_px: float) -> np.ndarray:
         """Whether each measurement is weak under these thresholds (measurement.weakness itself,
         on each measurement's quality as its record gives it: its residual already in px)."""
-        thresholds = TwoViewConfig(min_inliers=int(min_inliers), min_inlier_ratio=float(min_inlier_ratio),
-                                   max_residual_px=float(max_residual_px))
+        thresholds = TwoViewConfig(
+            min_inliers=int(min_inliers),
+            min_inlier_ratio=float(min_inlier_ratio),
+            max_residual_px=float(max_residual_px),
+        )
         return np.array([bool(weakness(thresholds, edge, 1.0)) for edge in self.edges], dtype=bool)
 
     def rates(self, weak: np.ndarray, use: np.ndarray) -> tuple[float, float]:
         """(right called weak, wrong called ok): each the mean over the runs in `use` that have
         such measurements."""
         runs = np.unique(self.run[use])
-        right_weak = [weak[use & self.right & (self.run == u)].mean() for u in runs if (use & self.right & (self.run == u)).any()]
-        wrong_ok = [(~weak[use & self.wrong & (self.run == u)]).mean() for u in runs if (use & self.wrong & (self.run == u)).any()]
+        right_weak = [
+            weak[use & self.right & (self.run == u)].mean() for u in runs if (use & self.right & (self.run == u)).any()
+        ]
+        wrong_ok = [
+            (~weak[use & self.wrong & (self.run == u)]).mean()
+            for u in runs
+            if (use & self.wrong & (self.run == u)).any()
+        ]
         return (float(np.mean(right_weak)) if right_weak else np.nan, float(np.mean(wrong_ok)) if wrong_ok else np.nan)
 
 
@@ -173,37 +217,63 @@ def percentiles(values: np.ndarray) -> str:
 
 def report(table: Table, before: tuple, after: tuple) -> None:
     print("\n## What the measurements look like (5th / 50th / 95th percentile)\n")
-    print("| data | config | frontend | right | wrong | neither | ratio right | ratio wrong | residual right [px] | residual wrong [px] | inliers right | inliers wrong |")
+    print(
+        "| data | config | frontend | right | wrong | neither | ratio right | ratio wrong | residual right [px] | residual wrong [px] | inliers right | inliers wrong |"
+    )
     print("|---" * 12 + "|")
     for u in dict.fromkeys(table.run):
         m = table.run == u
         r, w = m & table.right, m & table.wrong
-        print(f"| {' | '.join(u.split('|'))} | {r.sum()} | {w.sum()} | {(m & ~table.right & ~table.wrong).sum()} | "
-              f"{percentiles(table.ratio[r])} | {percentiles(table.ratio[w])} | {percentiles(table.residual[r])} | "
-              f"{percentiles(table.residual[w])} | {percentiles(table.inliers[r])} | {percentiles(table.inliers[w])} |")
+        print(
+            f"| {' | '.join(u.split('|'))} | {r.sum()} | {w.sum()} | {(m & ~table.right & ~table.wrong).sum()} | "
+            f"{percentiles(table.ratio[r])} | {percentiles(table.ratio[w])} | {percentiles(table.residual[r])} | "
+            f"{percentiles(table.residual[w])} | {percentiles(table.inliers[r])} | {percentiles(table.inliers[w])} |"
+        )
     print("\n## Rates (mean over the runs): right measurements called weak, wrong ones called ok\n")
-    print("| config | thresholds (min_inliers, min_inlier_ratio, max_residual_px) | data | right called weak | wrong called ok | all measurements weak |")
+    print(
+        "| config | thresholds (min_inliers, min_inlier_ratio, max_residual_px) | data | right called weak | wrong called ok | all measurements weak |"
+    )
     print("|---|---|---|---|---|---|")
     best = config.resolve("best").tracker  # it keeps the thresholds it was selected with: they also steer its fallback
     own = (best.min_inliers, best.min_inlier_ratio, best.max_residual_px)
     for file, name, combo in (("paper", "before", before), ("paper", "after", after), ("best", "its own", own)):
         weak = table.weak(*combo)
-        for split, (kind, real) in itertools.product(("choice", "held-out"), (("all", None), ("synthetic", False), ("real", True))):
-            keep = (table.config == file) & (table.split == split) & ((table.real == real) if real is not None else True)
+        for split, (kind, real) in itertools.product(
+            ("choice", "held-out"), (("all", None), ("synthetic", False), ("real", True))
+        ):
+            keep = (
+                (table.config == file) & (table.split == split) & ((table.real == real) if real is not None else True)
+            )
             if keep.any():
                 right_weak, wrong_ok = table.rates(weak, keep)
-                print(f"| {file} | {name} {', '.join(f'{v:g}' for v in combo)} | {split}, {kind} | {right_weak:.1%} | "
-                      f"{wrong_ok:.1%} | {weak[keep].mean():.1%} |")
+                print(
+                    f"| {file} | {name} {', '.join(f'{v:g}' for v in combo)} | {split}, {kind} | {right_weak:.1%} | "
+                    f"{wrong_ok:.1%} | {weak[keep].mean():.1%} |"
+                )
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--real", default="../shared/data/ecd/shapes_rotation_0-30s", help="the real excerpt's folder ('' to leave it out)")
+    parser.add_argument(
+        "--real",
+        default="../shared/data/ecd/shapes_rotation_0-30s",
+        help="the real excerpt's folder ('' to leave it out)",
+    )
     parser.add_argument("--seeds", type=int, nargs="*", default=[41, 42, 43], help="held-out simulator seeds")
     parser.add_argument("--only", nargs="*", metavar="LABEL", help="run only these data (e.g. 'seed 41' 'real 0-20 s')")
     parser.add_argument("--rows", type=Path, help="write every measurement to this CSV file")
-    parser.add_argument("--from", dest="sources", type=Path, nargs="*", help="read the measurements from these CSV files instead of running")
-    parser.add_argument("--before", default="15,0.5,0.5", help="the thresholds to compare with: min_inliers,min_inlier_ratio,max_residual_px")
+    parser.add_argument(
+        "--from",
+        dest="sources",
+        type=Path,
+        nargs="*",
+        help="read the measurements from these CSV files instead of running",
+    )
+    parser.add_argument(
+        "--before",
+        default="15,0.5,0.5",
+        help="the thresholds to compare with: min_inliers,min_inlier_ratio,max_residual_px",
+    )
     args = parser.parse_args()
     before = tuple(float(v) for v in args.before.split(","))
     if args.sources:
@@ -222,14 +292,18 @@ def main() -> None:
                 writer.writeheader()
                 writer.writerows(rows)
     table = Table(rows)
-    print(f"right: error below {RIGHT_PX} px of focal length, wrong: above {WRONG_PX} px; {len(table.rows)} measurements")
+    print(
+        f"right: error below {RIGHT_PX} px of focal length, wrong: above {WRONG_PX} px; {len(table.rows)} measurements"
+    )
     if not ((table.split == "choice") & (table.config == "paper") & table.right).any():
         print("no right measurement of the paper configuration on the choice data: nothing chosen, --before reported")
         after = before
     else:
         after, rates = choose(table, before)
-        print(f"chosen on the choice data: min_inliers {after[0]:g}, min_inlier_ratio {after[1]:g}, max_residual_px {after[2]:g} "
-              f"(right called weak {rates[0]:.1%}, wrong called ok {rates[1]:.1%})")
+        print(
+            f"chosen on the choice data: min_inliers {after[0]:g}, min_inlier_ratio {after[1]:g}, max_residual_px {after[2]:g} "
+            f"(right called weak {rates[0]:.1%}, wrong called ok {rates[1]:.1%})"
+        )
     report(table, before, after)
 
 

@@ -25,10 +25,10 @@ import numpy as np
 from eas_vo.concurrency import in_order
 from eas_vo.datasets.aedat4_packets import MAGIC, Aedat4File, DvFrame, Scratch
 from eas_vo.datasets.recording import CALIBRATION_FORMATS, RecordingReader, StreamConfig, clock_origin_ns
-from eas_vo.io.tables import check_increasing
 from eas_vo.errors import DataError, DataWarnings
 from eas_vo.eventfile import Validator, cache_key, file_identity, load_cached
 from eas_vo.eventfile.kernels import check_and_pack_dv
+from eas_vo.io.tables import check_increasing
 from eas_vo.types import EVENT_DTYPE, ImuSeries, empty_events
 
 #: Standard gravity [m/s^2]: the g of accelerometer datasheets, in which DV stores readings.
@@ -107,8 +107,10 @@ class Aedat4Dataset(RecordingReader):
         self._sensor = width, height = self._sensor_size()
         self.camera = self.calibration_file(width, height)
         if self.camera is None:
-            self.no_camera_reason = (f"{self.path}: an AEDAT4 file holds no lens calibration: give one with --set "
-                                     f"dataset.calibration=FILE ({CALIBRATION_FORMATS})")
+            self.no_camera_reason = (
+                f"{self.path}: an AEDAT4 file holds no lens calibration: give one with --set "
+                f"dataset.calibration=FILE ({CALIBRATION_FORMATS})"
+            )
         self._frame_times = self._read_frame_times()
         self._times = self._frame_times
         if self._frame_times is None:
@@ -137,10 +139,16 @@ class Aedat4Dataset(RecordingReader):
         sizes = {kind: self.file.streams[kind].size for kind in ("events", "frames") if kind in self.file.streams}
         sizes = {kind: size for kind, size in sizes.items() if size is not None}
         if not sizes:
-            raise DataError(self.path, "neither an events nor a frames stream with a resolution: the sensor size is unknown")
+            raise DataError(
+                self.path, "neither an events nor a frames stream with a resolution: the sensor size is unknown"
+            )
         if len(set(sizes.values())) > 1:
-            raise DataError(self.path, "the events stream is {0[0]}x{0[1]} px, the frames stream {1[0]}x{1[1]}".format(
-                sizes["events"], sizes["frames"]))
+            raise DataError(
+                self.path,
+                "the events stream is {0[0]}x{0[1]} px, the frames stream {1[0]}x{1[1]}".format(
+                    sizes["events"], sizes["frames"]
+                ),
+            )
         return next(iter(sizes.values()))
 
     # -- frames --------------------------------------------------------------------------
@@ -158,8 +166,9 @@ class Aedat4Dataset(RecordingReader):
             middle_us = frame.start_us + frame.exposure_us / 2
             if middles and middle_us < middles[-1]:
                 if not self.config.lenient:
-                    raise DataError(where, f"frame time {middle_us / 1e6:.6f} s goes back (previous {middles[-1] / 1e6:.6f})",
-                                    index)
+                    raise DataError(
+                        where, f"frame time {middle_us / 1e6:.6f} s goes back (previous {middles[-1] / 1e6:.6f})", index
+                    )
                 self.warnings.add(where, "frame time going back", f"frame {index}")
                 continue
             self._check_frame(frame, index)
@@ -171,8 +180,11 @@ class Aedat4Dataset(RecordingReader):
         size = frame.image.shape[1], frame.image.shape[0]
         expected = self._sensor
         if size != expected or any(frame.position):
-            raise DataError(f"{self.path}:frames", f"frame is {size[0]}x{size[1]} px at {frame.position}, "
-                                                   f"not the {expected[0]}x{expected[1]} sensor", index)
+            raise DataError(
+                f"{self.path}:frames",
+                f"frame is {size[0]}x{size[1]} px at {frame.position}, not the {expected[0]}x{expected[1]} sensor",
+                index,
+            )
 
     def load_frame(self, k: int) -> np.ndarray | None:
         if self._frame_times is None:
@@ -208,7 +220,9 @@ class Aedat4Dataset(RecordingReader):
         packets = self.file
         width, height = self._sensor
         groups = _groups(packets.sizes, GROUP_BYTES)
-        slots = [_Slot() for _ in range(GROUPS_AHEAD)]  # in_order keeps GROUPS_AHEAD groups at most, the one taken included
+        slots = [
+            _Slot() for _ in range(GROUPS_AHEAD)
+        ]  # in_order keeps GROUPS_AHEAD groups at most, the one taken included
 
         def checked(g):
             """Group g's packets decoded, each checked on its own (as if it started the stream)
@@ -221,8 +235,15 @@ class Aedat4Dataset(RecordingReader):
             for k in groups[g]:
                 records = packets.event_records(k, slot.scratch)
                 packed = slot.room(used + len(records))[used : used + len(records)]
-                bad, last_t = check_and_pack_dv(records.view(np.int64).reshape(-1, 2), self._origin_us, -np.inf, width,
-                                                height, c.time_tolerance_s, packed)
+                bad, last_t = check_and_pack_dv(
+                    records.view(np.int64).reshape(-1, 2),
+                    self._origin_us,
+                    -np.inf,
+                    width,
+                    height,
+                    c.time_tolerance_s,
+                    packed,
+                )
                 verdicts.append((k, used, len(records), bad, last_t))
                 used += len(records)
                 if len(records):
@@ -255,8 +276,14 @@ class Aedat4Dataset(RecordingReader):
                             out.write(slot.packed[run[0] : run[1]].data)
                             run = None
                         records = packets.event_records(k)  # again, on its own: the stream's check row by row
-                        events = validate(records["t"] - self._origin_us, records["x"], records["y"], records["p"],
-                                          lambda row, before=read: before + row, per_second=1e6)
+                        events = validate(
+                            records["t"] - self._origin_us,
+                            records["x"],
+                            records["y"],
+                            records["p"],
+                            lambda row, before=read: before + row,
+                            per_second=1e6,
+                        )
                         out.write(events.data)
                         kept += len(events)
                     read += rows

@@ -46,8 +46,9 @@ from eas_vo.errors import DataError
 #: The first bytes of every AEDAT 4.0 file.
 MAGIC = b"#!AER-DAT4.0\r\n"
 #: DV's `Event` struct as stored in an event packet.
-PACKET_EVENT = np.dtype({"names": ["t", "x", "y", "p"], "formats": ["<i8", "<i2", "<i2", "u1"],
-                         "offsets": [0, 8, 10, 12], "itemsize": 16})
+PACKET_EVENT = np.dtype(
+    {"names": ["t", "x", "y", "p"], "formats": ["<i8", "<i2", "<i2", "u1"], "offsets": [0, 8, 10, 12], "itemsize": 16}
+)
 #: IOHeader's compression enum -> the codec of the packet bodies.
 CODECS = {0: "none", 1: "lz4", 2: "lz4", 3: "zstd", 4: "zstd"}
 
@@ -292,8 +293,10 @@ class Aedat4File:
         except ValueError:
             size = (0, 0)
         if not all(0 < n <= 1 << 15 for n in size):  # DV's sizes are int16
-            self._fail(f"damaged AEDAT4 header: stream {stream_id}'s sensor size is "
-                       f"{attrs.get('sizeX')!r} x {attrs.get('sizeY')!r}, not two positive integers")
+            self._fail(
+                f"damaged AEDAT4 header: stream {stream_id}'s sensor size is "
+                f"{attrs.get('sizeX')!r} x {attrs.get('sizeY')!r}, not two positive integers"
+            )
         return size
 
     def _walk(self, at: int, end: int) -> None:
@@ -305,7 +308,9 @@ class Aedat4File:
                 self._fail(f"truncated: packet {index} at byte {at} has no whole header")
             stream, size = struct.unpack_from("<ii", self._map, at)
             if size < 0 or at + 8 + size > end:
-                self._fail(f"truncated or damaged: packet {index} at byte {at} claims {size} bytes, {end - at - 8} follow")
+                self._fail(
+                    f"truncated or damaged: packet {index} at byte {at} claims {size} bytes, {end - at - 8} follow"
+                )
             if stream in by_id:
                 by_id[stream].append((at + 8, size))
             at, index = at + 8 + size, index + 1
@@ -348,7 +353,9 @@ class Aedat4File:
         first, count = fb.vector(root, 10, 1)
         if width <= 0 or height <= 0 or count != width * height * channels:
             fail(f"{count} bytes of pixels for a {width}x{height} frame of {channels} channel(s)")
-        image = np.frombuffer(body, np.uint8, count, first).reshape((height, width, channels)[: 2 if channels == 1 else 3])
+        image = np.frombuffer(body, np.uint8, count, first).reshape(
+            (height, width, channels)[: 2 if channels == 1 else 3]
+        )
         return DvFrame(start_us, exposure_us, (fb.value("<h", root, 8), fb.value("<h", root, 9)), image)
 
     def imu_rows(self) -> np.ndarray:

@@ -17,15 +17,15 @@ from typing import Callable, ClassVar, Iterator
 import cv2
 import numpy as np
 
+from eas_vo.camera import CameraModel
 from eas_vo.datasets.calibration import camera_from_camera_info, check_frame_size
 from eas_vo.datasets.recording import CALIBRATION_FORMATS, RecordingReader, StreamConfig, clock_origin_ns
-from eas_vo.io.tables import check_increasing
-from eas_vo.io.tum import pose_series
 from eas_vo.errors import DataError, DataWarnings
 from eas_vo.eventfile import Validator, cache_key, load_cached, write_behind
 from eas_vo.eventfile.packets import DECODERS, decoder_class
+from eas_vo.io.tables import check_increasing
+from eas_vo.io.tum import pose_series
 from eas_vo.plugins import Dataset
-from eas_vo.camera import CameraModel
 from eas_vo.types import ImuSeries, empty_events
 
 #: Event messages are decoded and checked in groups of about this many bytes (a worker thread
@@ -87,8 +87,12 @@ def encode_mono(base_ns: int, events: np.ndarray, origin_ns: int = 0) -> np.ndar
     dt = np.round(events["t"] * 1e9).astype(np.int64) + (origin_ns - base_ns)
     if len(dt) and not (0 <= dt.min() and dt.max() < 2**32):
         raise ValueError("mono packets span at most 4.29 s after their time base")
-    words = (dt.astype(np.uint64) | events["x"].astype(np.uint64) << np.uint64(32)
-             | events["y"].astype(np.uint64) << np.uint64(48) | (events["p"] > 0).astype(np.uint64) << np.uint64(63))
+    words = (
+        dt.astype(np.uint64)
+        | events["x"].astype(np.uint64) << np.uint64(32)
+        | events["y"].astype(np.uint64) << np.uint64(48)
+        | (events["p"] > 0).astype(np.uint64) << np.uint64(63)
+    )
     return words.astype("<u8").view(np.uint8)
 
 
@@ -121,8 +125,14 @@ class PacketStream:
         if msg.encoding not in self.decoders:
             cls = decoder_class(msg.encoding)
             if cls is None:
-                what = "holds external trigger events only, not camera events" if msg.encoding == "trigger" else "is not read"
-                raise RefusedEncoding(f"event encoding {msg.encoding!r} {what} (eas-vo reads mono, {', '.join(DECODERS)})")
+                what = (
+                    "holds external trigger events only, not camera events"
+                    if msg.encoding == "trigger"
+                    else "is not read"
+                )
+                raise RefusedEncoding(
+                    f"event encoding {msg.encoding!r} {what} (eas-vo reads mono, {', '.join(DECODERS)})"
+                )
             self.decoders[msg.encoding] = cls(self.width, self.height)
         decoder = self.decoders[msg.encoding]
         out = decoder.decode(np.asarray(msg.events, np.uint8), int(msg.time_base))
@@ -186,9 +196,13 @@ class BagDataset(RecordingReader):
 
     def _topic_kinds(self) -> dict[str, tuple[str, ...]]:
         """Each topic option (a BagConfig field) and the message types it may carry."""
-        return {"events_topic": self.event_types, "image_topic": ("sensor_msgs/msg/Image",),
-                "imu_topic": ("sensor_msgs/msg/Imu",), "pose_topic": ("geometry_msgs/msg/PoseStamped",),
-                "camera_info_topic": ("sensor_msgs/msg/CameraInfo",)}
+        return {
+            "events_topic": self.event_types,
+            "image_topic": ("sensor_msgs/msg/Image",),
+            "imu_topic": ("sensor_msgs/msg/Imu",),
+            "pose_topic": ("geometry_msgs/msg/PoseStamped",),
+            "camera_info_topic": ("sensor_msgs/msg/CameraInfo",),
+        }
 
     def _find_topic(self, key: str, types: tuple[str, ...]) -> str | None:
         """The topic `config.<key>` names; where its default name is absent, the one topic of the
@@ -200,12 +214,19 @@ class BagDataset(RecordingReader):
             return named
         found = sorted(topic for topic, msgtype in self.topic_types.items() if msgtype in types)
         if named != getattr(BagConfig, key):
-            kind = (f"its {' or '.join(types)} topic{'s' if len(found) > 1 else ''}: {', '.join(found)} "
-                    f"(--set dataset.{key}={found[0]}); " if found else f"it has no {' or '.join(types)} topic; ")
+            kind = (
+                f"its {' or '.join(types)} topic{'s' if len(found) > 1 else ''}: {', '.join(found)} "
+                f"(--set dataset.{key}={found[0]}); "
+                if found
+                else f"it has no {' or '.join(types)} topic; "
+            )
             raise DataError(self.path, f"has no topic {named} (dataset.{key}); {kind}it holds {self._topic_list()}")
         if len(found) > 1:
-            raise DataError(self.path, f"has no {named} and {len(found)} topics of its kind ({', '.join(found)}): "
-                                       f"choose one with --set dataset.{key}=TOPIC")
+            raise DataError(
+                self.path,
+                f"has no {named} and {len(found)} topics of its kind ({', '.join(found)}): "
+                f"choose one with --set dataset.{key}=TOPIC",
+            )
         return found[0] if found else None
 
     def _first_stamp_ns(self) -> int:
@@ -263,8 +284,11 @@ class BagDataset(RecordingReader):
             except StopIteration:
                 return
             except self._damage_errors() as exc:
-                raise DataError(f"{self.path}:{topic}", "damaged bag data, message unreadable"
-                                + self._damage_detail(connections, index, exc), index) from None
+                raise DataError(
+                    f"{self.path}:{topic}",
+                    "damaged bag data, message unreadable" + self._damage_detail(connections, index, exc),
+                    index,
+                ) from None
             yield conn, raw
             index += 1
 
@@ -279,7 +303,9 @@ class BagDataset(RecordingReader):
     def _deserialize(self, raw: bytes, msgtype: str):
         raise NotImplementedError
 
-    def _decode_events(self, raw: bytes, msgtype: str, packets: PacketStream, index: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    def _decode_events(
+        self, raw: bytes, msgtype: str, packets: PacketStream, index: int
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """Event message `index` -> (t [ns, the bag's clock], x, y, p) columns (an EventPacket
         through `packets.decode`); ValueError for damaged bytes, RefusedEncoding for what the
         reader does not decode."""
@@ -304,7 +330,11 @@ class BagDataset(RecordingReader):
     def _event_message_size(self) -> tuple[int, int] | None:
         """(width, height) [px] the first event message states, or None (no events, or zero)."""
         first = self._first_event_message
-        return (int(first[1].width), int(first[1].height)) if first is not None and first[1].width and first[1].height else None
+        return (
+            (int(first[1].width), int(first[1].height))
+            if first is not None and first[1].width and first[1].height
+            else None
+        )
 
     # -- shared reading ------------------------------------------------------------------
 
@@ -359,8 +389,11 @@ class BagDataset(RecordingReader):
             return size
         info = self._camera_info
         if info is None:
-            raise DataError(self.path, "the sensor size is unknown: no CameraInfo, no images, and the event messages "
-                                       "state none; give a calibration with --set dataset.calibration=FILE")
+            raise DataError(
+                self.path,
+                "the sensor size is unknown: no CameraInfo, no images, and the event messages "
+                "state none; give a calibration with --set dataset.calibration=FILE",
+            )
         return int(info[1].width), int(info[1].height)
 
     def _check_camera_size(self) -> None:
@@ -371,25 +404,46 @@ class BagDataset(RecordingReader):
             check_frame_size(self.camera, width, height, f"{self.path}:{self.topic['image_topic']}:0", "its frames are")
         size = self._event_message_size()
         if size is not None:
-            check_frame_size(self.camera, *size, f"{self.path}:{self.topic['events_topic']}:0",
-                             "its event messages state a sensor of")
+            check_frame_size(
+                self.camera,
+                *size,
+                f"{self.path}:{self.topic['events_topic']}:0",
+                "its event messages state a sensor of",
+            )
 
     def _read_camera(self) -> CameraModel | None:
         info = self._camera_info
         if info is None:
-            self.no_camera_reason = (f"{self.path} holds no CameraInfo message: give the intrinsics with --set "
-                                     f"dataset.calibration=FILE ({CALIBRATION_FORMATS})")
+            self.no_camera_reason = (
+                f"{self.path} holds no CameraInfo message: give the intrinsics with --set "
+                f"dataset.calibration=FILE ({CALIBRATION_FORMATS})"
+            )
             return None
         where, msg = info
         K_name, D_name = self.camera_fields
-        return camera_from_camera_info(where, int(msg.width), int(msg.height), getattr(msg, K_name), getattr(msg, D_name),
-                                       msg.distortion_model, f"{K_name}/{D_name}")
+        return camera_from_camera_info(
+            where,
+            int(msg.width),
+            int(msg.height),
+            getattr(msg, K_name),
+            getattr(msg, D_name),
+            msg.distortion_model,
+            f"{K_name}/{D_name}",
+        )
 
     def _read_poses(self):
         topic = self.topic["pose_topic"]
         rows = [
-            (self._stamp_s(m), m.pose.position.x, m.pose.position.y, m.pose.position.z,
-             m.pose.orientation.x, m.pose.orientation.y, m.pose.orientation.z, m.pose.orientation.w)
+            (
+                self._stamp_s(m),
+                m.pose.position.x,
+                m.pose.position.y,
+                m.pose.position.z,
+                m.pose.orientation.x,
+                m.pose.orientation.y,
+                m.pose.orientation.z,
+                m.pose.orientation.w,
+            )
             for _, _, m in self._messages(topic, ("geometry_msgs/msg/PoseStamped",))
         ]
         if not rows:
@@ -401,8 +455,15 @@ class BagDataset(RecordingReader):
     def _read_imu(self):
         topic = self.topic["imu_topic"]
         rows = [
-            (self._stamp_s(m), m.linear_acceleration.x, m.linear_acceleration.y, m.linear_acceleration.z,
-             m.angular_velocity.x, m.angular_velocity.y, m.angular_velocity.z)
+            (
+                self._stamp_s(m),
+                m.linear_acceleration.x,
+                m.linear_acceleration.y,
+                m.linear_acceleration.z,
+                m.angular_velocity.x,
+                m.angular_velocity.y,
+                m.angular_velocity.z,
+            )
             for _, _, m in self._messages(topic, ("sensor_msgs/msg/Imu",))
         ]
         if not rows:
@@ -462,16 +523,24 @@ class BagDataset(RecordingReader):
 
             written = write_behind(out, blocks())
             if packets.triggers:
-                warnings.add(where, "external trigger edges, not camera events (kept apart)", f"message {packets.first_trigger}",
-                             packets.triggers)
+                warnings.add(
+                    where,
+                    "external trigger edges, not camera events (kept apart)",
+                    f"message {packets.first_trigger}",
+                    packets.triggers,
+                )
             for decoder in packets.decoders.values():
-                for n, what in ((decoder.outside, "events outside the sensor"),
-                                (decoder.skipped, "events before the stream's first full timestamp")):
+                for n, what in (
+                    (decoder.outside, "events outside the sensor"),
+                    (decoder.skipped, "events before the stream's first full timestamp"),
+                ):
                     if n:
                         warnings.add(where, f"{what} ({decoder.encoding})", "the decoder's count", n)
             return written
 
-        key = cache_key(self.cache_tag, *self._identity(), topic, width, height, c.time_tolerance_s, self.clock_origin_ns)
+        key = cache_key(
+            self.cache_tag, *self._identity(), topic, width, height, c.time_tolerance_s, self.clock_origin_ns
+        )
         return load_cached(key, c.lenient, self.warnings, fill, where)
 
 
@@ -491,11 +560,18 @@ def write_messages(writer, messages, store, serialize, origin_ns: int = 0) -> No
     for t, topic, msgtype, msg in messages:
         if topic not in connections:
             connections[topic] = writer.add_connection(topic, msgtype, typestore=store)
-        writer.write(connections[topic], bag_time_ns(t, origin_ns), msg if isinstance(msg, bytes) else serialize(msg, msgtype))
+        writer.write(
+            connections[topic], bag_time_ns(t, origin_ns), msg if isinstance(msg, bytes) else serialize(msg, msgtype)
+        )
 
 
-def recording_messages(dataset: Dataset, config: BagConfig, store, ros1: bool,
-                       event_messages: Callable[[np.ndarray], Iterator[tuple[float, str, object]]]):
+def recording_messages(
+    dataset: Dataset,
+    config: BagConfig,
+    store,
+    ros1: bool,
+    event_messages: Callable[[np.ndarray], Iterator[tuple[float, str, object]]],
+):
     """(t [s], topic, msgtype, message or bytes) of a dataset's camera info, frames, events, IMU
     and ground truth, built with rosbags' `store` types (ROS 1 or ROS 2 field names), in time
     order. `event_messages(events)` yields the event messages (t, msgtype, bytes)."""
@@ -516,12 +592,20 @@ def recording_messages(dataset: Dataset, config: BagConfig, store, ros1: bool,
     messages = []
     t0 = float(dataset.frame_times()[0]) if len(dataset.frame_times()) else 0.0
     K = np.asarray(cam.K, float)
-    matrices = {"D": np.asarray(cam.dist, float), "K": K.ravel(), "R": np.eye(3).ravel(),
-                "P": np.column_stack([K, np.zeros(3)]).ravel()}
+    matrices = {
+        "D": np.asarray(cam.dist, float),
+        "K": K.ravel(),
+        "R": np.eye(3).ravel(),
+        "P": np.column_stack([K, np.zeros(3)]).ravel(),
+    }
     info = T["sensor_msgs/msg/CameraInfo"](
-        header=header(t0), height=cam.height, width=cam.width,
+        header=header(t0),
+        height=cam.height,
+        width=cam.width,
         distortion_model="equidistant" if cam.model == "equidistant" else "plumb_bob",
-        **{(name if ros1 else name.lower()): value for name, value in matrices.items()}, binning_x=0, binning_y=0,
+        **{(name if ros1 else name.lower()): value for name, value in matrices.items()},
+        binning_x=0,
+        binning_y=0,
         roi=T["sensor_msgs/msg/RegionOfInterest"](x_offset=0, y_offset=0, height=0, width=0, do_rectify=False),
     )
     messages.append((t0, c.camera_info_topic, "sensor_msgs/msg/CameraInfo", info))
@@ -529,17 +613,28 @@ def recording_messages(dataset: Dataset, config: BagConfig, store, ros1: bool,
         frame = dataset.load_frame(k)
         if frame is None:
             break
-        msg = T["sensor_msgs/msg/Image"](header=header(t), height=frame.shape[0], width=frame.shape[1], encoding="mono8",
-                                         is_bigendian=0, step=frame.shape[1], data=np.ascontiguousarray(frame).ravel())
+        msg = T["sensor_msgs/msg/Image"](
+            header=header(t),
+            height=frame.shape[0],
+            width=frame.shape[1],
+            encoding="mono8",
+            is_bigendian=0,
+            step=frame.shape[1],
+            data=np.ascontiguousarray(frame).ravel(),
+        )
         messages.append((t, c.image_topic, "sensor_msgs/msg/Image", msg))
     messages.extend((t, c.events_topic, msgtype, raw) for t, msgtype, raw in event_messages(dataset.events()))
     if dataset.imu is not None:
         zero_cov = np.zeros(9)
         for t, acc, gyro in zip(dataset.imu.t, dataset.imu.acc, dataset.imu.gyro):
             msg = T["sensor_msgs/msg/Imu"](
-                header=header(t), orientation=T["geometry_msgs/msg/Quaternion"](x=0.0, y=0.0, z=0.0, w=1.0),
-                orientation_covariance=zero_cov, angular_velocity=vec(*gyro), angular_velocity_covariance=zero_cov,
-                linear_acceleration=vec(*acc), linear_acceleration_covariance=zero_cov,
+                header=header(t),
+                orientation=T["geometry_msgs/msg/Quaternion"](x=0.0, y=0.0, z=0.0, w=1.0),
+                orientation_covariance=zero_cov,
+                angular_velocity=vec(*gyro),
+                angular_velocity_covariance=zero_cov,
+                linear_acceleration=vec(*acc),
+                linear_acceleration_covariance=zero_cov,
             )
             messages.append((t, c.imu_topic, "sensor_msgs/msg/Imu", msg))
     gt = dataset.ground_truth
@@ -547,9 +642,18 @@ def recording_messages(dataset: Dataset, config: BagConfig, store, ros1: bool,
         for t, p, q in zip(gt.t, gt.p_w_c, gt.q_w_c):
             pose = T["geometry_msgs/msg/Pose"](
                 position=T["geometry_msgs/msg/Point"](x=float(p[0]), y=float(p[1]), z=float(p[2])),
-                orientation=T["geometry_msgs/msg/Quaternion"](x=float(q[0]), y=float(q[1]), z=float(q[2]), w=float(q[3])),
+                orientation=T["geometry_msgs/msg/Quaternion"](
+                    x=float(q[0]), y=float(q[1]), z=float(q[2]), w=float(q[3])
+                ),
             )
-            messages.append((t, c.pose_topic, "geometry_msgs/msg/PoseStamped", T["geometry_msgs/msg/PoseStamped"](header=header(t), pose=pose)))
+            messages.append(
+                (
+                    t,
+                    c.pose_topic,
+                    "geometry_msgs/msg/PoseStamped",
+                    T["geometry_msgs/msg/PoseStamped"](header=header(t), pose=pose),
+                )
+            )
     return sorted(messages, key=lambda m: m[0])
 
 

@@ -26,10 +26,9 @@ from pathlib import Path
 
 import numpy as np
 
+from eas_vo.camera import LENS_MODELS, CameraModel
 from eas_vo.errors import DataError
 from eas_vo.io.tables import text_bytes
-from eas_vo.camera import LENS_MODELS, CameraModel
-
 
 #: The largest sensor side [px] a calibration or a dataset may have (the largest event sensors
 #: are a few thousand).
@@ -39,8 +38,10 @@ MAX_SENSOR_PX = 16384
 def _intrinsics_problem(fx, fy, cx, cy, width: int, height: int) -> str | None:
     side = max(width, height)
     if not (0.1 * side <= fx <= 100 * side and 0.1 * side <= fy <= 100 * side):
-        return f"focal lengths fx = {fx:g}, fy = {fy:g} px are not those of a {width}x{height} camera " \
-               f"({0.1 * side:g} to {100 * side:g} px)"
+        return (
+            f"focal lengths fx = {fx:g}, fy = {fy:g} px are not those of a {width}x{height} camera "
+            f"({0.1 * side:g} to {100 * side:g} px)"
+        )
     if not (0 <= cx <= width and 0 <= cy <= height):
         return f"principal point cx = {cx:g}, cy = {cy:g} px lies off the {width}x{height} sensor"
     return None
@@ -63,10 +64,12 @@ def _fold_problem(camera: CameraModel) -> str | None:
         return None
     radius_px, angle_rad, corner_px = fold
     names = " ".join(LENS_MODELS[camera.model])
-    return (f"the {camera.model} lens ({names} = {' '.join(f'{d:g}' for d in camera.dist)}) folds back "
-            f"{radius_px:.1f} px from the principal point ({angle_rad:.3f} rad off the optical axis), inside the "
-            f"{camera.width}x{camera.height} sensor (its farthest corner {corner_px:.1f} px): a lens model must "
-            "grow over the whole sensor")
+    return (
+        f"the {camera.model} lens ({names} = {' '.join(f'{d:g}' for d in camera.dist)}) folds back "
+        f"{radius_px:.1f} px from the principal point ({angle_rad:.3f} rad off the optical axis), inside the "
+        f"{camera.width}x{camera.height} sensor (its farthest corner {corner_px:.1f} px): a lens model must "
+        "grow over the whole sensor"
+    )
 
 
 def camera_problem(values, width: int, height: int, model: str = "radtan") -> str | None:
@@ -77,25 +80,35 @@ def camera_problem(values, width: int, height: int, model: str = "radtan") -> st
     growing out to the sensor's corners (_fold_problem). NaN fails every range."""
     n = len(LENS_MODELS[model])
     dist = np.array((list(values[4:]) + [0.0] * n)[:n], float)
-    return (_intrinsics_problem(*values[:4], width, height) or _distortion_problem(dist, model)
-            or _fold_problem(CameraModel(width, height, _intrinsic_matrix(*values[:4]), dist, model)))
+    return (
+        _intrinsics_problem(*values[:4], width, height)
+        or _distortion_problem(dist, model)
+        or _fold_problem(CameraModel(width, height, _intrinsic_matrix(*values[:4]), dist, model))
+    )
 
 
 def sensor_size(where: str, value, key: str) -> tuple[int, int]:
     """(width, height) [px] from a calibration's two size values (ints, or floats holding whole
     numbers), each 1 to MAX_SENSOR_PX; else one DataError naming the file and `key`."""
     ok = len(value) == 2 and all(
-        isinstance(v, (int, float, np.integer, np.floating)) and not isinstance(v, bool) and math.isfinite(v)
-        and v == int(v) and 1 <= v <= MAX_SENSOR_PX for v in value)
+        isinstance(v, (int, float, np.integer, np.floating))
+        and not isinstance(v, bool)
+        and math.isfinite(v)
+        and v == int(v)
+        and 1 <= v <= MAX_SENSOR_PX
+        for v in value
+    )
     if not ok:
         found = ", ".join(f"{v!r:.20}" for v in value)
-        raise DataError(where, f"{key}: the sensor size must be two whole numbers of pixels, 1 to {MAX_SENSOR_PX} "
-                               f"(found {found})")
+        raise DataError(
+            where, f"{key}: the sensor size must be two whole numbers of pixels, 1 to {MAX_SENSOR_PX} (found {found})"
+        )
     return int(value[0]), int(value[1])
 
 
-def check_frame_size(camera: CameraModel, width: int, height: int, where: str, what: str = "the frames are",
-                     key: str = "") -> None:
+def check_frame_size(
+    camera: CameraModel, width: int, height: int, where: str, what: str = "the frames are", key: str = ""
+) -> None:
     """One DataError naming both sizes when images of width x height [px] (`what` they are: the
     frames, frame k, the recording's sensor) are not the size `camera` was calibrated for:
     its intrinsics describe another sensor (or a crop of one), whatever else fits."""
@@ -104,8 +117,9 @@ def check_frame_size(camera: CameraModel, width: int, height: int, where: str, w
         raise DataError(where, f"{at}the calibration is for {camera.width}x{camera.height} px, {what} {width}x{height}")
 
 
-def camera_model(where: str, width: int, height: int, K, dist, model: str = "radtan",
-                 keys: tuple[str, str, str] = ("", "", "")) -> CameraModel:
+def camera_model(
+    where: str, width: int, height: int, K, dist, model: str = "radtan", keys: tuple[str, str, str] = ("", "", "")
+) -> CameraModel:
     """A checked CameraModel from a 3x3 intrinsic matrix [px] and distortion coefficients in
     `model`'s order: radtan takes up to 5 (k1 k2 p1 p2 k3, those left out zero; more only if the
     extra rational terms are zero), equidistant exactly 4. `keys` name where the sensor size,
@@ -117,21 +131,30 @@ def camera_model(where: str, width: int, height: int, K, dist, model: str = "rad
         raise DataError(where, f"{K_key}camera matrix has {len(K)} values, not 9")
     for at, values in ((K_key, K), (dist_key, dist)):
         if not np.isfinite(values).all():
-            raise DataError(where, f"{at}intrinsics and distortion must be finite (found {' '.join(f'{v:g}' for v in values)})")
+            raise DataError(
+                where, f"{at}intrinsics and distortion must be finite (found {' '.join(f'{v:g}' for v in values)})"
+            )
     K = K.reshape(3, 3)
     n = len(LENS_MODELS[model])
     if model == "equidistant" and len(dist) != n:
-        raise DataError(where, f"{dist_key}the equidistant lens model takes 4 distortion coefficients (k1 k2 k3 k4), "
-                               f"found {len(dist)}")
+        raise DataError(
+            where,
+            f"{dist_key}the equidistant lens model takes 4 distortion coefficients (k1 k2 k3 k4), found {len(dist)}",
+        )
     if model == "radtan":
         if len(dist) > 5 and dist[5:].any():
-            raise DataError(where, f"{dist_key}{len(dist)} radial-tangential distortion coefficients: k1 k2 p1 p2 [k3] are "
-                                   "read (the rational and thin-prism terms of OpenCV's longer forms are not supported)")
+            raise DataError(
+                where,
+                f"{dist_key}{len(dist)} radial-tangential distortion coefficients: k1 k2 p1 p2 [k3] are "
+                "read (the rational and thin-prism terms of OpenCV's longer forms are not supported)",
+            )
         dist = np.concatenate([dist, np.zeros(n)])[:n]
     if K[0, 1] != 0 or K[1, 0] != 0 or K[2, 0] != 0 or K[2, 1] != 0 or K[2, 2] != 1:
         raise DataError(where, f"{K_key}camera matrix is not [[fx 0 cx] [0 fy cy] [0 0 1]] (skew is not supported)")
-    for at, problem in ((K_key, _intrinsics_problem(K[0, 0], K[1, 1], K[0, 2], K[1, 2], width, height)),
-                        (dist_key, _distortion_problem(dist, model))):
+    for at, problem in (
+        (K_key, _intrinsics_problem(K[0, 0], K[1, 1], K[0, 2], K[1, 2], width, height)),
+        (dist_key, _distortion_problem(dist, model)),
+    ):
         if problem:
             raise DataError(where, f"{at}{problem}")
     camera = CameraModel(width, height, K, dist, model)
@@ -198,8 +221,11 @@ def read_dv_xml(path: str | Path, camera: str | None = None) -> CameraModel:
         fs = cv2.FileStorage(where, cv2.FILE_STORAGE_READ)
     except (cv2.error, SystemError) as exc:  # (OpenCV's parse errors surface as a SystemError over cv2.error)
         said = re.search(r"\((\d+)\): (.*?)'?$", str(exc.__cause__ or exc).strip())  # "...file.xml(2): <what>'"
-        raise DataError(where, f"not a readable OpenCV XML file ({said[2] if said else 'unparsable'})",
-                        int(said[1]) if said else None) from None
+        raise DataError(
+            where,
+            f"not a readable OpenCV XML file ({said[2] if said else 'unparsable'})",
+            int(said[1]) if said else None,
+        ) from None
     try:
         if not fs.isOpened():
             raise DataError(where, "not a readable OpenCV XML file")
@@ -208,25 +234,39 @@ def read_dv_xml(path: str | Path, camera: str | None = None) -> CameraModel:
         cameras = [name for name, node in nodes.items() if node.isMap() and not node.getNode("camera_matrix").empty()]
         if camera is not None:
             if camera not in cameras:
-                raise DataError(where, f"no camera node {camera!r} (holding camera_matrix); found {', '.join(cameras) or 'none'}")
+                raise DataError(
+                    where, f"no camera node {camera!r} (holding camera_matrix); found {', '.join(cameras) or 'none'}"
+                )
             node, prefix = nodes[camera], f"{camera}/"
         elif not root.getNode("camera_matrix").empty():
             node, prefix = root, ""
         elif len(cameras) == 1:
             node, prefix = nodes[cameras[0]], f"{cameras[0]}/"
         elif cameras:
-            raise DataError(where, f"holds {len(cameras)} cameras ({', '.join(cameras)}): choose one with camera=NAME "
-                                   "(--set dataset.calibration_camera=NAME)")
+            raise DataError(
+                where,
+                f"holds {len(cameras)} cameras ({', '.join(cameras)}): choose one with camera=NAME "
+                "(--set dataset.calibration_camera=NAME)",
+            )
         else:
-            raise DataError(where, "no camera_matrix, neither at the top level nor in a camera node: not a DV calibration")
+            raise DataError(
+                where, "no camera_matrix, neither at the top level nor in a camera node: not a DV calibration"
+            )
         K = _fs_matrix(where, node, prefix, "camera_matrix", 9)
         dist = _fs_matrix(where, node, prefix, "distortion_coefficients", None)
         width, height = (_fs_int(where, node, prefix, key) for key in ("image_width", "image_height"))
         model = _dv_lens_model(where, root, node, prefix, cameras)
     finally:
         fs.release()
-    return camera_model(where, width, height, K, dist, model,
-                        (f"{prefix}image_width, image_height", f"{prefix}camera_matrix", f"{prefix}distortion_coefficients"))
+    return camera_model(
+        where,
+        width,
+        height,
+        K,
+        dist,
+        model,
+        (f"{prefix}image_width, image_height", f"{prefix}camera_matrix", f"{prefix}distortion_coefficients"),
+    )
 
 
 def _fs_matrix(where: str, node, prefix: str, key: str, size: int | None) -> np.ndarray:
@@ -268,8 +308,10 @@ def _dv_lens_model(where: str, root, node, prefix: str, cameras: list[str]) -> s
         if not named.empty():
             name = named.string() if named.isString() else ""
             if name.lower() not in DV_LENS_MODELS:
-                raise DataError(where, f"{at}distortion_model: {name or 'not a name'!r} is not read "
-                                       "(RadialTangential or Equidistant)")
+                raise DataError(
+                    where,
+                    f"{at}distortion_model: {name or 'not a name'!r} is not read (RadialTangential or Equidistant)",
+                )
             names[f"{at}distortion_model"] = DV_LENS_MODELS[name.lower()]
         if not flag.empty():
             if not (flag.isInt() and flag.real() in (0, 1)):
@@ -294,8 +336,10 @@ def _no_lens_keys_elsewhere(where: str, node, path: str, cameras: set[str]) -> N
         for key in node.keys():
             at = f"{path}{key}"
             if key in DV_LENS_KEYS and path and path[:-1] not in cameras:
-                raise DataError(where, f"{at}: a lens model key where it is not read (it is read at the top level "
-                                       "and in a camera's node)")
+                raise DataError(
+                    where,
+                    f"{at}: a lens model key where it is not read (it is read at the top level and in a camera's node)",
+                )
             _no_lens_keys_elsewhere(where, node.getNode(key), f"{at}/", cameras)
     elif node.isSeq():
         for k in range(node.size()):
@@ -306,8 +350,13 @@ def _no_lens_keys_elsewhere(where: str, node, path: str, cameras: set[str]) -> N
 
 
 #: kalibr's and ROS's distortion model names -> lens models.
-YAML_LENS_MODELS = {"radtan": "radtan", "plumb_bob": "radtan", "rational_polynomial": "radtan", "equidistant": "equidistant",
-                    "none": "radtan"}
+YAML_LENS_MODELS = {
+    "radtan": "radtan",
+    "plumb_bob": "radtan",
+    "rational_polynomial": "radtan",
+    "equidistant": "equidistant",
+    "none": "radtan",
+}
 
 
 def _load_yaml(path: str | Path) -> dict:
@@ -321,8 +370,9 @@ def _parse_yaml(data: bytes, where: str) -> dict:
         content = yaml.safe_load(data)
     except yaml.YAMLError as exc:
         mark = getattr(exc, "problem_mark", None)
-        raise DataError(where, f"not valid YAML ({getattr(exc, 'problem', None) or exc})",
-                        None if mark is None else mark.line + 1) from None
+        raise DataError(
+            where, f"not valid YAML ({getattr(exc, 'problem', None) or exc})", None if mark is None else mark.line + 1
+        ) from None
     if not isinstance(content, dict):
         raise DataError(where, "not a YAML mapping of calibration keys")
     return content
@@ -356,19 +406,32 @@ def parse_kalibr_camchain(data: bytes, where: str, camera: str = "cam0") -> Came
     cam = content.get(camera)
     if not isinstance(cam, dict):
         found = ", ".join(k for k, v in content.items() if isinstance(v, dict) and "intrinsics" in v)
-        raise DataError(where, f"no camera {camera!r}; found {found}" if found else
-                        "not a calibration read here: no camN of a kalibr camchain, nor the image_width and "
-                        "camera_matrix of a ROS camera_info")
+        raise DataError(
+            where,
+            f"no camera {camera!r}; found {found}"
+            if found
+            else "not a calibration read here: no camN of a kalibr camchain, nor the image_width and "
+            "camera_matrix of a ROS camera_info",
+        )
     if cam.get("camera_model") != "pinhole":
         raise DataError(where, f"{camera}.camera_model: {cam.get('camera_model')!r} is not read (pinhole only)")
     fu, fv, pu, pv = _numbers(where, cam, "intrinsics", 4, f"{camera}.intrinsics")
-    width, height = sensor_size(where, _numbers(where, cam, "resolution", 2, f"{camera}.resolution"), f"{camera}.resolution")
+    width, height = sensor_size(
+        where, _numbers(where, cam, "resolution", 2, f"{camera}.resolution"), f"{camera}.resolution"
+    )
     model = _lens(where, cam, "distortion_model")
     dist = _numbers(where, cam, "distortion_coeffs", None, f"{camera}.distortion_coeffs")
     if cam["distortion_model"] == "none" and any(dist):
         raise DataError(where, f"{camera}.distortion_coeffs: distortion_model none with non-zero coefficients")
-    return camera_model(where, width, height, _intrinsic_matrix(fu, fv, pu, pv), dist, model,
-                        (f"{camera}.resolution", f"{camera}.intrinsics", f"{camera}.distortion_coeffs"))
+    return camera_model(
+        where,
+        width,
+        height,
+        _intrinsic_matrix(fu, fv, pu, pv),
+        dist,
+        model,
+        (f"{camera}.resolution", f"{camera}.intrinsics", f"{camera}.distortion_coeffs"),
+    )
 
 
 def read_camera_info_yaml(path: str | Path) -> CameraModel:
@@ -386,15 +449,26 @@ def read_camera_info_yaml(path: str | Path) -> CameraModel:
     for key in ("camera_matrix", "distortion_coefficients"):
         table = content.get(key)
         if not isinstance(table, dict):
-            raise DataError(where, f"{key}: expected a matrix (rows, cols, data), found {'missing' if table is None else repr(table)}")
+            raise DataError(
+                where,
+                f"{key}: expected a matrix (rows, cols, data), found {'missing' if table is None else repr(table)}",
+            )
         matrices[key] = _numbers(where, table, "data", 9 if key == "camera_matrix" else None, f"{key}.data")
-    return camera_from_camera_info(where, size[0], size[1], matrices["camera_matrix"], matrices["distortion_coefficients"],
-                                   content.get("distortion_model"), "camera_matrix/distortion_coefficients",
-                                   "image_width, image_height")
+    return camera_from_camera_info(
+        where,
+        size[0],
+        size[1],
+        matrices["camera_matrix"],
+        matrices["distortion_coefficients"],
+        content.get("distortion_model"),
+        "camera_matrix/distortion_coefficients",
+        "image_width, image_height",
+    )
 
 
-def camera_from_camera_info(where: str, width: int, height: int, K, D, distortion_model, key: str = "K/D",
-                            size_key: str = "width, height") -> CameraModel:
+def camera_from_camera_info(
+    where: str, width: int, height: int, K, D, distortion_model, key: str = "K/D", size_key: str = "width, height"
+) -> CameraModel:
     """sensor_msgs/CameraInfo fields (a message or its YAML) -> CameraModel: K row-major [px], D in
     the order of `distortion_model` (plumb_bob, rational_polynomial with k4..k6 zero, or
     equidistant; an empty name, as old drivers leave it, is plumb_bob). `key` names the K and D
@@ -425,8 +499,9 @@ def calibration_format(path: str | Path) -> str:
     return "kalibr"
 
 
-def read_calibration(path: str | Path, *, width: int | None = None, height: int | None = None,
-                     camera: str | None = None) -> CameraModel:
+def read_calibration(
+    path: str | Path, *, width: int | None = None, height: int | None = None, camera: str | None = None
+) -> CameraModel:
     """The calibration in `path`, whatever of the four formats it is in (told by content).
 
     width, height: the recording's sensor size [px]: required for an ECD calib.txt (which does

@@ -26,20 +26,18 @@ from pathlib import Path, PurePosixPath, PureWindowsPath
 import cv2
 import numpy as np
 
+from eas_vo.camera import CameraModel
 from eas_vo.datasets import ecd_catalogue
 from eas_vo.datasets.calibration import MAX_SENSOR_PX, check_frame_size, parse_ecd_calib, parse_kalibr_camchain
 from eas_vo.datasets.recording import RecordingReader, StreamConfig, clock_origin_ns
-from eas_vo.io.tum import parse_tum
-from eas_vo.io.tables import timed_table
 from eas_vo.datasets.sources import MARKERS, open_source
 from eas_vo.errors import DataError, DataWarnings
 from eas_vo.eventfile import load_event_text, write_events_text
 from eas_vo.io.atomic import atomic_path, write_text_atomic
-from eas_vo.io.tables import clock_time, text_bytes
-from eas_vo.camera import CameraModel
+from eas_vo.io.tables import clock_time, text_bytes, timed_table
+from eas_vo.io.tum import parse_tum
 from eas_vo.types import ImuSeries, PoseSeries, empty_events
 from eas_vo.validation import check_range
-
 
 #: The calibration of a fisheye sequence in this layout: calib.txt has only the radial-tangential
 #: model, so (as fisheye datasets in this layout ship, e.g. UZH-FPV's DAVIS) it is kalibr's camchain.
@@ -92,7 +90,9 @@ class EcdFolderDataset(RecordingReader):
     """An Event Camera Dataset sequence: an extracted folder or its `.zip`."""
 
     name = "ecd"
-    description = "Event Camera Dataset sequence: folder or .zip (events.txt, images.txt, groundtruth.txt, imu.txt, calib.txt)"
+    description = (
+        "Event Camera Dataset sequence: folder or .zip (events.txt, images.txt, groundtruth.txt, imu.txt, calib.txt)"
+    )
     Config = EcdConfig
 
     def __init__(self, location: str | Path, config: EcdConfig | None = None):
@@ -170,8 +170,12 @@ class EcdFolderDataset(RecordingReader):
         """The files each stream's times are read from (the ground truth's: groundtruth.txt, or the
         dataset.ground_truth file)."""
         label = self.source.label
-        return {"frame": label("images.txt"), "event": label("events.txt"), "IMU": label("imu.txt"),
-                "ground-truth": self.config.ground_truth or label("groundtruth.txt")}
+        return {
+            "frame": label("images.txt"),
+            "event": label("events.txt"),
+            "IMU": label("imu.txt"),
+            "ground-truth": self.config.ground_truth or label("groundtruth.txt"),
+        }
 
     # -- readers -----------------------------------------------------------------------
 
@@ -202,13 +206,18 @@ class EcdFolderDataset(RecordingReader):
             return None, []
         where = self.source.label("images.txt")
         times, names, lines = [], [], []
-        for lineno, line in enumerate(text_bytes(self.source.read_bytes("images.txt")).decode(errors="replace").splitlines(), 1):
+        for lineno, line in enumerate(
+            text_bytes(self.source.read_bytes("images.txt")).decode(errors="replace").splitlines(), 1
+        ):
             parts = line.split()
             if not parts or parts[0].startswith("#"):
                 continue
             problem = self._image_line_problem(parts, times)
             if problem is None and _leaves_folder(parts[1]):
-                problem = ("frame outside the dataset", f"frame path {parts[1]} leaves the dataset folder (absolute or '..')")
+                problem = (
+                    "frame outside the dataset",
+                    f"frame path {parts[1]} leaves the dataset folder (absolute or '..')",
+                )
             if problem is None and not self.source.exists(parts[1]):
                 problem = ("missing frame file", f"frame file {parts[1]} does not exist")
             if problem is not None:
@@ -245,15 +254,19 @@ class EcdFolderDataset(RecordingReader):
         sizes = [self._frame_size(k) for k in range(min(3, len(self._frame_names)))]
         for k, size in enumerate(sizes):
             if not (1 <= size[0] <= MAX_SENSOR_PX and 1 <= size[1] <= MAX_SENSOR_PX):
-                raise DataError(self.source.label(self._frame_names[k]),
-                                f"frame {k} is {size[0]}x{size[1]}, not an event camera's frame (at most "
-                                f"{MAX_SENSOR_PX} px a side; images.txt line {self._frame_lines[k]})")
+                raise DataError(
+                    self.source.label(self._frame_names[k]),
+                    f"frame {k} is {size[0]}x{size[1]}, not an event camera's frame (at most "
+                    f"{MAX_SENSOR_PX} px a side; images.txt line {self._frame_lines[k]})",
+                )
         common = max(set(sizes), key=sizes.count)
         for k, size in enumerate(sizes):
             if size != common:
-                raise DataError(self.source.label(self._frame_names[k]),
-                                f"frame {k} is {size[0]}x{size[1]} where the frames after it are {common[0]}x{common[1]} "
-                                f"(images.txt line {self._frame_lines[k]})")
+                raise DataError(
+                    self.source.label(self._frame_names[k]),
+                    f"frame {k} is {size[0]}x{size[1]} where the frames after it are {common[0]}x{common[1]} "
+                    f"(images.txt line {self._frame_lines[k]})",
+                )
         return common
 
     def _frame_size(self, k: int) -> tuple[int, int]:
@@ -284,7 +297,9 @@ class EcdFolderDataset(RecordingReader):
                     pass
         if image is None:
             empty = ": the file is empty" if not data.size else ""
-            raise DataError(self.source.label(name), f"cannot decode frame {k}{empty} (images.txt line {self._frame_lines[k]})")
+            raise DataError(
+                self.source.label(name), f"cannot decode frame {k}{empty} (images.txt line {self._frame_lines[k]})"
+            )
         return image
 
     def _read_calib(self, width: int, height: int) -> CameraModel | None:
@@ -295,9 +310,11 @@ class EcdFolderDataset(RecordingReader):
         if not self.source.exists("calib.txt"):
             if self.source.exists(CAMCHAIN):
                 return self._read_camchain(width, height)
-            self.no_camera_reason = (f"{where}: file not found: calib.txt holds the intrinsics 'fx fy cx cy k1 k2 p1 p2 "
-                                     f"k3' (or {CAMCHAIN}, a kalibr camchain, those of a fisheye; or give one with "
-                                     "--set dataset.calibration=FILE)")
+            self.no_camera_reason = (
+                f"{where}: file not found: calib.txt holds the intrinsics 'fx fy cx cy k1 k2 p1 p2 "
+                f"k3' (or {CAMCHAIN}, a kalibr camchain, those of a fisheye; or give one with "
+                "--set dataset.calibration=FILE)"
+            )
             return None
         camera = parse_ecd_calib(text_bytes(self.source.read_bytes("calib.txt")), where, width, height)
         if self.source.exists(CAMCHAIN):
@@ -308,8 +325,14 @@ class EcdFolderDataset(RecordingReader):
         """cam0 of the folder's kalibr camchain (calibration.parse_kalibr_camchain), for the frames' size."""
         where = self.source.label(CAMCHAIN)
         camera = parse_kalibr_camchain(text_bytes(self.source.read_bytes(CAMCHAIN)), where)
-        check_frame_size(camera, width, height, where, "the frames are" if self._frame_names else "dataset.width x dataset.height is",
-                         "cam0.resolution")
+        check_frame_size(
+            camera,
+            width,
+            height,
+            where,
+            "the frames are" if self._frame_names else "dataset.width x dataset.height is",
+            "cam0.resolution",
+        )
         return camera
 
     def _read_ground_truth(self) -> PoseSeries | None:
@@ -317,14 +340,21 @@ class EcdFolderDataset(RecordingReader):
             return self.ground_truth_file()
         if not self.source.exists("groundtruth.txt"):
             return None
-        return parse_tum(self.source.read_bytes("groundtruth.txt"), self.source.label("groundtruth.txt"),
-                         self.config.ground_truth_time_offset_s, self.clock_origin_ns, self.tolerated, min_poses=2)
+        return parse_tum(
+            self.source.read_bytes("groundtruth.txt"),
+            self.source.label("groundtruth.txt"),
+            self.config.ground_truth_time_offset_s,
+            self.clock_origin_ns,
+            self.tolerated,
+            min_poses=2,
+        )
 
     def _read_imu(self) -> ImuSeries | None:
         if not self.source.exists("imu.txt"):
             return None
-        table, _ = timed_table(self.source.read_bytes("imu.txt"), self.source.label("imu.txt"), 7, "t ax ay az gx gy gz",
-                               self.tolerated)
+        table, _ = timed_table(
+            self.source.read_bytes("imu.txt"), self.source.label("imu.txt"), 7, "t ax ay az gx gy gz", self.tolerated
+        )
         return ImuSeries(t=table[:, 0] - self._origin_s, acc=table[:, 1:4], gyro=table[:, 4:7])
 
 
@@ -342,10 +372,16 @@ def _refuse_disagreement(camera: CameraModel, where: str, other: CameraModel, ot
         same_dist = len(camera.dist) == len(other.dist) and np.allclose(camera.dist, other.dist, rtol=1e-9, atol=1e-12)
         if key is None and same_dist:
             return
-        differs = (f"{key} {mine[key]:g} against {theirs[key]:g}" if key is not None
-                   else f"distortion {' '.join(f'{v:g}' for v in camera.dist)} against {' '.join(f'{v:g}' for v in other.dist)}")
-    raise DataError(f"{where} and {other_where}", f"two calibrations of the camera that differ ({differs}); remove the "
-                    "wrong one, or choose one with --set dataset.calibration=FILE")
+        differs = (
+            f"{key} {mine[key]:g} against {theirs[key]:g}"
+            if key is not None
+            else f"distortion {' '.join(f'{v:g}' for v in camera.dist)} against {' '.join(f'{v:g}' for v in other.dist)}"
+        )
+    raise DataError(
+        f"{where} and {other_where}",
+        f"two calibrations of the camera that differ ({differs}); remove the "
+        "wrong one, or choose one with --set dataset.calibration=FILE",
+    )
 
 
 def write_ecd_folder(
@@ -392,14 +428,18 @@ def camchain_yaml(camera: CameraModel) -> str:
     if camera.model != "equidistant":
         raise ValueError(f"{camera.model} cameras go into calib.txt")
     K = camera.K
-    return (f"# written by eas-vo: the camera of this sequence, in kalibr's camchain format\n"
-            f"cam0:\n  camera_model: pinhole\n"
-            f"  intrinsics: [{', '.join(repr(float(v)) for v in (K[0, 0], K[1, 1], K[0, 2], K[1, 2]))}]\n"
-            f"  distortion_model: {camera.model}\n"
-            f"  distortion_coeffs: [{', '.join(repr(float(v)) for v in camera.dist)}]\n"
-            f"  resolution: [{camera.width}, {camera.height}]\n")
+    return (
+        f"# written by eas-vo: the camera of this sequence, in kalibr's camchain format\n"
+        f"cam0:\n  camera_model: pinhole\n"
+        f"  intrinsics: [{', '.join(repr(float(v)) for v in (K[0, 0], K[1, 1], K[0, 2], K[1, 2]))}]\n"
+        f"  distortion_model: {camera.model}\n"
+        f"  distortion_coeffs: [{', '.join(repr(float(v)) for v in camera.dist)}]\n"
+        f"  resolution: [{camera.width}, {camera.height}]\n"
+    )
 
 
 def _format_rows(t: np.ndarray, table: np.ndarray, origin_ns: int) -> str:
     """Rows `t v1 v2 ...`, t [s] after the clock origin written as the recording's own time."""
-    return "".join(" ".join([clock_time(ti, origin_ns), *(f"{v:.9f}" for v in row)]) + "\n" for ti, row in zip(t, table))
+    return "".join(
+        " ".join([clock_time(ti, origin_ns), *(f"{v:.9f}" for v in row)]) + "\n" for ti, row in zip(t, table)
+    )

@@ -46,7 +46,9 @@ def registry() -> dict[str, str]:
         except (OSError, UnicodeDecodeError) as exc:
             raise DataError(path, f"cannot read the registry named by EAS_VO_DATA_REGISTRY: {exc}") from None
         return parse_registry(text, path)
-    return parse_registry(resources.files("eas_vo.datasets").joinpath("ecd_registry.txt").read_text(), "ecd_registry.txt")
+    return parse_registry(
+        resources.files("eas_vo.datasets").joinpath("ecd_registry.txt").read_text(), "ecd_registry.txt"
+    )
 
 
 def parse_registry(text: str, where: str) -> dict[str, str]:
@@ -94,8 +96,10 @@ def fetch(name: str, folder: str | Path | None = None, progress: bool = False) -
     if mirror is not None:
         return _copy_verified(mirror / target.name, target, md5s[name])
     if urlsplit(url).scheme not in ("http", "https", "ftp"):
-        raise EasVoError(f"EAS_VO_DATA_URL={url!r}: expected an http://, https:// or ftp:// address, "
-                         "or a local folder (a path or a file:// URL)")
+        raise EasVoError(
+            f"EAS_VO_DATA_URL={url!r}: expected an http://, https:// or ftp:// address, "
+            "or a local folder (a path or a file:// URL)"
+        )
     logger.info(f"fetching {name}.zip ({_size_text(url + target.name)}) from {url} into {target.parent}")
     pooch.get_logger().setLevel(logging.WARNING)  # our notice above replaces its own
     store = pooch.create(path=target.parent, base_url=url, registry={target.name: known}, retry_if_failed=2)
@@ -104,9 +108,13 @@ def fetch(name: str, folder: str | Path | None = None, progress: bool = False) -
     except (ValueError, requests.RequestException, OSError) as exc:  # hash, connection, HTTP status, disk
         detail = str(exc).splitlines()[0] if str(exc) else "no detail"
         if isinstance(exc, ValueError) and "hash" in detail.lower():
-            raise EasVoError(f"{url}{target.name}: downloaded file does not match its MD5 {md5s[name]} "
-                             f"(tried 3 times; nothing was kept)") from None
-        raise EasVoError(f"{url}{target.name}: download failed, nothing was kept ({type(exc).__name__}: {detail})") from None
+            raise EasVoError(
+                f"{url}{target.name}: downloaded file does not match its MD5 {md5s[name]} "
+                f"(tried 3 times; nothing was kept)"
+            ) from None
+        raise EasVoError(
+            f"{url}{target.name}: download failed, nothing was kept ({type(exc).__name__}: {detail})"
+        ) from None
     os.chmod(target, 0o666 & ~current_umask())  # pooch's temporary file was private
     return target
 
@@ -134,7 +142,9 @@ def _copy_verified(source: Path, target: Path, md5: str) -> Path:
 
     if not source.is_file():
         raise EasVoError(f"{source}: not in the local mirror (EAS_VO_DATA_URL), nothing was copied")
-    logger.info(f"copying {source.name} ({source.stat().st_size / 1e6:.1f} MB) from {source.parent} into {target.parent}")
+    logger.info(
+        f"copying {source.name} ({source.stat().st_size / 1e6:.1f} MB) from {source.parent} into {target.parent}"
+    )
     with atomic_path(target) as tmp:
         shutil.copyfile(source, tmp)
         found = pooch.file_hash(str(tmp), alg="md5")

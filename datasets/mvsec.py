@@ -29,14 +29,13 @@ from typing import Callable
 
 import numpy as np
 
+from eas_vo.camera import CameraModel
 from eas_vo.datasets.calibration import MAX_SENSOR_PX, read_calibration
 from eas_vo.datasets.recording import RecordingReader, StreamConfig, clock_origin_ns
-from eas_vo.io.tables import check_increasing
 from eas_vo.errors import DataError, DataWarnings
-from eas_vo.eventfile import (Validator, cache_key, file_identity, load_cached, pack_rows, pack_table,
-                              write_behind)
+from eas_vo.eventfile import Validator, cache_key, file_identity, load_cached, pack_rows, pack_table, write_behind
 from eas_vo.geometry.rotations import quats_from_matrices
-from eas_vo.camera import CameraModel
+from eas_vo.io.tables import check_increasing
 from eas_vo.types import ImuSeries, PoseSeries, empty_events
 from eas_vo.validation import check_choice, check_range
 
@@ -123,7 +122,9 @@ class MvsecDataset(RecordingReader):
         self.group = f"davis/{c.side}"
         self.file = self._open(h5py, self.path)
         if self.group not in self.file:
-            raise DataError(self.path, f"has no group {self.group} (an MVSEC NAME_data.hdf5 holds davis/left and davis/right)")
+            raise DataError(
+                self.path, f"has no group {self.group} (an MVSEC NAME_data.hdf5 holds davis/left and davis/right)"
+            )
         side = self.file[self.group]
         self._events_dset = self._dataset(side, "events", 2, 4, "f8") if "events" in side else None
         self._images = self._dataset(side, "image_raw", 3, None, "u1") if "image_raw" in side else None
@@ -175,9 +176,14 @@ class MvsecDataset(RecordingReader):
         """The HDF5 datasets each stream's times are read from (the ground truth's: NAME_gt.hdf5
         beside, or the dataset.ground_truth file)."""
         gt = self._ground_truth_file()
-        return {"frame": self._where("image_raw_ts"), "event": self._where("events") + " (column t)",
-                "IMU": self._where("imu_ts"),
-                "ground-truth": str(gt) if gt is None or gt.suffix.lower() not in (".hdf5", ".h5") else self._where("pose_ts", gt)}
+        return {
+            "frame": self._where("image_raw_ts"),
+            "event": self._where("events") + " (column t)",
+            "IMU": self._where("imu_ts"),
+            "ground-truth": str(gt)
+            if gt is None or gt.suffix.lower() not in (".hdf5", ".h5")
+            else self._where("pose_ts", gt),
+        }
 
     # -- readers -----------------------------------------------------------------------
 
@@ -276,8 +282,10 @@ class MvsecDataset(RecordingReader):
             return self.config.width, self.config.height
         height, width = self._images.shape[1:]
         if not (1 <= width <= MAX_SENSOR_PX and 1 <= height <= MAX_SENSOR_PX):
-            raise DataError(self._where("image_raw"), f"frames are {width}x{height}, not an event camera's "
-                                                      f"(at most {MAX_SENSOR_PX} px a side)")
+            raise DataError(
+                self._where("image_raw"),
+                f"frames are {width}x{height}, not an event camera's (at most {MAX_SENSOR_PX} px a side)",
+            )
         return width, height
 
     def _read_camera(self) -> CameraModel | None:
@@ -290,12 +298,16 @@ class MvsecDataset(RecordingReader):
             return camera
         found = sorted(self.path.parent.glob("*camchain*.yaml"))
         if len(found) == 1:
-            return read_calibration(found[0], width=width, height=height, camera=self.config.calibration_camera or side_camera)
+            return read_calibration(
+                found[0], width=width, height=height, camera=self.config.calibration_camera or side_camera
+            )
         self.no_camera_reason = (
             f"{self.path}: the intrinsics are unknown: an MVSEC HDF5 file holds none; give its kalibr camchain YAML "
-            "with --set dataset.calibration=FILE" if not found else
-            f"{self.path}: {len(found)} camchain YAMLs beside it ({', '.join(p.name for p in found)}); choose one with "
-            "--set dataset.calibration=FILE")
+            "with --set dataset.calibration=FILE"
+            if not found
+            else f"{self.path}: {len(found)} camchain YAMLs beside it ({', '.join(p.name for p in found)}); choose one with "
+            "--set dataset.calibration=FILE"
+        )
         return None
 
     def _read_imu(self) -> ImuSeries | None:
@@ -335,9 +347,14 @@ class MvsecDataset(RecordingReader):
         off |= np.linalg.det(R) <= 0
         if off.any():
             row = int(np.argmax(off))
-            raise DataError(where, "is not a rigid transform (rotation not orthonormal with det 1, or last row "
-                                   "not 0 0 0 1)", row)
-        return PoseSeries(t=(t - self._origin_s) + self.config.ground_truth_time_offset_s, p_w_c=T[:, :3, 3].copy(), q_w_c=quats_from_matrices(R))
+            raise DataError(
+                where, "is not a rigid transform (rotation not orthonormal with det 1, or last row not 0 0 0 1)", row
+            )
+        return PoseSeries(
+            t=(t - self._origin_s) + self.config.ground_truth_time_offset_s,
+            p_w_c=T[:, :3, 3].copy(),
+            q_w_c=quats_from_matrices(R),
+        )
 
     def _first_time_ns(self) -> int:
         """The first frame's or event's time [ns] on the file's clock (0 with neither)."""
@@ -365,14 +382,24 @@ class MvsecDataset(RecordingReader):
             validate = Validator(where, *self._sensor, c.time_tolerance_s, c.lenient, warnings, "row")
             mapped = self._map_events(dset) if MAP_EVENTS else None
             if mapped is not None:
-                return pack_table(mapped[0], (2, 0, 1, 3), validate, lambda events: out.write(self._after_origin(events)),
-                                  MAP_BLOCK_ROWS, group_rows=BLOCK_ROWS, touch=mapped[1])
-            blocks = (functools.partial(lambda block: self._after_origin(block()), block)
-                      for block in self._h5py_blocks(dset, where, validate))
+                return pack_table(
+                    mapped[0],
+                    (2, 0, 1, 3),
+                    validate,
+                    lambda events: out.write(self._after_origin(events)),
+                    MAP_BLOCK_ROWS,
+                    group_rows=BLOCK_ROWS,
+                    touch=mapped[1],
+                )
+            blocks = (
+                functools.partial(lambda block: self._after_origin(block()), block)
+                for block in self._h5py_blocks(dset, where, validate)
+            )
             return write_behind(out, blocks)
 
-        key = cache_key("mvsec", *file_identity(self.path), self.group, *self._sensor,
-                        c.time_tolerance_s, self.clock_origin_ns)
+        key = cache_key(
+            "mvsec", *file_identity(self.path), self.group, *self._sensor, c.time_tolerance_s, self.clock_origin_ns
+        )
         return load_cached(key, c.lenient, self.warnings, fill, where, len(dset))
 
     def _map_events(self, dset) -> tuple[np.ndarray, Callable[[int, int], None] | None] | None:
@@ -391,8 +418,9 @@ class MvsecDataset(RecordingReader):
             if dset.id.get_create_plist().get_external_count() or dset.id.get_create_plist().get_nfilters():
                 return None
             h5type = dset.id.get_type()
-            orders = [order for order, ieee in (("<", h5py.h5t.IEEE_F64LE), (">", h5py.h5t.IEEE_F64BE))
-                      if h5type.equal(ieee)]
+            orders = [
+                order for order, ieee in (("<", h5py.h5t.IEEE_F64LE), (">", h5py.h5t.IEEE_F64BE)) if h5type.equal(ieee)
+            ]
             offset, nbytes = dset.id.get_offset(), dset.size * 8
             if not orders or offset is None or nbytes == 0 or dset.id.get_storage_size() != nbytes:
                 return None

@@ -131,13 +131,16 @@ class PropheseeDataset(RecordingReader):
             width, height, self._size_source = self._sensor(*self._raw_geometry())
         else:
             self.format, self.legacy = self._dat_format(), False
-            width, height, self._size_source = self._sensor(self._dat_side("Width"), self._dat_side("Height"),
-                                                            "the header's Width and Height")
+            width, height, self._size_source = self._sensor(
+                self._dat_side("Width"), self._dat_side("Height"), "the header's Width and Height"
+            )
         self._size_px = (width, height)
         self.camera = self.calibration_file(width, height)
         if self.camera is None:
-            self.no_camera_reason = (f"{self.path} holds no lens calibration: give one with --set dataset.calibration=FILE "
-                                     f"({CALIBRATION_FORMATS})")
+            self.no_camera_reason = (
+                f"{self.path} holds no lens calibration: give one with --set dataset.calibration=FILE "
+                f"({CALIBRATION_FORMATS})"
+            )
         self.no_frames_reason = f"{self.path} holds events only (a Prophesee recording has no frames)"
         self.ground_truth = self.ground_truth_file()
         self._times = None
@@ -154,8 +157,9 @@ class PropheseeDataset(RecordingReader):
         elif "evt" in fields:
             name = EVT_VERSIONS.get(fields["evt"], f"evt {fields['evt']}")
         else:
-            raise DataError(self.path, "the header names no event format (a `% format EVT3;width=W;height=H` or "
-                                       "`% evt 3.0` line)")
+            raise DataError(
+                self.path, "the header names no event format (a `% format EVT3;width=W;height=H` or `% evt 3.0` line)"
+            )
         if name not in DECODERS:
             raise DataError(self.path, f"event format {name} is not read (EVT 2.0, 2.1 and 3.0 are)")
         endianness = self._format_options().get("endianness", fields.get("endianness", ""))
@@ -175,8 +179,10 @@ class PropheseeDataset(RecordingReader):
             if None in geometry:
                 raise DataError(self.path, f"header line `% geometry {fields['geometry']}` is not WIDTHxHEIGHT")
             if None not in size and size != geometry:
-                raise DataError(self.path, f"the header's format says {size[0]}x{size[1]} px, its geometry "
-                                           f"{geometry[0]}x{geometry[1]}")
+                raise DataError(
+                    self.path,
+                    f"the header's format says {size[0]}x{size[1]} px, its geometry {geometry[0]}x{geometry[1]}",
+                )
             return geometry[0], geometry[1], "the header's geometry"
         return size[0], size[1], "the header's format"
 
@@ -192,7 +198,9 @@ class PropheseeDataset(RecordingReader):
             what = DAT_OTHER_TYPES.get(ev_type, f"event type {ev_type}")
             raise DataError(self.path, f"holds {what} records: only CD events (types 0 and 12) are read")
         if ev_size != DAT_RECORD_BYTES:
-            raise DataError(self.path, f"{DAT_CD_TYPES[ev_type]} records of {ev_size} bytes (they are {DAT_RECORD_BYTES})")
+            raise DataError(
+                self.path, f"{DAT_CD_TYPES[ev_type]} records of {ev_size} bytes (they are {DAT_RECORD_BYTES})"
+            )
         return DAT_CD_TYPES[ev_type]
 
     def _dat_side(self, key: str) -> int | None:
@@ -212,12 +220,15 @@ class PropheseeDataset(RecordingReader):
         c = self.config
         if width is None or height is None:
             if not (c.width and c.height):
-                raise DataError(self.path, "the header states no sensor size: give it with --set dataset.width=W "
-                                           "--set dataset.height=H")
+                raise DataError(
+                    self.path,
+                    "the header states no sensor size: give it with --set dataset.width=W --set dataset.height=H",
+                )
             return c.width, c.height, "dataset.width, dataset.height"
         if (c.width or c.height) and (c.width, c.height) != (width, height):
-            raise DataError(self.path, f"dataset.width, dataset.height say {c.width}x{c.height} px, {source} "
-                                       f"{width}x{height}")
+            raise DataError(
+                self.path, f"dataset.width, dataset.height say {c.width}x{c.height} px, {source} {width}x{height}"
+            )
         return width, height, source
 
     # -- events ----------------------------------------------------------------------------
@@ -244,8 +255,15 @@ class PropheseeDataset(RecordingReader):
 
     def _key(self) -> str:
         width, height = self._size_px
-        return cache_key("prophesee", *file_identity(self.path), self.format, self.legacy, width, height,
-                         self.config.time_tolerance_s)
+        return cache_key(
+            "prophesee",
+            *file_identity(self.path),
+            self.format,
+            self.legacy,
+            width,
+            height,
+            self.config.time_tolerance_s,
+        )
 
     def _blocks(self, block_bytes: int = BLOCK_BYTES):
         """(byte offset in the file, uint8 array) of the data after the header, in blocks of whole words."""
@@ -262,7 +280,9 @@ class PropheseeDataset(RecordingReader):
 
     def _decoder(self) -> PropheseeDecoder:
         width, height = self._size_px
-        return Evt21Decoder(width, height, self.legacy) if self.format == "EVT21" else DECODERS[self.format](width, height)
+        return (
+            Evt21Decoder(width, height, self.legacy) if self.format == "EVT21" else DECODERS[self.format](width, height)
+        )
 
     def _decoded(self, triggers: list):
         """The Decoded of a `.raw`'s blocks in order, the decoder's state carried; each block's
@@ -273,7 +293,9 @@ class PropheseeDataset(RecordingReader):
             try:
                 decoded = decoder.decode(data)
             except WordError as exc:
-                raise DataError(self.path, f"byte {offset + exc.offset}: damaged {decoder.title} data: {exc.reason}") from None
+                raise DataError(
+                    self.path, f"byte {offset + exc.offset}: damaged {decoder.title} data: {exc.reason}"
+                ) from None
             triggers.append((decoded.trigger_t_ns // 1000, decoded.trigger_edge, decoded.trigger_id))
             yield decoded
         triggers.append((decoder.outside, decoder.skipped))
@@ -300,15 +322,25 @@ class PropheseeDataset(RecordingReader):
 
             return write_behind(out, blocks())
 
-        events = load_cached(key, c.lenient, self.warnings, fill, where,
-                             (self.size - self.header.data_offset) // DAT_RECORD_BYTES if self.kind == ".dat" else 0)
+        events = load_cached(
+            key,
+            c.lenient,
+            self.warnings,
+            fill,
+            where,
+            (self.size - self.header.data_offset) // DAT_RECORD_BYTES if self.kind == ".dat" else 0,
+        )
         if self.kind == ".raw":
             if triggers:  # decoded now (not read from the cache)
                 self._summary = self._save_summary(key, triggers)
             outside = self._trigger_summary()["counts"][0]
             if outside:
-                self.warnings.add(where, f"event outside the {width}x{height} sensor (Prophesee's decoders drop them too)",
-                                  "decoding", int(outside))
+                self.warnings.add(
+                    where,
+                    f"event outside the {width}x{height} sensor (Prophesee's decoders drop them too)",
+                    "decoding",
+                    int(outside),
+                )
         return events
 
     def _dat_blocks(self):
@@ -319,8 +351,11 @@ class PropheseeDataset(RecordingReader):
         for offset, data in self._blocks(BLOCK_BYTES - BLOCK_BYTES % DAT_RECORD_BYTES):
             whole = len(data) - len(data) % DAT_RECORD_BYTES
             if whole != len(data):
-                raise DataError(self.path, f"byte {offset + whole}: the file ends inside an event record "
-                                           f"({len(data) - whole} of its {DAT_RECORD_BYTES} bytes)")
+                raise DataError(
+                    self.path,
+                    f"byte {offset + whole}: the file ends inside an event record "
+                    f"({len(data) - whole} of its {DAT_RECORD_BYTES} bytes)",
+                )
             words = data.view("<u4").reshape(-1, 2)
             t32, d = words[:, 0].astype(np.int64), words[:, 1]
             loops = carry + np.cumsum(np.diff(t32, prepend=t32[0] if last is None else last) < -(1 << 31))
@@ -335,8 +370,11 @@ class PropheseeDataset(RecordingReader):
     def _save_summary(self, key: str, triggers: list) -> dict[str, np.ndarray]:
         """Cache what _decoded put in `triggers`: (t [us], edge, id) per block, then the counts."""
         *blocks, counts = triggers
-        t_us, edge, channel = (np.concatenate(column) for column in zip(*blocks)) if blocks else (
-            np.empty(0, np.int64), np.empty(0, np.uint8), np.empty(0, np.uint8))
+        t_us, edge, channel = (
+            (np.concatenate(column) for column in zip(*blocks))
+            if blocks
+            else (np.empty(0, np.int64), np.empty(0, np.uint8), np.empty(0, np.uint8))
+        )
         summary = {"t_us": t_us, "edge": edge, "id": channel, "counts": np.array(counts, np.int64)}
         try:
             with atomic_file(self._summary_path(key)) as fh:
@@ -351,14 +389,21 @@ class PropheseeDataset(RecordingReader):
         if self._summary is not None:
             return self._summary
         if self.kind == ".dat":
-            self._summary = {"t_us": np.empty(0, np.int64), "edge": np.empty(0, np.uint8), "id": np.empty(0, np.uint8),
-                             "counts": np.zeros(2, np.int64)}
+            self._summary = {
+                "t_us": np.empty(0, np.int64),
+                "edge": np.empty(0, np.uint8),
+                "id": np.empty(0, np.uint8),
+                "counts": np.zeros(2, np.int64),
+            }
             return self._summary
         key = self._key()
         try:
             with np.load(self._summary_path(key)) as kept:
                 summary = {name: kept[name] for name in ("t_us", "edge", "id", "counts")}
-            if len({len(summary["t_us"]), len(summary["edge"]), len(summary["id"])}) == 1 and len(summary["counts"]) == 2:
+            if (
+                len({len(summary["t_us"]), len(summary["edge"]), len(summary["id"])}) == 1
+                and len(summary["counts"]) == 2
+            ):
                 self._summary = summary
                 return summary
         except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile):
@@ -387,8 +432,10 @@ class PropheseeDataset(RecordingReader):
             s = self._trigger_summary()
             edge = s["edge"]
             channels = ", ".join(map(str, np.unique(s["id"]))) or "none"
-            lines.append(f"external triggers {len(edge)} edges ({int(np.sum(edge == 1))} rising, {int(np.sum(edge == 0))} "
-                         f"falling; channels {channels})")
+            lines.append(
+                f"external triggers {len(edge)} edges ({int(np.sum(edge == 1))} rising, {int(np.sum(edge == 0))} "
+                f"falling; channels {channels})"
+            )
             outside, skipped = (int(v) for v in s["counts"])
             if outside:
                 lines.append(f"dropped {outside} events outside the sensor")

@@ -8,11 +8,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from eas_vo.camera import CameraModel
 from eas_vo.datasets.calibration import read_calibration
 from eas_vo.errors import DataWarnings
 from eas_vo.io.tum import read_tum
 from eas_vo.plugins import Dataset
-from eas_vo.camera import CameraModel
 from eas_vo.types import TIME_UNITS, PoseSeries
 from eas_vo.validation import check_range
 
@@ -112,15 +112,21 @@ def clock_unit_problems(spans: dict[str, float], sources: dict[str, str]) -> dic
         ratio = kept[name] / ref_span
         against = f"the {reference} timestamps' {ref_span:.4g} s ({ref_where})"
         if ratio >= SPAN_RATIO_LIMIT:
-            problems[name] = (f"{sources.get(name, name)}: the {name} timestamps span {kept[name]:.4g} s, {ratio:.3g} times "
-                              f"{against}: they look like {_unit_of(ratio)}; times must be in seconds")
+            problems[name] = (
+                f"{sources.get(name, name)}: the {name} timestamps span {kept[name]:.4g} s, {ratio:.3g} times "
+                f"{against}: they look like {_unit_of(ratio)}; times must be in seconds"
+            )
         elif ratio <= 1 / SPAN_RATIO_LIMIT:
-            problems[name] = (f"{sources.get(name, name)}: the {name} timestamps span {kept[name]:.4g} s, 1/{1 / ratio:.3g} "
-                              f"of {against}: those look like {_unit_of(1 / ratio)}; times must be in seconds")
+            problems[name] = (
+                f"{sources.get(name, name)}: the {name} timestamps span {kept[name]:.4g} s, 1/{1 / ratio:.3g} "
+                f"of {against}: those look like {_unit_of(1 / ratio)}; times must be in seconds"
+            )
         elif kept[name] > MAX_SPAN_S:
-            problems[name] = (f"{sources.get(name, name)}: the {name} timestamps span {kept[name]:.4g} s, more than a day, "
-                              f"which no recording lasts: they look like microseconds ({kept[name] / 1e6:.4g} s) or "
-                              f"nanoseconds ({kept[name] / 1e9:.4g} s); times must be in seconds")
+            problems[name] = (
+                f"{sources.get(name, name)}: the {name} timestamps span {kept[name]:.4g} s, more than a day, "
+                f"which no recording lasts: they look like microseconds ({kept[name] / 1e6:.4g} s) or "
+                f"nanoseconds ({kept[name] / 1e9:.4g} s); times must be in seconds"
+            )
     return problems
 
 
@@ -130,9 +136,12 @@ def recording_clock_problems(dataset: Dataset, has_frames: bool) -> dict[str, st
     truth, each named by time_source; and events lying far from the frames (STREAMS_APART_SPANS:
     a stream on another clock). Reads the event stream (Dataset.events)."""
     events = dataset.events()
-    streams = {"frame": dataset.frame_times() if has_frames else None, "event": events["t"] if len(events) else None,
-               "IMU": None if dataset.imu is None else dataset.imu.t,
-               "ground-truth": None if dataset.ground_truth is None else dataset.ground_truth.t}
+    streams = {
+        "frame": dataset.frame_times() if has_frames else None,
+        "event": events["t"] if len(events) else None,
+        "IMU": None if dataset.imu is None else dataset.imu.t,
+        "ground-truth": None if dataset.ground_truth is None else dataset.ground_truth.t,
+    }
     spans = {name: float(t[-1]) - float(t[0]) for name, t in streams.items() if t is not None and len(t) > 1}
     problems = clock_unit_problems(spans, {name: time_source(dataset, name) for name in spans})
     frames, event_t = streams["frame"], streams["event"]
@@ -140,10 +149,12 @@ def recording_clock_problems(dataset: Dataset, has_frames: bool) -> dict[str, st
         first, last = float(event_t[0]), float(event_t[-1])
         apart = max(float(frames[0]) - last, first - float(frames[-1]))
         if apart > STREAMS_APART_SPANS * max(last - first, float(frames[-1]) - float(frames[0]), 1.0):
-            problems["event"] = (f"{time_source(dataset, 'event')}: the events ({first:.6g} to {last:.6g} s) and the frames "
-                                 f"({float(frames[0]):.6g} to {float(frames[-1]):.6g} s, {time_source(dataset, 'frame')}) "
-                                 "do not overlap: are they on two clocks (one from zero, one at Unix time)? "
-                                 "Every time must be on the recording's one clock")
+            problems["event"] = (
+                f"{time_source(dataset, 'event')}: the events ({first:.6g} to {last:.6g} s) and the frames "
+                f"({float(frames[0]):.6g} to {float(frames[-1]):.6g} s, {time_source(dataset, 'frame')}) "
+                "do not overlap: are they on two clocks (one from zero, one at Unix time)? "
+                "Every time must be on the recording's one clock"
+            )
     return problems
 
 
@@ -163,22 +174,8 @@ def event_sample_times(event_t: np.ndarray, rate_hz: float, every_events: int) -
     return np.arange(float(event_t[0]), float(event_t[-1]), 1.0 / rate_hz)
 
 
-
-
-
-
 #: Calibration formats, for messages.
 CALIBRATION_FORMATS = "a DV calibration XML, a kalibr camchain YAML, a ROS camera_info YAML or an ECD calib.txt"
-
-
-
-
-
-
-
-
-
-
 
 
 class RecordingReader(Dataset):
@@ -196,13 +193,17 @@ class RecordingReader(Dataset):
         """(width, height) [px], known with or without a calibration."""
         return self._sensor
 
-    def calibration_file(self, width: int | None, height: int | None, default_camera: str | None = None) -> CameraModel | None:
+    def calibration_file(
+        self, width: int | None, height: int | None, default_camera: str | None = None
+    ) -> CameraModel | None:
         """The camera of `config.calibration` for a width x height [px] sensor, or None when no
         file is given (`default_camera`: the camera read when `calibration_camera` is empty)."""
         c = self.config
         if not c.calibration:
             return None
-        return read_calibration(c.calibration, width=width, height=height, camera=c.calibration_camera or default_camera)
+        return read_calibration(
+            c.calibration, width=width, height=height, camera=c.calibration_camera or default_camera
+        )
 
     def ground_truth_file(self) -> PoseSeries | None:
         """The poses of `config.ground_truth` (a TUM file) on the recording's clock (after its
@@ -210,8 +211,14 @@ class RecordingReader(Dataset):
         c = self.config
         if not c.ground_truth:
             return None
-        return read_tum(c.ground_truth, c.ground_truth_time_offset_s, self.clock_origin_ns, self.tolerated, min_poses=2,
-                        what="ground truth")
+        return read_tum(
+            c.ground_truth,
+            c.ground_truth_time_offset_s,
+            self.clock_origin_ns,
+            self.tolerated,
+            min_poses=2,
+            what="ground truth",
+        )
 
     @property
     def tolerated(self) -> DataWarnings | None:

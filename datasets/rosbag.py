@@ -15,8 +15,15 @@ from pathlib import Path
 
 import numpy as np
 
-from eas_vo.datasets.bags import (EVENT_PACKET_FIELDS, PACKET_TYPES, BagConfig, BagDataset, recording_messages, stamp_ns,
-                                  write_messages)
+from eas_vo.datasets.bags import (
+    EVENT_PACKET_FIELDS,
+    PACKET_TYPES,
+    BagConfig,
+    BagDataset,
+    recording_messages,
+    stamp_ns,
+    write_messages,
+)
 from eas_vo.errors import DataError
 from eas_vo.eventfile import file_identity
 from eas_vo.plugins import Dataset
@@ -139,7 +146,9 @@ def _serialise_event_array(t_header: float, width: int, height: int, events: np.
     return head + wire.tobytes()
 
 
-def write_bag(dataset: Dataset, path: str | Path, config: BagConfig | None = None, events_per_message: int = 5000) -> None:
+def write_bag(
+    dataset: Dataset, path: str | Path, config: BagConfig | None = None, events_per_message: int = 5000
+) -> None:
     """Write a dataset (frames, events, IMU, ground truth, camera info) as a ROS1 bag."""
     from rosbags.rosbag1 import Writer
 
@@ -151,9 +160,18 @@ def write_bag(dataset: Dataset, path: str | Path, config: BagConfig | None = Non
         for start in range(0, len(events), events_per_message):
             chunk = events[start : start + events_per_message]
             t = float(chunk["t"][-1])
-            yield t, "dvs_msgs/msg/EventArray", _serialise_event_array(t, cam.width, cam.height, chunk, dataset.clock_origin_ns)
+            yield (
+                t,
+                "dvs_msgs/msg/EventArray",
+                _serialise_event_array(t, cam.width, cam.height, chunk, dataset.clock_origin_ns),
+            )
 
     Path(path).unlink(missing_ok=True)
     with Writer(Path(path)) as writer:
-        write_messages(writer, recording_messages(dataset, c, store, True, event_messages), store, store.serialize_ros1,
-                       dataset.clock_origin_ns)
+        write_messages(
+            writer,
+            recording_messages(dataset, c, store, True, event_messages),
+            store,
+            store.serialize_ros1,
+            dataset.clock_origin_ns,
+        )

@@ -22,8 +22,17 @@ from pathlib import Path
 
 import numpy as np
 
-from eas_vo.datasets.bags import (EVENT_PACKET_FIELDS, PACKET_TYPES, BagConfig, BagDataset, RefusedEncoding, encode_mono,
-                                  recording_messages, stamp_ns, write_messages)
+from eas_vo.datasets.bags import (
+    EVENT_PACKET_FIELDS,
+    PACKET_TYPES,
+    BagConfig,
+    BagDataset,
+    RefusedEncoding,
+    encode_mono,
+    recording_messages,
+    stamp_ns,
+    write_messages,
+)
 from eas_vo.errors import DataError
 from eas_vo.eventfile import file_identity
 from eas_vo.plugins import Dataset
@@ -45,14 +54,36 @@ SQLITE_MAGIC = b"SQLite format 3\x00"
 MCAP_MAGIC = b"\x89MCAP0\r\n"
 #: What rosbags' rosbag2 readers raise on damaged bytes besides ReaderError: sqlite's errors,
 #: short reads and failed asserts of the mcap parser, and the chunk decompressors' errors.
-DAMAGED_BAG_ERRORS = (sqlite3.Error, AssertionError, KeyError, IndexError, ValueError, struct.error, OSError, EOFError,
-                      RuntimeError, UnicodeDecodeError)
+DAMAGED_BAG_ERRORS = (
+    sqlite3.Error,
+    AssertionError,
+    KeyError,
+    IndexError,
+    ValueError,
+    struct.error,
+    OSError,
+    EOFError,
+    RuntimeError,
+    UnicodeDecodeError,
+)
 #: dvs_msgs/msg/Event in CDR: the first element starts 4-aligned (x, y, sec, nsec, polarity:
 #: 13 bytes + 1 of padding); every later one starts at 2 mod 4 and pads its time to 4: 16 bytes.
-_FIRST_EVENT = np.dtype({"names": ["x", "y", "sec", "nsec", "p"], "formats": ["<u2", "<u2", "<i4", "<u4", "u1"],
-                         "offsets": [0, 2, 4, 8, 12], "itemsize": 13})
-_LATER_EVENT = np.dtype({"names": ["x", "y", "sec", "nsec", "p"], "formats": ["<u2", "<u2", "<i4", "<u4", "u1"],
-                         "offsets": [0, 2, 6, 10, 14], "itemsize": 15})
+_FIRST_EVENT = np.dtype(
+    {
+        "names": ["x", "y", "sec", "nsec", "p"],
+        "formats": ["<u2", "<u2", "<i4", "<u4", "u1"],
+        "offsets": [0, 2, 4, 8, 12],
+        "itemsize": 13,
+    }
+)
+_LATER_EVENT = np.dtype(
+    {
+        "names": ["x", "y", "sec", "nsec", "p"],
+        "formats": ["<u2", "<u2", "<i4", "<u4", "u1"],
+        "offsets": [0, 2, 6, 10, 14],
+        "itemsize": 15,
+    }
+)
 
 
 def event_typestore():
@@ -174,7 +205,12 @@ def encode_dvs_array(t_header: float, width: int, height: int, events: np.ndarra
         if n:
             rec = np.ndarray((n,), dtype, body, len(head) + offset, (16,))
             rec["x"], rec["y"], rec["sec"], rec["nsec"], rec["p"] = (
-                events["x"][part], events["y"][part], secs[part], nsecs[part], events["p"][part] > 0)
+                events["x"][part],
+                events["y"][part],
+                secs[part],
+                nsecs[part],
+                events["p"][part] > 0,
+            )
     return b"\x00\x01\x00\x00" + bytes(body)
 
 
@@ -205,7 +241,9 @@ class Rosbag2Dataset(BagDataset):
         self.store = bag_typestore(path, reader.connections)
         reference = event_typestore()
         for conn in reader.connections:
-            if conn.msgtype in self.event_types and _definition(self.store, conn.msgtype) != _definition(reference, conn.msgtype):
+            if conn.msgtype in self.event_types and _definition(self.store, conn.msgtype) != _definition(
+                reference, conn.msgtype
+            ):
                 raise DataError(path, f"topic {conn.topic}: the bag defines {conn.msgtype} unlike its driver")
         return reader
 
@@ -239,7 +277,10 @@ class Rosbag2Dataset(BagDataset):
     def _identity(self) -> tuple:
         if self.path.is_file():
             return file_identity(self.path)
-        files = [self.path / "metadata.yaml", *sorted(p for p in self.path.iterdir() if p.suffix in (".db3", ".mcap", ".zstd"))]
+        files = [
+            self.path / "metadata.yaml",
+            *sorted(p for p in self.path.iterdir() if p.suffix in (".db3", ".mcap", ".zstd")),
+        ]
         return tuple(part for f in files for part in (f.name, *file_identity(f)))
 
     @classmethod
@@ -273,12 +314,18 @@ def _storage_file(folder: Path) -> Path:
     if storage or not isinstance(storage, str):
         return folder
     if len(files) != 1 or not isinstance(files[0], str) or _leaves(files[0]):
-        raise DataError(where, f"names no storage plugin (storage_identifier is empty) and {len(files)} bag files: "
-                               "write the storage (sqlite3 or mcap) into it")
+        raise DataError(
+            where,
+            f"names no storage plugin (storage_identifier is empty) and {len(files)} bag files: "
+            "write the storage (sqlite3 or mcap) into it",
+        )
     path = folder / files[0]
     if not path.is_file() or _storage_of(path) is None:
-        raise DataError(where, f"names no storage plugin, and its file {files[0]} is "
-                               f"{'missing' if not path.is_file() else 'neither sqlite3 nor mcap'}")
+        raise DataError(
+            where,
+            f"names no storage plugin, and its file {files[0]} is "
+            f"{'missing' if not path.is_file() else 'neither sqlite3 nor mcap'}",
+        )
     return path
 
 
@@ -301,8 +348,14 @@ def _said(exc: Exception) -> str:
     return " ".join(str(exc).split()) or type(exc).__name__
 
 
-def write_bag2(dataset: Dataset, path: str | Path, storage: str = "sqlite3", config: BagConfig | None = None,
-               encoding: str = "dvs", events_per_message: int = 5000) -> None:
+def write_bag2(
+    dataset: Dataset,
+    path: str | Path,
+    storage: str = "sqlite3",
+    config: BagConfig | None = None,
+    encoding: str = "dvs",
+    events_per_message: int = 5000,
+) -> None:
     """Write a dataset as a rosbag2 folder `path` with rosbags' Writer (storage `sqlite3` or
     `mcap`); events as dvs_msgs/msg/EventArray (`encoding="dvs"`) or as `mono`
     event_camera_msgs/msg/EventPacket (`encoding="mono"`)."""
@@ -323,12 +376,23 @@ def write_bag2(dataset: Dataset, path: str | Path, storage: str = "sqlite3", con
                 continue
             time_base = origin_ns + int(round(float(chunk["t"][0]) * 1e9))
             sec, nsec = divmod(time_base, 1_000_000_000)
-            header = store.types["std_msgs/msg/Header"](stamp=store.types["builtin_interfaces/msg/Time"](sec=sec, nanosec=nsec),
-                                                        frame_id="davis")
-            msg = store.types[packet_type](header=header, height=cam.height, width=cam.width, seq=start // events_per_message,
-                                           time_base=time_base, encoding="mono", is_bigendian=False, events=encode_mono(time_base, chunk, origin_ns))
+            header = store.types["std_msgs/msg/Header"](
+                stamp=store.types["builtin_interfaces/msg/Time"](sec=sec, nanosec=nsec), frame_id="davis"
+            )
+            msg = store.types[packet_type](
+                header=header,
+                height=cam.height,
+                width=cam.width,
+                seq=start // events_per_message,
+                time_base=time_base,
+                encoding="mono",
+                is_bigendian=False,
+                events=encode_mono(time_base, chunk, origin_ns),
+            )
             yield t, packet_type, bytes(store.serialize_cdr(msg, packet_type))
 
     plugin = {"sqlite3": StoragePlugin.SQLITE3, "mcap": StoragePlugin.MCAP}[storage]
     with Writer(Path(path), version=9, storage_plugin=plugin) as writer:
-        write_messages(writer, recording_messages(dataset, c, store, False, event_messages), store, store.serialize_cdr, origin_ns)
+        write_messages(
+            writer, recording_messages(dataset, c, store, False, event_messages), store, store.serialize_cdr, origin_ns
+        )

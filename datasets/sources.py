@@ -60,12 +60,18 @@ class ZipSource:
         names = set(self.zip.namelist())
         prefixes = sorted({n[: -len(m)] for n in names for m in MARKERS if n.endswith(m) and n.count("/") <= 1})
         if len(prefixes) > 1:
-            raise DataError(path, f"holds {len(prefixes)} sequences ({', '.join(p.rstrip('/') or '.' for p in prefixes)}); "
-                                  "a dataset archive must hold one")
+            raise DataError(
+                path,
+                f"holds {len(prefixes)} sequences ({', '.join(p.rstrip('/') or '.' for p in prefixes)}); "
+                "a dataset archive must hold one",
+            )
         deeper = sorted({n[: -len(m)] for n in names for m in MARKERS if n.endswith("/" + m)})
         if not prefixes and deeper:
-            raise DataError(path, f"holds its sequence in {deeper[0]}, more than one folder deep; "
-                                  "a dataset archive holds it at its top or in one folder")
+            raise DataError(
+                path,
+                f"holds its sequence in {deeper[0]}, more than one folder deep; "
+                "a dataset archive holds it at its top or in one folder",
+            )
         self.prefix = prefixes[0] if prefixes else ""
 
     def label(self, name: str) -> str:

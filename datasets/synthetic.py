@@ -12,6 +12,7 @@ import sys
 from dataclasses import dataclass
 from pathlib import Path
 
+from eas_vo.camera import LENS_MODELS
 from eas_vo.datasets.calibration import MAX_SENSOR_PX, camera_problem
 from eas_vo.datasets.ecd import EcdFolderDataset
 from eas_vo.datasets.simulator import SimConfig, simulate
@@ -19,7 +20,6 @@ from eas_vo.datasets.simulator.generate import SENSORS, SimCamera
 from eas_vo.datasets.simulator.sensor import DvsModel
 from eas_vo.errors import ConfigError, EasVoError
 from eas_vo.io.cache import cache_folder
-from eas_vo.camera import LENS_MODELS
 from eas_vo.validation import check_choice, check_range
 
 logger = logging.getLogger(__name__)
@@ -94,13 +94,19 @@ class SyntheticConfig(DvsModel):
         check_choice(self, "lens", ("", *LENS_MODELS))
         lens = self.lens or SENSORS[self.sensor].lens
         names = LENS_MODELS[lens]
-        if self.dist and (len(self.dist) != len(names) or not all(isinstance(v, (int, float)) and not isinstance(v, bool)
-                                                                   and math.isfinite(v) for v in self.dist)):
-            raise ConfigError(f"dist = {list(self.dist)!r}: the {lens} lens takes {len(names)} finite numbers ({' '.join(names)})")
+        if self.dist and (
+            len(self.dist) != len(names)
+            or not all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in self.dist)
+        ):
+            raise ConfigError(
+                f"dist = {list(self.dist)!r}: the {lens} lens takes {len(names)} finite numbers ({' '.join(names)})"
+            )
         cam = self.camera()
         problem = camera_problem([cam.fx, cam.fy, cam.cx, cam.cy, *cam.dist], cam.width, cam.height, cam.lens)
         if problem:
-            raise ConfigError(f"{'dist' if 'distortion' in problem else 'focal_px'}: the camera is impossible: {problem}")
+            raise ConfigError(
+                f"{'dist' if 'distortion' in problem else 'focal_px'}: the camera is impossible: {problem}"
+            )
         check_range(self, "contrast_threshold", 0.01, 5.0)
         check_range(self, "threshold_sigma", 0.0, 1.0)
         check_range(self, "refractory_s", 0.0, 1.0)
@@ -117,9 +123,14 @@ class SyntheticConfig(DvsModel):
     def applied_to(self, preset: SimConfig) -> SimConfig:
         """The preset seen by this camera and pixel, its light, speed and translation scaled."""
         dvs = DvsModel(**{f.name: getattr(self, f.name) for f in dataclasses.fields(DvsModel)})
-        return dataclasses.replace(preset, illumination=preset.illumination * self.illumination, speed=preset.speed * self.speed,
-                                   translation_scale=preset.translation_scale * self.translation_scale, dvs=dvs,
-                                   camera=self.camera())
+        return dataclasses.replace(
+            preset,
+            illumination=preset.illumination * self.illumination,
+            speed=preset.speed * self.speed,
+            translation_scale=preset.translation_scale * self.translation_scale,
+            dvs=dvs,
+            camera=self.camera(),
+        )
 
 
 def sequence_folder(name: str, config: SyntheticConfig | None = None, progress: bool = True) -> Path:
@@ -129,7 +140,10 @@ def sequence_folder(name: str, config: SyntheticConfig | None = None, progress: 
         raise EasVoError(f"unknown synthetic sequence {name!r}; available: {', '.join(PRESETS)}")
     config = (config or SyntheticConfig()).applied_to(PRESETS[name])
     digest = hashlib.sha1(config.fingerprint().encode()).hexdigest()[:12]
-    folder = cache_folder("synthetic", "simulated sequences; simulated again when next needed (about 40 s each)") / f"{name}-{digest}"
+    folder = (
+        cache_folder("synthetic", "simulated sequences; simulated again when next needed (about 40 s each)")
+        / f"{name}-{digest}"
+    )
     if not (folder / "images.txt").exists():
         if progress:
             logger.info(f"simulating synthetic:{name} ({config.duration_s:g} s) into {folder} (once)")
@@ -170,5 +184,7 @@ class SyntheticDataset(EcdFolderDataset):
     def __init__(self, name: str = "default", config: SyntheticConfig | None = None):
         config = config or SyntheticConfig()
         super().__init__(sequence_folder(name or "default", config, progress=sys.stderr.isatty()))
-        changed = {f.name: getattr(config, f.name) for f in dataclasses.fields(config) if getattr(config, f.name) != f.default}
+        changed = {
+            f.name: getattr(config, f.name) for f in dataclasses.fields(config) if getattr(config, f.name) != f.default
+        }
         self.label = f"synthetic:{name or 'default'}" + "".join(f" {k}={_label_value(v)}" for k, v in changed.items())

@@ -125,9 +125,7 @@ def build(cls, values: dict, section: str):
     known = {f.name for f in fields(cls)}
     unknown = sorted(set(values) - known)
     if unknown:
-        raise ConfigError(
-            f"unknown key {section}.{unknown[0]}; allowed keys: {', '.join(sorted(known)) or 'none'}"
-        )
+        raise ConfigError(f"unknown key {section}.{unknown[0]}; allowed keys: {', '.join(sorted(known)) or 'none'}")
     kwargs = {k: _coerce(v, hints[k], f"{section}.{k}") for k, v in values.items()}
     try:
         cfg = cls(**kwargs)
@@ -141,7 +139,9 @@ def build(cls, values: dict, section: str):
             raise ConfigError(f"{section}.{exc}") from None
     for key, value in kwargs.items():
         if hints[key] is tuple and not isinstance(value, tuple):  # not an array, and validate() did not say so
-            raise ConfigError(f"{section}.{key} must be an array, e.g. {_toml_value(getattr(cls, key, ()))}, got {value!r}")
+            raise ConfigError(
+                f"{section}.{key} must be an array, e.g. {_toml_value(getattr(cls, key, ()))}, got {value!r}"
+            )
     return cfg
 
 
@@ -172,9 +172,7 @@ def parse_set(assignment: str) -> tuple[list[str], Any]:
     path, sep, text = assignment.partition("=")
     keys = path.strip().split(".")
     if not sep or len(keys) < 2 or keys[0] not in SECTIONS or not all(keys):
-        raise ConfigError(
-            f"--set {assignment!r}: expected SECTION.KEY=VALUE with SECTION one of {', '.join(SECTIONS)}"
-        )
+        raise ConfigError(f"--set {assignment!r}: expected SECTION.KEY=VALUE with SECTION one of {', '.join(SECTIONS)}")
     try:
         value = tomllib.loads(f"v = {text.strip()}")["v"]
     except tomllib.TOMLDecodeError:
@@ -201,7 +199,9 @@ def read_config_file(path: str | Path) -> dict:
     if not p.is_file():
         raise ConfigError(f"{p}: not a config file (a directory?)")
     try:
-        raw = tomllib.loads(text_bytes(p.read_bytes()).decode("utf-8"))  # a byte-order mark, as some editors write, is read past
+        raw = tomllib.loads(
+            text_bytes(p.read_bytes()).decode("utf-8")
+        )  # a byte-order mark, as some editors write, is read past
     except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
         raise ConfigError(f"{p}: invalid TOML: {exc}") from None
     unknown = sorted(set(raw) - set(SECTIONS))
@@ -225,8 +225,10 @@ def _check_tables(raw: dict, where: str) -> None:
         installed = _installed(section)
         for key, value in table.items():
             if key in installed and not isinstance(value, dict):
-                raise ConfigError(f"{where}: {section}.{key} must be a table (the {key} {section}'s keys, "
-                                  f"[{section}.{key}]), found {_found(value)}")
+                raise ConfigError(
+                    f"{where}: {section}.{key} must be a table (the {key} {section}'s keys, "
+                    f"[{section}.{key}]), found {_found(value)}"
+                )
 
 
 def _found(value) -> str:
@@ -282,8 +284,11 @@ def _sources(config_file, run_overrides: dict | None, assignments) -> list[_Sour
     """The sources in rising precedence: the config file, the command's options (`run_overrides`,
     None meaning not given), `--set`; the dataclass defaults lie under them all."""
     options = tuple(("run", None, k, v) for k, v in (run_overrides or {}).items() if v is not None)
-    return [*([_file_source(config_file)] if config_file else []), _Source("options", options, ordered=True),
-            _set_source(assignments)]
+    return [
+        *([_file_source(config_file)] if config_file else []),
+        _Source("options", options, ordered=True),
+        _set_source(assignments),
+    ]
 
 
 def _values(source: _Source, section: str, plugin: type | None = None) -> dict[str, tuple[str, Any]]:
@@ -302,7 +307,9 @@ def _values(source: _Source, section: str, plugin: type | None = None) -> dict[s
             continue
         if plugin is not None and table is None and isinstance(value, dict) and key not in own_keys:
             installed = ", ".join(_installed(section)) or "none"
-            raise ConfigError(f"{source.where}: unknown table {section}.{key}: not an installed {section} plugin ({installed})")
+            raise ConfigError(
+                f"{source.where}: unknown table {section}.{key}: not an installed {section} plugin ({installed})"
+            )
         if key not in found or source.ordered or table is not None:
             found[key] = (".".join(filter(None, (section, table, key))), value)
     return found

@@ -45,7 +45,10 @@ class DataWarnings:
             self.add(where, what, other.first[(where, what)], n)
 
     def lines(self) -> list[str]:
-        return [f"{where}: {n} dropped: {what} (first at {self.first[(where, what)]})" for (where, what), n in self.counts.items()]
+        return [
+            f"{where}: {n} dropped: {what} (first at {self.first[(where, what)]})"
+            for (where, what), n in self.counts.items()
+        ]
 
     def to_json(self) -> str:
         return json.dumps([[w, k, self.first[(w, k)], n] for (w, k), n in self.counts.items()])

@@ -72,8 +72,10 @@ def rotation_figure(result, title: str = ""):
     if "ape_mean_rad" in m:
         facts.append(f"average APE {m['ape_mean_rad']:.4f} rad, average NC {m['nc_mean']:.1f}")
     if "time_offset_s" in m and errors is not None:
-        facts.append(f"ground truth time offset {m['time_offset_s'] * 1e3:+.1f} ms"
-                     + (" (estimated)" if m.get("time_offset_estimated") else ""))
+        facts.append(
+            f"ground truth time offset {m['time_offset_s'] * 1e3:+.1f} ms"
+            + (" (estimated)" if m.get("time_offset_estimated") else "")
+        )
     if facts:
         title += "\n" + ", ".join(facts)
     motion = []
@@ -144,7 +146,10 @@ def plot_gallery(path: str | Path, names: list[str], images: dict, frame_indices
     height, width = next((im.shape for im in images.values() if im is not None), (3, 4))
     shown_px = min(width, GALLERY_MAX_PX)
     interpolation = "nearest" if width <= GALLERY_MAX_PX else "antialiased"
-    cell_w, cell_h = (shown_px + GALLERY_MARGIN_PX) / 100, (shown_px * height / width + GALLERY_MARGIN_PX) / 100  # [in] at 100 dpi
+    cell_w, cell_h = (
+        (shown_px + GALLERY_MARGIN_PX) / 100,
+        (shown_px * height / width + GALLERY_MARGIN_PX) / 100,
+    )  # [in] at 100 dpi
     fig = _figure(figsize=(cell_w * cols, cell_h * rows + 0.4), layout="constrained")
     axes = fig.subplots(rows, cols, squeeze=False)
     for r, k in enumerate(frame_indices):
@@ -217,25 +222,47 @@ def ape_bars_figure(rows: list[dict], equal: dict | None = None, colours: dict |
     width = 0.8 / len(sources)
     for c, dataset in enumerate(datasets):
         methods = columns[dataset]
-        for ax, key, what, fmt in ((axes[0][c], "ape_mean_rad", "average APE [rad]", "{:.3f}"),
-                                   (axes[1][c], "nc_mean", "average NC", "{:.0f}")):
+        for ax, key, what, fmt in (
+            (axes[0][c], "ape_mean_rad", "average APE [rad]", "{:.3f}"),
+            (axes[1][c], "nc_mean", "average NC", "{:.0f}"),
+        ):
             for s, (frontend, sweep) in enumerate(sources):
                 cells = [by_key.get((dataset, m, frontend, sweep)) for m in methods]
-                values = np.array([np.nan if r is None else 0.0 if r["status"] != "ok" else np.nan if r[key] is None else r[key]
-                                   for r in cells], dtype=float)
-                texts = ["failed" if r is not None and r["status"] != "ok" else "" if v != v else fmt.format(v)
-                         for r, v in zip(cells, values)]
-                bars = ax.bar(np.arange(len(methods)) + (s - (len(sources) - 1) / 2) * width, values, width,
-                              color=colours[frontend], hatch=SWEEP_HATCHES[sweeps.index(sweep) % len(SWEEP_HATCHES)],
-                              edgecolor="white", linewidth=0.5, label=" ".join(filter(None, [frontend, sweep])))
-                ax.bar_label(bars, labels=texts, fontsize="x-small",
-                             rotation=90 if len(sources) * len(methods) > 8 else 0, padding=2)
+                values = np.array(
+                    [
+                        np.nan if r is None else 0.0 if r["status"] != "ok" else np.nan if r[key] is None else r[key]
+                        for r in cells
+                    ],
+                    dtype=float,
+                )
+                texts = [
+                    "failed" if r is not None and r["status"] != "ok" else "" if v != v else fmt.format(v)
+                    for r, v in zip(cells, values)
+                ]
+                bars = ax.bar(
+                    np.arange(len(methods)) + (s - (len(sources) - 1) / 2) * width,
+                    values,
+                    width,
+                    color=colours[frontend],
+                    hatch=SWEEP_HATCHES[sweeps.index(sweep) % len(SWEEP_HATCHES)],
+                    edgecolor="white",
+                    linewidth=0.5,
+                    label=" ".join(filter(None, [frontend, sweep])),
+                )
+                ax.bar_label(
+                    bars,
+                    labels=texts,
+                    fontsize="x-small",
+                    rotation=90 if len(sources) * len(methods) > 8 else 0,
+                    padding=2,
+                )
             ax.set_ylabel(what)
             ax.margins(y=0.18)
             ax.grid(axis="y", alpha=0.3)
         axes[0][c].set_title(_panel_name(dataset), fontsize="medium")
-        axes[1][c].set_xticks(np.arange(len(methods)), [_method_title(m, equal.get((dataset, m), [])) for m in methods],
-                              fontsize="small")
+        axes[1][c].set_xticks(
+            np.arange(len(methods)), [_method_title(m, equal.get((dataset, m), [])) for m in methods], fontsize="small"
+        )
     handles, labels = axes[0][0].get_legend_handles_labels()
     fig.legend(handles, labels, loc="outside right upper", fontsize="small", title="source")
     return fig
@@ -268,8 +295,14 @@ def ape_time_figure(series: dict, equal: dict | None = None, colours: dict | Non
             method = panels[dataset][c]
             for (d, m, frontend, sweep), (t, ape) in series.items():
                 if (d, m) == (dataset, method):
-                    ax.plot(t, ape, lw=1.0, color=colours[frontend], ls=SWEEP_STYLES[sweeps.index(sweep) % len(SWEEP_STYLES)],
-                            label=" ".join(filter(None, [frontend, sweep])))
+                    ax.plot(
+                        t,
+                        ape,
+                        lw=1.0,
+                        color=colours[frontend],
+                        ls=SWEEP_STYLES[sweeps.index(sweep) % len(SWEEP_STYLES)],
+                        label=" ".join(filter(None, [frontend, sweep])),
+                    )
             name = _panel_name(dataset) + ": " if len(datasets) > 1 else ""
             ax.set_title(name + _method_title(method, equal.get((dataset, method), [])), fontsize="medium")
             ax.grid(alpha=0.3)
@@ -297,8 +330,17 @@ def plot_sweep(path: str | Path, key: str, curves: dict, colours: dict | None = 
     ape_ax, nc_ax = fig.subplots(1, 2)
     several = {part: len({k[i] for k in curves}) > 1 for i, part in enumerate(("dataset", "method", "frontend"))}
     for (dataset, method, frontend), xy in curves.items():
-        label = " ".join([frontend] + ([method] if several["method"] else []) + ([Path(dataset).name or dataset] if several["dataset"] else []))
-        style = {"color": colours[frontend], "ls": SWEEP_STYLES[methods.index(method) % len(SWEEP_STYLES)], "lw": 1.2, "ms": 4}
+        label = " ".join(
+            [frontend]
+            + ([method] if several["method"] else [])
+            + ([Path(dataset).name or dataset] if several["dataset"] else [])
+        )
+        style = {
+            "color": colours[frontend],
+            "ls": SWEEP_STYLES[methods.index(method) % len(SWEEP_STYLES)],
+            "lw": 1.2,
+            "ms": 4,
+        }
         ape_ax.plot(xy[:, 0], xy[:, 2], "o", label=label, **style)
         nc_ax.plot(xy[:, 0], xy[:, 1], "o", label=label, **style)
     values = np.concatenate([xy[:, 0] for xy in curves.values()]) if curves else np.array([1.0])
@@ -313,7 +355,9 @@ def plot_sweep(path: str | Path, key: str, curves: dict, colours: dict | None = 
     fig.savefig(path, dpi=110, format="png")
 
 
-def plot_euler_grid(path: str | Path, panels: list[tuple[str, np.ndarray, np.ndarray, np.ndarray]], title: str = "") -> None:
+def plot_euler_grid(
+    path: str | Path, panels: list[tuple[str, np.ndarray, np.ndarray, np.ndarray]], title: str = ""
+) -> None:
     """The paper's Fig. 3 for one sequence: a column per source, rows roll/pitch/yaw [deg],
     estimate (aligned at the first frame) over ground truth. `panels`: (source label,
     t [s], R_w_c ground truth (N, 3, 3), R_w_c estimate (N, 3, 3))."""

@@ -24,8 +24,8 @@ from typing import Callable, ClassVar, Iterator, Sequence
 
 import numpy as np
 
-from eas_vo.errors import EasVoError
 from eas_vo.camera import CameraModel
+from eas_vo.errors import EasVoError
 from eas_vo.types import FrameRecord, ImuSeries, PoseSeries, RelativeRotation, Sample, search_times
 
 
@@ -248,8 +248,9 @@ class Tracker:
         though rotation.png still marks any edge marked `loop`)."""
         return False
 
-    def process(self, image: np.ndarray | None, t: float, *,
-                sample: Sample | None = None) -> tuple[FrameRecord, list[RelativeRotation]]:
+    def process(
+        self, image: np.ndarray | None, t: float, *, sample: Sample | None = None
+    ) -> tuple[FrameRecord, list[RelativeRotation]]:
         """Take the next image (uint8, sensor size; None when `reads_images` is False) taken at
         `t` [s], and (only when `needs_events`) its `sample`.
 
@@ -259,7 +260,9 @@ class Tracker:
         """
         raise NotImplementedError
 
-    def submit(self, image: np.ndarray | None, t: float, **kwargs) -> Callable[[], tuple[FrameRecord, list[RelativeRotation]]]:
+    def submit(
+        self, image: np.ndarray | None, t: float, **kwargs
+    ) -> Callable[[], tuple[FrameRecord, list[RelativeRotation]]]:
         """Start on the next image (as `process`); returns a function that gives `process`'s
         result for it. The run may submit the next image before it takes this result, and takes
         results in order. By default the image is processed at once; a tracker overrides this to

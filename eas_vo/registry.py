@@ -27,8 +27,7 @@ def _entry_points(kind: str) -> dict:
     for ep in entry_points(group=f"eas_vo.{kind}"):
         if ep.name in found:
             warnings.warn(
-                f"eas-vo: duplicate {kind[:-1]} plugin {ep.name!r} ({ep.value}); "
-                f"keeping {found[ep.name].value}",
+                f"eas-vo: duplicate {kind[:-1]} plugin {ep.name!r} ({ep.value}); keeping {found[ep.name].value}",
                 RuntimeWarning,
                 stacklevel=2,
             )
@@ -49,8 +48,9 @@ def _load(kind: str) -> tuple[dict[str, type], dict[str, str]]:
         except Exception as exc:  # a broken third-party plugin must not break the tool
             failed[name] = f"{ep.value}: {type(exc).__name__}: {exc}"
             if not ep.value.startswith(_BUILTIN_PREFIX):
-                warnings.warn(f"eas-vo: {kind[:-1]} plugin {name!r} failed to load ({failed[name]})",
-                              RuntimeWarning, stacklevel=2)
+                warnings.warn(
+                    f"eas-vo: {kind[:-1]} plugin {name!r} failed to load ({failed[name]})", RuntimeWarning, stacklevel=2
+                )
     return loaded, failed
 
 
@@ -85,8 +85,10 @@ def _installation_problem(kind: str, name: str | None = None) -> str:
     failures = "; ".join(f"{n} ({why})" for n, why in broken.items())
     text = f"; built-in {kind} that failed to import: {failures}"
     if any("No module named 'eas_vo." in why for why in broken.values()):
-        text += (f"; eas_vo was imported from {Path(eas_vo.__file__).parent}: if that is a source checkout "
-                 "shadowing the installed package, run from another folder or install with `pip install -e .`")
+        text += (
+            f"; eas_vo was imported from {Path(eas_vo.__file__).parent}: if that is a source checkout "
+            "shadowing the installed package, run from another folder or install with `pip install -e .`"
+        )
     return text
 
 
@@ -114,8 +116,10 @@ def resolve_dataset(spec: str) -> tuple[type, str]:
             raise EasVoError(f"--dataset {spec}: names no location after '{scheme}:'")
         return plugins[scheme], location
     if explicit and not Path(spec).exists():
-        raise EasVoError(f"--dataset {spec}: no dataset plugin {scheme!r} (installed: {', '.join(plugins) or 'none'})"
-                         f"{_installation_problem('datasets', scheme)}")
+        raise EasVoError(
+            f"--dataset {spec}: no dataset plugin {scheme!r} (installed: {', '.join(plugins) or 'none'})"
+            f"{_installation_problem('datasets', scheme)}"
+        )
     claims = [cls for _, cls in sorted(plugins.items()) if _claims(cls, spec)]
     if len(claims) == 1:
         return claims[0], spec
@@ -123,10 +127,14 @@ def resolve_dataset(spec: str) -> tuple[type, str]:
         names = ", ".join(cls.name for cls in claims)
         raise EasVoError(f"{spec}: several dataset plugins can open it ({names}); write NAME:{spec} to choose")
     if not Path(spec).exists():
-        raise EasVoError(f"{spec}: dataset not found (no such file or folder, and no dataset plugin "
-                         f"recognises it; installed: {', '.join(plugins) or 'none'}){_installation_problem('datasets')}")
-    raise EasVoError(f"{spec}: no installed dataset plugin can open it (installed: {', '.join(plugins) or 'none'}; "
-                     f"write NAME:{spec} to force one){_installation_problem('datasets')}")
+        raise EasVoError(
+            f"{spec}: dataset not found (no such file or folder, and no dataset plugin "
+            f"recognises it; installed: {', '.join(plugins) or 'none'}){_installation_problem('datasets')}"
+        )
+    raise EasVoError(
+        f"{spec}: no installed dataset plugin can open it (installed: {', '.join(plugins) or 'none'}; "
+        f"write NAME:{spec} to force one){_installation_problem('datasets')}"
+    )
 
 
 def fetchable(spec: str) -> tuple[type, str]:
@@ -144,7 +152,9 @@ def fetchable(spec: str) -> tuple[type, str]:
     if len(owners) == 1:
         return owners[0], name
     if owners:
-        raise EasVoError(f"{spec}: several dataset plugins list it ({', '.join(c.name for c in owners)}); write PLUGIN:{spec}")
+        raise EasVoError(
+            f"{spec}: several dataset plugins list it ({', '.join(c.name for c in owners)}); write PLUGIN:{spec}"
+        )
     known = sorted(f"{cls.name}:{n}" if sep else n for cls in candidates for n in cls.catalogue())
     raise EasVoError(f"{spec}: no dataset plugin can fetch it (known: {', '.join(known) or 'none'})")
 
@@ -153,8 +163,11 @@ def _claims(cls: type, location: str) -> bool:
     try:
         return bool(cls.can_open(location))
     except Exception as exc:  # can_open must never raise; a plugin that does is skipped, loudly
-        warnings.warn(f"eas-vo: dataset plugin {cls.name!r}: can_open raised {type(exc).__name__}: {exc}",
-                      RuntimeWarning, stacklevel=3)
+        warnings.warn(
+            f"eas-vo: dataset plugin {cls.name!r}: can_open raised {type(exc).__name__}: {exc}",
+            RuntimeWarning,
+            stacklevel=3,
+        )
         return False
 
 

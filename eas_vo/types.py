@@ -8,7 +8,6 @@ frame a; trajectories are camera-to-world (`R_w_c`).
 from __future__ import annotations
 
 import functools
-
 from dataclasses import dataclass
 
 import numpy as np

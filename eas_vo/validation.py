@@ -38,4 +38,6 @@ def check_vector(cfg, key: str, length: int, unit: str = "") -> None:
         and all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in value)
     )
     if not ok:
-        raise ConfigError(f"{key} = {value!r}; expected an array of {length} finite numbers{f' [{unit}]' if unit else ''}")
+        raise ConfigError(
+            f"{key} = {value!r}; expected an array of {length} finite numbers{f' [{unit}]' if unit else ''}"
+        )

@@ -8,9 +8,9 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from eas_vo.validation import check_range
 from eas_vo.plugins import Frontend
 from eas_vo.types import Sample
+from eas_vo.validation import check_range
 
 
 def event_slice(events: np.ndarray, n: int, width: int, height: int) -> np.ndarray:

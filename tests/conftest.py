@@ -77,7 +77,12 @@ def walk_vocabulary(tmp_path_factory) -> Path:
     from eas_vo.cli.main import main
 
     path = tmp_path_factory.mktemp("vocabulary") / "walk.voc.txt"
-    assert main(["vocabulary", "--dataset", "synthetic:walk_short", "--frontend", "original", "--out", str(path), "--quiet"]) == 0
+    assert (
+        main(
+            ["vocabulary", "--dataset", "synthetic:walk_short", "--frontend", "original", "--out", str(path), "--quiet"]
+        )
+        == 0
+    )
     return path
 
 

@@ -22,12 +22,34 @@ PACKAGES = {
 #: go down (ALLOWED); docs/architecture.md's layout table is this one, each row's purpose the
 #: first sentence of its docstring (test_the_documented_layout_is_the_layer_table).
 LAYERS = {
-    "bottom": ("eas_vo.types", "eas_vo.errors", "eas_vo.validation", "eas_vo.geometry", "eas_vo.camera",
-               "eas_vo.concurrency", "eas_vo.logs"),
-    "middle": ("eas_vo.plugins", "eas_vo.registry", "eas_vo.io", "eas_vo.eventfile", "eas_vo.evaluation", "eas_vo.imu",
-               "eas_vo.plots", "eas_vo.orb"),
-    "top": ("eas_vo.config", "eas_vo.pipeline", "eas_vo.experiments", "eas_vo.sequence", "eas_vo.slam", "eas_vo.cli",
-            "eas_vo.__main__"),
+    "bottom": (
+        "eas_vo.types",
+        "eas_vo.errors",
+        "eas_vo.validation",
+        "eas_vo.geometry",
+        "eas_vo.camera",
+        "eas_vo.concurrency",
+        "eas_vo.logs",
+    ),
+    "middle": (
+        "eas_vo.plugins",
+        "eas_vo.registry",
+        "eas_vo.io",
+        "eas_vo.eventfile",
+        "eas_vo.evaluation",
+        "eas_vo.imu",
+        "eas_vo.plots",
+        "eas_vo.orb",
+    ),
+    "top": (
+        "eas_vo.config",
+        "eas_vo.pipeline",
+        "eas_vo.experiments",
+        "eas_vo.sequence",
+        "eas_vo.slam",
+        "eas_vo.cli",
+        "eas_vo.__main__",
+    ),
     "plugins": ("eas_vo.frontends", "eas_vo.trackers", "eas_vo.backends", "eas_vo.datasets"),
 }
 PLUGIN_KINDS = set(LAYERS["plugins"])
@@ -93,8 +115,12 @@ def test_every_module_has_a_layer(graph):
 
 
 def test_imports_only_go_down(graph):
-    wrong = [f"{m} ({layer(m)}) imports {d} ({layer(d)})" for m, deps in graph.items() for d in sorted(deps)
-             if layer(d) not in ALLOWED[layer(m)]]
+    wrong = [
+        f"{m} ({layer(m)}) imports {d} ({layer(d)})"
+        for m, deps in graph.items()
+        for d in sorted(deps)
+        if layer(d) not in ALLOWED[layer(m)]
+    ]
     assert wrong == []
 
 
@@ -102,7 +128,9 @@ def test_a_plugin_imports_no_other_kind_of_plugin(graph):
     def kind(m):
         return next((k for k in PLUGIN_KINDS if m == k or m.startswith(k + ".")), None)
 
-    wrong = [f"{m} imports {d}" for m, deps in graph.items() for d in deps if kind(m) and kind(d) and kind(d) != kind(m)]
+    wrong = [
+        f"{m} imports {d}" for m, deps in graph.items() for d in deps if kind(m) and kind(d) and kind(d) != kind(m)
+    ]
     assert wrong == []
 
 
@@ -113,7 +141,7 @@ def test_no_import_cycle(graph):
         state[m] = 1
         for d in sorted(graph.get(m, ())):
             if state.get(d) == 1:
-                raise AssertionError("import cycle: " + " -> ".join(path[path.index(d):] + [m, d]))
+                raise AssertionError("import cycle: " + " -> ".join(path[path.index(d) :] + [m, d]))
             if d not in state:
                 visit(d, path + [m])
         state[m] = 2
@@ -150,9 +178,11 @@ def test_tests_mirror_the_package():
         folder = test.parent.relative_to(REPOSITORY / "tests")
         if not folder.parts or folder.parts[0] in ("support", "plugin_example"):
             continue
-        stem = test.stem[len("test_"):]
-        candidates = [stem[:m.start()] for m in re.finditer(r"_|$", stem)]
-        if not any((REPOSITORY / folder / f"{c}.py").exists() or (REPOSITORY / folder / c).is_dir() for c in candidates):
+        stem = test.stem[len("test_") :]
+        candidates = [stem[: m.start()] for m in re.finditer(r"_|$", stem)]
+        if not any(
+            (REPOSITORY / folder / f"{c}.py").exists() or (REPOSITORY / folder / c).is_dir() for c in candidates
+        ):
             orphans.append(str(test.relative_to(REPOSITORY)))
     assert orphans == []
 
@@ -161,7 +191,7 @@ def source_of(name: str) -> Path:
     """The folder (a package) or file (a module) of the installed name `name`, in the repository."""
     for folder, package in sorted(PACKAGES.items(), key=lambda item: -len(item[1])):  # eas_vo.frontends before eas_vo
         if name == package or name.startswith(package + "."):
-            path = REPOSITORY.joinpath(folder, *name[len(package):].strip(".").split("."))
+            path = REPOSITORY.joinpath(folder, *name[len(package) :].strip(".").split("."))
             return path if path.is_dir() else path.with_suffix(".py")
     raise AssertionError(f"{name} is in no installed root")
 
@@ -191,7 +221,9 @@ def test_the_documented_layout_is_the_layer_table():
     start, end = "<!-- layout: tests/test_architecture.py -->\n", "<!-- end of layout -->"
     assert start in page and end in page, "docs/architecture.md lost its layout markers"
     shown = page.split(start, 1)[1].split(end, 1)[0]
-    assert shown == documented_layout(), "docs/architecture.md's layout table, as it should read:\n" + documented_layout()
+    assert shown == documented_layout(), (
+        "docs/architecture.md's layout table, as it should read:\n" + documented_layout()
+    )
 
 
 def test_every_package_of_the_tree_has_a_layer_and_a_purpose():
@@ -221,10 +253,26 @@ def test_a_wheel_holds_every_subpackage_of_the_tree(tmp_path):
         if (REPOSITORY / name).is_file():
             (source / name).parent.mkdir(parents=True, exist_ok=True)
             (source / name).write_bytes((REPOSITORY / name).read_bytes())
-    subprocess.run([sys.executable, "-m", "pip", "wheel", "--quiet", "--no-deps", "--wheel-dir", str(tmp_path / "wheel"),
-                    str(source)], check=True, capture_output=True)
+    subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "pip",
+            "wheel",
+            "--quiet",
+            "--no-deps",
+            "--wheel-dir",
+            str(tmp_path / "wheel"),
+            str(source),
+        ],
+        check=True,
+        capture_output=True,
+    )
     (wheel,) = (tmp_path / "wheel").glob("*.whl")
-    held = {n.removesuffix("/__init__.py").replace("/", ".") for n in zipfile.ZipFile(wheel).namelist()
-            if n.endswith("/__init__.py")}
+    held = {
+        n.removesuffix("/__init__.py").replace("/", ".")
+        for n in zipfile.ZipFile(wheel).namelist()
+        if n.endswith("/__init__.py")
+    }
     expected = {name for name in modules() if source_of(name).is_dir()} | {"eas_vo.configs"}
     assert expected <= held, sorted(expected - held)

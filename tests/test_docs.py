@@ -25,8 +25,11 @@ def page_id(path: Path) -> str:
 
 def code_blocks(text: str, language: str | None = None) -> list[str]:
     """The fenced code blocks of a Markdown text (of one language, if given)."""
-    return [body for lang, body in re.findall(r"^```(\w*)\n(.*?)^```", text, re.S | re.M)
-            if language is None or lang == language]
+    return [
+        body
+        for lang, body in re.findall(r"^```(\w*)\n(.*?)^```", text, re.S | re.M)
+        if language is None or lang == language
+    ]
 
 
 def prose(text: str) -> str:
@@ -41,8 +44,9 @@ def anchors(text: str) -> set[str]:
     out = set()
     for heading in re.findall(r"^#{1,6}\s+(.+?)\s*#*$", prose(text), re.M):
         plain = re.sub(r"[`*]|\[([^\]]*)\]\([^)]*\)", lambda m: m.group(1) or "", heading)
-        slug = "".join(c for c in unicodedata.normalize("NFKC", plain.lower())
-                       if c.isalnum() or c in " -_").replace(" ", "-")
+        slug = "".join(c for c in unicodedata.normalize("NFKC", plain.lower()) if c.isalnum() or c in " -_").replace(
+            " ", "-"
+        )
         n = seen.get(slug, 0)
         seen[slug] = n + 1
         out.add(slug if n == 0 else f"{slug}-{n}")
@@ -76,9 +80,11 @@ def test_the_link_check_sees_broken_files_and_anchors(tmp_path):
     """The checker itself: a missing file, a missing heading and a good heading of another page."""
     (tmp_path / "other.md").write_text("# Time offsets: the ground truth's clock\n\n## A `code` heading\n")
     page = tmp_path / "page.md"
-    page.write_text("[a](other.md#time-offsets-the-ground-truths-clock) [b](other.md#a-code-heading) "
-                    "[c](missing.md) [d](other.md#nope) [e](#here) [f](https://example.org/x.md)\n\n## Here\n"
-                    "```\n[g](inside-code.md)\n```\n")
+    page.write_text(
+        "[a](other.md#time-offsets-the-ground-truths-clock) [b](other.md#a-code-heading) "
+        "[c](missing.md) [d](other.md#nope) [e](#here) [f](https://example.org/x.md)\n\n## Here\n"
+        "```\n[g](inside-code.md)\n```\n"
+    )
     assert [b.split(":")[0] for b in broken_links(page)] == ["missing.md", "other.md#nope"]
 
 

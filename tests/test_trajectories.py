@@ -37,7 +37,12 @@ def test_a_bundled_configuration_gives_its_recorded_trajectory(name, tmp_path):
         recorded.write_bytes(got)
     if got != recorded.read_bytes():
         a, b = parse_tum(got, "now", ordered=False), parse_tum(recorded.read_bytes(), str(recorded), ordered=False)
-        apart = (geodesic_angle(matrices_from_quats(a.q_w_c), matrices_from_quats(b.q_w_c)).max()
-                 if len(a.t) == len(b.t) else np.inf)
-        pytest.fail(f"{name}: the trajectory differs from {recorded.name} ({len(a.t)} against {len(b.t)} poses, "
-                    f"up to {apart:.3g} rad apart)")
+        apart = (
+            geodesic_angle(matrices_from_quats(a.q_w_c), matrices_from_quats(b.q_w_c)).max()
+            if len(a.t) == len(b.t)
+            else np.inf
+        )
+        pytest.fail(
+            f"{name}: the trajectory differs from {recorded.name} ({len(a.t)} against {len(b.t)} poses, "
+            f"up to {apart:.3g} rad apart)"
+        )

@@ -17,10 +17,8 @@ import numba
 import numpy as np
 
 from eas_vo import concurrency
-from eas_vo.geometry.rotations import geodesic_angle
-from eas_vo.geometry.rotations import scaled_rotation
 from eas_vo.camera import CameraModel
-from eas_vo.geometry.rotations import exp_so3, rotvec_to_matrix
+from eas_vo.geometry.rotations import exp_so3, geodesic_angle, rotvec_to_matrix, scaled_rotation
 
 #: Focal lengths [px] of the resolutions the alignment and the score work at, whatever the
 #: sensor: each view is resized to them, so every figure below in pixels of a resolution is an
@@ -124,8 +122,10 @@ class FallbackAudit:
         if len(self.judged) >= AUDIT_MIN_JUDGED and 2 * len(against) > len(self.judged):
             self.off = True
             frames = ", ".join(str(j) for j in against)
-            self.warning = (f"the {self.name} fallback is off from frame {self._now + 1}: {len(against)} of the {len(self.judged)} "
-                            f"steps of it judged disagree with the measurements beside them (frames {frames})")
+            self.warning = (
+                f"the {self.name} fallback is off from frame {self._now + 1}: {len(against)} of the {len(self.judged)} "
+                f"steps of it judged disagree with the measurements beside them (frames {frames})"
+            )
 
 
 class PhotometricAlignment:
@@ -135,8 +135,14 @@ class PhotometricAlignment:
         self._maps = camera.undistort_maps()
         seen = self._undistort(np.full((camera.height, camera.width), 255, np.uint8)) == 255
         self._levels = {f: _Level(camera, seen, f) for f in sorted({SCORE_FOCAL_PX, *ALIGN_FOCAL_PX})}
-        self._grid = np.array([rotvec_to_matrix(np.radians([tilt, pan, roll]))
-                               for roll in SEARCH_ROLL_DEG for pan in SEARCH_GRID_DEG for tilt in SEARCH_GRID_DEG])
+        self._grid = np.array(
+            [
+                rotvec_to_matrix(np.radians([tilt, pan, roll]))
+                for roll in SEARCH_ROLL_DEG
+                for pan in SEARCH_GRID_DEG
+                for tilt in SEARCH_GRID_DEG
+            ]
+        )
         self._grid_warps = self._levels[ALIGN_FOCAL_PX[0]].warps(self._grid)  # the same for every pair of views
         # the last pair of views scored and its scores by rotation (one tracker's, not shared across threads)
         self._scored: tuple[dict, dict, dict] | None = None
@@ -189,8 +195,11 @@ class PhotometricAlignment:
             if f == ALIGN_FOCAL_PX[0]:  # half ranked sharp, half blurred
                 pair = [source[f], source["search"]], [image["pixels"][f], image["pixels"]["search"]]
                 n_starts = len(candidates) - len(self._grid)
-                grid = (level.scores(*pair, self._grid) if self._grid_warps is None
-                        else level.warped_scores(*pair, self._grid_warps))
+                grid = (
+                    level.scores(*pair, self._grid)
+                    if self._grid_warps is None
+                    else level.warped_scores(*pair, self._grid_warps)
+                )
                 scores = np.concatenate([level.scores(*pair, candidates[:n_starts]), grid], axis=1)
                 sharp, blurred = np.argsort(-scores)
                 order = list(dict.fromkeys([*sharp[: keep // 2], *blurred[:keep], *sharp]))[:keep]
@@ -200,7 +209,9 @@ class PhotometricAlignment:
         last = ALIGN_FOCAL_PX[-1]
         best = candidates[0]
         if len(candidates) > 1:
-            best = candidates[int(np.argmax(self._levels[last].scores([source[last]], [image["pixels"][last]], candidates)[0]))]
+            best = candidates[
+                int(np.argmax(self._levels[last].scores([source[last]], [image["pixels"][last]], candidates)[0]))
+            ]
         return best if self.explains(source, image, best) else None
 
 
@@ -212,14 +223,19 @@ class _Level:
 
     def __init__(self, camera: CameraModel, seen: np.ndarray, focal_px: float):
         fx, fy = camera.K[0, 0], camera.K[1, 1]
-        self.size = (max(round(camera.width * min(focal_px / fx, 1.0)), 2), max(round(camera.height * min(focal_px / fy, 1.0)), 2))
+        self.size = (
+            max(round(camera.width * min(focal_px / fx, 1.0)), 2),
+            max(round(camera.height * min(focal_px / fy, 1.0)), 2),
+        )
         sx, sy = self.size[0] / camera.width, self.size[1] / camera.height
         # cv2.resize keeps pixel centres in place: x' + 0.5 = sx (x + 0.5)
         self.K = np.array([[sx, 0.0, 0.5 * (sx - 1.0)], [0.0, sy, 0.5 * (sy - 1.0)], [0.0, 0.0, 1.0]]) @ camera.K
         self.seen = self.resized(seen.astype(np.uint8) * 255) == 255
         self.shape = self.seen.shape
         self.ys, self.xs = np.nonzero(self.seen)
-        self.bearings = np.linalg.inv(self.K) @ np.stack([self.xs, self.ys, np.ones_like(self.xs)]).astype(float)  # (3, N)
+        self.bearings = np.linalg.inv(self.K) @ np.stack([self.xs, self.ys, np.ones_like(self.xs)]).astype(
+            float
+        )  # (3, N)
         self.min_count = max(MIN_OVERLAP * len(self.xs), 1.0)  # pixels two views must share to be compared
 
     def _check(self, sources: list[np.ndarray], targets: list[np.ndarray]) -> None:
@@ -248,10 +264,18 @@ class _Level:
         _warp_rows(KRs, self.bearings, self.seen, self.min_count, first, *table, True)
         return (first, *table)
 
-    def warped_scores(self, sources: list[np.ndarray], targets: list[np.ndarray], warps: tuple[np.ndarray, ...]) -> np.ndarray:
+    def warped_scores(
+        self, sources: list[np.ndarray], targets: list[np.ndarray], warps: tuple[np.ndarray, ...]
+    ) -> np.ndarray:
         """`scores` of the rotations whose `warps` are given: the same numbers, without projecting."""
-        return self._each_pair(sources, targets, len(warps[0]) - 1, lambda source, target, a, b: _zncc_warped(
-            source.reshape(-1), target, warps[0][a: b + 1], *warps[1:], self.shape[1], self.min_count))
+        return self._each_pair(
+            sources,
+            targets,
+            len(warps[0]) - 1,
+            lambda source, target, a, b: _zncc_warped(
+                source.reshape(-1), target, warps[0][a : b + 1], *warps[1:], self.shape[1], self.min_count
+            ),
+        )
 
     def scores(self, sources: list[np.ndarray], targets: list[np.ndarray], Rs: np.ndarray) -> np.ndarray:
         """The ZNCC of each image's pixels of the view `targets` (its `pyramid`'s "pixels") with
@@ -259,15 +283,23 @@ class _Level:
         Rs (C, 3, 3), over the pixels both see: (len(targets), C); -1 where they share under
         MIN_OVERLAP or either is flat there."""
         KRs = np.asarray(self.K @ Rs, np.float64)
-        return self._each_pair(sources, targets, len(KRs), lambda source, target, a, b: _zncc(
-            source, target, KRs[a:b], self.bearings, self.seen, self.min_count))
+        return self._each_pair(
+            sources,
+            targets,
+            len(KRs),
+            lambda source, target, a, b: _zncc(source, target, KRs[a:b], self.bearings, self.seen, self.min_count),
+        )
 
     def _each_pair(self, sources: list[np.ndarray], targets: list[np.ndarray], count: int, kernel) -> np.ndarray:
         """kernel(source, target, a, b), the scores of candidates a..b-1, for each pair of views,
         the candidates split across the threads: (len(targets), count)."""
         self._check(sources, targets)
-        return np.stack([np.concatenate(concurrency.split(lambda a, b: kernel(source, target, a, b), count, PARALLEL_CANDIDATES))
-                         for source, target in zip(sources, targets)])
+        return np.stack(
+            [
+                np.concatenate(concurrency.split(lambda a, b: kernel(source, target, a, b), count, PARALLEL_CANDIDATES))
+                for source, target in zip(sources, targets)
+            ]
+        )
 
     def refine(self, source: np.ndarray, image: np.ndarray, target: np.ndarray, Rs: np.ndarray) -> np.ndarray:
         """Each R_source_image of Rs (C, 3, 3) refined by inverse-compositional Gauss-Newton on
@@ -283,8 +315,18 @@ class _Level:
         # d image(pi(K exp([d]x) b)) / d d at d = 0 is r (-[b]x), r = grad . d pi / d b
         r0, r1, r2 = gx * fx, gy * fy, -(gx * fx * X + gy * fy * Y)
         J = np.stack([r2 * Y - r1, r0 - r2 * X, r1 * X - r0 * Y], axis=1)  # (N, 3)
-        return _refine(np.asarray(source, np.float32), target, np.ascontiguousarray(J), self.K, np.array(Rs, float),
-                       self.bearings, self.seen, self.min_count, ALIGN_ITERATIONS, ALIGN_STOP_PX / fx)
+        return _refine(
+            np.asarray(source, np.float32),
+            target,
+            np.ascontiguousarray(J),
+            self.K,
+            np.array(Rs, float),
+            self.bearings,
+            self.seen,
+            self.min_count,
+            ALIGN_ITERATIONS,
+            ALIGN_STOP_PX / fx,
+        )
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
@@ -317,8 +359,12 @@ def _bilinear(image, u, v):
     """`image` (h, w) at (u, v) [px] inside it, interpolated bilinearly (float64)."""
     i, j, a, b = _corner(u, v, image)
     i, j, one = np.uint32(i), np.uint32(j), np.uint32(1)  # unsigned: no negative-index handling
-    return ((1 - a) * (1 - b) * image[j, i] + a * (1 - b) * image[j, i + one]
-            + (1 - a) * b * image[j + one, i] + a * b * image[j + one, i + one])
+    return (
+        (1 - a) * (1 - b) * image[j, i]
+        + a * (1 - b) * image[j, i + one]
+        + (1 - a) * b * image[j + one, i]
+        + a * b * image[j + one, i + one]
+    )
 
 
 @numba.njit(cache=True, nogil=True)
@@ -357,8 +403,12 @@ def _zncc_warped(source, target, first, pixel, corner, offsets, w, min_count):
         sx = sy = sxx = syy = sxy = 0.0
         for m in range(first[c], first[c + 1]):
             k, a, b = corner[m], offsets[m, 0], offsets[m, 1]
-            x = ((1 - a) * (1 - b) * source[k] + a * (1 - b) * source[k + one]
-                 + (1 - a) * b * source[k + w] + a * b * source[k + w + one])
+            x = (
+                (1 - a) * (1 - b) * source[k]
+                + a * (1 - b) * source[k + one]
+                + (1 - a) * b * source[k + w]
+                + a * b * source[k + w + one]
+            )
             y = target[pixel[m]]
             sx += x
             sy += y

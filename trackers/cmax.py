@@ -63,29 +63,29 @@ MAX_UNCOVERED = 0.5
 @dataclass(frozen=True)
 class CmaxConfig:
     """Attributes:
-        window_events: events per window when window_s is 0: the interval between two samples is
-            cut into round(N / window_events) windows (at least one) of its own events only (an
-            interval with fewer is one window: a window padded from before it would measure the
-            interval before).
-        window_s: window length [s] instead (0: by events): round(interval / window_s) windows,
-            one holding over 2 * window_events events cut further by count.
-        sigma_px: the Gaussian smoothing the image of warped events [px of the sensor].
-        min_events: a window with fewer events (hot pixels left out) is not measured (the frame is `lost`).
-        lost_focus, lost_gain: a focus (the optimum's contrast over that of warps FOCUS_STEP_PX
-            away) at or below lost_focus with a contrast gain (over no motion) at or below
-            lost_gain measures nothing: nothing was brought into focus and no blur removed.
-            Neither alone is a test: slow motion, well measured, has gains near 1, and fast
-            motion in dim light a focus near 1 (the events' latency spread blurs its sharpest
-            image beyond a pixel); docs/cmax.md, "Status: ok, weak, lost", has the figures.
-        weak_focus: a focus below this makes the frame `weak`.
-        max_residual_px: the frame is `weak` when the image quadrants' own optima lie further
-            apart than this [px of displacement over half a window]: one rotation does not
-            explain the events (translation before a near scene, independent motion).
-        init: where the solver starts: `auto` (the gyro when the dataset has one, else the previous
-            window; a coarse search when neither; no motion too when the optimum found is no
-            better than no motion), `previous` (never the gyro), `search` (the coarse search
-            and no motion, always).
-        max_rate_deg_s: the coarse search covers |omega| per axis up to this [deg/s].
+    window_events: events per window when window_s is 0: the interval between two samples is
+        cut into round(N / window_events) windows (at least one) of its own events only (an
+        interval with fewer is one window: a window padded from before it would measure the
+        interval before).
+    window_s: window length [s] instead (0: by events): round(interval / window_s) windows,
+        one holding over 2 * window_events events cut further by count.
+    sigma_px: the Gaussian smoothing the image of warped events [px of the sensor].
+    min_events: a window with fewer events (hot pixels left out) is not measured (the frame is `lost`).
+    lost_focus, lost_gain: a focus (the optimum's contrast over that of warps FOCUS_STEP_PX
+        away) at or below lost_focus with a contrast gain (over no motion) at or below
+        lost_gain measures nothing: nothing was brought into focus and no blur removed.
+        Neither alone is a test: slow motion, well measured, has gains near 1, and fast
+        motion in dim light a focus near 1 (the events' latency spread blurs its sharpest
+        image beyond a pixel); docs/cmax.md, "Status: ok, weak, lost", has the figures.
+    weak_focus: a focus below this makes the frame `weak`.
+    max_residual_px: the frame is `weak` when the image quadrants' own optima lie further
+        apart than this [px of displacement over half a window]: one rotation does not
+        explain the events (translation before a near scene, independent motion).
+    init: where the solver starts: `auto` (the gyro when the dataset has one, else the previous
+        window; a coarse search when neither; no motion too when the optimum found is no
+        better than no motion), `previous` (never the gyro), `search` (the coarse search
+        and no motion, always).
+    max_rate_deg_s: the coarse search covers |omega| per axis up to this [deg/s].
     """
 
     window_events: int = 40000
@@ -173,7 +173,9 @@ class CmaxTracker(Tracker):
         cut = self._windows(events, t_prev, t)
         if cut is None:
             self._omega = None
-            return FrameRecord(k, t, 0, 0, "lost", False, reason=f"too few events ({len(events)})", events=len(events)), []
+            return FrameRecord(
+                k, t, 0, 0, "lost", False, reason=f"too few events ({len(events)})", events=len(events)
+            ), []
         windows = [self.measure(chunk, lo, hi) for chunk, lo, hi in cut]
         self.windows = windows
         n = sum(w.events for w in windows)
@@ -184,8 +186,9 @@ class CmaxTracker(Tracker):
             return FrameRecord(k, t, 0, 0, "lost", False, reason=f"too few events ({n})", events=n), []
         if focus <= self.config.lost_focus and gain <= self.config.lost_gain:
             self._omega = None
-            return FrameRecord(k, t, 0, 0, "lost", False, reason=f"nothing in focus ({focus:.3f})", events=n,
-                               contrast_gain=gain), []
+            return FrameRecord(
+                k, t, 0, 0, "lost", False, reason=f"nothing in focus ({focus:.3f})", events=n, contrast_gain=gain
+            ), []
         R = np.eye(3)
         variance = 0.0
         for w in windows:
@@ -205,7 +208,9 @@ class CmaxTracker(Tracker):
             # the focus test): the rotation is known to within itself and the peak's width
             still = max(w.still_focus for w in windows)
             status, reason = "weak", f"as sharp at no motion ({still:.3f})"
-            sigma = max(sigma, float(np.hypot(np.linalg.norm(matrix_to_rotvec(R)), _angle(windows, lambda w: FOCUS_STEP_PX))))
+            sigma = max(
+                sigma, float(np.hypot(np.linalg.norm(matrix_to_rotvec(R)), _angle(windows, lambda w: FOCUS_STEP_PX)))
+            )
         elif residual > self.config.max_residual_px:
             # the rotation is known no better than the quadrants agree: the sigma is at least their spread
             status, reason = "weak", f"quadrants disagree ({residual:.2f} px)"
@@ -214,9 +219,13 @@ class CmaxTracker(Tracker):
             status, reason, sigma = "weak", "flat objective", FLAT_SIGMA_RAD
         # the edge's inliers: the events an ok estimate rests on, none for a weak one (what makes an
         # edge confident for the gyro's check, imu.verdict.CONFIDENT_INLIERS: a weak window is not)
-        record = FrameRecord(k, t, 0, n, status, False, residual_px=residual, reason=reason, events=n, contrast_gain=gain)
+        record = FrameRecord(
+            k, t, 0, n, status, False, residual_px=residual, reason=reason, events=n, contrast_gain=gain
+        )
         confident = n if status == "ok" else 0
-        return record, [RelativeRotation(k - 1, k, R, inliers=confident, estimated_sigma_rad=min(sigma, FLAT_SIGMA_RAD))]
+        return record, [
+            RelativeRotation(k - 1, k, R, inliers=confident, estimated_sigma_rad=min(sigma, FLAT_SIGMA_RAD))
+        ]
 
     def _windows(self, events: np.ndarray, t_prev: float, t: float):
         """(events, t0, t1) per window: its events, all within [t_prev, t), and the part [t0, t1]
@@ -234,7 +243,7 @@ class CmaxTracker(Tracker):
         bounds = np.searchsorted(events["t"], cuts)
         windows = []
         for i in range(n):
-            chunk = events[bounds[i]:bounds[i + 1]]
+            chunk = events[bounds[i] : bounds[i + 1]]
             if len(chunk) > 2 * c.window_events:
                 windows += _by_count(chunk, cuts[i], cuts[i + 1], c.window_events, c.min_events)
             else:
@@ -275,8 +284,9 @@ class CmaxTracker(Tracker):
         # the curvature, the focus and the quadrants' gradients and curvatures, from the 7 passes
         # at the optimum and 1 px from it along each axis
         centre = contrast.with_quadrants(omega)
-        around = [contrast.with_quadrants((p + sign * FOCUS_STEP_PX * e) / scale)
-                  for e in np.eye(3) for sign in (1.0, -1.0)]
+        around = [
+            contrast.with_quadrants((p + sign * FOCUS_STEP_PX * e) / scale) for e in np.eye(3) for sign in (1.0, -1.0)
+        ]
         H = np.column_stack([around[2 * i][1] - around[2 * i + 1][1] for i in range(3)])
         H /= -2 * FOCUS_STEP_PX * v0 * scale
         H = 0.5 * (H + H.T)
@@ -288,11 +298,13 @@ class CmaxTracker(Tracker):
         # no motion's own focus, where the optimum stands above it by less than above its neighbours
         still_focus = 0.0
         if gain < focus:
-            still_focus = v0 / np.mean([contrast.value(sign * FOCUS_STEP_PX * e / scale) for e in np.eye(3)
-                                         for sign in (1.0, -1.0)])
+            still_focus = v0 / np.mean(
+                [contrast.value(sign * FOCUS_STEP_PX * e / scale) for e in np.eye(3) for sign in (1.0, -1.0)]
+            )
         self._omega = omega
-        return Window(omega, sigma / scale, gain, focus, n, t0, t1, contrast.evaluations, residual, 1.0 / scale,
-                      still_focus)
+        return Window(
+            omega, sigma / scale, gain, focus, n, t0, t1, contrast.evaluations, residual, 1.0 / scale, still_focus
+        )
 
     def _quadrant_residual_px(self, contrast: Contrast, p: np.ndarray, scale: float, centre, around, H) -> float:
         """How far apart the four image quadrants' own optima lie [px of displacement over half
@@ -310,8 +322,11 @@ class CmaxTracker(Tracker):
         h = FOCUS_STEP_PX
         # cost_q(p) = -V_q(p) / V_q(optimum), in px
         grads = {q: -centre[3][q] / (v[q] * scale) for q in use}
-        metrics = {q: np.column_stack([(around[2 * i][3][q] - around[2 * i + 1][3][q]) for i in range(3)])
-                      / (-2 * h * v[q] * scale) for q in use}
+        metrics = {
+            q: np.column_stack([(around[2 * i][3][q] - around[2 * i + 1][3][q]) for i in range(3)])
+            / (-2 * h * v[q] * scale)
+            for q in use
+        }
         # a direction a quadrant alone hardly constrains (roll, within a quadrant, is nearly a
         # shift) would send its Newton steps far on its texture's noise: its curvature is taken
         # as at least the whole window's flattest
@@ -356,8 +371,12 @@ class CmaxTracker(Tracker):
         smoothed to half the grid's spacing (so the optimum's basin is not stepped over)."""
         steps = np.radians(self.config.max_rate_deg_s) * np.linspace(-1, 1, 7)
         spacing_px = (steps[1] - steps[0]) * scale
-        coarse = Contrast(np.column_stack([contrast.x, contrast.y])[::4], contrast.dt[::4], contrast.grid,
-                          max(contrast.sigma_px, 0.5 * spacing_px))
+        coarse = Contrast(
+            np.column_stack([contrast.x, contrast.y])[::4],
+            contrast.dt[::4],
+            contrast.grid,
+            max(contrast.sigma_px, 0.5 * spacing_px),
+        )
         grid = np.stack(np.meshgrid(steps, steps, steps, indexing="ij"), -1).reshape(-1, 3)
         values = [coarse.value(w) for w in grid]
         contrast.evaluations += coarse.evaluations
@@ -428,7 +447,7 @@ def _by_count(events: np.ndarray, t0: float, t1: float, per_window: int, min_eve
     bounds = np.linspace(0, len(events), n + 1).round().astype(int)
     times = events["t"]
     cuts = [t0] + [0.5 * (times[b - 1] + times[b]) for b in bounds[1:-1]] + [t1]
-    return [(events[bounds[i]:bounds[i + 1]], cuts[i], cuts[i + 1]) for i in range(n)]
+    return [(events[bounds[i] : bounds[i + 1]], cuts[i], cuts[i + 1]) for i in range(n)]
 
 
 def _angle(windows, px) -> float:

@@ -185,16 +185,18 @@ def _series_one(x, y, dt, w0, w1, w2, fx, fy, cx, cy, U, V, Z, J0, J1, J2, J3, J
     """_series_warp of every event by one omega into U, V, Z (u, v, q2) and J0..J5 (d(u, v)/domega).
     (A loop over range(len(x)): LLVM vectorises it, not one over range(lo, hi).)"""
     for k in range(len(x)):
-        U[k], V[k], Z[k], J0[k], J1[k], J2[k], J3[k], J4[k], J5[k] = _series_warp(x[k], y[k], dt[k], w0, w1, w2,
-                                                                                  fx, fy, cx, cy)
+        U[k], V[k], Z[k], J0[k], J1[k], J2[k], J3[k], J4[k], J5[k] = _series_warp(
+            x[k], y[k], dt[k], w0, w1, w2, fx, fy, cx, cy
+        )
 
 
 @numba.njit(cache=True, error_model="numpy")
 def _series_each(x, y, dt, W0, W1, W2, fx, fy, cx, cy, U, V, Z, J0, J1, J2, J3, J4, J5):
     """The same, each event by its own omega (W0[k], W1[k], W2[k])."""
     for k in range(len(x)):
-        U[k], V[k], Z[k], J0[k], J1[k], J2[k], J3[k], J4[k], J5[k] = _series_warp(x[k], y[k], dt[k], W0[k], W1[k],
-                                                                                  W2[k], fx, fy, cx, cy)
+        U[k], V[k], Z[k], J0[k], J1[k], J2[k], J3[k], J4[k], J5[k] = _series_warp(
+            x[k], y[k], dt[k], W0[k], W1[k], W2[k], fx, fy, cx, cy
+        )
 
 
 def warp_events(x, y, dt, label, index, omegas, fx, fy, cx, cy, width, height, uvz, cell, frac, jac) -> None:
@@ -205,8 +207,13 @@ def warp_events(x, y, dt, label, index, omegas, fx, fy, cx, cy, width, height, u
     where |omega dt| >= 0.3 rad: the same values as _warp. Chunks of CHUNK events split across
     eas_vo.concurrency's threads (the kernel releases the GIL)."""
     chunks = (len(x) + CHUNK - 1) // CHUNK
-    concurrency.split(lambda c0, c1: _warp_chunks(c0, c1, x, y, dt, label, index, omegas, fx, fy, cx, cy, width, height,
-                                                  uvz, cell, frac, jac), chunks, MIN_CHUNKS)
+    concurrency.split(
+        lambda c0, c1: _warp_chunks(
+            c0, c1, x, y, dt, label, index, omegas, fx, fy, cx, cy, width, height, uvz, cell, frac, jac
+        ),
+        chunks,
+        MIN_CHUNKS,
+    )
 
 
 @numba.njit(cache=True, nogil=True)
@@ -220,13 +227,49 @@ def _warp_chunks(c0, c1, x, y, dt, label, index, omegas, fx, fy, cx, cy, width, 
             for k in range(lo, hi):
                 for m in range(3):
                     uvz[3 + m, k] = omegas[index[k], m]
-            _series_each(x[lo:hi], y[lo:hi], dt[lo:hi], uvz[3, lo:hi], uvz[4, lo:hi], uvz[5, lo:hi], fx, fy, cx, cy,
-                         uvz[0, lo:hi], uvz[1, lo:hi], uvz[2, lo:hi], jac[0, lo:hi], jac[1, lo:hi], jac[2, lo:hi],
-                         jac[3, lo:hi], jac[4, lo:hi], jac[5, lo:hi])
+            _series_each(
+                x[lo:hi],
+                y[lo:hi],
+                dt[lo:hi],
+                uvz[3, lo:hi],
+                uvz[4, lo:hi],
+                uvz[5, lo:hi],
+                fx,
+                fy,
+                cx,
+                cy,
+                uvz[0, lo:hi],
+                uvz[1, lo:hi],
+                uvz[2, lo:hi],
+                jac[0, lo:hi],
+                jac[1, lo:hi],
+                jac[2, lo:hi],
+                jac[3, lo:hi],
+                jac[4, lo:hi],
+                jac[5, lo:hi],
+            )
         else:
-            _series_one(x[lo:hi], y[lo:hi], dt[lo:hi], omegas[0, 0], omegas[0, 1], omegas[0, 2], fx, fy, cx, cy,
-                        uvz[0, lo:hi], uvz[1, lo:hi], uvz[2, lo:hi], jac[0, lo:hi], jac[1, lo:hi], jac[2, lo:hi],
-                        jac[3, lo:hi], jac[4, lo:hi], jac[5, lo:hi])
+            _series_one(
+                x[lo:hi],
+                y[lo:hi],
+                dt[lo:hi],
+                omegas[0, 0],
+                omegas[0, 1],
+                omegas[0, 2],
+                fx,
+                fy,
+                cx,
+                cy,
+                uvz[0, lo:hi],
+                uvz[1, lo:hi],
+                uvz[2, lo:hi],
+                jac[0, lo:hi],
+                jac[1, lo:hi],
+                jac[2, lo:hi],
+                jac[3, lo:hi],
+                jac[4, lo:hi],
+                jac[5, lo:hi],
+            )
         J = np.empty((2, 3))
         for k in range(lo, hi):
             if several and label[k] < 0:
@@ -308,8 +351,9 @@ def gather(cell, frac, jac, label, B, which) -> np.ndarray:
     the same result on any number of threads."""
     chunks = (len(cell) + CHUNK - 1) // CHUNK
     partial = np.zeros((chunks, B.shape[0], 3))
-    concurrency.split(lambda c0, c1: _gather_chunks(c0, c1, cell, frac, jac, label, B, which, partial), chunks,
-                      MIN_CHUNKS)
+    concurrency.split(
+        lambda c0, c1: _gather_chunks(c0, c1, cell, frac, jac, label, B, which, partial), chunks, MIN_CHUNKS
+    )
     return _in_order(partial)
 
 
@@ -413,8 +457,24 @@ class Contrast:
             self._images[M] = np.empty((M, g.height, g.width))
         images = self._images[M]
         omegas = np.ascontiguousarray(omegas, dtype=np.float64).reshape(-1, 3)
-        warp_events(self.x, self.y, self.dt, self.label, self._index, omegas, g.fx, g.fy, g.cx, g.cy, g.width, g.height,
-                    self._uvz, self._cell, self._frac, self._jac)
+        warp_events(
+            self.x,
+            self.y,
+            self.dt,
+            self.label,
+            self._index,
+            omegas,
+            g.fx,
+            g.fy,
+            g.cx,
+            g.cy,
+            g.width,
+            g.height,
+            self._uvz,
+            self._cell,
+            self._frac,
+            self._jac,
+        )
         self.landed, box = vote(self._cell, self._frac, self.label, images, which)
         values = np.zeros(M)
         B = np.empty_like(images) if want_gradient else None
@@ -444,8 +504,24 @@ class Contrast:
         """The smoothed IWE at omega [rad/s] (height, width)."""
         g = self.grid
         omegas = np.asarray(omega, np.float64).reshape(1, 3)
-        warp_events(self.x, self.y, self.dt, self.label, self._index, omegas, g.fx, g.fy, g.cx, g.cy, g.width, g.height,
-                    self._uvz, self._cell, self._frac, self._jac)
+        warp_events(
+            self.x,
+            self.y,
+            self.dt,
+            self.label,
+            self._index,
+            omegas,
+            g.fx,
+            g.fy,
+            g.cx,
+            g.cy,
+            g.width,
+            g.height,
+            self._uvz,
+            self._cell,
+            self._frac,
+            self._jac,
+        )
         H = np.empty((1, g.height, g.width))
         self.landed = vote(self._cell, self._frac, self.label, H, FULL)[0]
         return blur(H[0], self.sigma_px)

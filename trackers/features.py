@@ -6,9 +6,9 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
+from eas_vo.camera import CameraModel
 from eas_vo.trackers.measurement import PixelScale, TwoViewConfig, measure, weakness
 from eas_vo.trackers.motion import lk_params, lk_track
-from eas_vo.camera import CameraModel
 from eas_vo.types import RelativeRotation
 
 DETECTORS = ("orb", "sift")  # AKAZE left OpenCV's main modules in 5.0
@@ -52,22 +52,33 @@ class Features:
         keypoints, descriptors = self.extractor.detectAndCompute(image, None)
         return np.float32([kp.pt for kp in keypoints]).reshape(-1, 2), descriptors
 
-    def match(self, descriptors_a: np.ndarray | None, descriptors_b: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
+    def match(
+        self, descriptors_a: np.ndarray | None, descriptors_b: np.ndarray | None
+    ) -> tuple[np.ndarray, np.ndarray]:
         """Indices (into a, into b) of the accepted matches, one per keypoint of a at most."""
         if descriptors_a is None or descriptors_b is None or len(descriptors_a) == 0 or len(descriptors_b) < 2:
             return np.empty(0, int), np.empty(0, int)
         if self.matching == "crosscheck":
             pairs = [(m.queryIdx, m.trainIdx) for m in self.matcher.match(descriptors_a, descriptors_b)]
         else:
-            pairs = [(m[0].queryIdx, m[0].trainIdx) for m in self.matcher.knnMatch(descriptors_a, descriptors_b, k=2)
-                     if len(m) == 2 and m[0].distance < self.ratio * m[1].distance]
+            pairs = [
+                (m[0].queryIdx, m[0].trainIdx)
+                for m in self.matcher.knnMatch(descriptors_a, descriptors_b, k=2)
+                if len(m) == 2 and m[0].distance < self.ratio * m[1].distance
+            ]
         if not pairs:
             return np.empty(0, int), np.empty(0, int)
         a, b = np.array(pairs).T
         return a, b
 
     def rotation(
-        self, config: TwoViewConfig, camera: CameraModel, detected_i: tuple, detected_j: tuple, i: int, j: int,
+        self,
+        config: TwoViewConfig,
+        camera: CameraModel,
+        detected_i: tuple,
+        detected_j: tuple,
+        i: int,
+        j: int,
         min_matches: int = MIN_MATCHES,
     ) -> tuple[RelativeRotation | None, int]:
         """R_i_j from two detections (keypoints [px], descriptors) by their matches, and the
@@ -97,18 +108,31 @@ class RefinedMatching:
 
     def __init__(self, features: Features, camera: CameraModel, fine: TwoViewConfig, min_inliers: int = MIN_MATCHES):
         self.features, self.camera, self.fine, self.min_inliers = features, camera, fine, min_inliers
-        self.coarse = TwoViewConfig(geometry="rotation", ransac_threshold_px=RANSAC_THRESHOLD_PX,
-                                    max_residual_px=MAX_RESIDUAL_PX, min_inliers=min_inliers,
-                                    min_inlier_ratio=COARSE_MIN_INLIER_RATIO)
+        self.coarse = TwoViewConfig(
+            geometry="rotation",
+            ransac_threshold_px=RANSAC_THRESHOLD_PX,
+            max_residual_px=MAX_RESIDUAL_PX,
+            min_inliers=min_inliers,
+            min_inlier_ratio=COARSE_MIN_INLIER_RATIO,
+        )
         levels, window = PixelScale.of(camera).pyramid(3, 21)
         self.lk = lk_params(window, levels)
 
     def rotation(
-        self, source: np.ndarray, corners: np.ndarray, source_detected: tuple, image: np.ndarray, detected: tuple, i: int, j: int,
+        self,
+        source: np.ndarray,
+        corners: np.ndarray,
+        source_detected: tuple,
+        image: np.ndarray,
+        detected: tuple,
+        i: int,
+        j: int,
     ) -> tuple[RelativeRotation | None, int]:
         """R_i_j from `source` (its Shi-Tomasi `corners` [px] and `source_detected` keypoints)
         to `image` (`detected`), and the number of matches."""
-        coarse, n_matches = self.features.rotation(self.coarse, self.camera, source_detected, detected, i, j, self.min_inliers)
+        coarse, n_matches = self.features.rotation(
+            self.coarse, self.camera, source_detected, detected, i, j, self.min_inliers
+        )
         if coarse is None or weakness(self.coarse, coarse, self.camera.focal_px):
             return None, n_matches
         cur, ok = lk_track(self.camera, source, corners, image, self.lk, coarse.R_i_j, fb_max_px=1.0)

@@ -18,16 +18,15 @@ import cv2
 import numpy as np
 
 from eas_vo import concurrency
+from eas_vo.camera import CameraModel
 from eas_vo.errors import ConfigError
-from eas_vo.geometry.rotations import geodesic_angle, gyro_rotation
+from eas_vo.geometry.rotations import geodesic_angle, gyro_rotation, scaled_rotation
 from eas_vo.plugins import Tracker
 from eas_vo.trackers.alignment import FINEST_PIXEL_RAD, FallbackAudit, PhotometricAlignment
 from eas_vo.trackers.features import DETECTORS, Features, RefinedMatching
-from eas_vo.trackers.loops import LoopClosureConfig, LoopCloser
+from eas_vo.trackers.loops import LoopCloser, LoopClosureConfig
 from eas_vo.trackers.measurement import PixelScale, StepBound, TwoViewConfig, frame_record, measure, weakness
 from eas_vo.trackers.motion import lk_params, lk_track
-from eas_vo.geometry.rotations import scaled_rotation
-from eas_vo.camera import CameraModel
 from eas_vo.types import FrameRecord, ImuSeries, RelativeRotation
 from eas_vo.validation import check_choice, check_range
 
@@ -157,13 +156,17 @@ class KltTracker(Tracker):
     description = "Shi-Tomasi corners, pyramidal Lucas-Kanade, five-point essential matrix (the paper)"
     Config = KltConfig
 
-    def __init__(self, config: KltConfig | None = None, camera: CameraModel | None = None, *, imu: ImuSeries | None = None):
+    def __init__(
+        self, config: KltConfig | None = None, camera: CameraModel | None = None, *, imu: ImuSeries | None = None
+    ):
         super().__init__(config, camera, imu=imu)
         self.extents = PixelScale.of(camera).extents(self.config)
         c, e = self.config, self.extents
         self._lk_params = lk_params(e.lk_win_size, e.lk_max_level, c.lk_max_iterations, c.lk_epsilon_px)
         self._predict = c.predict if c.predict != "auto" else ("gyro" if imu is not None else "velocity")
-        self._matching = RefinedMatching(Features(c.fallback_detector), camera, c, c.min_inliers) if c.fallback == "match" else None
+        self._matching = (
+            RefinedMatching(Features(c.fallback_detector), camera, c, c.min_inliers) if c.fallback == "match" else None
+        )
         self._alignment = PhotometricAlignment(camera) if c.fallback == "align" else None
 
     def reset(self) -> None:
@@ -209,7 +212,9 @@ class KltTracker(Tracker):
     def track(self, image: np.ndarray, R_prev_cur: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
         """LK-track the previous corners into `image`, from the predicted rotation if any
         (motion.lk_track): (N, 2) positions [px] and a mask of the tracked ones."""
-        return lk_track(self.camera, self._prev_image, self._prev_pts, image, self._lk_params, R_prev_cur, self.config.fb_max_px)
+        return lk_track(
+            self.camera, self._prev_image, self._prev_pts, image, self._lk_params, R_prev_cur, self.config.fb_max_px
+        )
 
     def predicted_rotation(self, t_prev: float, t: float) -> np.ndarray | None:
         """R_{k-1}_{k} expected before measuring it (None: no prediction, as the paper)."""
@@ -236,7 +241,9 @@ class KltTracker(Tracker):
         predicted = self.predicted_rotation(t_prev, t)
         cur, ok = self.track(image, predicted)
         nc = int(ok.sum())
-        geometry = concurrency.submit(self._measured, k, t, nc, self._prev_pts[ok], cur[ok], self._kf_pts[ok], self._kf_index)
+        geometry = concurrency.submit(
+            self._measured, k, t, nc, self._prev_pts[ok], cur[ok], self._kf_pts[ok], self._kf_index
+        )
         frame = _Frame(k, t, t_prev, image, previous, predicted, nc, geometry)
         self._unfinished.append(frame)
         self._advance(image, self._redetects(frame), cur, ok, k)
@@ -258,8 +265,9 @@ class KltTracker(Tracker):
         t_prev, self._prev_t = self._prev_t, t
         return k, t_prev, None
 
-    def _measured(self, k: int, t: float, nc: int, prev_pts: np.ndarray, cur: np.ndarray, kf_pts: np.ndarray,
-                  kf_index: int) -> tuple[FrameRecord, list[RelativeRotation], RelativeRotation | None]:
+    def _measured(
+        self, k: int, t: float, nc: int, prev_pts: np.ndarray, cur: np.ndarray, kf_pts: np.ndarray, kf_index: int
+    ) -> tuple[FrameRecord, list[RelativeRotation], RelativeRotation | None]:
         """Frame k's record, its edges (from the previous frame; from the keyframe, when
         keyframe_interval > 0) and its step from the previous frame, from the tracked corners
         (`prev_pts`, `kf_pts` -> `cur`; `nc` of them). Reads nothing that changes: it runs on
@@ -320,8 +328,9 @@ class KltTracker(Tracker):
             if c.keyframe_interval > 0 and k - self._kf_index >= c.keyframe_interval:
                 self._kf_index, self._kf_pts = k, cur[ok]
 
-    def _matched(self, frame: _Frame, record: FrameRecord, edges: list[RelativeRotation],
-                 step: RelativeRotation | None) -> tuple[FrameRecord, list[RelativeRotation], RelativeRotation | None]:
+    def _matched(
+        self, frame: _Frame, record: FrameRecord, edges: list[RelativeRotation], step: RelativeRotation | None
+    ) -> tuple[FrameRecord, list[RelativeRotation], RelativeRotation | None]:
         """The `match` fallback: where LK's frame is weak or lost, the rotation from matched
         descriptors refined by LK replaces LK's if it is more certain. (record, edges, step)."""
         detected = None
@@ -330,16 +339,20 @@ class KltTracker(Tracker):
             detected = detect(frame.image)
             previous = frame.previous
             previous_detected = self._prev_detected or detect(previous.image)
-            matched, n_matched = self._matching.rotation(previous.image, previous.pts, previous_detected, frame.image, detected,
-                                                         frame.k - 1, frame.k)
+            matched, n_matched = self._matching.rotation(
+                previous.image, previous.pts, previous_detected, frame.image, detected, frame.k - 1, frame.k
+            )
             if matched is not None and (step is None or matched.sigma_rad < step.sigma_rad):
                 step, edges = matched, [matched]
-                record = frame_record(self._matching.coarse, self.camera, frame.k, frame.t, n_matched, matched, True, True)
+                record = frame_record(
+                    self._matching.coarse, self.camera, frame.k, frame.t, n_matched, matched, True, True
+                )
         self._prev_detected = detected
         return record, edges, step
 
-    def _aligned(self, frame: _Frame, record: FrameRecord, edges: list[RelativeRotation], step: RelativeRotation | None
-                 ) -> tuple[FrameRecord, list[RelativeRotation], RelativeRotation | None, bool]:
+    def _aligned(
+        self, frame: _Frame, record: FrameRecord, edges: list[RelativeRotation], step: RelativeRotation | None
+    ) -> tuple[FrameRecord, list[RelativeRotation], RelativeRotation | None, bool]:
         """The `align` fallback: where LK's step is missing or has under `min_inliers` inliers, no
         gyro predicted it and the audit left it on, `_aligned_step`. (record, edges, step, and
         whether the fallback's own step replaced LK's)."""
@@ -352,7 +365,9 @@ class KltTracker(Tracker):
             if aligned is not None:
                 step, n_aligned = aligned
                 edges = [step] if step is not None else []
-                record = frame_record(c, self.camera, frame.k, frame.t, n_aligned if step is not None else frame.nc, step, True, True)
+                record = frame_record(
+                    c, self.camera, frame.k, frame.t, n_aligned if step is not None else frame.nc, step, True, True
+                )
                 if step is None:
                     record = replace(record, reason="no rotation explains the two images clearly better than no motion")
                 elif n_aligned == 0:
@@ -360,7 +375,9 @@ class KltTracker(Tracker):
         self._prev_pyramid = pyramid
         return record, edges, step, aligned is not None
 
-    def _audited(self, k: int, t_prev: float, t: float, step: RelativeRotation | None, by_fallback: bool, ok: bool) -> None:
+    def _audited(
+        self, k: int, t_prev: float, t: float, step: RelativeRotation | None, by_fallback: bool, ok: bool
+    ) -> None:
         """Frame k's step shown to the fallback's audit: the fallback's, LK's own where it is not
         weak (primary: evidence the fallback can be judged by), or neither."""
         kind = "fallback" if by_fallback else "primary" if ok and step is not None else "other"
@@ -381,16 +398,29 @@ class KltTracker(Tracker):
         def score(R_prev_cur: np.ndarray) -> float:
             return align.score(source, pyramid, R_prev_cur)
 
-        R_aligned = align.align(source, pyramid, [np.eye(3)] if frame.predicted is None else [frame.predicted, np.eye(3)])
+        R_aligned = align.align(
+            source, pyramid, [np.eye(3)] if frame.predicted is None else [frame.predicted, np.eye(3)]
+        )
         if R_aligned is None:
             return None if step is None or align.explains(source, pyramid, step.R_i_j) else (None, 0)
         corners = self.detect(previous.image) if previous.corners is None else previous.corners
-        cur, ok = lk_track(self.camera, previous.image, corners, frame.image, self._lk_params, R_aligned, self.config.fb_max_px)
-        retried = measure(self.config, self.camera, corners[ok], cur[ok], k - 1, k) if ok.sum() >= self.config.threshold1 else None
-        if (retried is not None and not weakness(self.config, retried, self.camera.focal_px)
-                and geodesic_angle(retried.R_i_j, R_aligned) <= FINEST_PIXEL_RAD):
+        cur, ok = lk_track(
+            self.camera, previous.image, corners, frame.image, self._lk_params, R_aligned, self.config.fb_max_px
+        )
+        retried = (
+            measure(self.config, self.camera, corners[ok], cur[ok], k - 1, k)
+            if ok.sum() >= self.config.threshold1
+            else None
+        )
+        if (
+            retried is not None
+            and not weakness(self.config, retried, self.camera.focal_px)
+            and geodesic_angle(retried.R_i_j, R_aligned) <= FINEST_PIXEL_RAD
+        ):
             return retried, int(ok.sum())
-        candidates = [(RelativeRotation(k - 1, k, R_aligned), 0)] + ([(retried, int(ok.sum()))] if retried is not None else [])
+        candidates = [(RelativeRotation(k - 1, k, R_aligned), 0)] + (
+            [(retried, int(ok.sum()))] if retried is not None else []
+        )
         scores = [score(candidate[0].R_i_j) for candidate in candidates]
         best = int(np.argmax(scores))
         if scores[best] <= -1.0 or (step is not None and score(step.R_i_j) >= scores[best]):

@@ -11,10 +11,10 @@ from dataclasses import dataclass, replace
 import cv2
 import numpy as np
 
+from eas_vo.camera import CameraModel
 from eas_vo.geometry.rotations import geodesic_angle
 from eas_vo.trackers.features import DETECTORS, Features, RefinedMatching
 from eas_vo.trackers.measurement import PixelScale, TwoViewConfig
-from eas_vo.camera import CameraModel
 from eas_vo.types import RelativeRotation
 from eas_vo.validation import check_choice, check_range
 
@@ -24,25 +24,25 @@ LOOP_GEOMETRIES = ("rotation", "homography")
 @dataclass(frozen=True)
 class LoopClosureConfig:
     """Attributes:
-        loop_closure: off (the paper) or on.
-        loop_detector: keypoints for keyframes (`orb` or `sift`); the loop rotation they give
-            is refined by LK from the keyframe's corners, so ORB's coarser keypoints suffice.
-        loop_keyframe_deg: a new keyframe when the view turned this much [deg] since the last.
-        loop_min_gap: a frame may close a loop only with keyframes at least this many frames old.
-        loop_overlap_deg: candidates are keyframes whose optical axis is within this angle [deg]
-            of the current one by the running estimate (about half the DAVIS240's field of view).
-        loop_every: query for loops at most every this many frames, and only once the view
-            turned `loop_keyframe_deg` (along its path) since the last query: a still camera
-            would find the loop it just closed again. After a lost frame, at once.
-        loop_min_inliers: a loop is accepted with at least this many rotation-only inliers
-            (and not weak): twice the support a frame-to-frame edge needs, since a wrong loop
-            costs more than a missed one.
-        loop_geometry: the geometry of the LK refinement: `rotation`, or `homography`, which
-            keeps the parallax of the camera's translation out of the rotation where the
-            homography determines it (else the loop is measured rotation-only). A loop spans
-            seconds in which a hand-held camera moves by centimetres, whose parallax a
-            rotation-only loop takes for rotation: an error the size of the chain's it should
-            correct (docs/best_config.md, "Loops and the hand's translation").
+    loop_closure: off (the paper) or on.
+    loop_detector: keypoints for keyframes (`orb` or `sift`); the loop rotation they give
+        is refined by LK from the keyframe's corners, so ORB's coarser keypoints suffice.
+    loop_keyframe_deg: a new keyframe when the view turned this much [deg] since the last.
+    loop_min_gap: a frame may close a loop only with keyframes at least this many frames old.
+    loop_overlap_deg: candidates are keyframes whose optical axis is within this angle [deg]
+        of the current one by the running estimate (about half the DAVIS240's field of view).
+    loop_every: query for loops at most every this many frames, and only once the view
+        turned `loop_keyframe_deg` (along its path) since the last query: a still camera
+        would find the loop it just closed again. After a lost frame, at once.
+    loop_min_inliers: a loop is accepted with at least this many rotation-only inliers
+        (and not weak): twice the support a frame-to-frame edge needs, since a wrong loop
+        costs more than a missed one.
+    loop_geometry: the geometry of the LK refinement: `rotation`, or `homography`, which
+        keeps the parallax of the camera's translation out of the rotation where the
+        homography determines it (else the loop is measured rotation-only). A loop spans
+        seconds in which a hand-held camera moves by centimetres, whose parallax a
+        rotation-only loop takes for rotation: an error the size of the chain's it should
+        correct (docs/best_config.md, "Loops and the hand's translation").
     """
 
     loop_closure: bool = False
@@ -96,17 +96,28 @@ class LoopCloser:
             self.R_w_c = self.R_w_c @ step.R_i_j
             self._turned_deg += np.degrees(geodesic_angle(np.eye(3), step.R_i_j))
         self._since_query += 1
-        new_keyframe = not self.keyframes or np.degrees(geodesic_angle(self.keyframes[-1].R_w_c, self.R_w_c)) > c.loop_keyframe_deg
+        new_keyframe = (
+            not self.keyframes or np.degrees(geodesic_angle(self.keyframes[-1].R_w_c, self.R_w_c)) > c.loop_keyframe_deg
+        )
         candidates = self._candidates(k, lost)
-        query = len(candidates) > 0 and (lost or (self._since_query >= c.loop_every and self._turned_deg > c.loop_keyframe_deg))
+        query = len(candidates) > 0 and (
+            lost or (self._since_query >= c.loop_every and self._turned_deg > c.loop_keyframe_deg)
+        )
         if not (query or new_keyframe):
             return []
         current, loops = _Keyframe(k, self.R_w_c, image), []
         if query:
             self._since_query, self._turned_deg = 0, 0.0
             closest = self.keyframes[candidates[0]]
-            edge, _ = self.matching.rotation(closest.image, self._corners(closest), self._detected(closest),
-                                             image, self._detected(current), closest.index, k)
+            edge, _ = self.matching.rotation(
+                closest.image,
+                self._corners(closest),
+                self._detected(closest),
+                image,
+                self._detected(current),
+                closest.index,
+                k,
+            )
             if edge is not None:
                 loops = [replace(edge, loop=True)]
                 self.R_w_c = closest.R_w_c @ edge.R_i_j  # relocalise the running estimate on the loop
@@ -125,7 +136,9 @@ class LoopCloser:
     def _corners(self, keyframe: _Keyframe) -> np.ndarray:
         """The keyframe's Shi-Tomasi corners [px], detected the first time they are needed."""
         if keyframe.corners is None:
-            corners = cv2.goodFeaturesToTrack(keyframe.image, 300, 0.01, self._min_distance_px, blockSize=self._block_size)
+            corners = cv2.goodFeaturesToTrack(
+                keyframe.image, 300, 0.01, self._min_distance_px, blockSize=self._block_size
+            )
             keyframe.corners = np.empty((0, 2), np.float32) if corners is None else corners.reshape(-1, 2)
         return keyframe.corners
 

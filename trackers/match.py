@@ -10,7 +10,7 @@ import numpy as np
 
 from eas_vo.plugins import Tracker
 from eas_vo.trackers.features import DETECTORS, MATCHINGS, MAX_RESIDUAL_PX, MIN_MATCHES, RANSAC_THRESHOLD_PX, Features
-from eas_vo.trackers.loops import LoopClosureConfig, LoopCloser
+from eas_vo.trackers.loops import LoopCloser, LoopClosureConfig
 from eas_vo.trackers.measurement import StepBound, TwoViewConfig, frame_record
 from eas_vo.types import FrameRecord, RelativeRotation
 from eas_vo.validation import check_choice, check_range
@@ -86,7 +86,10 @@ class MatchTracker(Tracker):
             record, edges = FrameRecord(k, t, 0, 0, "first", True), []
         else:
             step, nc = self.features.rotation(c, self.camera, previous, detected, k - 1, k, c.min_matches)
-            record, edges = frame_record(c, self.camera, k, t, nc, step, True, nc >= c.min_matches), [step] if step else []
+            record, edges = (
+                frame_record(c, self.camera, k, t, nc, step, True, nc >= c.min_matches),
+                [step] if step else [],
+            )
             record, edges = self._bound.judge(record, edges, t_prev, t)
         if self._loops is not None:
             edges = edges + self._loops.step(k, image, edges, lost=record.status == "lost")

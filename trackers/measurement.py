@@ -8,12 +8,11 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from eas_vo.camera import CameraModel
 from eas_vo.geometry.rotations import matrix_to_rotvec
 from eas_vo.geometry.two_view import ESSENTIAL_METHODS, GEOMETRIES, bearings, explains, rotation_from_correspondences
-from eas_vo.camera import CameraModel
 from eas_vo.types import FrameRecord, RelativeRotation
 from eas_vo.validation import check_choice, check_range
-
 
 #: The focal length [px] a tracker's extents in pixels are stated for: the DAVIS240's, whose
 #: images the defaults were set on. A tracker converts them to its camera by PixelScale, so a
@@ -142,11 +141,17 @@ def measure(
     """
     x_from, x_to = camera.undistort(pts_from_px), camera.undistort(pts_to_px)
     threshold = config.ransac_threshold_px / camera.focal_px
-    found = rotation_from_correspondences(x_from, x_to, threshold, config.ransac_confidence, config.essential_method, config.geometry)
+    found = rotation_from_correspondences(
+        x_from, x_to, threshold, config.ransac_confidence, config.essential_method, config.geometry
+    )
     if found is None or (found.model == "essential" and found.inliers < config.min_inliers):
         return None
-    edge = RelativeRotation(i, j, found.R_prev_cur, found.inliers, found.inliers / max(len(pts_from_px), 1), found.residual)
-    if weakness(config, edge, camera.focal_px) and not explains(found.R_prev_cur.T, bearings(x_from), bearings(x_to), threshold):
+    edge = RelativeRotation(
+        i, j, found.R_prev_cur, found.inliers, found.inliers / max(len(pts_from_px), 1), found.residual
+    )
+    if weakness(config, edge, camera.focal_px) and not explains(
+        found.R_prev_cur.T, bearings(x_from), bearings(x_to), threshold
+    ):
         return None
     return edge
 
@@ -163,8 +168,14 @@ def weakness(config: TwoViewConfig, edge: RelativeRotation, focal_px: float) -> 
 
 
 def frame_record(
-    config: TwoViewConfig, camera: CameraModel, k: int, t: float, nc: int, step: RelativeRotation | None,
-    redetected: bool, enough_correspondences: bool,
+    config: TwoViewConfig,
+    camera: CameraModel,
+    k: int,
+    t: float,
+    nc: int,
+    step: RelativeRotation | None,
+    redetected: bool,
+    enough_correspondences: bool,
 ) -> FrameRecord:
     """The record of frame k at `t` [s] with `nc` correspondences and its frame-to-frame
     measurement `step` (None: nothing measured, because there were not enough correspondences
@@ -173,8 +184,17 @@ def frame_record(
         reason = "no model" if enough_correspondences else "few correspondences"
         return FrameRecord(k, t, nc, 0, "lost", redetected, reason=reason)
     why = weakness(config, step, camera.focal_px)
-    return FrameRecord(k, t, nc, step.inliers, "weak" if why else "ok", redetected, step.inlier_ratio,
-                       step.residual_rad * camera.focal_px, why)
+    return FrameRecord(
+        k,
+        t,
+        nc,
+        step.inliers,
+        "weak" if why else "ok",
+        redetected,
+        step.inlier_ratio,
+        step.residual_rad * camera.focal_px,
+        why,
+    )
 
 
 class StepBound:
@@ -192,8 +212,9 @@ class StepBound:
         self._noise_rad = 3.0 * config.ransac_threshold_px / (REFERENCE_FOCAL_PX if camera is None else camera.focal_px)
         self._rate: tuple[np.ndarray, float] | None = None  # (rotation vector per second [rad/s], midpoint [s])
 
-    def judge(self, record: FrameRecord, edges: list[RelativeRotation], t_prev: float,
-              t: float) -> tuple[FrameRecord, list[RelativeRotation]]:
+    def judge(
+        self, record: FrameRecord, edges: list[RelativeRotation], t_prev: float, t: float
+    ) -> tuple[FrameRecord, list[RelativeRotation]]:
         """Frame `record`'s (record, edges), measured over [t_prev, t] [s], kept or made `lost`."""
         step = next((e for e in edges if e.j == record.index and e.i == record.index - 1), None)
         if step is None or record.status not in ("ok", "weak"):
@@ -209,7 +230,9 @@ class StepBound:
             if record.status == "ok":
                 self._rate = (rotvec / dt, mid)
             return record, edges
-        why = f"{math.degrees(departure):.1f} deg from the last ok step's rate (more than {math.degrees(bound):.1f} deg)"
+        why = (
+            f"{math.degrees(departure):.1f} deg from the last ok step's rate (more than {math.degrees(bound):.1f} deg)"
+        )
         if record.status == "ok":
             return replace(record, status="weak", reason=why), edges
         return replace(record, status="lost", inliers=0, reason=f"{record.reason}, and {why}"), []

@@ -13,13 +13,21 @@ from eas_vo.camera import CameraModel
 def lk_params(win_size: int = 21, max_level: int = 3, max_iterations: int = 30, epsilon_px: float = 0.01) -> dict:
     """Pyramidal Lucas-Kanade settings: window [px], pyramid levels, and when each level stops:
     after `max_iterations` or once a step is below `epsilon_px` [px] (OpenCV's defaults)."""
-    return dict(winSize=(win_size, win_size), maxLevel=max_level,
-                criteria=(cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, max_iterations, epsilon_px))
+    return dict(
+        winSize=(win_size, win_size),
+        maxLevel=max_level,
+        criteria=(cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, max_iterations, epsilon_px),
+    )
 
 
 def lk_track(
-    camera: CameraModel, source: np.ndarray, pts_px: np.ndarray, image: np.ndarray, params: dict,
-    R_source_image: np.ndarray | None = None, fb_max_px: float = 0.0,
+    camera: CameraModel,
+    source: np.ndarray,
+    pts_px: np.ndarray,
+    image: np.ndarray,
+    params: dict,
+    R_source_image: np.ndarray | None = None,
+    fb_max_px: float = 0.0,
 ) -> tuple[np.ndarray, np.ndarray]:
     """LK-track points `pts_px` of `source` into `image`: (N, 2) positions [px] and a mask of the
     tracked ones (inside the image; with `fb_max_px` > 0, back within that many pixels).
@@ -39,10 +47,20 @@ def lk_track(
         H = camera.K @ R_source_image.T @ np.linalg.inv(camera.K)
         source = cv2.warpPerspective(source, H, image.shape[::-1], flags=cv2.INTER_LINEAR)
         start = cv2.perspectiveTransform(start, H).astype(np.float32)
-    cur, status, _ = cv2.calcOpticalFlowPyrLK(source, image, start, start.copy(), flags=cv2.OPTFLOW_USE_INITIAL_FLOW, **params)
+    cur, status, _ = cv2.calcOpticalFlowPyrLK(
+        source, image, start, start.copy(), flags=cv2.OPTFLOW_USE_INITIAL_FLOW, **params
+    )
     h, w = image.shape
-    ok = (status.ravel() == 1) & (cur[:, 0, 0] >= 0) & (cur[:, 0, 0] <= w - 1) & (cur[:, 0, 1] >= 0) & (cur[:, 0, 1] <= h - 1)
+    ok = (
+        (status.ravel() == 1)
+        & (cur[:, 0, 0] >= 0)
+        & (cur[:, 0, 0] <= w - 1)
+        & (cur[:, 0, 1] >= 0)
+        & (cur[:, 0, 1] <= h - 1)
+    )
     if fb_max_px > 0:
-        back, back_status, _ = cv2.calcOpticalFlowPyrLK(image, source, cur, start.copy(), flags=cv2.OPTFLOW_USE_INITIAL_FLOW, **params)
+        back, back_status, _ = cv2.calcOpticalFlowPyrLK(
+            image, source, cur, start.copy(), flags=cv2.OPTFLOW_USE_INITIAL_FLOW, **params
+        )
         ok &= (back_status.ravel() == 1) & (np.linalg.norm((back - start).reshape(-1, 2), axis=1) <= fb_max_px)
     return cur.reshape(-1, 2), ok

@@ -13,13 +13,13 @@ from pathlib import Path
 import numba
 import numpy as np
 
-from eas_vo.validation import check_range
+from eas_vo.camera import CameraModel
 from eas_vo.datasets.simulator.motion import HandHeldMotion
 from eas_vo.datasets.simulator.scene import Scene
 from eas_vo.datasets.simulator.sensor import ApsModel, DvsModel, EventSimulator, ImuModel
 from eas_vo.geometry.rotations import quats_from_matrices
-from eas_vo.camera import CameraModel
 from eas_vo.types import EVENT_DTYPE, ImuSeries, PoseSeries
+from eas_vo.validation import check_range
 
 SIMULATOR_VERSION = 3  # bump when the output for a given config changes (invalidates caches)
 
@@ -50,8 +50,15 @@ class SimCamera:
         if (width, height) == (self.width, self.height):
             return self
         scale = math.hypot(width, height) / math.hypot(self.width, self.height)
-        return dataclasses.replace(self, width=width, height=height, fx=self.fx * scale, fy=self.fy * scale,
-                                   cx=(self.cx + 0.5) * width / self.width - 0.5, cy=(self.cy + 0.5) * height / self.height - 0.5)
+        return dataclasses.replace(
+            self,
+            width=width,
+            height=height,
+            fx=self.fx * scale,
+            fy=self.fy * scale,
+            cx=(self.cx + 0.5) * width / self.width - 0.5,
+            cy=(self.cy + 0.5) * height / self.height - 0.5,
+        )
 
 
 #: Sensors the simulator has a preset for: size and a typical calibration.
@@ -62,8 +69,16 @@ class SimCamera:
 #: equidistant lens, 118 deg across the diagonal (the davis240: 82).
 SENSORS = {
     "davis240": SimCamera(),
-    "davis346": SimCamera(346, 260, 226.38018519795807, 226.15002947047415, 173.6470807871759, 133.73271487507847,
-                          "equidistant", (-0.048031442223833355, 0.011330957517194437, -0.055378166304281135, 0.021500973881459395)),
+    "davis346": SimCamera(
+        346,
+        260,
+        226.38018519795807,
+        226.15002947047415,
+        173.6470807871759,
+        133.73271487507847,
+        "equidistant",
+        (-0.048031442223833355, 0.011330957517194437, -0.055378166304281135, 0.021500973881459395),
+    ),
 }
 DAVIS240_CAMERA = SENSORS["davis240"].model()
 
@@ -126,8 +141,11 @@ class SimConfig:
 
 def _as_typed_dict(config) -> dict:
     """dataclasses.asdict, with the values of fields annotated `float` converted to float."""
-    return {f.name: _as_typed_dict(v) if dataclasses.is_dataclass(v) else float(v) if f.type == "float" else v
-            for f in dataclasses.fields(config) for v in [getattr(config, f.name)]}
+    return {
+        f.name: _as_typed_dict(v) if dataclasses.is_dataclass(v) else float(v) if f.type == "float" else v
+        for f in dataclasses.fields(config)
+        for v in [getattr(config, f.name)]
+    }
 
 
 def camera_rays(camera: CameraModel) -> np.ndarray:
@@ -183,7 +201,9 @@ def simulate(config: SimConfig, out_dir: str | Path, progress: bool = False) -> 
     shape = (camera.height, camera.width)
     motion = HandHeldMotion(motion_rng, config.duration_s, config.speed_growth, config.speed, config.translation_scale)
     render = _renderer(config, camera, motion, scene_rng)
-    frame_times = np.arange(config.aps.exposure_s, config.duration_s - config.aps.exposure_s, 1.0 / config.frame_rate_hz)
+    frame_times = np.arange(
+        config.aps.exposure_s, config.duration_s - config.aps.exposure_s, 1.0 / config.frame_rate_hz
+    )
     samples = max(1, math.ceil(config.exposure_samples * config.speed))
     offsets = (np.arange(samples) + 0.5) / samples - 0.5
 
@@ -193,7 +213,9 @@ def simulate(config: SimConfig, out_dir: str | Path, progress: bool = False) -> 
 
     steps = _render_steps(config, camera, motion)
     sim = EventSimulator(config.dvs, shape, dvs_rng)
-    rendered = _rendered_ahead(_event_inputs(sim, render, steps) + [functools.partial(exposure, t) for t in frame_times])
+    rendered = _rendered_ahead(
+        _event_inputs(sim, render, steps) + [functools.partial(exposure, t) for t in frame_times]
+    )
     events, stats = _simulate_events(config, sim, steps, rendered, progress)
     fixed_pattern = config.aps.fixed_pattern(shape, aps_rng)
     frames = [config.aps.expose(next(rendered), fixed_pattern, aps_rng) for _ in frame_times]
@@ -201,7 +223,9 @@ def simulate(config: SimConfig, out_dir: str | Path, progress: bool = False) -> 
     gt_t = np.arange(0.0, config.duration_s, 1.0 / config.gt_rate_hz)
     R_w_c, p_w_c = motion.pose(gt_t)
     ground_truth = PoseSeries(gt_t, p_w_c, quats_from_matrices(R_w_c))
-    acc, gyro = config.imu.measure(R_w_c, motion.angular_velocity(gt_t), motion.acceleration(gt_t), config.gt_rate_hz, imu_rng)
+    acc, gyro = config.imu.measure(
+        R_w_c, motion.angular_velocity(gt_t), motion.acceleration(gt_t), config.gt_rate_hz, imu_rng
+    )
     write_ecd_folder(out_dir, camera, frame_times, frames, events, ground_truth, ImuSeries(gt_t, acc, gyro))
     return stats
 
@@ -252,8 +276,9 @@ def _render_steps(config, camera, motion) -> list[float]:
 def _event_inputs(sim: EventSimulator, render, steps: list[float]) -> list:
     """Jobs giving what the sensor takes, in order: the radiance at steps[0], then per step
     the radiance at its end with the sensor's radiance-only work done (EventSimulator.prepare)."""
-    return [functools.partial(render, steps[0])] + [functools.partial(_prepared, sim, render, t0, t1)
-                                                    for t0, t1 in zip(steps, steps[1:])]
+    return [functools.partial(render, steps[0])] + [
+        functools.partial(_prepared, sim, render, t0, t1) for t0, t1 in zip(steps, steps[1:])
+    ]
 
 
 def _prepared(sim: EventSimulator, render, t0: float, t1: float):
@@ -284,15 +309,22 @@ def _simulate_events(config, sim: EventSimulator, steps, inputs, progress) -> tu
     white = config.dvs.white_radiance
     # simulated time counted in whole microseconds, so that the bar ends exactly at its total
     # (a sum of float steps passes it: tqdm warns), and shown in seconds
-    with tqdm(total=round(config.duration_s * 1e6), unit_scale=1e-6, disable=not progress, desc="simulating events",
-              bar_format="{desc}: {percentage:3.0f}%|{bar}| {n:.2f}/{total:.2f} s simulated [{elapsed}<{remaining}]") as bar:
+    with tqdm(
+        total=round(config.duration_s * 1e6),
+        unit_scale=1e-6,
+        disable=not progress,
+        desc="simulating events",
+        bar_format="{desc}: {percentage:3.0f}%|{bar}| {n:.2f}/{total:.2f} s simulated [{elapsed}<{remaining}]",
+    ) as bar:
         for t, t1 in zip(steps, steps[1:]):
             given = next(inputs)
             events, truth = sim.step(t, t1, given)
             chunks.append(events)
             truths.append(truth)
             radiance = given.radiance
-            pixel_s += (t1 - t) * np.array([np.count_nonzero(radiance < DARK * white), np.count_nonzero(radiance > BRIGHT * white)])
+            pixel_s += (t1 - t) * np.array(
+                [np.count_nonzero(radiance < DARK * white), np.count_nonzero(radiance > BRIGHT * white)]
+            )
             bar.update(round(t1 * 1e6) - bar.n)
     events = np.concatenate(chunks) if chunks else np.empty(0, EVENT_DTYPE)
     return events, _stats(config.duration_s, truths, pixel_s, white)

@@ -25,8 +25,14 @@ class HandHeldMotion:
     Poses are camera-to-world: R_w_c(t) = R_w_c0 Exp(rotvec(t)), p_w_c(t).
     """
 
-    def __init__(self, rng: np.random.Generator, duration_s: float, speed_growth: float = 1.5, speed: float = 1.0,
-                 translation_scale: float = 1.0):
+    def __init__(
+        self,
+        rng: np.random.Generator,
+        duration_s: float,
+        speed_growth: float = 1.5,
+        speed: float = 1.0,
+        translation_scale: float = 1.0,
+    ):
         self.duration_s = duration_s
         self.speed_growth = speed_growth
         self.speed = speed
@@ -53,7 +59,9 @@ class HandHeldMotion:
         phi = self._warped_time(np.atleast_1d(np.asarray(t, dtype=float)))
         rotvec = self._sines(phi, ROTATION_TERMS, self.rot_phase)
         rotvec -= self._sines(np.zeros(1), ROTATION_TERMS, self.rot_phase)  # start at R_w_c0
-        return self.R_w_c0 @ rotvec_to_matrix(rotvec), self.translation_scale * self._sines(phi, TRANSLATION_TERMS, self.trans_phase)
+        return self.R_w_c0 @ rotvec_to_matrix(rotvec), self.translation_scale * self._sines(
+            phi, TRANSLATION_TERMS, self.trans_phase
+        )
 
     def angular_velocity(self, t, h: float = 1e-4) -> np.ndarray:
         """Body angular velocity omega_c [rad/s] (N, 3) by central differences of R_w_c."""

@@ -142,9 +142,19 @@ class Scene:
         """Radiance seen along camera rays `rays_c` (H*W, 3) from pose (R_w_c, p_w_c [m]); (H, W) float32."""
         out = np.empty(len(rays_c), np.float32)
         _ray_cast(
-            np.asarray(R_w_c, np.float32), np.asarray(p_w_c, np.float32), rays_c, self.lo, self.hi,
-            np.array([b.inside for b in self.boxes]), self.face_uv_axes, self.face_uv_lo,
-            self.face_offset, self.face_size, self.atlas, np.float32(TEXELS_PER_M), out,
+            np.asarray(R_w_c, np.float32),
+            np.asarray(p_w_c, np.float32),
+            rays_c,
+            self.lo,
+            self.hi,
+            np.array([b.inside for b in self.boxes]),
+            self.face_uv_axes,
+            self.face_uv_lo,
+            self.face_offset,
+            self.face_size,
+            self.atlas,
+            np.float32(TEXELS_PER_M),
+            out,
         )
         return out.reshape(shape)
 
@@ -185,7 +195,6 @@ def _ray_cast(R, o, rays, lo, hi, inside, uv_axes, uv_lo, offset, size, atlas, t
         v = min(max(v, 0.0), size[best_face, 1] - 1.0) + offset[best_face, 1]
         x0, y0 = int(u), int(v)
         fx, fy = u - x0, v - y0
-        out[n] = (
-            (1 - fy) * ((1 - fx) * atlas[y0, x0] + fx * atlas[y0, x0 + 1])
-            + fy * ((1 - fx) * atlas[y0 + 1, x0] + fx * atlas[y0 + 1, x0 + 1])
+        out[n] = (1 - fy) * ((1 - fx) * atlas[y0, x0] + fx * atlas[y0, x0 + 1]) + fy * (
+            (1 - fx) * atlas[y0 + 1, x0] + fx * atlas[y0 + 1, x0 + 1]
         )

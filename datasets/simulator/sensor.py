@@ -211,8 +211,21 @@ class EventSimulator:
 
     def _record_raw_crossings(self, t0, t1, raw1) -> None:
         n_pos, n_neg = self._levels_crossed(self.raw_ref, raw1)
-        _record_crossings(t0, t1, self.raw_ref, self.last_raw, raw1, n_pos, n_neg, self.c_pos, self.c_neg,
-                          self.ring_level, self.ring_t, self.ring_up, self.ring_next)
+        _record_crossings(
+            t0,
+            t1,
+            self.raw_ref,
+            self.last_raw,
+            raw1,
+            n_pos,
+            n_neg,
+            self.c_pos,
+            self.c_neg,
+            self.ring_level,
+            self.ring_t,
+            self.ring_up,
+            self.ring_next,
+        )
         self.last_raw = raw1
 
     def _crossings(self, t0, t1, v0, v1) -> tuple[np.ndarray, np.ndarray]:
@@ -221,9 +234,27 @@ class EventSimulator:
         w = self.shape[1]
         n_pos, n_neg = self._levels_crossed(self.ref, v1)
         total = int((n_pos + n_neg).sum())
-        pix, t, up, level, k = (np.empty(total, dtype) for dtype in (np.int64, np.float64, np.bool_, np.float32, np.int64))
-        kept = _signal_crossings(t0, t1, self.ref, v0, v1, n_pos, n_neg, self.c_pos, self.c_neg, self.last_t,
-                                 self.model.refractory_s, pix, t, up, level, k)
+        pix, t, up, level, k = (
+            np.empty(total, dtype) for dtype in (np.int64, np.float64, np.bool_, np.float32, np.int64)
+        )
+        kept = _signal_crossings(
+            t0,
+            t1,
+            self.ref,
+            v0,
+            v1,
+            n_pos,
+            n_neg,
+            self.c_pos,
+            self.c_neg,
+            self.last_t,
+            self.model.refractory_s,
+            pix,
+            t,
+            up,
+            level,
+            k,
+        )
         order = np.argsort(k[:kept], kind="stable")  # pixel-major -> crossing-major, pixels still in order
         pix, level = pix[order], level[order]
         ev = np.empty(kept, EVENT_DTYPE)
@@ -236,7 +267,9 @@ class EventSimulator:
         drifted apart by unequal ON and OFF steps); NaN when none of the last HISTORY matches."""
         pix = events["y"].astype(np.int64) * self.shape[1] + events["x"]
         tolerance = 0.5 * np.minimum(self.c_pos[pix], self.c_neg[pix])[:, None]
-        match = (np.abs(self.ring_level[pix] - levels[:, None]) < tolerance) & (self.ring_up[pix] == events["p"][:, None].astype(bool))
+        match = (np.abs(self.ring_level[pix] - levels[:, None]) < tolerance) & (
+            self.ring_up[pix] == events["p"][:, None].astype(bool)
+        )
         t_raw = np.where(match & (self.ring_t[pix] <= events["t"][:, None]), self.ring_t[pix], -np.inf).max(axis=1)
         return np.where(np.isfinite(t_raw), events["t"] - t_raw, np.nan)
 
@@ -317,8 +350,9 @@ def _count_levels(ref, v1, c_pos, c_neg, n_pos, n_neg):
 def _advance(ref, n_pos, n_neg, c_pos, c_neg, p):
     """Pixel p's reference moved by the levels it crossed, as numpy's float32 `ref += n_pos *
     c_pos - n_neg * c_neg` computes it (in float64, rounded to float32)."""
-    ref[p] = np.float32(np.float64(ref[p]) + (np.float64(n_pos[p]) * np.float64(c_pos[p])
-                                              - np.float64(n_neg[p]) * np.float64(c_neg[p])))
+    ref[p] = np.float32(
+        np.float64(ref[p]) + (np.float64(n_pos[p]) * np.float64(c_pos[p]) - np.float64(n_neg[p]) * np.float64(c_neg[p]))
+    )
 
 
 @numba.njit(cache=True, nogil=True)

@@ -4,12 +4,10 @@ that projects, undistorts and makes undistortion maps."""
 from __future__ import annotations
 
 import functools
-
 from dataclasses import dataclass, field
 
 import cv2
 import numpy as np
-
 
 #: Lens models and the names of their distortion coefficients, in order: `radtan`, OpenCV's
 #: radial-tangential (the ECD calib.txt order, ROS's plumb_bob) and `equidistant`, the
@@ -40,7 +38,9 @@ class CameraModel:
         if self.model not in LENS_MODELS:
             raise ValueError(f"unknown lens model {self.model!r}: one of {', '.join(LENS_MODELS)}")
         if len(self.dist) != len(LENS_MODELS[self.model]):
-            raise ValueError(f"the {self.model} lens model takes {len(LENS_MODELS[self.model])} distortion coefficients, not {len(self.dist)}")
+            raise ValueError(
+                f"the {self.model} lens model takes {len(LENS_MODELS[self.model])} distortion coefficients, not {len(self.dist)}"
+            )
 
     @classmethod
     def from_calib(cls, values, width: int = 240, height: int = 180) -> "CameraModel":
@@ -63,7 +63,9 @@ class CameraModel:
         p = np.asarray(points, dtype=np.float64)
         p = np.ascontiguousarray(p.reshape(-1, p.shape[-1]))
         out = np.empty((len(p), 2))
-        project_points(p, np.asarray(self.K, np.float64), np.asarray(self.dist, np.float64), self.model == "equidistant", out)
+        project_points(
+            p, np.asarray(self.K, np.float64), np.asarray(self.dist, np.float64), self.model == "equidistant", out
+        )
         return out
 
     @property

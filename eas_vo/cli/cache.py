@@ -3,8 +3,6 @@
 from __future__ import annotations
 
 
-
-
 def add_parser(sub) -> None:
     """`eas-vo cache`: its arguments and help, added to `sub`, the command line's subparsers."""
     parser = sub.add_parser(
@@ -15,7 +13,9 @@ def add_parser(sub) -> None:
         "or downloaded again when next needed; clear it while no eas-vo run is using it.",
         epilog="environment: EAS_VO_CACHE_DIR (the cache folder; default $XDG_CACHE_HOME/eas-vo or ~/.cache/eas-vo)",
     )
-    parser.add_argument("--clear", action="append", default=[], metavar="NAME", help="empty this cache folder (e.g. events)")
+    parser.add_argument(
+        "--clear", action="append", default=[], metavar="NAME", help="empty this cache folder (e.g. events)"
+    )
     parser.set_defaults(func=run)
 
 

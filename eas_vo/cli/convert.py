@@ -3,8 +3,20 @@
 from __future__ import annotations
 
 import sys
-from eas_vo.cli.options import add_config, add_dataset, add_lenient, add_output_options, add_quiet, add_window, dataset_inputs, refuse_inputs_inside, set_assignments, shows_progress, window_overrides
 
+from eas_vo.cli.options import (
+    add_config,
+    add_dataset,
+    add_lenient,
+    add_output_options,
+    add_quiet,
+    add_window,
+    dataset_inputs,
+    refuse_inputs_inside,
+    set_assignments,
+    shows_progress,
+    window_overrides,
+)
 
 
 def add_parser(sub) -> None:
@@ -20,8 +32,11 @@ def add_parser(sub) -> None:
         epilog="then, e.g.: eas-vo run --dataset OUT --config paper",
     )
     add_dataset(parser)
-    add_config(parser, config_help="config file for the dataset's settings (its [dataset] table)",
-                set_help="override one dataset setting, e.g. dataset.sample_rate_hz=100 (repeatable)")
+    add_config(
+        parser,
+        config_help="config file for the dataset's settings (its [dataset] table)",
+        set_help="override one dataset setting, e.g. dataset.sample_rate_hz=100 (repeatable)",
+    )
     add_window(parser)
     add_quiet(parser)
     add_lenient(parser)
@@ -41,10 +56,14 @@ def run(args) -> int:
     done = convert(config, out, progress=shows_progress(args), replace=args.overwrite)
     for line in done.warnings:
         print(f"eas-vo: warning: {line}", file=sys.stderr)
-    print(f"wrote {done.frames} frames, {done.events} events, {done.imu} IMU readings and {done.poses} poses of "
-          f"{done.label} ({done.span_s:.3f} s) as an Event Camera Dataset folder to {out}")
+    print(
+        f"wrote {done.frames} frames, {done.events} events, {done.imu} IMU readings and {done.poses} poses of "
+        f"{done.label} ({done.span_s:.3f} s) as an Event Camera Dataset folder to {out}"
+    )
     if not done.frames:
         width, height = done.sensor
-        print(f"  an event-only stream: open it with --set dataset.width={width} --set dataset.height={height} "
-              "(without frames, its sensor size is not in the folder)")
+        print(
+            f"  an event-only stream: open it with --set dataset.width={width} --set dataset.height={height} "
+            "(without frames, its sensor size is not in the folder)"
+        )
     return 0

@@ -3,8 +3,8 @@
 from __future__ import annotations
 
 import sys
-from eas_vo.cli.options import add_dataset, add_output_options, dataset_inputs, refuse_inputs_inside, seconds
 
+from eas_vo.cli.options import add_dataset, add_output_options, dataset_inputs, refuse_inputs_inside, seconds
 
 
 def add_parser(sub) -> None:
@@ -20,8 +20,13 @@ def add_parser(sub) -> None:
     add_dataset(parser, help="the dataset the estimate was made on", required=True)
     parser.add_argument("--estimate", required=True, metavar="FILE", help="TUM trajectory: t tx ty tz qx qy qz qw")
     parser.add_argument("--align", choices=("sim3", "se3", "origin"), default="sim3", help="default sim3 (evo_ape -as)")
-    parser.add_argument("--max-diff", type=seconds(allow_zero=True), default=0.01, metavar="S",
-                          help="largest time difference of an associated pose pair (default 0.01 s, evo's)")
+    parser.add_argument(
+        "--max-diff",
+        type=seconds(allow_zero=True),
+        default=0.01,
+        metavar="S",
+        help="largest time difference of an associated pose pair (default 0.01 s, evo's)",
+    )
     parser.add_argument("--label", metavar="TEXT", help="the row's name in table2_row.md (default: the file's name)")
     add_output_options(parser, required=False)
     parser.set_defaults(func=run)
@@ -29,18 +34,22 @@ def add_parser(sub) -> None:
 
 def run(args) -> int:
     """`eas-vo evaluate` on the parsed `args`; returns the exit status."""
+    from eas_vo.experiments.external import evaluate_estimate
     from eas_vo.io.outputs import check_output_folder
     from eas_vo.io.text import figure_text
-    from eas_vo.experiments.external import evaluate_estimate
 
     if args.out:
         out = check_output_folder(args.out, replace=args.overwrite)
         refuse_inputs_inside(out, dataset_inputs(args.dataset), ("the --estimate", args.estimate))
-    m = evaluate_estimate(args.dataset, args.estimate, args.align, args.max_diff, args.out, args.label,
-                          replace=args.overwrite)
+    m = evaluate_estimate(
+        args.dataset, args.estimate, args.align, args.max_diff, args.out, args.label, replace=args.overwrite
+    )
     for line in m["warnings"]:
         print(f"eas-vo: warning: {line}", file=sys.stderr)
-    print(f"{args.estimate} vs {m['dataset']} ({m['align']}, {m['matched_poses']} of {m['estimate_poses']} poses matched, "
-          f"scale {m['scale']:.4g}): translation APE mean {figure_text(m['ape_trans_mean_m'], 4)} m, "
-          f"RMSE {figure_text(m['ape_trans_rmse_m'], 4)} m; rotation APE mean {m['ape_rot_mean_rad']:.4f} rad" + (f" -> {args.out}" if args.out else ""))
+    print(
+        f"{args.estimate} vs {m['dataset']} ({m['align']}, {m['matched_poses']} of {m['estimate_poses']} poses matched, "
+        f"scale {m['scale']:.4g}): translation APE mean {figure_text(m['ape_trans_mean_m'], 4)} m, "
+        f"RMSE {figure_text(m['ape_trans_rmse_m'], 4)} m; rotation APE mean {m['ape_rot_mean_rad']:.4f} rad"
+        + (f" -> {args.out}" if args.out else "")
+    )
     return 0

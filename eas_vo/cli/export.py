@@ -1,9 +1,18 @@
 """`eas-vo export`: a frontend's images as a sequence ORB-SLAM2 reads."""
 
 from __future__ import annotations
-from eas_vo.cli.options import add_config, add_dataset, add_output_options, add_quiet, add_window, dataset_inputs, refuse_inputs_inside, shows_progress, window_overrides
 
-
+from eas_vo.cli.options import (
+    add_config,
+    add_dataset,
+    add_output_options,
+    add_quiet,
+    add_window,
+    dataset_inputs,
+    refuse_inputs_inside,
+    shows_progress,
+    window_overrides,
+)
 
 
 def add_parser(sub) -> None:
@@ -19,8 +28,12 @@ def add_parser(sub) -> None:
     )
     add_dataset(parser)
     parser.add_argument("--frontend", metavar="NAME", help="image source (default eas)")
-    parser.add_argument("--format", choices=("tum", "euroc"), default="tum",
-                        help="tum: rgb.txt + rgb/T.png (mono_tum); euroc: mav0/cam0/data/T_NS.png + timestamps.txt (mono_euroc)")
+    parser.add_argument(
+        "--format",
+        choices=("tum", "euroc"),
+        default="tum",
+        help="tum: rgb.txt + rgb/T.png (mono_tum); euroc: mav0/cam0/data/T_NS.png + timestamps.txt (mono_euroc)",
+    )
     add_config(parser)
     add_window(parser)
     add_quiet(parser)
@@ -42,6 +55,8 @@ def run(args) -> int:
     out = check_output_folder(args.out, replace=args.overwrite)
     refuse_inputs_inside(out, dataset_inputs(config.run.dataset, config.dataset), ("the --config", args.config))
     done = export(config, out, args.format, progress=shows_progress(args), replace=args.overwrite)
-    print(f"wrote {done['frames']} {done['frontend']} images of {done['dataset']} ({done['format']} layout, "
-          f"{done['fps']:.2f} frames/s) and settings.yaml to {out}")
+    print(
+        f"wrote {done['frames']} {done['frontend']} images of {done['dataset']} ({done['format']} layout, "
+        f"{done['fps']:.2f} frames/s) and settings.yaml to {out}"
+    )
     return 0

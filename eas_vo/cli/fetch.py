@@ -4,8 +4,6 @@ from __future__ import annotations
 
 import sys
 
-
-
 #: The `eas-vo fetch` name of ORB-SLAM3's published vocabulary (ORBvoc.txt).
 ORB_VOCABULARY = "orb-vocabulary"
 
@@ -25,7 +23,9 @@ def add_parser(sub) -> None:
         "EAS_VO_ORB_VOCABULARY_URL (a mirror of ORBvoc.txt.tar.gz)",
     )
     parser.add_argument("names", nargs="+", metavar="NAME", help="a sequence name, PLUGIN:NAME, or orb-vocabulary")
-    parser.add_argument("--dir", metavar="DIR", help="where to keep them (default: $EAS_VO_DATA_DIR, else the cache's data/)")
+    parser.add_argument(
+        "--dir", metavar="DIR", help="where to keep them (default: $EAS_VO_DATA_DIR, else the cache's data/)"
+    )
     parser.set_defaults(func=run)
 
 
@@ -33,7 +33,9 @@ def run(args) -> int:
     """`eas-vo fetch` on the parsed `args`; returns the exit status."""
     from eas_vo.registry import fetchable
 
-    wanted = [fetchable(spec) for spec in args.names if spec != ORB_VOCABULARY]  # every name checked before any download
+    wanted = [
+        fetchable(spec) for spec in args.names if spec != ORB_VOCABULARY
+    ]  # every name checked before any download
     if ORB_VOCABULARY in args.names:
         from eas_vo.slam.orbvoc import fetch_orb_vocabulary
 

@@ -1,9 +1,8 @@
 """`eas-vo info`: what a recording holds, before any long work."""
 
 from __future__ import annotations
+
 from eas_vo.cli.options import add_config, add_dataset, add_lenient, set_assignments
-
-
 
 
 def add_parser(sub) -> None:
@@ -16,8 +15,11 @@ def add_parser(sub) -> None:
         "Reads the frame list and at most one frame, and the event stream once (a text reader caches it for later runs).",
     )
     add_dataset(parser)
-    add_config(parser, config_help="config file for the dataset's settings (its [dataset] table)",
-                set_help="override one dataset setting, e.g. dataset.sample_rate_hz=100 (repeatable)")
+    add_config(
+        parser,
+        config_help="config file for the dataset's settings (its [dataset] table)",
+        set_help="override one dataset setting, e.g. dataset.sample_rate_hz=100 (repeatable)",
+    )
     add_lenient(parser)
     parser.set_defaults(func=run)
 

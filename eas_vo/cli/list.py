@@ -5,7 +5,6 @@ from __future__ import annotations
 import sys
 
 
-
 def add_parser(sub) -> None:
     """`eas-vo list`: its arguments and help, added to `sub`, the command line's subparsers."""
     parser = sub.add_parser(
@@ -25,8 +24,11 @@ def run(args) -> int:
     from eas_vo.config import RunConfig
 
     def config_keys(cls) -> str:
-        keys = [f"{f.name}={f.default!r}" if f.default is not MISSING else f.name
-                for f in fields(cls) if f.default is not MISSING or f.default_factory is MISSING]
+        keys = [
+            f"{f.name}={f.default!r}" if f.default is not MISSING else f.name
+            for f in fields(cls)
+            if f.default is not MISSING or f.default_factory is MISSING
+        ]
         return " ".join(keys) if keys else "(none)"
 
     print(f"run (every run, [run] or --set run.KEY=VALUE):\n  {'':10s} config: {config_keys(RunConfig)}")

@@ -15,10 +15,23 @@ import sys
 from eas_vo.errors import EasVoError, Interrupted, sigterm_as_interrupt
 from eas_vo.logs import to_stderr
 
-
 #: The commands, in the order `eas-vo --help` lists them: each a module of this package.
-COMMANDS = ("run", "compare", "list", "info", "render", "export", "slam", "vocabulary", "convert", "evaluate", "reproduce",
-            "fetch", "cache", "simulate")
+COMMANDS = (
+    "run",
+    "compare",
+    "list",
+    "info",
+    "render",
+    "export",
+    "slam",
+    "vocabulary",
+    "convert",
+    "evaluate",
+    "reproduce",
+    "fetch",
+    "cache",
+    "simulate",
+)
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -24,24 +24,35 @@ def add_dataset(parser, help: str = "as for run (default: synthetic:default)", r
     parser.add_argument("--dataset", required=required, metavar="SPEC", help=help)
 
 
-def add_config(parser, config_help: str = "TOML config file, or the name of a bundled one (e.g. paper)",
-                set_help: str = "override one config value, e.g. frontend.n=8000 (repeatable)") -> None:
+def add_config(
+    parser,
+    config_help: str = "TOML config file, or the name of a bundled one (e.g. paper)",
+    set_help: str = "override one config value, e.g. frontend.n=8000 (repeatable)",
+) -> None:
     """--config FILE and --set SECTION.KEY=VALUE (repeatable, into args.assignments)."""
     parser.add_argument("--config", metavar="FILE", help=config_help)
-    parser.add_argument("--set", dest="assignments", action="append", default=[], metavar="SECTION.KEY=VALUE",
-                        help=set_help)
+    parser.add_argument(
+        "--set", dest="assignments", action="append", default=[], metavar="SECTION.KEY=VALUE", help=set_help
+    )
 
 
 def add_window(parser) -> None:
     """--start and --duration [s]: the part of the sequence a command reads."""
-    parser.add_argument("--start", type=seconds(allow_zero=True), metavar="S", help="skip the first S seconds of the sequence")
-    parser.add_argument("--duration", type=seconds(allow_zero=False), metavar="S", help="process S seconds (default: all)")
+    parser.add_argument(
+        "--start", type=seconds(allow_zero=True), metavar="S", help="skip the first S seconds of the sequence"
+    )
+    parser.add_argument(
+        "--duration", type=seconds(allow_zero=False), metavar="S", help="process S seconds (default: all)"
+    )
 
 
 def add_time_offset(parser) -> None:
     """--time-offset S|auto, for the commands that evaluate against ground truth."""
-    parser.add_argument("--time-offset", metavar="S|auto",
-                        help="ground truth is sampled at frame time + S seconds (default 0); 'auto' estimates S from the data")
+    parser.add_argument(
+        "--time-offset",
+        metavar="S|auto",
+        help="ground truth is sampled at frame time + S seconds (default 0); 'auto' estimates S from the data",
+    )
 
 
 def add_quiet(parser, help: str = "no progress bar") -> None:
@@ -62,15 +73,20 @@ def add_output_options(parser, required: bool, default: str | None = None) -> No
     """--out and --overwrite, as every command writing one output folder has them."""
     where = f"default: {default}" if default else "new, or replaced with --overwrite"
     parser.add_argument("--out", required=required, metavar="DIR", help=f"output folder ({where})")
-    parser.add_argument("--overwrite", action="store_true",
-                        help="replace a non-empty --out that holds only an earlier eas-vo output")
+    parser.add_argument(
+        "--overwrite", action="store_true", help="replace a non-empty --out that holds only an earlier eas-vo output"
+    )
 
 
 def add_threads(parser) -> None:
     """--threads N: the threads of eas-vo's own parallel work (concurrency.set_threads)."""
-    parser.add_argument("--threads", type=positive_int, metavar="N",
-                        help="threads for eas-vo's own parallel work (default: one per core; 1: the serial path, "
-                             "which gives the same results)")
+    parser.add_argument(
+        "--threads",
+        type=positive_int,
+        metavar="N",
+        help="threads for eas-vo's own parallel work (default: one per core; 1: the serial path, "
+        "which gives the same results)",
+    )
 
 
 def apply_threads(args) -> None:
@@ -83,7 +99,9 @@ def apply_threads(args) -> None:
 
 def add_jobs(parser) -> None:
     """--jobs N: the parallel processes of a grid (default: one per core)."""
-    parser.add_argument("--jobs", type=positive_int, default=os.cpu_count() or 1, help="parallel processes (default: all cores)")
+    parser.add_argument(
+        "--jobs", type=positive_int, default=os.cpu_count() or 1, help="parallel processes (default: all cores)"
+    )
 
 
 def positive_int(text: str) -> int:
@@ -99,14 +117,18 @@ def positive_int(text: str) -> int:
 
 def seconds(allow_zero: bool):
     """argparse type: a finite number of seconds, positive (or, with `allow_zero`, not negative)."""
+
     def parse(text: str) -> float:
         try:
             value = float(text)
         except ValueError:
             raise argparse.ArgumentTypeError(f"expected a number of seconds, got {text!r}") from None
         if not math.isfinite(value) or value < 0 or (value == 0 and not allow_zero):
-            raise argparse.ArgumentTypeError(f"must be {'at least 0' if allow_zero else 'more than 0'} seconds, got {text}")
+            raise argparse.ArgumentTypeError(
+                f"must be {'at least 0' if allow_zero else 'more than 0'} seconds, got {text}"
+            )
         return value
+
     return parse
 
 
@@ -164,8 +186,14 @@ def dataset_inputs(spec: str, settings=None) -> list[tuple[str, str | None]]:
     except EasVoError:
         location = None
     named = [(f"dataset.{f.name}", getattr(settings, f.name)) for f in fields(settings)] if settings is not None else []
-    return [("the dataset", location),
-            *((what, value) for what, value in named if isinstance(value, str) and value and Path(value).expanduser().exists())]
+    return [
+        ("the dataset", location),
+        *(
+            (what, value)
+            for what, value in named
+            if isinstance(value, str) and value and Path(value).expanduser().exists()
+        ),
+    ]
 
 
 def dataset_settings(args, spec: str):
@@ -179,8 +207,9 @@ def dataset_settings(args, spec: str):
         return None
 
 
-def refuse_inputs_inside(out: Path, datasets: list[tuple[str, str | None]], *others: tuple[str, str | None],
-                          out_is_file: bool = False) -> None:
+def refuse_inputs_inside(
+    out: Path, datasets: list[tuple[str, str | None]], *others: tuple[str, str | None], out_is_file: bool = False
+) -> None:
     """io.refuse_inputs for a command's output: its datasets' inputs (dataset_inputs) and the
     `others` it reads ((what, path or None): a --config, an --estimate, ...)."""
     from eas_vo.io.outputs import refuse_inputs

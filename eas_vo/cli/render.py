@@ -2,9 +2,8 @@
 
 from __future__ import annotations
 
-
-from eas_vo.errors import EasVoError
 from eas_vo.cli.options import add_config, add_dataset, dataset_inputs, refuse_inputs_inside
+from eas_vo.errors import EasVoError
 
 
 def add_parser(sub) -> None:
@@ -17,11 +16,20 @@ def add_parser(sub) -> None:
     )
     add_dataset(parser)
     parser.add_argument("--frames", required=True, metavar="I,J,...", help="frame indices, e.g. 20,120")
-    parser.add_argument("--frontends", metavar="A,B,...", help="frontends to show (default: every installed one that makes an image)")
-    add_config(parser, config_help="config file for the frontends' settings",
-                set_help="override one config value, e.g. frontend.n=8000 (repeatable)")
+    parser.add_argument(
+        "--frontends", metavar="A,B,...", help="frontends to show (default: every installed one that makes an image)"
+    )
+    add_config(
+        parser,
+        config_help="config file for the frontends' settings",
+        set_help="override one config value, e.g. frontend.n=8000 (repeatable)",
+    )
     parser.add_argument("--out", required=True, metavar="PNG", help="output image, e.g. gallery.png")
-    parser.add_argument("--overwrite", action="store_true", help="replace an existing --out if it is a PNG image (never one of the inputs)")
+    parser.add_argument(
+        "--overwrite",
+        action="store_true",
+        help="replace an existing --out if it is a PNG image (never one of the inputs)",
+    )
     parser.set_defaults(func=run)
 
 

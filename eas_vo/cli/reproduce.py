@@ -2,9 +2,18 @@
 
 from __future__ import annotations
 
-
+from eas_vo.cli.options import (
+    add_jobs,
+    add_quiet,
+    dataset_inputs,
+    name_list,
+    positive_int,
+    refuse_inputs_inside,
+    report_cells,
+    seconds,
+    shows_progress,
+)
 from eas_vo.errors import EasVoError
-from eas_vo.cli.options import add_jobs, add_quiet, dataset_inputs, name_list, positive_int, refuse_inputs_inside, report_cells, seconds, shows_progress
 
 
 def add_parser(sub) -> None:
@@ -23,21 +32,46 @@ def add_parser(sub) -> None:
     )
     parser.add_argument("table", choices=("table1", "table2"))
     parser.add_argument("--out", metavar="DIR", help="output folder (default: reproduce/TABLE)")
-    parser.add_argument("--duration", type=seconds(allow_zero=False), metavar="S",
-                           help="seconds of each sequence (default: the paper's, table1 the first 25 s, table2 the whole "
-                           "sequences: §4.3 names no window and Fig. 4 shows the whole trajectories)")
+    parser.add_argument(
+        "--duration",
+        type=seconds(allow_zero=False),
+        metavar="S",
+        help="seconds of each sequence (default: the paper's, table1 the first 25 s, table2 the whole "
+        "sequences: §4.3 names no window and Fig. 4 shows the whole trajectories)",
+    )
     parser.add_argument("--config", default="paper", metavar="FILE", help="configuration (default paper, the paper's)")
-    parser.add_argument("--backends", default="chain,gtsam", metavar="A,B",
-                           help="table1's backends (default chain,gtsam): chain on klt's consecutive edges (the paper), "
-                           "any other fed also its keyframe edges (tracker.klt.keyframe_interval=3, as configs/best.toml)")
-    parser.add_argument("--estimate", dest="estimates", action="append", default=[], metavar="SEQUENCE:SOURCE=FILE",
-                           help="table2: an ORB-SLAM2 KeyFrameTrajectory.txt, e.g. hdr_boxes:eas=KeyFrameTrajectory.txt (repeatable)")
-    parser.add_argument("--frontends", default="original,eas", metavar="A,B",
-                           help="table2's sources (default original,eas, the paper's); any frontend, e.g. original,histeq,eas,sits")
-    parser.add_argument("--runs", type=positive_int, default=5,
-                           help="table2 with the slam extra: ORB-SLAM3 runs per cell (default 5; the median is reported)")
-    parser.add_argument("--vocabulary", metavar="FILE",
-                           help="table2 with the slam extra: ORB vocabulary (default: $PYORBSLAM3_VOCAB, else ORBvoc.txt, fetched if missing)")
+    parser.add_argument(
+        "--backends",
+        default="chain,gtsam",
+        metavar="A,B",
+        help="table1's backends (default chain,gtsam): chain on klt's consecutive edges (the paper), "
+        "any other fed also its keyframe edges (tracker.klt.keyframe_interval=3, as configs/best.toml)",
+    )
+    parser.add_argument(
+        "--estimate",
+        dest="estimates",
+        action="append",
+        default=[],
+        metavar="SEQUENCE:SOURCE=FILE",
+        help="table2: an ORB-SLAM2 KeyFrameTrajectory.txt, e.g. hdr_boxes:eas=KeyFrameTrajectory.txt (repeatable)",
+    )
+    parser.add_argument(
+        "--frontends",
+        default="original,eas",
+        metavar="A,B",
+        help="table2's sources (default original,eas, the paper's); any frontend, e.g. original,histeq,eas,sits",
+    )
+    parser.add_argument(
+        "--runs",
+        type=positive_int,
+        default=5,
+        help="table2 with the slam extra: ORB-SLAM3 runs per cell (default 5; the median is reported)",
+    )
+    parser.add_argument(
+        "--vocabulary",
+        metavar="FILE",
+        help="table2 with the slam extra: ORB vocabulary (default: $PYORBSLAM3_VOCAB, else ORBvoc.txt, fetched if missing)",
+    )
     add_jobs(parser)
     add_quiet(parser, help="no progress bars")
     parser.set_defaults(func=run)
@@ -45,8 +79,8 @@ def add_parser(sub) -> None:
 
 def run(args) -> int:
     """`eas-vo reproduce` on the parsed `args`; returns the exit status."""
-    from eas_vo.experiments import reproduce
     from eas_vo.datasets.ecd_catalogue import data_dir
+    from eas_vo.experiments import reproduce
     from eas_vo.io.outputs import check_grid_folder, check_writable_folder
 
     estimates = {}
@@ -54,7 +88,9 @@ def run(args) -> int:
         key, sep, path = text.partition("=")
         seq, colon, source = key.partition(":")
         if not (sep and colon and path):
-            raise EasVoError(f"--estimate {text!r}: expected SEQUENCE:SOURCE=FILE, e.g. hdr_boxes:eas=KeyFrameTrajectory.txt")
+            raise EasVoError(
+                f"--estimate {text!r}: expected SEQUENCE:SOURCE=FILE, e.g. hdr_boxes:eas=KeyFrameTrajectory.txt"
+            )
         key = (seq.strip(), source.strip())
         if key in estimates:
             raise EasVoError(f"--estimate {key[0]}:{key[1]} given twice ({estimates[key]} and {path}): give one")
@@ -64,16 +100,35 @@ def run(args) -> int:
     if args.vocabulary and args.table != "table2":
         raise EasVoError("--vocabulary belongs to table2 (ORB-SLAM3 runs)")
     out = check_writable_folder(args.out or f"reproduce/{args.table}")
-    refuse_inputs_inside(out, [i for spec in reproduce.SPECS.values() for i in dataset_inputs(spec)],
-                          ("the --config", args.config), ("the --vocabulary", args.vocabulary),
-                          ("the data folder", str(data_dir())), *(("the --estimate", path) for path in estimates.values()))
+    refuse_inputs_inside(
+        out,
+        [i for spec in reproduce.SPECS.values() for i in dataset_inputs(spec)],
+        ("the --config", args.config),
+        ("the --vocabulary", args.vocabulary),
+        ("the data folder", str(data_dir())),
+        *(("the --estimate", path) for path in estimates.values()),
+    )
     check_grid_folder(out)  # before any download
     progress = shows_progress(args)
     if args.table == "table1":
-        rows, n_run, markdown = reproduce.table1(out, args.duration or reproduce.PAPER_DURATION_S,
-                                                 name_list("--backends", args.backends), args.config,
-                                                 args.jobs, progress)
+        rows, n_run, markdown = reproduce.table1(
+            out,
+            args.duration or reproduce.PAPER_DURATION_S,
+            name_list("--backends", args.backends),
+            args.config,
+            args.jobs,
+            progress,
+        )
     else:
-        rows, n_run, markdown = reproduce.table2(out, estimates, args.duration, args.config, args.jobs, progress,
-                                                 name_list("--frontends", args.frontends), args.runs, args.vocabulary)
+        rows, n_run, markdown = reproduce.table2(
+            out,
+            estimates,
+            args.duration,
+            args.config,
+            args.jobs,
+            progress,
+            name_list("--frontends", args.frontends),
+            args.runs,
+            args.vocabulary,
+        )
     return report_cells(rows, n_run, out / f"{args.table}.md", markdown)

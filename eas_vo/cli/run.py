@@ -5,9 +5,24 @@ from __future__ import annotations
 import argparse
 import sys
 from pathlib import Path
-from eas_vo.cli.options import add_config, add_dataset, add_lenient, add_output_options, add_quiet, add_threads, add_time_offset, add_window, apply_threads, dataset_inputs, installed_names, refuse_inputs_inside, set_assignments, shared_overrides, shows_progress
 
-
+from eas_vo.cli.options import (
+    add_config,
+    add_dataset,
+    add_lenient,
+    add_output_options,
+    add_quiet,
+    add_threads,
+    add_time_offset,
+    add_window,
+    apply_threads,
+    dataset_inputs,
+    installed_names,
+    refuse_inputs_inside,
+    set_assignments,
+    shared_overrides,
+    shows_progress,
+)
 
 EPILOG_RUN = """\
 outputs (in --out):
@@ -38,16 +53,28 @@ def add_parser(sub) -> None:
     )
     from eas_vo.config import RunConfig
 
-    add_dataset(parser, help=f"a recording (a folder or file) one of the installed dataset plugins opens, or "
-                 f"PLUGIN:LOCATION, PLUGIN one of {installed_names('datasets')}; synthetic:NAME is simulated once "
-                 f"(default {RunConfig.dataset}; eas-vo list says what each plugin reads)")
-    parser.add_argument("--frontend", metavar="NAME",
-                     help=f"image source, one of {installed_names('frontends')} (default {RunConfig.frontend})")
-    parser.add_argument("--tracker", metavar="NAME",
-                     help=f"relative rotations between frames, one of {installed_names('trackers')} "
-                     f"(default {RunConfig.tracker}, the paper's)")
-    parser.add_argument("--backend", metavar="NAME",
-                     help=f"relative -> absolute rotations, one of {installed_names('backends')} (default {RunConfig.backend})")
+    add_dataset(
+        parser,
+        help=f"a recording (a folder or file) one of the installed dataset plugins opens, or "
+        f"PLUGIN:LOCATION, PLUGIN one of {installed_names('datasets')}; synthetic:NAME is simulated once "
+        f"(default {RunConfig.dataset}; eas-vo list says what each plugin reads)",
+    )
+    parser.add_argument(
+        "--frontend",
+        metavar="NAME",
+        help=f"image source, one of {installed_names('frontends')} (default {RunConfig.frontend})",
+    )
+    parser.add_argument(
+        "--tracker",
+        metavar="NAME",
+        help=f"relative rotations between frames, one of {installed_names('trackers')} "
+        f"(default {RunConfig.tracker}, the paper's)",
+    )
+    parser.add_argument(
+        "--backend",
+        metavar="NAME",
+        help=f"relative -> absolute rotations, one of {installed_names('backends')} (default {RunConfig.backend})",
+    )
     add_config(parser)
     add_window(parser)
     add_time_offset(parser)
@@ -68,8 +95,13 @@ def run(args) -> int:
     apply_threads(args)
     config = config_mod.resolve(
         args.config,
-        {"dataset": args.dataset, "frontend": args.frontend, "tracker": args.tracker, "backend": args.backend,
-         **shared_overrides(args)},
+        {
+            "dataset": args.dataset,
+            "frontend": args.frontend,
+            "tracker": args.tracker,
+            "backend": args.backend,
+            **shared_overrides(args),
+        },
         set_assignments(args),
     )
     rc = config.run
@@ -89,9 +121,15 @@ def run(args) -> int:
     if "frames_scored_fraction" in m:  # scored: over how many frames and what span of the run
         start, end = m["ground_truth_span_s"]
         scored = f"{m['frames_evaluated']} of {m['frames']} frames scored, ground truth from {start:.3f} to {end:.3f} s of the run's 0 to {m['sequence_s']:.3f} s"
-        ape_text = f"average APE {ape:.4f} rad ({ape * 57.29577951:.2f} deg; {scored})" if m["frames_evaluated"] else f"no frame scored ({scored})"
+        ape_text = (
+            f"average APE {ape:.4f} rad ({ape * 57.29577951:.2f} deg; {scored})"
+            if m["frames_evaluated"]
+            else f"no frame scored ({scored})"
+        )
     if m["time_offset_estimated"]:
-        ape_text += f" (time offset {m['time_offset_s'] * 1e3:+.1f} ms, estimated on the ground truth it scores against)"
+        ape_text += (
+            f" (time offset {m['time_offset_s'] * 1e3:+.1f} ms, estimated on the ground truth it scores against)"
+        )
     statuses = _status_text(m["status_counts"], m["status_reasons"])
     meaning = f" [{WEAK_MEANS}]" if m["status_counts"].get("weak") else ""
     loops = f"{m['loop_count']} loop(s) closed, " if m["loop_count"] is not None else ""

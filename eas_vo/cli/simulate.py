@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import sys
 
-from eas_vo.errors import EasVoError
 from eas_vo.cli.options import add_output_options
+from eas_vo.errors import EasVoError
 
 
 def add_parser(sub) -> None:
@@ -21,16 +21,33 @@ def add_parser(sub) -> None:
     add_output_options(parser, required=True)
     parser.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     parser.add_argument("--duration", type=float, default=10.0, metavar="S", help="length in seconds (default 10)")
-    parser.add_argument("--illumination", type=float, metavar="X",
-                     help="scale of the scene's light (default 1.0, the dim room; 0.1 is ten times darker)")
-    parser.add_argument("--speed", type=float, metavar="X",
-                     help="scale of the camera's speed (default 1.0, hand-held: 44 deg/s mean; 4 gives 177 deg/s, "
-                     "more than the real shapes_rotation's 147): the same path, travelled X times as fast")
-    parser.add_argument("--set", dest="assignments", action="append", default=[], metavar="dataset.KEY=VALUE",
-                     help="a camera or DVS pixel value, as for run (see `eas-vo list`: the synthetic dataset's keys)")
-    parser.add_argument("--stats", action="store_true",
-                     help="print what the simulator knows of its events: rate, noise fraction, noise rate "
-                     "per pixel and median latency in dark and bright regions")
+    parser.add_argument(
+        "--illumination",
+        type=float,
+        metavar="X",
+        help="scale of the scene's light (default 1.0, the dim room; 0.1 is ten times darker)",
+    )
+    parser.add_argument(
+        "--speed",
+        type=float,
+        metavar="X",
+        help="scale of the camera's speed (default 1.0, hand-held: 44 deg/s mean; 4 gives 177 deg/s, "
+        "more than the real shapes_rotation's 147): the same path, travelled X times as fast",
+    )
+    parser.add_argument(
+        "--set",
+        dest="assignments",
+        action="append",
+        default=[],
+        metavar="dataset.KEY=VALUE",
+        help="a camera or DVS pixel value, as for run (see `eas-vo list`: the synthetic dataset's keys)",
+    )
+    parser.add_argument(
+        "--stats",
+        action="store_true",
+        help="print what the simulator knows of its events: rate, noise fraction, noise rate "
+        "per pixel and median latency in dark and bright regions",
+    )
     parser.set_defaults(func=run)
 
 
@@ -47,7 +64,9 @@ def run(args) -> int:
         if keys[0] != "dataset" or len(keys) != 2:
             raise EasVoError(f"--set {assignment!r}: simulate takes dataset.KEY=VALUE (the synthetic dataset's keys)")
         pixel[keys[1]] = value
-    flags = {key: value for key, value in (("illumination", args.illumination), ("speed", args.speed)) if value is not None}
+    flags = {
+        key: value for key, value in (("illumination", args.illumination), ("speed", args.speed)) if value is not None
+    }
     for key in sorted(flags.keys() & pixel.keys()):
         raise EasVoError(f"--{key} and --set dataset.{key} both given: give one")
     sensor = build(SyntheticConfig, {**pixel, **flags}, "dataset")
@@ -56,8 +75,10 @@ def run(args) -> int:
     with output_folder(args.out, replace=args.overwrite, keep_partial=False) as staging:  # whole, or not at all
         stats = simulate(config, staging, progress=sys.stderr.isatty())
     cam = config.camera
-    print(f"wrote a {config.duration_s:g} s synthetic sequence (seed {config.seed}, illumination {config.illumination:g}, "
-          f"speed {config.speed:g}, {cam.width}x{cam.height} {cam.lens}) to {args.out}")
+    print(
+        f"wrote a {config.duration_s:g} s synthetic sequence (seed {config.seed}, illumination {config.illumination:g}, "
+        f"speed {config.speed:g}, {cam.width}x{cam.height} {cam.lens}) to {args.out}"
+    )
     if args.stats:
         print("\n".join("  " + line for line in stats.lines()))
     return 0

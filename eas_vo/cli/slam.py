@@ -4,9 +4,19 @@ from __future__ import annotations
 
 import argparse
 import sys
-from eas_vo.cli.options import add_config, add_dataset, add_output_options, add_quiet, add_window, dataset_inputs, positive_int, refuse_inputs_inside, shows_progress, window_overrides
 
-
+from eas_vo.cli.options import (
+    add_config,
+    add_dataset,
+    add_output_options,
+    add_quiet,
+    add_window,
+    dataset_inputs,
+    positive_int,
+    refuse_inputs_inside,
+    shows_progress,
+    window_overrides,
+)
 
 EPILOG_SLAM = """\
 outputs (in --out):
@@ -38,12 +48,16 @@ def add_parser(sub) -> None:
         "differ), and score each run's keyframe and all-frame trajectories against ground truth after Sim(3) "
         "alignment. Each frame is sent once ORB-SLAM3's mapping threads are idle, so a busy machine changes how long a run "
         "takes, not what it tracks. A run that never initialises, loses track or crashes is reported as such.",
-        epilog=EPILOG_SLAM, formatter_class=argparse.RawDescriptionHelpFormatter,
+        epilog=EPILOG_SLAM,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     add_dataset(parser)
     parser.add_argument("--frontend", metavar="NAME", help="image source (default eas)")
-    parser.add_argument("--vocabulary", metavar="FILE",
-                      help="DBoW2 text vocabulary (default: $PYORBSLAM3_VOCAB, else ORBvoc.txt from eas-vo fetch orb-vocabulary)")
+    parser.add_argument(
+        "--vocabulary",
+        metavar="FILE",
+        help="DBoW2 text vocabulary (default: $PYORBSLAM3_VOCAB, else ORBvoc.txt from eas-vo fetch orb-vocabulary)",
+    )
     parser.add_argument("--runs", type=positive_int, default=5, help="runs (default 5, as the ORB-SLAM papers report)")
     add_config(parser)
     add_window(parser)
@@ -61,19 +75,28 @@ def run(args) -> int:
 
     require_extra()
     vocabulary = find_vocabulary(args.vocabulary)
-    config = config_mod.resolve(args.config, {"dataset": args.dataset, "frontend": args.frontend, **window_overrides(args)},
-                                args.assignments)
+    config = config_mod.resolve(
+        args.config, {"dataset": args.dataset, "frontend": args.frontend, **window_overrides(args)}, args.assignments
+    )
     out = check_output_folder(args.out, replace=args.overwrite)
-    refuse_inputs_inside(out, dataset_inputs(config.run.dataset, config.dataset), ("the --config", args.config),
-                          ("the --vocabulary", str(vocabulary)))
+    refuse_inputs_inside(
+        out,
+        dataset_inputs(config.run.dataset, config.dataset),
+        ("the --config", args.config),
+        ("the --vocabulary", str(vocabulary)),
+    )
     done = run_slam(config, out, str(vocabulary), args.runs, progress=shows_progress(args), replace=args.overwrite)
     statuses = ", ".join(f"{n} {s}" for s, n in done["statuses"].items())
-    print(f"ORB-SLAM3 on {done['frames']} {done['frontend']} images of {done['dataset']}: {done['runs']} run(s), {statuses} -> {out}")
+    print(
+        f"ORB-SLAM3 on {done['frames']} {done['frontend']} images of {done['dataset']}: {done['runs']} run(s), {statuses} -> {out}"
+    )
     for key, text in SUMMARISED:
         s = done[key]
         if s:
-            print(f"  {text}: median {figure_text(s['median'], 4)} (min {figure_text(s['min'], 4)}, "
-                  f"max {figure_text(s['max'], 4)}, {s['n']} run(s))")
+            print(
+                f"  {text}: median {figure_text(s['median'], 4)} (min {figure_text(s['min'], 4)}, "
+                f"max {figure_text(s['max'], 4)}, {s['n']} run(s))"
+            )
     if not done["statuses"].get("ok"):
         print("  no run tracked: " + "; ".join(f"run {m['run']} {m['status']}" for m in done["per_run"]))
     for line in done["crashed"]:

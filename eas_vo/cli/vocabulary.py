@@ -1,9 +1,18 @@
 """`eas-vo vocabulary`: an ORB vocabulary trained on a recording's images."""
 
 from __future__ import annotations
-from eas_vo.cli.options import add_config, add_dataset, add_quiet, add_window, dataset_inputs, positive_int, refuse_inputs_inside, shows_progress, window_overrides
 
-
+from eas_vo.cli.options import (
+    add_config,
+    add_dataset,
+    add_quiet,
+    add_window,
+    dataset_inputs,
+    positive_int,
+    refuse_inputs_inside,
+    shows_progress,
+    window_overrides,
+)
 
 
 def add_parser(sub) -> None:
@@ -25,7 +34,11 @@ def add_parser(sub) -> None:
     add_window(parser)
     add_quiet(parser)
     parser.add_argument("--out", required=True, metavar="FILE", help="the vocabulary file to write")
-    parser.add_argument("--overwrite", action="store_true", help="replace an existing --out if it is a vocabulary (never one of the inputs)")
+    parser.add_argument(
+        "--overwrite",
+        action="store_true",
+        help="replace an existing --out if it is a vocabulary (never one of the inputs)",
+    )
     parser.set_defaults(func=run)
 
 
@@ -35,13 +48,17 @@ def run(args) -> int:
     from eas_vo.io.outputs import check_output_file, refuse_foreign_file
     from eas_vo.slam.train import train_vocabulary
 
-    config = config_mod.resolve(args.config, {"dataset": args.dataset, "frontend": args.frontend, **window_overrides(args)},
-                                args.assignments)
+    config = config_mod.resolve(
+        args.config, {"dataset": args.dataset, "frontend": args.frontend, **window_overrides(args)}, args.assignments
+    )
     out = check_output_file(args.out, replace=args.overwrite)
-    refuse_inputs_inside(out, dataset_inputs(config.run.dataset, config.dataset), ("the --config", args.config),
-                          out_is_file=True)
+    refuse_inputs_inside(
+        out, dataset_inputs(config.run.dataset, config.dataset), ("the --config", args.config), out_is_file=True
+    )
     refuse_foreign_file(out, "DBoW2 vocabulary")
     done = train_vocabulary(config, out, args.k, args.levels, args.seed, progress=shows_progress(args))
-    print(f"wrote a vocabulary of {done['nodes']} nodes ({done['words']} words, k={args.k}, L={args.levels}) from "
-          f"{done['descriptors']} ORB descriptors of {done['images']} {done['frontend']} images of {done['dataset']} to {out}")
+    print(
+        f"wrote a vocabulary of {done['nodes']} nodes ({done['words']} words, k={args.k}, L={args.levels}) from "
+        f"{done['descriptors']} ORB descriptors of {done['images']} {done['frontend']} images of {done['dataset']} to {out}"
+    )
     return 0

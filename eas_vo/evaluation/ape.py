@@ -12,7 +12,6 @@ import numpy as np
 from eas_vo.geometry.rotations import geodesic_angle, interpolate_poses, matrices_from_quats
 from eas_vo.types import MAX_GAP_READINGS, PoseSeries
 
-
 #: Below this fraction of a run's frames scored, its summary warns: the APE then describes a
 #: part of the run only (a tenth of the frames unscored is about a lost ground-truth sample at
 #: each end of a short run, or a marker occluded for a moment).
@@ -83,10 +82,15 @@ class RotationErrors:
         (frames within its span left unscored)."""
         t = np.asarray(t, float)
         inside = (t >= self.ground_truth_span_s[0]) & (t <= self.ground_truth_span_s[1])
-        return {"frames_scored_fraction": float(self.valid.mean()) if len(t) else 0.0,
-                "ground_truth_span_s": [self.ground_truth_span_s[0] - float(t[0]), self.ground_truth_span_s[1] - float(t[0])],
-                "ground_truth_max_gap_s": float(self.max_gap_s),
-                "frames_in_ground_truth_gaps": int(np.sum(inside & ~self.valid))}
+        return {
+            "frames_scored_fraction": float(self.valid.mean()) if len(t) else 0.0,
+            "ground_truth_span_s": [
+                self.ground_truth_span_s[0] - float(t[0]),
+                self.ground_truth_span_s[1] - float(t[0]),
+            ],
+            "ground_truth_max_gap_s": float(self.max_gap_s),
+            "frames_in_ground_truth_gaps": int(np.sum(inside & ~self.valid)),
+        }
 
     def coverage_warning(self, t: np.ndarray) -> list[str]:
         """One line when the ground truth scores fewer than MIN_SCORED_FRACTION of the frames at
@@ -96,12 +100,18 @@ class RotationErrors:
             return []
         c = self.coverage(t)
         gaps = c["frames_in_ground_truth_gaps"]
-        in_gaps = (f"; {gaps} frames lie in its gaps wider than {c['ground_truth_max_gap_s']:.3g} s, across which it is "
-                   "not interpolated" if gaps else "")
+        in_gaps = (
+            f"; {gaps} frames lie in its gaps wider than {c['ground_truth_max_gap_s']:.3g} s, across which it is "
+            "not interpolated"
+            if gaps
+            else ""
+        )
         start, end = c["ground_truth_span_s"]
-        said = (f"the ground truth scores only {scored} of the run's {n} frames ({100 * scored / n:.0f} %, under "
-                f"{100 * MIN_SCORED_FRACTION:.0f} %): it spans {start:.3f} to {end:.3f} s of the run's 0 to {t[-1] - t[0]:.3f} s"
-                f"{in_gaps}; the APE describes those frames only")
+        said = (
+            f"the ground truth scores only {scored} of the run's {n} frames ({100 * scored / n:.0f} %, under "
+            f"{100 * MIN_SCORED_FRACTION:.0f} %): it spans {start:.3f} to {end:.3f} s of the run's 0 to {t[-1] - t[0]:.3f} s"
+            f"{in_gaps}; the APE describes those frames only"
+        )
         return [said]
 
     def summary(self) -> dict:
@@ -131,8 +141,15 @@ def rotation_errors(
     _, R_gt, p_gt = interpolate_poses(ground_truth, at[valid])
     R_aligned, ape = aligned_errors(R_gt, np.asarray(R_w_c)[valid])
     span = (float(ground_truth.t[0]) - time_offset_s, float(ground_truth.t[-1]) - time_offset_s)
-    return RotationErrors(valid, R_gt, p_gt if len(ape) else np.empty((0, 3)), R_aligned, ape, span,
-                          ground_truth_gap_limit_s(ground_truth.t, at))
+    return RotationErrors(
+        valid,
+        R_gt,
+        p_gt if len(ape) else np.empty((0, 3)),
+        R_aligned,
+        ape,
+        span,
+        ground_truth_gap_limit_s(ground_truth.t, at),
+    )
 
 
 def aligned_errors(R_w_c_gt: np.ndarray, R_w_c_est: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -156,7 +173,9 @@ def tum_rotation_errors(estimate_tum: Path, groundtruth_tum: Path) -> tuple[np.n
     return t - t[0], geodesic_angle(R_gt, R_aligned)
 
 
-def tum_aligned_rotations(estimate_tum: Path, groundtruth_tum: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+def tum_aligned_rotations(
+    estimate_tum: Path, groundtruth_tum: Path
+) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
     """(common timestamps [s], R_w_c ground truth, R_w_c estimate aligned at the first) of two
     TUM files; None if either is unreadable or they share no timestamp."""
     from eas_vo.errors import EasVoError

@@ -3,12 +3,10 @@ rotation error (RPE) over a fixed time span."""
 
 from __future__ import annotations
 
-
 import numpy as np
 
-from eas_vo.geometry.rotations import geodesic_angle, matrix_to_rotvec
 from eas_vo.evaluation.ape import RotationErrors
-
+from eas_vo.geometry.rotations import geodesic_angle, matrix_to_rotvec
 
 #: The interval of the relative pose error [s], as the event-rotation literature reports it.
 RPE_DELTA_S = 1.0

@@ -2,18 +2,18 @@
 
 from __future__ import annotations
 
-
 import numpy as np
 
 from eas_vo.geometry.rotations import geodesic_angle
 from eas_vo.types import PoseSeries
 
-
 #: How far [s] run.time_offset_auto searches for the ground truth's time offset, either way.
 OFFSET_SEARCH_S = 0.1
 
 
-def estimate_time_offset(t: np.ndarray, edges, ground_truth: PoseSeries, search_s: float = OFFSET_SEARCH_S) -> float | None:
+def estimate_time_offset(
+    t: np.ndarray, edges, ground_truth: PoseSeries, search_s: float = OFFSET_SEARCH_S
+) -> float | None:
     """The offset [s] to add to frame times so that ground truth best explains the measured rotations.
 
     For a candidate offset d, each measured relative rotation R_i_j is compared with the

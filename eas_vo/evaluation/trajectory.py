@@ -10,7 +10,6 @@ import numpy as np
 from eas_vo.geometry.rotations import geodesic_angle, matrices_from_quats
 from eas_vo.types import PoseSeries
 
-
 ALIGNMENTS = ("sim3", "se3", "origin")
 
 
@@ -27,7 +26,9 @@ ALIGN_UNCERTAINTY_RAD = 0.05
 #: What a sim3 / se3 alignment that the estimate's positions cannot fix says to do instead:
 #: the origin alignment takes only the first pose, so it scores a rotation-only trajectory
 #: (eas-vo's own, positions 0).
-ORIGIN_INSTEAD = "; to score the rotations alone (e.g. a rotation-only trajectory), align at the first pose: --align origin"
+ORIGIN_INSTEAD = (
+    "; to score the rotations alone (e.g. a rotation-only trajectory), align at the first pose: --align origin"
+)
 
 
 @dataclass(frozen=True)
@@ -124,8 +125,10 @@ def trajectory_ape(ground_truth: PoseSeries, estimate: PoseSeries, align: str = 
     least = 2 if align == "origin" else 3
     if len(i_gt) < least:
         instead = ORIGIN_INSTEAD if len(i_gt) >= 2 else ""
-        raise ValueError(f"{len(i_gt)} estimate pose(s) within {max_diff_s} s of a ground-truth pose; "
-                         f"{align} alignment needs at least {least}{instead}")
+        raise ValueError(
+            f"{len(i_gt)} estimate pose(s) within {max_diff_s} s of a ground-truth pose; "
+            f"{align} alignment needs at least {least}{instead}"
+        )
     p_gt, R_gt = ground_truth.p_w_c[i_gt], matrices_from_quats(ground_truth.q_w_c[i_gt])
     p_est, R_est = estimate.p_w_c[i_est], matrices_from_quats(estimate.q_w_c[i_est])
     if align == "origin":
@@ -134,24 +137,30 @@ def trajectory_ape(ground_truth: PoseSeries, estimate: PoseSeries, align: str = 
     else:
         similar = umeyama(p_est, p_gt, with_scale=True)
         if similar is None:
-            raise ValueError(f"the positions of the {len(i_gt)} matched poses lie on a line or a point; "
-                             f"{align} alignment needs them to span a plane{ORIGIN_INSTEAD}")
+            raise ValueError(
+                f"the positions of the {len(i_gt)} matched poses lie on a line or a point; "
+                f"{align} alignment needs them to span a plane{ORIGIN_INSTEAD}"
+            )
         with np.errstate(over="ignore", invalid="ignore"):  # an overflow is refused below
             shape_error_m = np.linalg.norm(p_gt - similarity_transform(*similar, p_est, R_est)[0], axis=1)
         uncertainty = alignment_uncertainty(p_gt, shape_error_m, dof=7)
         if uncertainty > ALIGN_UNCERTAINTY_RAD:
-            raise ValueError(f"the {len(i_gt)} matched positions fix the {align} alignment's rotation only to about "
-                             f"{uncertainty:.2g} rad ({ALIGN_UNCERTAINTY_RAD:g} at most): they spread too little across "
-                             f"their main direction for how far they miss the ground truth{ORIGIN_INSTEAD}")
+            raise ValueError(
+                f"the {len(i_gt)} matched positions fix the {align} alignment's rotation only to about "
+                f"{uncertainty:.2g} rad ({ALIGN_UNCERTAINTY_RAD:g} at most): they spread too little across "
+                f"their main direction for how far they miss the ground truth{ORIGIN_INSTEAD}"
+            )
         R_a, t_a, s = similar if align == "sim3" else umeyama(p_est, p_gt, with_scale=False)
     with np.errstate(over="ignore", invalid="ignore"):  # an overflow is refused below
         p_aligned, R_aligned = similarity_transform(R_a, t_a, s, p_est, R_est)
-        ape = TrajectoryApe(estimate.t[i_est], R_a, t_a, s, np.linalg.norm(p_gt - p_aligned, axis=1),
-                            geodesic_angle(R_gt, R_aligned))
+        ape = TrajectoryApe(
+            estimate.t[i_est], R_a, t_a, s, np.linalg.norm(p_gt - p_aligned, axis=1), geodesic_angle(R_gt, R_aligned)
+        )
         finite = np.isfinite(list(ape.summary().values())).all()
     if not (finite and s > 0):
-        raise ValueError(f"positions up to {np.abs(p_est).max():.3g} m: the errors after {align} alignment "
-                         "overflow floating point")
+        raise ValueError(
+            f"positions up to {np.abs(p_est).max():.3g} m: the errors after {align} alignment overflow floating point"
+        )
     return ape
 
 

@@ -127,11 +127,13 @@ class BlockParser:
         return list(self.pool.map(run, range(len(pieces)))) if len(pieces) > 1 else [run(0)]
 
 
-def parse_block(buf: np.ndarray, width: int = 65535, height: int = 65535, tolerance_s: float = np.inf) -> np.ndarray | None:
+def parse_block(
+    buf: np.ndarray, width: int = 65535, height: int = 65535, tolerance_s: float = np.inf
+) -> np.ndarray | None:
     """Plain, valid `t x y p` lines -> EVENT_DTYPE records (a copy), or None if any line is not."""
     parser = BlockParser(width, height, tolerance_s, threads=1)
     try:
-        (_, result), = parser(buf)
+        ((_, result),) = parser(buf)
     finally:
         parser.close()
     return None if result is None else result[0].copy()

@@ -18,9 +18,9 @@ import functools
 import hashlib
 import logging
 import os
-from pathlib import Path
 from collections.abc import Iterable
 from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
 from typing import BinaryIO, Callable
 
 import numpy as np
@@ -181,13 +181,17 @@ UNWRITABLE = (errno.EROFS, errno.EACCES, errno.EPERM, errno.ENOSPC, errno.EDQUOT
 def _cache_unwritable(exc: OSError, folder: Path) -> bool:
     """Whether `exc` came from writing a cache file in `folder` (naming the folder, a file in
     it, or nothing: a write), not from reading the source (which names the source)."""
-    return exc.errno in UNWRITABLE and (exc.filename is None or folder in (Path(exc.filename), Path(exc.filename).parent))
+    return exc.errno in UNWRITABLE and (
+        exc.filename is None or folder in (Path(exc.filename), Path(exc.filename).parent)
+    )
 
 
 @functools.cache  # once per folder and reason
 def _say_unwritable(folder: Path, reason: str) -> None:
-    logger.warning(f"the event cache folder {folder} cannot be written ({reason}); events are read into "
-                   "memory, and again next time (EAS_VO_CACHE_DIR chooses another folder)")
+    logger.warning(
+        f"the event cache folder {folder} cannot be written ({reason}); events are read into "
+        "memory, and again next time (EAS_VO_CACHE_DIR chooses another folder)"
+    )
 
 
 class _MemoryWriter:
@@ -219,7 +223,11 @@ def write_cache(path: Path, events: np.ndarray) -> np.ndarray:
 
 
 def load_cached(
-    key: str, lenient: bool, warnings: DataWarnings, fill: Callable[[BinaryIO, DataWarnings], int], where: str,
+    key: str,
+    lenient: bool,
+    warnings: DataWarnings,
+    fill: Callable[[BinaryIO, DataWarnings], int],
+    where: str,
     max_events: int = 0,
 ) -> np.ndarray:
     """The event stream cached under `key`, built by `fill(out, warnings)` when absent.
@@ -297,7 +305,9 @@ def load_event_text(
 
     key = cache_key("text", *identity, width, height, tolerance_s, origin_s)
     size = text_size or 0  # a line is at least 8 bytes: at most size // 8 events
-    return load_cached(key, lenient, warnings if warnings is not None else DataWarnings(), fill, where, size // 8 + 1 if size else 0)
+    return load_cached(
+        key, lenient, warnings if warnings is not None else DataWarnings(), fill, where, size // 8 + 1 if size else 0
+    )
 
 
 def prime_text_cache(source: Path, events: np.ndarray, width: int, height: int, tolerance_s: float = 1e-6) -> None:

@@ -212,9 +212,22 @@ def check_and_pack(ticks, per_second, x, y, p, last_t, width, height, tolerance_
         for i in range(a, e):
             t = ticks[i] / per_second
             r = events[i]
-            r.t, r.x, r.y, r.p = t, np.uint16(x[i]), np.uint16(y[i]), p[i] > 0  # any value: a block not plain is packed again
-            bad |= not ((x[i] >= 0) & (x[i] < width) & (y[i] >= 0) & (y[i] < height) & (p[i] >= -1) & (p[i] <= 1)
-                        & (t >= prev) & (t - t == 0.0))
+            r.t, r.x, r.y, r.p = (
+                t,
+                np.uint16(x[i]),
+                np.uint16(y[i]),
+                p[i] > 0,
+            )  # any value: a block not plain is packed again
+            bad |= not (
+                (x[i] >= 0)
+                & (x[i] < width)
+                & (y[i] >= 0)
+                & (y[i] < height)
+                & (p[i] >= -1)
+                & (p[i] <= 1)
+                & (t >= prev)
+                & (t - t == 0.0)
+            )
             prev = t
         if not bad:
             last_t = prev
@@ -242,9 +255,17 @@ def _plain_rows(rows, a, e, col_t, col_x, col_y, col_p, last_t, width, height):
     for i in range(a, e):
         xf, yf, pf, t = rows[i, col_x], rows[i, col_y], rows[i, col_p], rows[i, col_t]
         prev = rows[i - 1, col_t] if i > a else last_t
-        bad |= not ((xf >= 0.0) & (xf < width) & (yf >= 0.0) & (yf < height)
-                    & ((xf + _TWO52) - _TWO52 == xf) & ((yf + _TWO52) - _TWO52 == yf)
-                    & ((pf == 1.0) | (pf == -1.0) | (pf == 0.0)) & (t >= prev) & (t - t == 0.0))
+        bad |= not (
+            (xf >= 0.0)
+            & (xf < width)
+            & (yf >= 0.0)
+            & (yf < height)
+            & ((xf + _TWO52) - _TWO52 == xf)
+            & ((yf + _TWO52) - _TWO52 == yf)
+            & ((pf == 1.0) | (pf == -1.0) | (pf == 0.0))
+            & (t >= prev)
+            & (t - t == 0.0)
+        )
     return not bad
 
 

@@ -198,7 +198,9 @@ def _packet(data, word_bytes: int, encoding: str) -> np.ndarray:
     data = np.ascontiguousarray(data, dtype=np.uint8).reshape(-1)
     if len(data) % word_bytes:
         cut = len(data) - len(data) % word_bytes
-        raise ValueError(f"{encoding} packet, byte {cut}: cut inside a word ({len(data)} bytes, not a multiple of {word_bytes})")
+        raise ValueError(
+            f"{encoding} packet, byte {cut}: cut inside a word ({len(data)} bytes, not a multiple of {word_bytes})"
+        )
     return data
 
 

@@ -94,7 +94,14 @@ def _trigger(trig_t, trig_edge, trig_id, report, t, edge, channel):
 def decode_evt3(words, start, state, width, height, out_t, out_x, out_y, out_p, trig_t, trig_edge, trig_id, report):
     """EVT 3.0 words[start:] (uint16) into the outputs, until the end, a bad word, or outputs
     too full for another word (12 events, 1 trigger). See the module's rules; `report` as _REPORT."""
-    high, low, row, base_x, pol, flags = state[_HIGH], state[_LOW], state[_Y], state[_BASE_X], state[_POL], state[_FLAGS]
+    high, low, row, base_x, pol, flags = (
+        state[_HIGH],
+        state[_LOW],
+        state[_Y],
+        state[_BASE_X],
+        state[_POL],
+        state[_FLAGS],
+    )
     room_events, room_triggers = len(out_t) - 12, len(trig_t) - 1
     report[_BAD] = -1
     i = start
@@ -138,7 +145,14 @@ def decode_evt3(words, start, state, width, height, out_t, out_x, out_y, out_p, 
             report[_BAD] = i
             break
         i += 1
-    state[_HIGH], state[_LOW], state[_Y], state[_BASE_X], state[_POL], state[_FLAGS] = high, low, row, base_x, pol, flags
+    state[_HIGH], state[_LOW], state[_Y], state[_BASE_X], state[_POL], state[_FLAGS] = (
+        high,
+        low,
+        row,
+        base_x,
+        pol,
+        flags,
+    )
     report[_NEXT] = i
 
 
@@ -148,8 +162,9 @@ _EVT2_LOOP_UNITS = (1 << 28) - 1 - 10_000 // 64
 
 
 @numba.njit(cache=True, nogil=True)
-def decode_evt2(words, start, state, width, height, out_t, out_x, out_y, out_p, trig_t, trig_edge, trig_id, report,
-                legacy):
+def decode_evt2(
+    words, start, state, width, height, out_t, out_x, out_y, out_p, trig_t, trig_edge, trig_id, report, legacy
+):
     """EVT 2.0 words[start:] (uint32) or EVT 2.1 words (uint64; `legacy`: their 32-bit halves
     swapped), as decode_evt3 (room for 32 events, 1 trigger a word). An EVT 2.1 word is an EVT
     2.0 word (type, 6 time bits, x, y; TIME_HIGH and EXT_TRIGGER alike) in its upper half and
@@ -235,41 +250,58 @@ class PropheseeDecoder(PacketDecoder):
         data = np.frombuffer(data, np.uint8) if not isinstance(data, np.ndarray) else data.reshape(-1).view(np.uint8)
         if len(data) % self.word_bytes:
             whole = len(data) - len(data) % self.word_bytes
-            raise WordError(whole, f"{len(data) - whole} byte(s) after the last whole {8 * self.word_bytes}-bit "
-                                   f"{self.title} word (a cut packet or file?)")
+            raise WordError(
+                whole,
+                f"{len(data) - whole} byte(s) after the last whole {8 * self.word_bytes}-bit "
+                f"{self.title} word (a cut packet or file?)",
+            )
         words = data.view(f"<u{self.word_bytes}").astype(f"=u{self.word_bytes}", copy=False)
         size = min(CHUNK_EVENTS, 32 * len(words) + 32)
         parts, report, start = [], np.zeros(_REPORT, np.int64), 0
         first_outside = None
         outside = total = 0
         while True:
-            out = (np.empty(size, np.int64), np.empty(size, np.uint16), np.empty(size, np.uint16), np.empty(size, np.uint8),
-                   np.empty(size, np.int64), np.empty(size, np.uint8), np.empty(size, np.uint8))
+            out = (
+                np.empty(size, np.int64),
+                np.empty(size, np.uint16),
+                np.empty(size, np.uint16),
+                np.empty(size, np.uint8),
+                np.empty(size, np.int64),
+                np.empty(size, np.uint8),
+                np.empty(size, np.uint8),
+            )
             report[:] = 0
             self.kernel(words, start, self.state, self.width, self.height, *out, report, *self._options())
             n, m = int(report[_EVENTS]), int(report[_TRIGGERS])
             parts.append([a[:k] for a, k in zip(out, (n, n, n, n, m, m, m))])
             if report[_OUTSIDE] and first_outside is None:
-                first_outside = tuple(int(v) for v in report[_FIRST_OUTSIDE:_FIRST_OUTSIDE_Y + 1])
+                first_outside = tuple(int(v) for v in report[_FIRST_OUTSIDE : _FIRST_OUTSIDE_Y + 1])
             outside += int(report[_OUTSIDE])
             total += n
             if report[_BAD] >= 0:
                 bad = int(report[_BAD])
-                raise WordError(bad * self.word_bytes, f"word 0x{int(words[bad]):0{2 * self.word_bytes}x} is of no "
-                                                       f"{self.title} type (type {self._type_of(int(words[bad]))})")
+                raise WordError(
+                    bad * self.word_bytes,
+                    f"word 0x{int(words[bad]):0{2 * self.word_bytes}x} is of no "
+                    f"{self.title} type (type {self._type_of(int(words[bad]))})",
+                )
             start = int(report[_NEXT])
             if start >= len(words):
                 break
         if outside > OUTSIDE_REFUSED * (total + outside) and outside >= OUTSIDE_REFUSED_MIN:
             word, x, y = first_outside
-            raise WordError(word * self.word_bytes, f"{outside} of {total + outside} events fall outside the "
-                                                    f"{self.width}x{self.height} sensor (the first at x={x}, y={y}): the "
-                                                    f"sensor size is wrong, or these are not {self.title} words")
+            raise WordError(
+                word * self.word_bytes,
+                f"{outside} of {total + outside} events fall outside the "
+                f"{self.width}x{self.height} sensor (the first at x={x}, y={y}): the "
+                f"sensor size is wrong, or these are not {self.title} words",
+            )
         self.outside += outside
         columns = [np.concatenate(c) if len(parts) > 1 else c[0] for c in zip(*parts)]
         t_us, x, y, p, trig_us, edge, channel = columns
-        return Decoded(t_ns=t_us * 1000, x=x, y=y, p=p, trigger_t_ns=trig_us * 1000, trigger_edge=edge,
-                       trigger_id=channel)
+        return Decoded(
+            t_ns=t_us * 1000, x=x, y=y, p=p, trigger_t_ns=trig_us * 1000, trigger_edge=edge, trigger_id=channel
+        )
 
     def _type_of(self, word: int) -> int:
         return word >> (8 * self.word_bytes - 4)

@@ -27,8 +27,11 @@ def _parse_line(parts: list[bytes]) -> tuple[list[float] | None, str, str]:
     except ValueError:
         return None, "malformed line", f"not a number in {b' '.join(parts)[:60].decode(errors='replace')!r}"
     if any(not (v - v == 0.0 and v == int(v)) for v in row[1:]):
-        return None, "pixel or polarity not an integer", \
-            f"pixel coordinates and polarity must be integers, found x y p = {' '.join(f'{v:g}' for v in row[1:])}"
+        return (
+            None,
+            "pixel or polarity not an integer",
+            f"pixel coordinates and polarity must be integers, found x y p = {' '.join(f'{v:g}' for v in row[1:])}",
+        )
     return row, "", ""
 
 
@@ -40,7 +43,9 @@ def _slow_rows(text: bytes, first_line: int, where: str, lenient: bool, warnings
     rows, lines, pending = [], [], None
     for k, raw in enumerate(text.split(b"\n")):
         parts = (text_bytes(raw) if first_line + k == 1 else raw).split()
-        if not parts or parts[0].startswith(b"#"):  # a blank line, or a comment (`# t x y p`), as every table reads them
+        if not parts or parts[0].startswith(
+            b"#"
+        ):  # a blank line, or a comment (`# t x y p`), as every table reads them
             continue
         row, kind, problem = _parse_line(parts)
         if row is None:
@@ -65,8 +70,9 @@ def sequential_piece(piece, first_line: int, validate: Validator, where: str, le
     text = None  # the piece as bytes, copied once if a line needs the text path
     span = 1
     while i < len(piece):
-        n, bad, lines, _, last_t = parse_and_pack(piece[i:], validate.width, validate.height,
-                                                   validate.tolerance_s, validate.last_t, out.view(np.uint8))
+        n, bad, lines, _, last_t = parse_and_pack(
+            piece[i:], validate.width, validate.height, validate.tolerance_s, validate.last_t, out.view(np.uint8)
+        )
         chunks.append(out[:n].copy())
         validate.last_t = last_t
         line += lines

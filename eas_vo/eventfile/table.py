@@ -22,7 +22,10 @@ from eas_vo.types import EVENT_DTYPE
 
 
 def pack_rows(
-    rows: np.ndarray, columns: tuple[int, int, int, int], validate: Validator, first_row: int,
+    rows: np.ndarray,
+    columns: tuple[int, int, int, int],
+    validate: Validator,
+    first_row: int,
     out: np.ndarray | None = None,
 ) -> np.ndarray:
     """EVENT_DTYPE records of the valid rows of `rows` ((N, k) float64, C order), in order.
@@ -34,8 +37,9 @@ def pack_rows(
     """
     rows = np.ascontiguousarray(rows, dtype=np.float64)
     events = np.empty(len(rows), EVENT_DTYPE) if out is None else out[: len(rows)]
-    bad, last_t = check_and_pack_rows(rows, *columns, validate.last_t, validate.width, validate.height,
-                                      validate.tolerance_s, events)
+    bad, last_t = check_and_pack_rows(
+        rows, *columns, validate.last_t, validate.width, validate.height, validate.tolerance_s, events
+    )
     if bad < 0:  # the common case: every row is valid
         validate.last_t = last_t
         return events
@@ -43,8 +47,13 @@ def pack_rows(
 
 
 def pack_table(
-    rows: np.ndarray, columns: tuple[int, int, int, int], validate: Validator, write: Callable[[np.ndarray], object],
-    block_rows: int = 1 << 18, threads: int = 0, group_rows: int = 0,
+    rows: np.ndarray,
+    columns: tuple[int, int, int, int],
+    validate: Validator,
+    write: Callable[[np.ndarray], object],
+    block_rows: int = 1 << 18,
+    threads: int = 0,
+    group_rows: int = 0,
     touch: Callable[[int, int], object] | None = None,
 ) -> int:
     """Check and pack a whole table of rows ((N, k) float64 of either byte order, C order: a
@@ -68,8 +77,10 @@ def pack_table(
     size = max(1, min(block_rows, n))
     group = group_rows or size
     native = rows.dtype == np.dtype(np.float64)
-    free = [(np.empty(size, EVENT_DTYPE), None if native else np.empty((size, rows.shape[1]), np.float64))
-            for _ in range(threads + 1)]
+    free = [
+        (np.empty(size, EVENT_DTYPE), None if native else np.empty((size, rows.shape[1]), np.float64))
+        for _ in range(threads + 1)
+    ]
 
     def pack(start: int, buffers) -> tuple:
         events, scratch = buffers
@@ -81,8 +92,9 @@ def pack_table(
             block = scratch[: stop - start]
             np.copyto(block, rows[start:stop])
         previous_t = float(rows[start - 1, columns[0]]) if start else -np.inf
-        bad, last_t = check_and_pack_rows(block, *columns, previous_t, validate.width, validate.height,
-                                          validate.tolerance_s, events[: stop - start])
+        bad, last_t = check_and_pack_rows(
+            block, *columns, previous_t, validate.width, validate.height, validate.tolerance_s, events[: stop - start]
+        )
         return events[: stop - start], previous_t, bad, last_t
 
     total, pending, start = 0, deque(), 0
@@ -130,10 +142,12 @@ def _checked_rows(rows, columns, validate: Validator, first_row: int) -> np.ndar
         j = int(odd[0])
         validate(t[:j], *ints[:j].T, lambda i: first_row + i)  # an earlier problem is named first
         x, y, p = xyp[j]
-        raise DataError(validate.where, f"pixel coordinates and polarity must be integers: x y p = {x:g} {y:g} {p:g}",
-                        first_row + j)
+        raise DataError(
+            validate.where, f"pixel coordinates and polarity must be integers: x y p = {x:g} {y:g} {p:g}", first_row + j
+        )
     if len(odd):
-        validate.warnings.add(validate.where, "pixel or polarity not an integer", f"{validate.unit} {first_row + int(odd[0])}",
-                              len(odd))
+        validate.warnings.add(
+            validate.where, "pixel or polarity not an integer", f"{validate.unit} {first_row + int(odd[0])}", len(odd)
+        )
     keep = np.flatnonzero(whole)
     return validate(t[keep], *ints[keep].T, lambda i: first_row + int(keep[i]))

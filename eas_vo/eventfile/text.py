@@ -53,8 +53,9 @@ def format_events(events: np.ndarray, origin_ns: int = 0) -> bytes:
     return flat[flat != 0].tobytes()
 
 
-def write_events_text(path: str | Path, events: np.ndarray, width: int, height: int, chunk: int = 1_000_000,
-                      origin_ns: int = 0) -> None:
+def write_events_text(
+    path: str | Path, events: np.ndarray, width: int, height: int, chunk: int = 1_000_000, origin_ns: int = 0
+) -> None:
     """Write events (t [s] after the clock origin `origin_ns`) as ECD `events.txt` atomically,
     and prime the binary cache with the times as the text will parse back (rounded to 1 ns;
     not primed after an origin, where the parse rounds at the absolute time's magnitude)."""

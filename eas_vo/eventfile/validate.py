@@ -16,7 +16,14 @@ class Validator:
     """Checks one block of parsed rows at a time, carrying the last timestamp across blocks."""
 
     def __init__(
-        self, where: str, width: int, height: int, tolerance_s: float, lenient: bool, warnings: DataWarnings, unit: str = "line"
+        self,
+        where: str,
+        width: int,
+        height: int,
+        tolerance_s: float,
+        lenient: bool,
+        warnings: DataWarnings,
+        unit: str = "line",
     ):
         self.where, self.width, self.height, self.unit = where, width, height, unit
         self.tolerance_s, self.lenient, self.warnings = tolerance_s, lenient, warnings
@@ -27,8 +34,9 @@ class Validator:
         seconds, or integer ticks (per_second 1e6 for microseconds), divided as numpy divides.
         Any integer dtypes, strided views too (the fields of a library's records)."""
         events = np.empty(len(t), EVENT_DTYPE)
-        bad, last_t = check_and_pack(t, float(per_second), x, y, p, self.last_t, self.width, self.height,
-                                     self.tolerance_s, events)
+        bad, last_t = check_and_pack(
+            t, float(per_second), x, y, p, self.last_t, self.width, self.height, self.tolerance_s, events
+        )
         if bad < 0:  # the common case: every row is valid
             self.last_t = last_t
             return events
@@ -40,15 +48,23 @@ class Validator:
         Lenient: every bad row is dropped and counted once, under its first problem."""
         problems = [
             (~np.isfinite(t), "timestamp is not finite", lambda i: f"t = {t[i]}"),
-            ((x < 0) | (x >= self.width) | (y < 0) | (y >= self.height),
-             f"pixel outside the {self.width}x{self.height} sensor", lambda i: f"({x[i]}, {y[i]})"),
+            (
+                (x < 0) | (x >= self.width) | (y < 0) | (y >= self.height),
+                f"pixel outside the {self.width}x{self.height} sensor",
+                lambda i: f"({x[i]}, {y[i]})",
+            ),
             (~np.isin(p, (0, 1, -1)), "polarity not 0/1 (or -1/1)", lambda i: f"p = {p[i]}"),
         ]
         keep = ~np.logical_or.reduce([bad for bad, _, _ in problems])
         # Small steps back in time (within the tolerance) are clamped; larger ones are problems.
         running = np.maximum.accumulate(np.concatenate([[self.last_t], np.where(keep, t, -np.inf)]))[:-1]
-        problems.append((keep & (t < running - self.tolerance_s), "timestamp goes backwards",
-                         lambda i: f"{t[i]:.9f} after {running[i]:.9f}"))
+        problems.append(
+            (
+                keep & (t < running - self.tolerance_s),
+                "timestamp goes backwards",
+                lambda i: f"{t[i]:.9f} after {running[i]:.9f}",
+            )
+        )
         first_problem = np.full(len(t), -1)
         for k in range(len(problems) - 1, -1, -1):
             first_problem[problems[k][0]] = k

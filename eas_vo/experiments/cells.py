@@ -8,14 +8,10 @@ import itertools
 from dataclasses import dataclass
 from pathlib import Path
 
-
 from eas_vo import registry
 from eas_vo.config import NO_IMAGES, parse_set
 from eas_vo.errors import EasVoError
 from eas_vo.io.text import slug
-
-
-
 
 
 @dataclass(frozen=True)
@@ -108,7 +104,9 @@ def dataset_names(datasets: list[str]) -> dict[str, str]:
     names = {}
     for spec in dict.fromkeys(datasets):
         depth = 1
-        while any(tail(other, depth) == tail(spec, depth) for other in datasets if other != spec) and depth < len(Path(spec).parts):
+        while any(tail(other, depth) == tail(spec, depth) for other in datasets if other != spec) and depth < len(
+            Path(spec).parts
+        ):
             depth += 1
         names[spec] = tail(spec, depth)
     if len(set(names.values())) < len(names):  # still equal (e.g. `x` and `x/`): tell apart by hash

@@ -14,8 +14,15 @@ from eas_vo.io.text import figure_text, markdown_cell
 from eas_vo.types import PoseSeries
 
 
-def evaluate_estimate(dataset_spec: str, estimate_path: str | Path, align: str, max_diff_s: float,
-                      out: str | Path | None = None, label: str | None = None, replace: bool = False) -> dict:
+def evaluate_estimate(
+    dataset_spec: str,
+    estimate_path: str | Path,
+    align: str,
+    max_diff_s: float,
+    out: str | Path | None = None,
+    label: str | None = None,
+    replace: bool = False,
+) -> dict:
     """Score an external trajectory against a dataset's ground truth (evaluation.trajectory_ape);
     with `out`, write metrics.json, table2_row.md, groundtruth.tum (what it was compared with)
     and estimate_aligned.tum. Returns the metrics."""
@@ -35,7 +42,9 @@ def evaluate_estimate(dataset_spec: str, estimate_path: str | Path, align: str, 
     origin_ns = dataset.clock_origin_ns  # the estimate holds the recording's own times, the ground truth is after it
     estimate = PoseSeries(read.t - origin_ns / 1e9, read.p_w_c, read.q_w_c)
     spans = {"estimate": float(np.ptp(estimate.t)), "ground-truth": float(np.ptp(gt.t))}
-    clocks = clock_unit_problems(spans, {"estimate": str(estimate_path), "ground-truth": time_source(dataset, "ground-truth")})
+    clocks = clock_unit_problems(
+        spans, {"estimate": str(estimate_path), "ground-truth": time_source(dataset, "ground-truth")}
+    )
     if clocks:
         raise EasVoError(next(iter(clocks.values())))
     try:
@@ -43,13 +52,22 @@ def evaluate_estimate(dataset_spec: str, estimate_path: str | Path, align: str, 
     except ValueError as exc:
         raise EasVoError(f"{estimate_path}: {exc}") from None
     label = label or Path(estimate_path).stem
-    metrics = {"estimate": str(estimate_path), "dataset": dataset.label, "align": align, "max_diff_s": max_diff_s,
-               "estimate_poses": len(estimate.t), **ape.summary(), **_coverage(estimate.t, gt.t, ape.summary())}
+    metrics = {
+        "estimate": str(estimate_path),
+        "dataset": dataset.label,
+        "align": align,
+        "max_diff_s": max_diff_s,
+        "estimate_poses": len(estimate.t),
+        **ape.summary(),
+        **_coverage(estimate.t, gt.t, ape.summary()),
+    }
     if out is not None:
         with output_folder(out, replace) as staging:
             write_text_atomic(staging / "metrics.json", json_text(metrics))
             write_text_atomic(staging / "table2_row.md", table2_row(label, metrics))
-            write_text_atomic(staging / "groundtruth.tum", format_tum(gt.t, gt.p_w_c, matrices_from_quats(gt.q_w_c), origin_ns))
+            write_text_atomic(
+                staging / "groundtruth.tum", format_tum(gt.t, gt.p_w_c, matrices_from_quats(gt.q_w_c), origin_ns)
+            )
             aligned = ape.aligned(estimate.p_w_c, matrices_from_quats(estimate.q_w_c))
             write_text_atomic(staging / "estimate_aligned.tum", format_tum(estimate.t, *aligned, origin_ns))
     return metrics
@@ -67,18 +85,26 @@ def _coverage(t_est: np.ndarray, t_gt: np.ndarray, summary: dict) -> dict:
     span = float(t_est[-1] - t_est[0])
     warnings = []
     if matched < MIN_SCORED_FRACTION * n:
-        warnings.append(f"the ground truth scores only {matched} of the estimate's {n} poses ({100 * matched / n:.0f} %, "
-                        f"under {100 * MIN_SCORED_FRACTION:.0f} %): it spans {start:.3f} to {end:.3f} s of the estimate's "
-                        f"0 to {span:.3f} s; the APE describes those poses only")
-    return {"matched_fraction": matched / n, "ground_truth_span_s": [start, end], "estimate_span_s": span,
-            "warnings": warnings}
+        warnings.append(
+            f"the ground truth scores only {matched} of the estimate's {n} poses ({100 * matched / n:.0f} %, "
+            f"under {100 * MIN_SCORED_FRACTION:.0f} %): it spans {start:.3f} to {end:.3f} s of the estimate's "
+            f"0 to {span:.3f} s; the APE describes those poses only"
+        )
+    return {
+        "matched_fraction": matched / n,
+        "ground_truth_span_s": [start, end],
+        "estimate_span_s": span,
+        "warnings": warnings,
+    }
 
 
 def table2_row(label: str, metrics: dict) -> str:
     """A Markdown row as in the paper's Table 2: source, average (translation) APE [m], with
     RMSE, rotation APE, scale and matched poses beside it."""
     m = metrics
-    return ("| source | average APE [m] | RMSE [m] | rotation APE [rad] | scale | poses |\n|---|---|---|---|---|---|\n"
-            f"| {markdown_cell(label)} | {figure_text(m['ape_trans_mean_m'], 3)} | {figure_text(m['ape_trans_rmse_m'], 3)} | "
-            f"{m['ape_rot_mean_rad']:.3f} | "
-            f"{m['scale']:.3g} | {m['matched_poses']} |\n")
+    return (
+        "| source | average APE [m] | RMSE [m] | rotation APE [rad] | scale | poses |\n|---|---|---|---|---|---|\n"
+        f"| {markdown_cell(label)} | {figure_text(m['ape_trans_mean_m'], 3)} | {figure_text(m['ape_trans_rmse_m'], 3)} | "
+        f"{m['ape_rot_mean_rad']:.3f} | "
+        f"{m['scale']:.3g} | {m['matched_poses']} |\n"
+    )

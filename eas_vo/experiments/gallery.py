@@ -14,8 +14,14 @@ PAPER_ORDER = ("original", "histeq", "slice", "ts", "sits", "eas")
 
 #: Each of the paper's sources' colour in every figure of compare (and reproduce); other
 #: frontends take plots.SPARE_COLOURS.
-PAPER_COLOURS = {"original": "tab:blue", "histeq": "tab:orange", "slice": "tab:green", "eas": "tab:red",
-                 "ts": "tab:purple", "sits": "tab:brown"}
+PAPER_COLOURS = {
+    "original": "tab:blue",
+    "histeq": "tab:orange",
+    "slice": "tab:green",
+    "eas": "tab:red",
+    "ts": "tab:purple",
+    "sits": "tab:brown",
+}
 
 
 def frontend_images(
@@ -31,7 +37,9 @@ def frontend_images(
     frontends (ts, sits) have consumed the events before each chosen frame.
     """
     drawable = [n for n in registry.available("frontends") if registry.get("frontends", n).makes_images]
-    names = frontends or sorted(drawable, key=lambda n: (PAPER_ORDER.index(n) if n in PAPER_ORDER else len(PAPER_ORDER), n))
+    names = frontends or sorted(
+        drawable, key=lambda n: (PAPER_ORDER.index(n) if n in PAPER_ORDER else len(PAPER_ORDER), n)
+    )
     for name in names:
         if name in registry.available("frontends") and name not in drawable:
             raise EasVoError(f"frontend {name!r} makes no image to draw")

@@ -12,16 +12,12 @@ import traceback
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from pathlib import Path
 
-
 from eas_vo import concurrency
 from eas_vo.errors import EasVoError, Interrupted, sigterm_as_interrupt
-from eas_vo.io.atomic import remove_stale_temporaries, write_text_atomic
-from eas_vo.io.outputs import claim_grid_folder, output_folder
-
-
-
 from eas_vo.experiments.cells import Cell
 from eas_vo.experiments.results import OUTPUT_FILES, mark_identical, table_rows, write_figures, write_tables
+from eas_vo.io.atomic import remove_stale_temporaries, write_text_atomic
+from eas_vo.io.outputs import claim_grid_folder, output_folder
 
 
 def cell_config(cell: Cell, config_file, assignments: list[str], run_overrides: dict):
@@ -30,7 +26,13 @@ def cell_config(cell: Cell, config_file, assignments: list[str], run_overrides: 
 
     return config.resolve(
         config_file,
-        {**run_overrides, "dataset": cell.dataset, "frontend": cell.frontend, "tracker": cell.tracker, "backend": cell.backend},
+        {
+            **run_overrides,
+            "dataset": cell.dataset,
+            "frontend": cell.frontend,
+            "tracker": cell.tracker,
+            "backend": cell.backend,
+        },
         list(assignments) + [f"{k}={v}" for k, v in cell.settings + cell.sweep],
     )
 
@@ -63,8 +65,11 @@ def cell_failure(exc: Exception) -> dict:
     first = (str(exc).splitlines() or [""])[0]
     if isinstance(exc, EasVoError):
         return {"status": "failed", "error": first}
-    return {"status": "failed", "error": f"{type(exc).__name__}: {first} (a bug, not a problem with the input: "
-                                         "please report it with the cell's error.txt)"}
+    return {
+        "status": "failed",
+        "error": f"{type(exc).__name__}: {first} (a bug, not a problem with the input: "
+        "please report it with the cell's error.txt)",
+    }
 
 
 def completed(out_root: Path, cell: Cell, identity: dict) -> dict | None:
@@ -84,7 +89,13 @@ def completed(out_root: Path, cell: Cell, identity: dict) -> dict | None:
 
 
 def run_grid(
-    cells: list[Cell], out_root: Path, config_file, assignments, run_overrides, jobs: int, progress: bool,
+    cells: list[Cell],
+    out_root: Path,
+    config_file,
+    assignments,
+    run_overrides,
+    jobs: int,
+    progress: bool,
     scheduler: str | None = None,
     results: dict | None = None,
 ):
@@ -102,12 +113,17 @@ def run_grid(
     not_run = {"status": "not run", "error": "interrupted before this cell ran"}
     results.update({cell: done[cell] or dict(not_run) for cell in cells})  # one step: never half-filled
     args = (str(out_root), config_file, list(assignments), run_overrides)
-    with tqdm(total=len(cells), initial=len(cells) - len(todo), disable=not progress, unit="cell", desc="compare") as bar:
+    with tqdm(
+        total=len(cells), initial=len(cells) - len(todo), disable=not progress, unit="cell", desc="compare"
+    ) as bar:
         if scheduler is not None:
             try:
-                from distributed import Client, as_completed as dask_completed
+                from distributed import Client
+                from distributed import as_completed as dask_completed
             except ImportError:
-                raise EasVoError("--executor dask needs the 'distributed' extra: pip install 'eas-vo[distributed]'") from None
+                raise EasVoError(
+                    "--executor dask needs the 'distributed' extra: pip install 'eas-vo[distributed]'"
+                ) from None
             with Client(scheduler) as client:
                 futures = {client.submit(run_cell, cell, *args, pure=False): cell for cell in todo}
                 for future in dask_completed(futures):
@@ -119,7 +135,9 @@ def run_grid(
                 bar.update(1)
         else:
             workers = min(jobs, len(todo))
-            pool = ProcessPoolExecutor(workers, initializer=_worker_start, initargs=(max(1, (os.cpu_count() or 1) // workers),))
+            pool = ProcessPoolExecutor(
+                workers, initializer=_worker_start, initargs=(max(1, (os.cpu_count() or 1) // workers),)
+            )
             futures = {pool.submit(run_cell, cell, *args): cell for cell in todo}
             try:
                 for future in as_completed(futures):
@@ -174,8 +192,16 @@ def _stop(pool: ProcessPoolExecutor, futures: dict, results: dict) -> None:
         process.join(timeout=30)
 
 
-def run_experiment(cells: list[Cell], out: Path, config_file, assignments, overrides: dict, jobs: int,
-                   progress: bool, scheduler: str | None = None) -> tuple[list[dict], int]:
+def run_experiment(
+    cells: list[Cell],
+    out: Path,
+    config_file,
+    assignments,
+    overrides: dict,
+    jobs: int,
+    progress: bool,
+    scheduler: str | None = None,
+) -> tuple[list[dict], int]:
     """What `eas-vo compare` does after parsing: check every cell's configuration (a bad one is
     an error before any work), open each dataset once (simulated, fetched or cached here, not
     once per process), run the cells not yet complete, and write the tables and figures, also
@@ -191,7 +217,9 @@ def run_experiment(cells: list[Cell], out: Path, config_file, assignments, overr
         (c.dataset, tuple(f"{k}={v}" for k, v in c.sweep if k.startswith("dataset."))) for c in cells
     ):
         try:
-            resolved = config_mod.resolve(config_file, {**overrides, "dataset": dataset}, list(assignments) + list(dataset_sweep))
+            resolved = config_mod.resolve(
+                config_file, {**overrides, "dataset": dataset}, list(assignments) + list(dataset_sweep)
+            )
             open_dataset(dataset, resolved.dataset).events()
         except EasVoError:
             pass  # its cells will report the error

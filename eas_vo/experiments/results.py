@@ -12,10 +12,9 @@ from pathlib import Path
 import numpy as np
 
 from eas_vo.errors import EasVoError
+from eas_vo.experiments.cells import Cell
 from eas_vo.io.atomic import json_text, write_text_atomic
 from eas_vo.io.text import markdown_cell, slug
-from eas_vo.experiments.cells import Cell
-
 
 #: The files compare writes in its output folder (write_tables, write_figures).
 OUTPUT_FILES = ("table.md", "table.csv", "table.json", "ape_bars.png", "ape_time.png", "ape_sweep.png")
@@ -99,11 +98,14 @@ def mark_identical(out_root: Path, cells: list[Cell], rows: list[dict]) -> list[
     columns: dict = {}  # (dataset, method) -> {(frontend, sweep): (nc, trajectory file) or None if not finished}
     for cell, row in zip(cells, rows):
         columns.setdefault((cell.dataset, row["method"]), {})[(cell.frontend, row["sweep"])] = (
-            (row["nc_mean"], out_root / cell.folder / "trajectory.tum") if row["status"] == "ok" else None)
+            (row["nc_mean"], out_root / cell.folder / "trajectory.tum") if row["status"] == "ok" else None
+        )
 
     def same(a: dict, b: dict) -> bool:
-        return a.keys() == b.keys() and all(a[k] is not None and b[k] is not None and a[k][0] == b[k][0]
-                                            and same_trajectory(a[k][1], b[k][1]) for k in a)
+        return a.keys() == b.keys() and all(
+            a[k] is not None and b[k] is not None and a[k][0] == b[k][0] and same_trajectory(a[k][1], b[k][1])
+            for k in a
+        )
 
     same_as: dict = {}
     for (dataset, method), column in columns.items():  # each against the earlier columns of its own
@@ -126,7 +128,9 @@ def sweep_curves(cells: list[Cell], rows: list[dict]) -> tuple[str, dict] | None
     curves: dict = {}
     for cell, row in zip(cells, rows):
         if row["status"] == "ok" and row["ape_mean_rad"] is not None:
-            curves.setdefault((cell.dataset, row["method"], cell.frontend), []).append((values[cell], row["nc_mean"], row["ape_mean_rad"]))
+            curves.setdefault((cell.dataset, row["method"], cell.frontend), []).append(
+                (values[cell], row["nc_mean"], row["ape_mean_rad"])
+            )
     return keys.pop(), {k: np.array(sorted(v)) for k, v in curves.items()}
 
 
@@ -155,11 +159,20 @@ TABLE1_FIGURES = (("nc_mean", "average NC", "{:.0f}", False), ("ape_mean_rad", "
 
 
 #: The event-rotation literature's figures (evaluation.motion_errors), in table_motion.md.
-MOTION_FIGURES = (("omega_rms_deg_s", "omega RMS [deg/s]", "{:.1f}", True), ("rpe_1s_mean_deg", "RPE 1 s [deg]", "{:.2f}", True))
+MOTION_FIGURES = (
+    ("omega_rms_deg_s", "omega RMS [deg/s]", "{:.1f}", True),
+    ("rpe_1s_mean_deg", "RPE 1 s [deg]", "{:.2f}", True),
+)
 
 
-MOTION_KEYS = ("omega_rms_deg_s", "omega_rms_x_deg_s", "omega_rms_y_deg_s", "omega_rms_z_deg_s", "rpe_1s_mean_deg",
-               "rpe_1s_rmse_deg")
+MOTION_KEYS = (
+    "omega_rms_deg_s",
+    "omega_rms_x_deg_s",
+    "omega_rms_y_deg_s",
+    "omega_rms_z_deg_s",
+    "rpe_1s_mean_deg",
+    "rpe_1s_rmse_deg",
+)
 
 
 def table_markdown(rows: list[dict], figures=TABLE1_FIGURES) -> str:
@@ -182,7 +195,9 @@ def table_markdown(rows: list[dict], figures=TABLE1_FIGURES) -> str:
         for d, m in columns:
             r = by_key.get((d, m, frontend, sweep))
             if r is None or r["status"] != "ok":
-                cells += ["failed" if r else "", markdown_cell((r or {}).get("error", "")[:60])] + [""] * (len(figures) - 2)
+                cells += ["failed" if r else "", markdown_cell((r or {}).get("error", "")[:60])] + [""] * (
+                    len(figures) - 2
+                )
                 continue
             for (key, _, form, _), bests in zip(figures, best):
                 value = r.get(key)
@@ -198,22 +213,50 @@ def equal_methods(rows: list[dict]) -> dict[tuple[str, str], list[str]]:
     datasets = list(dict.fromkeys(r["dataset"] for r in rows))
     methods = list(dict.fromkeys(r["method"] for r in rows))
     same_as = {(r["dataset"], r["method"]): r["same_as"] for r in rows}
-    return {(d, m): [o for o in methods if same_as.get((d, o)) == m]
-            for d in datasets for m in methods if same_as.get((d, m)) == ""}
+    return {
+        (d, m): [o for o in methods if same_as.get((d, o)) == m]
+        for d in datasets
+        for m in methods
+        if same_as.get((d, m)) == ""
+    }
 
 
 def table_csv(rows: list[dict]) -> str:
     """The rows as CSV, one a cell, with which cells are best per column (best_nc, best_ape)."""
-    fields = ["dataset", "frontend", "tracker", "backend", "method", "sweep", "status", "nc_mean", "ape_mean_rad",
-              *MOTION_KEYS, "orb_keypoints_mean", "orb_matches_mean", "best_nc", "best_ape", "same_as", "folder", "error"]
+    fields = [
+        "dataset",
+        "frontend",
+        "tracker",
+        "backend",
+        "method",
+        "sweep",
+        "status",
+        "nc_mean",
+        "ape_mean_rad",
+        *MOTION_KEYS,
+        "orb_keypoints_mean",
+        "orb_matches_mean",
+        "best_nc",
+        "best_ape",
+        "same_as",
+        "folder",
+        "error",
+    ]
     best_nc, best_ape = _best(rows, "nc_mean", lower=False), _best(rows, "ape_mean_rad", lower=True)
     buffer = io.StringIO()
-    writer = csv.DictWriter(buffer, fieldnames=fields, extrasaction="ignore", lineterminator="\n")  # LF, as every file we write
+    writer = csv.DictWriter(
+        buffer, fieldnames=fields, extrasaction="ignore", lineterminator="\n"
+    )  # LF, as every file we write
     writer.writeheader()
     for r in rows:
         col = (r["dataset"], r["method"])
-        writer.writerow({**r, "best_nc": int(r["nc_mean"] is not None and r["nc_mean"] == best_nc.get(col)),
-                         "best_ape": int(r["ape_mean_rad"] is not None and r["ape_mean_rad"] == best_ape.get(col))})
+        writer.writerow(
+            {
+                **r,
+                "best_nc": int(r["nc_mean"] is not None and r["nc_mean"] == best_nc.get(col)),
+                "best_ape": int(r["ape_mean_rad"] is not None and r["ape_mean_rad"] == best_ape.get(col)),
+            }
+        )
     return buffer.getvalue()
 
 

@@ -43,9 +43,13 @@ def exp_so3(d):
     x, y, z = d[0] / theta, d[1] / theta, d[2] / theta
     c, s = np.cos(theta), np.sin(theta)
     c1 = 1.0 - c
-    return np.array([[c + c1 * x * x, c1 * x * y - s * z, c1 * x * z + s * y],
-                     [c1 * x * y + s * z, c + c1 * y * y, c1 * y * z - s * x],
-                     [c1 * x * z - s * y, c1 * y * z + s * x, c + c1 * z * z]])
+    return np.array(
+        [
+            [c + c1 * x * x, c1 * x * y - s * z, c1 * x * z + s * y],
+            [c1 * x * y + s * z, c + c1 * y * y, c1 * y * z - s * x],
+            [c1 * x * z - s * y, c1 * y * z + s * x, c + c1 * z * z],
+        ]
+    )
 
 
 def scaled_rotation(R: np.ndarray, factor: float) -> np.ndarray:

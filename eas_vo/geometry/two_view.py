@@ -45,8 +45,13 @@ def angular_residuals(R_cur_prev: np.ndarray, f_prev: np.ndarray, f_cur: np.ndar
 
 
 def rotation_ransac(
-    f_prev: np.ndarray, f_cur: np.ndarray, threshold_rad: float, confidence: float = 0.999,
-    max_hypotheses: int = 256, batch: int = 32, seed: int = 0,
+    f_prev: np.ndarray,
+    f_cur: np.ndarray,
+    threshold_rad: float,
+    confidence: float = 0.999,
+    max_hypotheses: int = 256,
+    batch: int = 32,
+    seed: int = 0,
 ) -> tuple[np.ndarray, np.ndarray] | None:
     """Pure-rotation model: 2-point minimal sets scored in batches until, given the best inlier
     ratio w so far, another sample is unlikely to do better (log(1 - confidence) / log(1 - w^2)
@@ -79,7 +84,7 @@ def _best_two_point_rotation(f_prev, f_cur, pairs, cos_threshold, confidence, ba
     drawn, needed, best_count = 0, pairs.shape[0], -1
     R_best = np.eye(3)
     while drawn < needed:
-        chosen = pairs[drawn:drawn + batch]
+        chosen = pairs[drawn : drawn + batch]
         drawn += batch
         chosen = chosen[chosen[:, 0] != chosen[:, 1]]
         if chosen.shape[0] == 0:
@@ -250,7 +255,8 @@ def homography_rotation(
     x = np.column_stack([x_prev[mask], np.ones(mask.sum())])
     x_next = np.column_stack([x_cur[mask], np.ones(mask.sum())])
     in_front = [  # (exact data can decompose into NaN: no point is in front of those)
-        R for R, n in zip(rotations, normals)
+        R
+        for R, n in zip(rotations, normals)
         if np.mean((x @ n.ravel() > 0) & (x_next @ (R @ n).ravel() > 0)) >= IN_FRONT_SHARE
     ]
     if not in_front or any(geodesic_angle(in_front[0], R) > threshold for R in in_front[1:]):

@@ -8,8 +8,8 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from eas_vo.geometry.rotations import geodesic_angle, matrix_to_rotvec
-from eas_vo.types import ImuSeries
 from eas_vo.imu.thresholds import MIN_AGREEMENT_PAIRS, MIN_TURN_RAD
+from eas_vo.types import ImuSeries
 
 
 @dataclass(frozen=True)
@@ -101,12 +101,23 @@ def _agreement(t: np.ndarray, edges, imu: ImuSeries) -> ImuAgreement | None:
         R, agree = _fit_axes(v, g)
         if agree.sum() < MIN_AGREEMENT_PAIRS:
             break
-        best, limit, residual, unshifted = _best_clock_shift(t0[keep][agree], t1[keep][agree], v[agree] @ R.T, turned, imu, shift)
+        best, limit, residual, unshifted = _best_clock_shift(
+            t0[keep][agree], t1[keep][agree], v[agree] @ R.T, turned, imu, shift
+        )
         singular = np.linalg.svd(v[agree], compute_uv=False)
         spread = float(singular[1] / max(singular[0], 1e-12))
         moved, shift = abs(best - shift), best
-        found = ImuAgreement(R, len(v), int(agree.sum()), spread, best, limit, residual, unshifted,
-                             _fit_sigma_deg(v[agree] @ R.T, g[agree]))
+        found = ImuAgreement(
+            R,
+            len(v),
+            int(agree.sum()),
+            spread,
+            best,
+            limit,
+            residual,
+            unshifted,
+            _fit_sigma_deg(v[agree] @ R.T, g[agree]),
+        )
         if moved < 1e-3:
             break
     return found
@@ -138,8 +149,9 @@ def _fit_sigma_deg(u: np.ndarray, g: np.ndarray) -> float:
     return float(np.degrees(sigma / np.sqrt(smallest))) if smallest > 0 else float("inf")
 
 
-def _best_clock_shift(t0: np.ndarray, t1: np.ndarray, expected: np.ndarray, turned, imu: ImuSeries,
-                      around: float) -> tuple[float, bool, float, float]:
+def _best_clock_shift(
+    t0: np.ndarray, t1: np.ndarray, expected: np.ndarray, turned, imu: ImuSeries, around: float
+) -> tuple[float, bool, float, float]:
     """The shift d [s] of the gyro's clock (read at t + d) whose rotation vectors over frame
     times t0 < t1 (`turned`: ImuSeries.turned_since_start) best match `expected` (N, 3) [rad], by the median
     distance on a 1 ms grid within CLOCK_SEARCH_S of `around`, refined by a parabola. Returns

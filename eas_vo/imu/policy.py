@@ -82,21 +82,38 @@ class GyroDecision:
     warnings: tuple[str, ...] = ()
     readers: str | None = None
 
-    def weakened(self, records: list[FrameRecord],
-                 edges: list[RelativeRotation]) -> tuple[list[FrameRecord], list[RelativeRotation]]:
+    def weakened(
+        self, records: list[FrameRecord], edges: list[RelativeRotation]
+    ) -> tuple[list[FrameRecord], list[RelativeRotation]]:
         """`records` and `edges` with the `still` frames `weak` (the reason says how far apart)
         and their edges' sigma at least the angle apart per axis (over sqrt(3)), so that a
         backend weighing edges by it trusts the gyro there."""
-        records = [dataclasses.replace(r, status="weak",
-                                       reason=f"turns while the gyro reads still ({np.degrees(self.still[r.index]):.2f} deg apart)")
-                   if r.index in self.still else r for r in records]
-        edges = [dataclasses.replace(e, estimated_sigma_rad=max(e.estimated_sigma_rad, self.still[e.j] / np.sqrt(3.0)))
-                 if e.j == e.i + 1 and not e.loop and e.j in self.still else e for e in edges]
+        records = [
+            dataclasses.replace(
+                r,
+                status="weak",
+                reason=f"turns while the gyro reads still ({np.degrees(self.still[r.index]):.2f} deg apart)",
+            )
+            if r.index in self.still
+            else r
+            for r in records
+        ]
+        edges = [
+            dataclasses.replace(e, estimated_sigma_rad=max(e.estimated_sigma_rad, self.still[e.j] / np.sqrt(3.0)))
+            if e.j == e.i + 1 and not e.loop and e.j in self.still
+            else e
+            for e in edges
+        ]
         return records, edges
 
 
-def assess(imu: ImuSeries | None, times: np.ndarray, edges: list[RelativeRotation], setup: GyroSetup,
-           retrack: Callable[[], tuple[np.ndarray, list[RelativeRotation]]] | None = None) -> GyroDecision:
+def assess(
+    imu: ImuSeries | None,
+    times: np.ndarray,
+    edges: list[RelativeRotation],
+    setup: GyroSetup,
+    retrack: Callable[[], tuple[np.ndarray, list[RelativeRotation]]] | None = None,
+) -> GyroDecision:
     """Decide what the run does with `imu` (camera frame, frames' clock; None without one), from
     the tracked frame times [s] and edges.
 
@@ -121,8 +138,16 @@ def assess(imu: ImuSeries | None, times: np.ndarray, edges: list[RelativeRotatio
     backend_imu, offset = backend_gyro(setup, None if verdict.contradicts else imu, agreement)
     reclocked = offset is not None and offset != setup.time_offset_s
     findings = disagreements(setup, agreement, reclocked)
-    return GyroDecision(verdict.use, retracked, still, backend_imu, offset, reclocked,
-                        tuple(verdict.warnings(retracked, findings)), gyro_readers(setup, verdict, retracked))
+    return GyroDecision(
+        verdict.use,
+        retracked,
+        still,
+        backend_imu,
+        offset,
+        reclocked,
+        tuple(verdict.warnings(retracked, findings)),
+        gyro_readers(setup, verdict, retracked),
+    )
 
 
 def _axis_rotations() -> list[np.ndarray]:
@@ -145,28 +170,44 @@ def _conclusive(agreement: ImuAgreement | None) -> bool:
 def _axes_off(agreement: ImuAgreement | None) -> bool:
     """Whether the gyro agrees with the images only turned by more than IMU_DISAGREEMENT_DEG
     and AXES_SIGMAS times the fit's own uncertainty (about more than one axis: MIN_SPREAD)."""
-    return _conclusive(agreement) and agreement.spread >= MIN_SPREAD and (
-        agreement.mirrored or agreement.turned_deg > max(IMU_DISAGREEMENT_DEG, AXES_SIGMAS * agreement.turned_sigma_deg))
+    return (
+        _conclusive(agreement)
+        and agreement.spread >= MIN_SPREAD
+        and (
+            agreement.mirrored
+            or agreement.turned_deg > max(IMU_DISAGREEMENT_DEG, AXES_SIGMAS * agreement.turned_sigma_deg)
+        )
+    )
 
 
 def _clock_is_off(agreement: ImuAgreement | None) -> bool:
     """Whether the images clearly ask for the gyro read CLOCK_OFF_S or more off its clock.
     Not judged while the axes are off: a tracker predicting from a wrongly turned gyro leans
     its tracks towards it, which reads as a clock offset."""
-    return (_conclusive(agreement) and not _axes_off(agreement) and abs(agreement.clock_shift_s) >= CLOCK_OFF_S
-            and agreement.residual_rad <= CLOCK_GAIN * agreement.residual_unshifted_rad)
+    return (
+        _conclusive(agreement)
+        and not _axes_off(agreement)
+        and abs(agreement.clock_shift_s) >= CLOCK_OFF_S
+        and agreement.residual_rad <= CLOCK_GAIN * agreement.residual_unshifted_rad
+    )
 
 
 def _reclocks(setup: GyroSetup, agreement: ImuAgreement | None) -> bool:
     """Whether run.imu_time_offset_auto re-times the gyro for the backend: it reads the gyro,
     the images clearly ask for another clock, found within the search, and the images do not
     show the past (their lag would then pass for the gyro's clock; docs/imu.md)."""
-    return (setup.time_offset_auto and setup.backend_uses_imu and _clock_is_off(agreement)
-            and not agreement.shift_at_limit and not setup.images_lag)
+    return (
+        setup.time_offset_auto
+        and setup.backend_uses_imu
+        and _clock_is_off(agreement)
+        and not agreement.shift_at_limit
+        and not setup.images_lag
+    )
 
 
-def backend_gyro(setup: GyroSetup, imu: ImuSeries | None,
-                 agreement: ImuAgreement | None) -> tuple[ImuSeries | None, float | None]:
+def backend_gyro(
+    setup: GyroSetup, imu: ImuSeries | None, agreement: ImuAgreement | None
+) -> tuple[ImuSeries | None, float | None]:
     """The gyro the backend gets and the time offset [s] it is read with: as configured, or
     (_reclocks) on the clock the images ask for. With an online backend that clock was found
     over the whole sequence, so its causal estimates are no longer strictly causal."""
@@ -198,14 +239,20 @@ def _clock_warning(setup: GyroSetup, agreement: ImuAgreement) -> str:
     the IMU's clock, or, for a frontend that shows the past (a time surface), the images' lag."""
     shift, configured = agreement.clock_shift_s, setup.time_offset_s
     at_least = "at least " if agreement.shift_at_limit else ""
-    found = (f"the gyro agrees best with the tracked rotations read {at_least}{abs(shift) * 1e3:.1f} ms "
-             f"{'later' if shift > 0 else 'earlier'} than configured (median residual {np.degrees(agreement.residual_rad):.2f} "
-             f"against {np.degrees(agreement.residual_unshifted_rad):.2f} deg)")
+    found = (
+        f"the gyro agrees best with the tracked rotations read {at_least}{abs(shift) * 1e3:.1f} ms "
+        f"{'later' if shift > 0 else 'earlier'} than configured (median residual {np.degrees(agreement.residual_rad):.2f} "
+        f"against {np.degrees(agreement.residual_unshifted_rad):.2f} deg)"
+    )
     if setup.images_lag:
-        return (f"{found}: the {setup.frontend} images show the past, so this is taken for their lag and the "
-                f"IMU's clock is kept; to check the clock itself, run a frontend of the present (e.g. eas)")
-    return (f"{found}: the IMU's clock, or the time {_measured_from(setup)} show, is off by that; "
-            f"run.imu_time_offset_s = {at_least}{configured + shift:.4f} would match them, not {configured:.10g}")
+        return (
+            f"{found}: the {setup.frontend} images show the past, so this is taken for their lag and the "
+            f"IMU's clock is kept; to check the clock itself, run a frontend of the present (e.g. eas)"
+        )
+    return (
+        f"{found}: the IMU's clock, or the time {_measured_from(setup)} show, is off by that; "
+        f"run.imu_time_offset_s = {at_least}{configured + shift:.4f} would match them, not {configured:.10g}"
+    )
 
 
 def _axes_warning(setup: GyroSetup, agreement: ImuAgreement) -> str:
@@ -225,13 +272,17 @@ def _axes_warning(setup: GyroSetup, agreement: ImuAgreement) -> str:
         return "[" + ", ".join(f"{float(x) + 0.0:.10g}" if abs(x) > 1e-12 else "0" for x in v) + "]"
 
     if agreement.mirrored:
-        return (f"the gyro agrees with the tracked rotations only with its rates negated ({agreement.agreeing} of "
-                f"{agreement.pairs} frame pairs): its axes are mirrored (a left-handed convention), which no "
-                f"run.imu_rotvec_cam undoes; negate its rates in the file, then run.imu_rotvec_cam = "
-                f"{vector(matrix_to_rotvec(looks))} ({how})")
-    return (f"the gyro agrees with the tracked rotations only turned by {agreement.turned_deg:.1f} deg ({agreement.agreeing} of "
-            f"{agreement.pairs} frame pairs): the IMU looks mounted as run.imu_rotvec_cam = {vector(matrix_to_rotvec(looks))} "
-            f"({how}), not {vector(setup.rotvec_cam)}; check it and the camera calibration")
+        return (
+            f"the gyro agrees with the tracked rotations only with its rates negated ({agreement.agreeing} of "
+            f"{agreement.pairs} frame pairs): its axes are mirrored (a left-handed convention), which no "
+            f"run.imu_rotvec_cam undoes; negate its rates in the file, then run.imu_rotvec_cam = "
+            f"{vector(matrix_to_rotvec(looks))} ({how})"
+        )
+    return (
+        f"the gyro agrees with the tracked rotations only turned by {agreement.turned_deg:.1f} deg ({agreement.agreeing} of "
+        f"{agreement.pairs} frame pairs): the IMU looks mounted as run.imu_rotvec_cam = {vector(matrix_to_rotvec(looks))} "
+        f"({how}), not {vector(setup.rotvec_cam)}; check it and the camera calibration"
+    )
 
 
 def gyro_readers(setup: GyroSetup, verdict: GyroVerdict | None, retracked: bool) -> str | None:
@@ -242,8 +293,10 @@ def gyro_readers(setup: GyroSetup, verdict: GyroVerdict | None, retracked: bool)
         return None
     uses = []
     if setup.tracker_uses_imu and not retracked:
-        uses.append(f"by the {setup.tracker} tracker as {setup.tracker_imu_use} "
-                    f"(the rotations measured from {_measured_from(setup)})")
+        uses.append(
+            f"by the {setup.tracker} tracker as {setup.tracker_imu_use} "
+            f"(the rotations measured from {_measured_from(setup)})"
+        )
     if setup.backend_uses_imu:
         uses.append(f"by the {setup.backend} backend as {setup.backend_imu_use}")
     return " and ".join(uses) or None

@@ -15,9 +15,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from eas_vo.geometry.rotations import geodesic_angle, gyro_rotation, matrix_to_rotvec, rotvec_to_matrix
-from eas_vo.types import ImuSeries, RelativeRotation
 from eas_vo.imu.thresholds import MIN_TURN_RAD
-
+from eas_vo.types import ImuSeries, RelativeRotation
 
 #: A frame-to-frame rotation with this many inliers is a confident measurement of the images
 #: (the 2-point rotation model's RANSAC: 30 inliers leave well under one chance in a million
@@ -175,21 +174,27 @@ class GyroVerdict:
         were tracked again without it) or used without the images' check, joined with the first
         of the `findings` of the axes and clock checks (fit.imu_agreement), then the rest."""
         if retracked and not self.contradicts:
-            findings = [f"the frames were tracked again without the gyro's predictions (with them the images measured "
-                        f"too little to check it); {self.disagreeing} of {self.judged} confident frame pairs disagree with "
-                        "it"] + findings
+            findings = [
+                f"the frames were tracked again without the gyro's predictions (with them the images measured "
+                f"too little to check it); {self.disagreeing} of {self.judged} confident frame pairs disagree with "
+                "it"
+            ] + findings
         if self.contradicts:
             again = "; the frames were tracked again without it" if retracked else ""
             said = f"the gyro is not used: {self._why()}{again}"
             if self.scaled_alike:
                 return [f"{said}. {self._scale_hint()}"] + findings
             if not findings:
-                return [f"{said}. Check its units (rad/s), signs, axes (run.imu_rotvec_cam) and clock (run.imu_time_offset_s)"]
+                return [
+                    f"{said}. Check its units (rad/s), signs, axes (run.imu_rotvec_cam) and clock (run.imu_time_offset_s)"
+                ]
             return [f"{said}; {findings[0]}"] + findings[1:]
         findings = self._still_warnings() + self._short_warnings() + findings
         if not self.can_tell:
-            return [f"the gyro is used unchecked: the images measured {self.judged} turning frame pairs confidently, "
-                    f"at least {MIN_JUDGED_PAIRS} are needed to check it"] + findings
+            return [
+                f"the gyro is used unchecked: the images measured {self.judged} turning frame pairs confidently, "
+                f"at least {MIN_JUDGED_PAIRS} are needed to check it"
+            ] + findings
         return findings
 
     def _still_warnings(self) -> list[str]:
@@ -197,36 +202,50 @@ class GyroVerdict:
         if not self.still:
             return []
         frames, off = zip(*self.still)
-        return [f"the events' rotation turns while the gyro reads still, beyond the noise of both, over {len(frames)} "
-                f"of {self.compared} frame pairs (frames {frames[0]}-{frames[-1]}, up to {np.degrees(max(off)):.2f} deg "
-                "apart): the scene moves before a still camera (independent motion), or the gyro measures nothing; "
-                "those frames are weak"]
+        return [
+            f"the events' rotation turns while the gyro reads still, beyond the noise of both, over {len(frames)} "
+            f"of {self.compared} frame pairs (frames {frames[0]}-{frames[-1]}, up to {np.degrees(max(off)):.2f} deg "
+            "apart): the scene moves before a still camera (independent motion), or the gyro measures nothing; "
+            "those frames are weak"
+        ]
 
     def _short_warnings(self) -> list[str]:
         """One line when the fit is off over too short a span to refute the gyro (fit_off, not contradicts)."""
         if not self.fit_off or self.contradicts:
             return []
-        return [(f"the gyro is used, though {self._why()}: those pairs span {self.judged_span_s:.2f} s, too short to "
-                 f"tell a gyro's scale or bias from the images' own systematic errors (at least {MIN_FIT_SPAN_S:g} s "
-                 "are needed); a longer window checks it")]
+        return [
+            (
+                f"the gyro is used, though {self._why()}: those pairs span {self.judged_span_s:.2f} s, too short to "
+                f"tell a gyro's scale or bias from the images' own systematic errors (at least {MIN_FIT_SPAN_S:g} s "
+                "are needed); a longer window checks it"
+            )
+        ]
 
     def _scale_hint(self) -> str:
         """What one scale between the gyro and the images points at (scaled_alike)."""
-        return (f"Turning about the same axes ({self.judged - self.rescaled_disagreeing} of {self.judged} pairs agree once "
-                "scaled), the two are one scale apart: check the camera's focal length first (the images' rotations "
-                f"scale with 1 / focal_px; it looks {1 / self.scale:.2f} times the calibration's: a calibration of another "
-                "resolution or binning), then the gyro's full-scale setting; not its axes, signs or clock")
+        return (
+            f"Turning about the same axes ({self.judged - self.rescaled_disagreeing} of {self.judged} pairs agree once "
+            "scaled), the two are one scale apart: check the camera's focal length first (the images' rotations "
+            f"scale with 1 / focal_px; it looks {1 / self.scale:.2f} times the calibration's: a calibration of another "
+            "resolution or binning), then the gyro's full-scale setting; not its axes, signs or clock"
+        )
 
     def _why(self) -> str:
         if self.disagreeing > self.judged / 2 and not self.scaled_alike:
-            return (f"{self.disagreeing} of {self.judged} confidently measured frame pairs disagree with it "
-                    f"(median {self.median_off_deg:.2f} deg apart)")
+            return (
+                f"{self.disagreeing} of {self.judged} confidently measured frame pairs disagree with it "
+                f"(median {self.median_off_deg:.2f} deg apart)"
+            )
         if self.scale_off:
-            return (f"it turns {self.scale:.2f} times as far as the images over {self.judged} confidently measured "
-                    f"frame pairs (+-{self.scale_se:.2f}; a MEMS gyro is within a few percent)")
-        return (f"it reads {self.bias_rad_s:.3f} rad/s (+-{self.bias_se_rad_s:.3f}) more than the images turn, "
-                f"constantly, over {self.judged} confidently measured frame pairs: a bias beyond the pose graph's "
-                "prior (calibrate it, or set backend.gyro_bias_sigma)")
+            return (
+                f"it turns {self.scale:.2f} times as far as the images over {self.judged} confidently measured "
+                f"frame pairs (+-{self.scale_se:.2f}; a MEMS gyro is within a few percent)"
+            )
+        return (
+            f"it reads {self.bias_rad_s:.3f} rad/s (+-{self.bias_se_rad_s:.3f}) more than the images turn, "
+            f"constantly, over {self.judged} confidently measured frame pairs: a bias beyond the pose graph's "
+            "prior (calibrate it, or set backend.gyro_bias_sigma)"
+        )
 
 
 def confident_steps(t: np.ndarray, edges, imu: ImuSeries) -> tuple[list, np.ndarray, np.ndarray]:
@@ -259,8 +278,15 @@ def judge_gyro(t: np.ndarray, edges, imu: ImuSeries) -> GyroVerdict:
     rescaled_disagreeing = int(disagreement(R_gyro[judged], rotvec_to_matrix(v * fitted[0]))[1].sum())
     pairs = [e for e, m in zip(steps, judged) if m]
     span = float(t[pairs[-1].j] - t[pairs[0].i])
-    return GyroVerdict(int(judged.sum()), int(disagree.sum()), float(np.degrees(np.median(off[judged]))), *fitted,
-                       span, rescaled_disagreeing, **noted)
+    return GyroVerdict(
+        int(judged.sum()),
+        int(disagree.sum()),
+        float(np.degrees(np.median(off[judged]))),
+        *fitted,
+        span,
+        rescaled_disagreeing,
+        **noted,
+    )
 
 
 def still_gyro_pairs(t: np.ndarray, edges, imu: ImuSeries) -> tuple[int, list[tuple[RelativeRotation, float]]]:

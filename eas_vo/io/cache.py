@@ -63,12 +63,19 @@ def cache_usage() -> dict[str, CachePart]:
     usage = {}
     for folder in sorted(p for p in root.iterdir() if p.is_dir()) if root.is_dir() else []:
         entries = _visible(folder)
-        files = [f for e in entries for f in ([e] if not e.is_dir() or e.is_symlink() else e.rglob("*"))
-                 if f.is_file() and not f.is_symlink() and not f.name.startswith(".")]
+        files = [
+            f
+            for e in entries
+            for f in ([e] if not e.is_dir() or e.is_symlink() else e.rglob("*"))
+            if f.is_file() and not f.is_symlink() and not f.name.startswith(".")
+        ]
         about = folder / CACHE_ABOUT
-        usage[folder.name] = CachePart(len(entries), sum(f.lstat().st_size for f in files),
-                                       about.read_text(errors="replace").strip() if about.is_file() else "",
-                                       folder.is_symlink())
+        usage[folder.name] = CachePart(
+            len(entries),
+            sum(f.lstat().st_size for f in files),
+            about.read_text(errors="replace").strip() if about.is_file() else "",
+            folder.is_symlink(),
+        )
     return usage
 
 
@@ -83,8 +90,10 @@ def clear_cache(names: list[str]) -> dict[str, int]:
     linked = [name for name in names if usage[name].link]
     if linked:
         link = cache_dir() / linked[0]
-        raise EasVoError(f"cache {linked[0]!r}: {link} is a link to {link.resolve()}, which eas-vo does not empty; "
-                         "remove the link, or empty that folder yourself")
+        raise EasVoError(
+            f"cache {linked[0]!r}: {link} is a link to {link.resolve()}, which eas-vo does not empty; "
+            "remove the link, or empty that folder yourself"
+        )
     for name in dict.fromkeys(names):
         for entry in _visible(cache_dir() / name):
             if entry.is_dir() and not entry.is_symlink():

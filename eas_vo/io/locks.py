@@ -24,8 +24,10 @@ def acquire_lock(lock: Path, out: Path) -> None:
                 return
             except FileExistsError:
                 if _lock_is_held(lock):
-                    raise EasVoError(f"{out} is being written by another eas-vo process (pid {_lock_owner(lock)[0] or '?'}); "
-                                     "wait for it or choose another --out") from None
+                    raise EasVoError(
+                        f"{out} is being written by another eas-vo process (pid {_lock_owner(lock)[0] or '?'}); "
+                        "wait for it or choose another --out"
+                    ) from None
                 lock.unlink(missing_ok=True)  # its writer is gone: a crash left it, and maybe a staging folder
                 _remove_leftovers(out)
         raise EasVoError(f"{out}: could not take its lock {lock}")
@@ -99,7 +101,7 @@ def _proc_stat(pid: int) -> list[str] | None:
     once the process is gone."""
     try:
         stat = Path(f"/proc/{pid}/stat").read_text()
-        return stat[stat.rindex(")") + 2:].split()
+        return stat[stat.rindex(")") + 2 :].split()
     except (OSError, ValueError):
         return None
 

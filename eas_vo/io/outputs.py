@@ -43,8 +43,10 @@ def check_writable_folder(out: str | Path) -> Path:
 
 
 #: How the files eas-vo writes begin, by kind: an existing --out is replaced only if it is one.
-FILE_SIGNATURES = {"PNG image": re.compile(rb"\x89PNG\r\n\x1a\n"),
-                   "DBoW2 vocabulary": re.compile(rb"\d+ \d+ \d+ \d+\s")}
+FILE_SIGNATURES = {
+    "PNG image": re.compile(rb"\x89PNG\r\n\x1a\n"),
+    "DBoW2 vocabulary": re.compile(rb"\d+ \d+ \d+ \d+\s"),
+}
 
 
 def check_output_file(out: str | Path, replace: bool) -> Path:
@@ -68,8 +70,10 @@ def refuse_foreign_file(out: Path, kind: str) -> None:
     with open(out, "rb") as f:
         start = f.read(64)
     if not FILE_SIGNATURES[kind].match(start):
-        raise EasVoError(f"--out {out} exists and is no {kind}, so not a file eas-vo wrote: --overwrite replaces only "
-                         "those; choose another name")
+        raise EasVoError(
+            f"--out {out} exists and is no {kind}, so not a file eas-vo wrote: --overwrite replaces only "
+            "those; choose another name"
+        )
 
 
 def _check_writable(out: Path) -> None:
@@ -102,8 +106,9 @@ def refuse_inputs(out: Path, inputs: list[tuple[str, str | Path | None]], out_is
             named = f"{what} {given}" + (f" (its {path.relative_to(top)})" if path != top else "")
             if out_is_file and (out == target or out.is_relative_to(target) or identity(path) in out_ids):
                 raise EasVoError(f"--out {out} is {named}, or inside it; writing there would replace it")
-            if not out_is_file and (target.is_relative_to(out)
-                                    or out_ids and any(identity(p) in out_ids for p in [target, *target.parents])):
+            if not out_is_file and (
+                target.is_relative_to(out) or out_ids and any(identity(p) in out_ids for p in [target, *target.parents])
+            ):
                 raise EasVoError(f"--out {out} holds {named}; writing there would replace it")
 
 
@@ -152,8 +157,10 @@ def check_output_folder(out: str | Path, replace: bool) -> Path:
             raise EasVoError(f"--out {out} is not empty; choose another folder or add --overwrite")
         foreign = _foreign_file(out)
         if foreign is not None:
-            raise EasVoError(f"--out {out} holds {foreign}, which eas-vo did not write; it replaces only "
-                             "folders of its own outputs: move that away or choose another folder")
+            raise EasVoError(
+                f"--out {out} holds {foreign}, which eas-vo did not write; it replaces only "
+                "folders of its own outputs: move that away or choose another folder"
+            )
     return out
 
 
@@ -184,8 +191,10 @@ def check_grid_folder(out: str | Path) -> Path:
     out = check_writable_folder(out)
     if out.is_dir() and any(out.iterdir()) and not _is_grid_folder(out):
         held = next(iter(_files_in(out)), None) or next(out.iterdir()).name
-        raise EasVoError(f"--out {out} holds {held} and is not an earlier compare's or reproduce's output, which "
-                         "they resume; they write only into a new or empty folder: choose another one")
+        raise EasVoError(
+            f"--out {out} holds {held} and is not an earlier compare's or reproduce's output, which "
+            "they resume; they write only into a new or empty folder: choose another one"
+        )
     return out
 
 

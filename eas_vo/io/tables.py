@@ -12,7 +12,6 @@ import numpy as np
 
 from eas_vo.errors import DataError, DataWarnings
 
-
 #: The UTF-8 byte-order mark some editors (Windows Notepad, for one) write at a text file's start.
 UTF8_BOM = b"\xef\xbb\xbf"
 
@@ -103,8 +102,9 @@ def _row_number(row: int) -> int:
     return row + 1
 
 
-def check_increasing(where: str, t: np.ndarray, line_of=_row_number, warnings: DataWarnings | None = None,
-                     row_word: str = "line") -> np.ndarray:
+def check_increasing(
+    where: str, t: np.ndarray, line_of=_row_number, warnings: DataWarnings | None = None, row_word: str = "line"
+) -> np.ndarray:
     """The indices of the rows to keep of a series whose time [s] must increase; `line_of(row)`
     turns a row index into what messages name (a file line; default: the row from 1), and
     `row_word` says what that is in a warning ("line", "message").
@@ -120,20 +120,26 @@ def check_increasing(where: str, t: np.ndarray, line_of=_row_number, warnings: D
     repeated = np.flatnonzero(step == 0) + 1
     if len(repeated) and warnings is None:
         i = int(repeated[0])
-        raise DataError(where, f"timestamp {t[i]:.9f} repeats the previous row's ({len(repeated)} such row(s); "
-                        "--lenient drops them)", line_of(i))
+        raise DataError(
+            where,
+            f"timestamp {t[i]:.9f} repeats the previous row's ({len(repeated)} such row(s); --lenient drops them)",
+            line_of(i),
+        )
     if len(repeated):
         warnings.add(where, "repeated timestamp", f"{row_word} {line_of(int(repeated[0]))}", len(repeated))
     return np.flatnonzero(np.concatenate([[True], step > 0])) if len(t) else np.arange(0)
 
 
-def timed_table(data: bytes, where: str, ncols: int, what: str,
-                warnings: DataWarnings | None = None) -> tuple[np.ndarray, Callable[[int], int]]:
+def timed_table(
+    data: bytes, where: str, ncols: int, what: str, warnings: DataWarnings | None = None
+) -> tuple[np.ndarray, Callable[[int], int]]:
     """The rows of a whitespace table (`what` describes one; `#` comments) whose first column, a
     time [s], increases (with `warnings`, --lenient: rows repeating a time dropped, check_increasing),
     and row index -> file line; at least 2 rows (to interpolate between)."""
     table = parse_table(data, where, ncols, what)
     if len(table) < 2:
-        raise DataError(where, f"holds {len(table)} row(s) of '{what}'; at least 2 are needed to interpolate (or remove the file)")
+        raise DataError(
+            where, f"holds {len(table)} row(s) of '{what}'; at least 2 are needed to interpolate (or remove the file)"
+        )
     keep = check_increasing(where, table[:, 0], functools.partial(data_line, data), warnings)
     return table[keep], lambda row: data_line(data, int(keep[row]))

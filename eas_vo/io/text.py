@@ -7,8 +7,6 @@ import re
 from pathlib import Path
 
 
-
-
 def markdown_cell(text: str) -> str:
     """`text` as one cell of a Markdown table: each run of white space or control characters
     (a newline too) made one space, and `|` escaped, so the cell can end neither its row nor itself."""

@@ -39,8 +39,15 @@ def pose_series(where: str, table: np.ndarray, line_of=_row_number) -> PoseSerie
     return PoseSeries(t=table[:, 0], p_w_c=table[:, 1:4], q_w_c=q)
 
 
-def parse_tum(data: bytes, where: str, time_offset_s: float = 0.0, origin_ns: int = 0,
-              warnings: DataWarnings | None = None, min_poses: int = 1, ordered: bool = True) -> PoseSeries:
+def parse_tum(
+    data: bytes,
+    where: str,
+    time_offset_s: float = 0.0,
+    origin_ns: int = 0,
+    warnings: DataWarnings | None = None,
+    min_poses: int = 1,
+    ordered: bool = True,
+) -> PoseSeries:
     """The poses of TUM text `data` (`where` names it in messages), `time_offset_s` [s] added to
     each time (the file's clock -> the recording's), read after the recording's clock origin
     `origin_ns` [ns] (Dataset.clock_origin_ns); at least `min_poses` of them (ground truth
@@ -48,9 +55,18 @@ def parse_tum(data: bytes, where: str, time_offset_s: float = 0.0, origin_ns: in
     trajectories: one row a frame, frames at the same time included."""
     table = parse_table(data, where, 8, TUM_ROW)
     if len(table) < min_poses:
-        raise DataError(where, "holds no pose" if min_poses == 1 else f"holds {len(table)} row(s) of '{TUM_ROW}'; at least "
-                        f"{min_poses} are needed to interpolate (or remove the file)")
-    keep = check_increasing(where, table[:, 0], lambda row: data_line(data, row), warnings) if ordered else np.arange(len(table))
+        raise DataError(
+            where,
+            "holds no pose"
+            if min_poses == 1
+            else f"holds {len(table)} row(s) of '{TUM_ROW}'; at least "
+            f"{min_poses} are needed to interpolate (or remove the file)",
+        )
+    keep = (
+        check_increasing(where, table[:, 0], lambda row: data_line(data, row), warnings)
+        if ordered
+        else np.arange(len(table))
+    )
     poses = pose_series(where, table[keep], lambda row: data_line(data, int(keep[row])))
     if time_offset_s == 0.0 and origin_ns == 0:
         return poses
@@ -58,9 +74,15 @@ def parse_tum(data: bytes, where: str, time_offset_s: float = 0.0, origin_ns: in
     return PoseSeries(poses.t + (time_offset_s - origin_ns / 1e9), poses.p_w_c, poses.q_w_c)
 
 
-def read_tum(path: str | Path, time_offset_s: float = 0.0, origin_ns: int = 0,
-             warnings: DataWarnings | None = None, min_poses: int = 1, ordered: bool = True,
-             what: str = "trajectory") -> PoseSeries:
+def read_tum(
+    path: str | Path,
+    time_offset_s: float = 0.0,
+    origin_ns: int = 0,
+    warnings: DataWarnings | None = None,
+    min_poses: int = 1,
+    ordered: bool = True,
+    what: str = "trajectory",
+) -> PoseSeries:
     """The poses of the TUM file `path` (see parse_tum); `what` it holds, for the message when
     it cannot be read."""
     try:

@@ -5,7 +5,6 @@ from __future__ import annotations
 import functools
 from pathlib import Path
 
-
 from eas_vo import registry
 from eas_vo.config import ResolvedConfig
 
@@ -19,8 +18,14 @@ def run_identity(config: ResolvedConfig) -> dict:
 
     plugin, location = registry.resolve_dataset(config.run.dataset)
     path = Path(location).expanduser()
-    plugins = [plugin] + [registry.get(kind, name) for kind, name in (
-        ("frontends", config.run.frontend), ("trackers", config.run.tracker), ("backends", config.run.backend))]
+    plugins = [plugin] + [
+        registry.get(kind, name)
+        for kind, name in (
+            ("frontends", config.run.frontend),
+            ("trackers", config.run.tracker),
+            ("backends", config.run.backend),
+        )
+    ]
     return {
         "eas_vo": __version__,
         "code": code_identity(tuple(sorted({cls.__module__.split(".")[0] for cls in plugins} | {"eas_vo"}))),
@@ -42,8 +47,11 @@ def code_identity(packages: tuple[str, ...]) -> str:
     files = {}  # each file by its dotted name in its package (the same whatever the install's layout)
     for name in packages:
         module = importlib.import_module(name)
-        for sub in [module] + [importlib.import_module(f"{name}.{part}") for part in (
-                "frontends", "trackers", "backends", "datasets", "configs") if name == "eas_vo"]:
+        for sub in [module] + [
+            importlib.import_module(f"{name}.{part}")
+            for part in ("frontends", "trackers", "backends", "datasets", "configs")
+            if name == "eas_vo"
+        ]:
             for folder in getattr(sub, "__path__", []):
                 for path in Path(folder).rglob("*"):
                     if path.suffix in (".py", ".toml") and path.is_file():
@@ -68,6 +76,8 @@ def dataset_identity(plugin: type, location: str):
         return list(file_identity(path))
     if path.is_dir():
         entries = sorted(p for p in path.iterdir() if not p.name.startswith("."))
-        return {p.name: list(file_identity(p)) if p.is_file() else [p.stat().st_mtime_ns, p.stat().st_ctime_ns]
-                for p in entries}
+        return {
+            p.name: list(file_identity(p)) if p.is_file() else [p.stat().st_mtime_ns, p.stat().st_ctime_ns]
+            for p in entries
+        }
     return plugin.catalogue().get(location)

@@ -10,8 +10,8 @@ import numpy as np
 
 from eas_vo.evaluation.ape import RotationErrors
 from eas_vo.io.atomic import atomic_path, json_text, write_text_atomic
-from eas_vo.types import FrameRecord, RelativeRotation
 from eas_vo.io.tum import format_tum
+from eas_vo.types import FrameRecord, RelativeRotation
 
 
 @dataclass
@@ -42,10 +42,14 @@ def write_outputs(out: Path, result: RunResult, label: str, origin: str = "") ->
         write_text_atomic(out / "trajectory_causal.tum", format_tum(result.t, zeros, result.causal_R_w_c, origin_ns))
     errors = result.errors
     if errors is not None and errors.valid.any():
-        write_text_atomic(out / "groundtruth.tum", format_tum(result.t[errors.valid], errors.p_w_c_gt, errors.R_w_c_gt, origin_ns))
+        write_text_atomic(
+            out / "groundtruth.tum", format_tum(result.t[errors.valid], errors.p_w_c_gt, errors.R_w_c_gt, origin_ns)
+        )
     write_text_atomic(out / "metrics.json", json_text(result.metrics))
     from eas_vo.plots import plot_rotation
 
     with atomic_path(out / "rotation.png") as tmp:
         m = result.metrics
-        plot_rotation(tmp, result, title=f"{m['frontend']} + {m['tracker']} + {m['backend']} ({origin or 'defaults'}): {label}")
+        plot_rotation(
+            tmp, result, title=f"{m['frontend']} + {m['tracker']} + {m['backend']} ({origin or 'defaults'}): {label}"
+        )

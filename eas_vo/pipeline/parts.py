@@ -48,7 +48,9 @@ def open_pipeline(config: ResolvedConfig) -> Pipeline:
     if first_frame is not None:  # a frame of another size than the camera's: said before any work
         check_frame(first_frame, dataset, 0, float(dataset.frame_times()[0]))
     if not frontend_cls.makes_images and registry.get("trackers", rc.tracker).reads_images:
-        raise EasVoError(f"frontend {rc.frontend!r} makes no images and tracker {rc.tracker!r} reads them; choose an image frontend")
+        raise EasVoError(
+            f"frontend {rc.frontend!r} makes no images and tracker {rc.tracker!r} reads them; choose an image frontend"
+        )
     n_window = len(dataset.window(rc.start_s, rc.duration_s))
     if n_window < 2:
         raise EasVoError(
@@ -56,7 +58,11 @@ def open_pipeline(config: ResolvedConfig) -> Pipeline:
             f"holds {n_window} sample(s); at least 2 are needed"
         )
     _check_ground_truth_overlap(dataset, config.run, n_window)
-    imu = None if dataset.imu is None else dataset.imu.in_camera_frame(rotvec_to_matrix(rc.imu_rotvec_cam), rc.imu_time_offset_s)
+    imu = (
+        None
+        if dataset.imu is None
+        else dataset.imu.in_camera_frame(rotvec_to_matrix(rc.imu_rotvec_cam), rc.imu_time_offset_s)
+    )
     parts = Pipeline(
         dataset=dataset,
         imu=imu,
@@ -66,8 +72,10 @@ def open_pipeline(config: ResolvedConfig) -> Pipeline:
     )
     for kind, plugin in (("tracker", parts.tracker), ("backend", parts.backend)):
         if plugin.needs_imu and dataset.imu is None:
-            raise EasVoError(f"{kind} {plugin.name!r} as configured needs an IMU and {dataset.label} has none "
-                             f"(imu.txt, or the bag's IMU topic); change the {kind} settings or the dataset")
+            raise EasVoError(
+                f"{kind} {plugin.name!r} as configured needs an IMU and {dataset.label} has none "
+                f"(imu.txt, or the bag's IMU topic); change the {kind} settings or the dataset"
+            )
     if imu is not None and not (parts.tracker.uses_imu or parts.backend.uses_imu):
         parts.imu = None  # nothing reads it: neither checked nor judged
     if parts.imu is not None:
@@ -86,19 +94,28 @@ def _check_ground_truth_overlap(dataset: Dataset, rc, n_window: int) -> None:
     t = dataset.frame_times()[dataset.window(rc.start_s, rc.duration_s)] + rc.time_offset_s
     if scorable(gt.t, t).any():
         return
-    where = f"{time_source(dataset, 'ground-truth')}: the ground truth ({len(gt.t)} poses, {gt.t[0]:.3f}-{gt.t[-1]:.3f} s)"
+    where = (
+        f"{time_source(dataset, 'ground-truth')}: the ground truth ({len(gt.t)} poses, {gt.t[0]:.3f}-{gt.t[-1]:.3f} s)"
+    )
     if np.any((t >= gt.t[0]) & (t <= gt.t[-1])):
         widest = float(np.max(np.diff(gt.t)))
-        raise EasVoError(f"{where} scores none of the {n_window} frame times of the window ({t[0]:.3f}-{t[-1]:.3f} s): "
-                         f"its poses lie up to {widest:.3g} s apart, and it is interpolated across gaps of at most "
-                         f"{ground_truth_gap_limit_s(gt.t, t):.3g} s ({MAX_GAP_READINGS} of its median sample intervals, "
-                         f"and {MAX_GAP_FRAMES} of the frames' at most)")
+        raise EasVoError(
+            f"{where} scores none of the {n_window} frame times of the window ({t[0]:.3f}-{t[-1]:.3f} s): "
+            f"its poses lie up to {widest:.3g} s apart, and it is interpolated across gaps of at most "
+            f"{ground_truth_gap_limit_s(gt.t, t):.3g} s ({MAX_GAP_READINGS} of its median sample intervals, "
+            f"and {MAX_GAP_FRAMES} of the frames' at most)"
+        )
     gap_s = float(dataset.frame_times()[0] - gt.t[0])
-    hint = ("check --time-offset, --start and --duration" if abs(gap_s) <= TIME_OFFSET_LIMIT_S else
-            f"its clock is not the recording's: put it there with --set dataset.ground_truth_time_offset_s=S "
-            f"(S = {gap_s:.6f} would start both together)")
-    raise EasVoError(f"{where} covers none of the {n_window} frame times of the window ({t[0]:.3f}-{t[-1]:.3f} s with "
-                     f"the time offset {rc.time_offset_s:+g} s); {hint}")
+    hint = (
+        "check --time-offset, --start and --duration"
+        if abs(gap_s) <= TIME_OFFSET_LIMIT_S
+        else f"its clock is not the recording's: put it there with --set dataset.ground_truth_time_offset_s=S "
+        f"(S = {gap_s:.6f} would start both together)"
+    )
+    raise EasVoError(
+        f"{where} covers none of the {n_window} frame times of the window ({t[0]:.3f}-{t[-1]:.3f} s with "
+        f"the time offset {rc.time_offset_s:+g} s); {hint}"
+    )
 
 
 def check_frame(frame, dataset: Dataset, index: int, t: float) -> None:

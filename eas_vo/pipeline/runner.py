@@ -12,21 +12,22 @@ import numpy as np
 
 from eas_vo import registry
 from eas_vo.config import ResolvedConfig
-from eas_vo.errors import Interrupted
+from eas_vo.errors import EasVoError, Interrupted
+from eas_vo.imu.policy import GyroDecision, GyroSetup, assess
 from eas_vo.io.atomic import atomic_path, json_text, write_text_atomic
 from eas_vo.io.outputs import output_folder
-from eas_vo.types import RelativeRotation
-from eas_vo.imu.policy import GyroDecision, GyroSetup, assess
 from eas_vo.pipeline.identity import run_identity
 from eas_vo.pipeline.outputs import RunResult, write_outputs
 from eas_vo.pipeline.parts import Pipeline, open_pipeline
 from eas_vo.pipeline.summary import evaluate, summarise
 from eas_vo.pipeline.tracking import FrameLog, Tracked, track
-from eas_vo.errors import EasVoError
 from eas_vo.plugins import BackendResult
+from eas_vo.types import RelativeRotation
 
 
-def run(config: ResolvedConfig, out_dir: str | Path | None = None, progress: bool = False, replace: bool = False) -> RunResult:
+def run(
+    config: ResolvedConfig, out_dir: str | Path | None = None, progress: bool = False, replace: bool = False
+) -> RunResult:
     """Run the configured pipeline; with `out_dir`, write every output file there (a non-empty
     `out_dir` only if `replace` and it is an eas-vo output: io.output_folder).
 
@@ -43,8 +44,15 @@ def run(config: ResolvedConfig, out_dir: str | Path | None = None, progress: boo
         return _run_into(parts, config, staging, progress, started, load_s, Path(out_dir))
 
 
-def _run_into(parts: Pipeline, config: ResolvedConfig, out: Path | None, progress: bool, started: float, load_s: float,
-              final: Path | None = None) -> RunResult:
+def _run_into(
+    parts: Pipeline,
+    config: ResolvedConfig,
+    out: Path | None,
+    progress: bool,
+    started: float,
+    load_s: float,
+    final: Path | None = None,
+) -> RunResult:
     """Track, assess the gyro, solve, evaluate and (with `out`) write there; `final` is where it will end up."""
     if out is not None:
         write_text_atomic(out / "config.toml", config.to_toml())
@@ -54,16 +62,27 @@ def _run_into(parts: Pipeline, config: ResolvedConfig, out: Path | None, progres
         t = tracked.times
         solved = parts.backend.solve(len(t), tracked.edges, times=t, imu=gyro.backend_imu)
         if not isinstance(solved, BackendResult):
-            raise EasVoError(f"backend {config.run.backend!r} returned {type(solved).__name__}: Backend.solve returns "
-                             "an eas_vo.plugins.BackendResult (docs/plugins.md)")
+            raise EasVoError(
+                f"backend {config.run.backend!r} returned {type(solved).__name__}: Backend.solve returns "
+                "an eas_vo.plugins.BackendResult (docs/plugins.md)"
+            )
         R_w_c = solved.R_w_c
         evaluation = evaluate(config, parts.dataset, t, R_w_c, tracked.edges)
         metrics = summarise(config, parts.dataset, tracked, evaluation, time.perf_counter() - started, load_s, gyro)
-        metrics["data_warnings"] = (parts.imu_warnings + metrics["data_warnings"] + list(parts.tracker.tracker_warnings)
-                                  + list(solved.warnings))
+        metrics["data_warnings"] = (
+            parts.imu_warnings + metrics["data_warnings"] + list(parts.tracker.tracker_warnings) + list(solved.warnings)
+        )
         metrics["gyro_use"] = gyro.readers
-        result = RunResult(t, R_w_c, tracked.records, tracked.edges, evaluation.errors, metrics, solved.causal_R_w_c,
-                           parts.dataset.clock_origin_ns)
+        result = RunResult(
+            t,
+            R_w_c,
+            tracked.records,
+            tracked.edges,
+            evaluation.errors,
+            metrics,
+            solved.causal_R_w_c,
+            parts.dataset.clock_origin_ns,
+        )
         if out is not None:
             write_outputs(out, result, parts.dataset.label, config.origin)
     except KeyboardInterrupt as exc:  # before there was anything to evaluate, or while writing
@@ -78,15 +97,25 @@ def _run_into(parts: Pipeline, config: ResolvedConfig, out: Path | None, progres
 def gyro_setup(config: ResolvedConfig, parts: Pipeline) -> GyroSetup:
     """What the gyro's policy (imu.policy) needs to know of this run."""
     rc = config.run
-    return GyroSetup(rc.imu_rotvec_cam, rc.imu_time_offset_s, rc.imu_time_offset_auto, rc.frontend, rc.tracker, rc.backend,
-                     images_lag=registry.get("frontends", rc.frontend).shows_the_past,
-                     tracker_reads_images=registry.get("trackers", rc.tracker).reads_images,
-                     tracker_uses_imu=parts.tracker.uses_imu, tracker_imu_use=parts.tracker.imu_use,
-                     backend_uses_imu=parts.backend.uses_imu, backend_imu_use=parts.backend.imu_use)
+    return GyroSetup(
+        rc.imu_rotvec_cam,
+        rc.imu_time_offset_s,
+        rc.imu_time_offset_auto,
+        rc.frontend,
+        rc.tracker,
+        rc.backend,
+        images_lag=registry.get("frontends", rc.frontend).shows_the_past,
+        tracker_reads_images=registry.get("trackers", rc.tracker).reads_images,
+        tracker_uses_imu=parts.tracker.uses_imu,
+        tracker_imu_use=parts.tracker.imu_use,
+        backend_uses_imu=parts.backend.uses_imu,
+        backend_imu_use=parts.backend.imu_use,
+    )
 
 
-def _track_and_assess_gyro(parts: Pipeline, config: ResolvedConfig, out: Path | None,
-                           progress: bool) -> tuple[Tracked, GyroDecision]:
+def _track_and_assess_gyro(
+    parts: Pipeline, config: ResolvedConfig, out: Path | None, progress: bool
+) -> tuple[Tracked, GyroDecision]:
     """Track (frames.csv in `out`) and ask the gyro's policy once (imu.policy.assess), which may
     have the frames tracked again without the gyro (frames_without_gyro.csv, frames.csv if kept);
     frames where the scene moved while the gyro read still become weak (frames.csv rewritten)."""
@@ -99,8 +128,13 @@ def _track_and_assess_gyro(parts: Pipeline, config: ResolvedConfig, out: Path | 
         without_gyro.append(track(_without_imu(parts, config), config, second_csv, progress))
         return without_gyro[0].times, without_gyro[0].edges
 
-    gyro = assess(parts.imu, tracked.times, tracked.edges, gyro_setup(config, parts),
-                  retrack if tracked.interrupted is None else None)
+    gyro = assess(
+        parts.imu,
+        tracked.times,
+        tracked.edges,
+        gyro_setup(config, parts),
+        retrack if tracked.interrupted is None else None,
+    )
     if without_gyro and second_csv:
         if gyro.retrack:
             second_csv.replace(frames_csv)

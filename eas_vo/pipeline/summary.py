@@ -13,9 +13,9 @@ from eas_vo.config import ResolvedConfig
 from eas_vo.evaluation.ape import RotationErrors, rotation_errors
 from eas_vo.evaluation.motion import motion_errors
 from eas_vo.evaluation.time_offset import OFFSET_SEARCH_S, estimate_time_offset
-from eas_vo.plugins import Dataset
 from eas_vo.imu.policy import GyroDecision
 from eas_vo.pipeline.tracking import Tracked
+from eas_vo.plugins import Dataset
 
 
 @dataclass(frozen=True)
@@ -40,8 +40,15 @@ def evaluate(config: ResolvedConfig, dataset: Dataset, t: np.ndarray, R_w_c: np.
     return Evaluation(rotation_errors(t, R_w_c, dataset.ground_truth, offset), offset, estimated is not None)
 
 
-def summarise(config: ResolvedConfig, dataset: Dataset, tracked: Tracked, evaluation: Evaluation,
-              elapsed: float, load_s: float, gyro: GyroDecision) -> dict:
+def summarise(
+    config: ResolvedConfig,
+    dataset: Dataset,
+    tracked: Tracked,
+    evaluation: Evaluation,
+    elapsed: float,
+    load_s: float,
+    gyro: GyroDecision,
+) -> dict:
     """metrics.json: accuracy (`evaluation`), tracking and speed figures, and what was decided
     about the gyro; speed is measured over the processing (`elapsed` [s] less the `load_s` [s]
     of opening the dataset)."""
@@ -60,8 +67,10 @@ def summarise(config: ResolvedConfig, dataset: Dataset, tracked: Tracked, evalua
         "nc_mean": float(np.mean([r.nc for r in pairs])),
         "inliers_mean": float(np.mean([r.inliers for r in pairs])),
         "status_counts": dict(Counter(r.status for r in records)),
-        "status_reasons": {status: dict(Counter(r.reason.split(" (")[0] for r in records if r.status == status and r.reason))
-                           for status in ("weak", "lost")},
+        "status_reasons": {
+            status: dict(Counter(r.reason.split(" (")[0] for r in records if r.status == status and r.reason))
+            for status in ("weak", "lost")
+        },
         "redetections": int(sum(r.redetected for r in pairs)),
         "edge_count": len(tracked.edges),
         "loop_count": int(sum(e.loop for e in tracked.edges)) if tracked.closes_loops else None,
@@ -81,25 +90,31 @@ def summarise(config: ResolvedConfig, dataset: Dataset, tracked: Tracked, evalua
         metrics["imu_time_offset_s"] = gyro.imu_time_offset_s
         metrics["imu_time_offset_estimated"] = gyro.reclocked
     metrics["gyro"] = gyro.use
-    metrics["data_warnings"] = (dataset.data_warnings() + _events_end_early(config, dataset, tracked.times)
-                                + ([] if errors is None else errors.coverage_warning(tracked.times))
-                                + _offset_not_estimated(config, dataset, tracked, offset, offset_estimated)
-                                + list(gyro.warnings))
+    metrics["data_warnings"] = (
+        dataset.data_warnings()
+        + _events_end_early(config, dataset, tracked.times)
+        + ([] if errors is None else errors.coverage_warning(tracked.times))
+        + _offset_not_estimated(config, dataset, tracked, offset, offset_estimated)
+        + list(gyro.warnings)
+    )
     metrics["partial"] = tracked.interrupted is not None
     if tracked.orb is not None:
         metrics.update(tracked.orb.summary())
     return metrics
 
 
-def _offset_not_estimated(config: ResolvedConfig, dataset: Dataset, tracked: Tracked, offset: float,
-                          estimated: bool) -> list[str]:
+def _offset_not_estimated(
+    config: ResolvedConfig, dataset: Dataset, tracked: Tracked, offset: float, estimated: bool
+) -> list[str]:
     """A warning when run.time_offset_auto could not estimate the offset (evaluation.estimate_time_offset)."""
     if not config.run.time_offset_auto or dataset.ground_truth is None or estimated:
         return []
-    return [f"the time offset could not be estimated from the {len(tracked.edges)} measured rotations (fewer than 5; "
-            f"the ground truth spanning fewer than half of them at every offset within {OFFSET_SEARCH_S * 1e3:g} ms; or no "
-            "clear best offset within it: a still camera, identical frames, or a true offset beyond the search): "
-            f"the errors are measured with {offset:+g} s"]
+    return [
+        f"the time offset could not be estimated from the {len(tracked.edges)} measured rotations (fewer than 5; "
+        f"the ground truth spanning fewer than half of them at every offset within {OFFSET_SEARCH_S * 1e3:g} ms; or no "
+        "clear best offset within it: a still camera, identical frames, or a true offset beyond the search): "
+        f"the errors are measured with {offset:+g} s"
+    ]
 
 
 def _events_end_early(config: ResolvedConfig, dataset: Dataset, times: np.ndarray) -> list[str]:
@@ -119,5 +134,7 @@ def _events_end_early(config: ResolvedConfig, dataset: Dataset, times: np.ndarra
     late = int(np.sum(times > last))
     if late == 0:
         return []
-    return [f"{dataset.label}: the events end at {last:.3f} s, before {late} of the {len(times)} frames: "
-            f"{what.replace('the ', 'their ', 1)} hold no events"]
+    return [
+        f"{dataset.label}: the events end at {last:.3f} s, before {late} of the {len(times)} frames: "
+        f"{what.replace('the ', 'their ', 1)} hold no events"
+    ]

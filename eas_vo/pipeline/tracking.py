@@ -14,12 +14,22 @@ from eas_vo.config import ResolvedConfig
 from eas_vo.errors import EasVoError
 from eas_vo.io.tables import clock_time
 from eas_vo.orb import OrbStats
-from eas_vo.types import FrameRecord, RelativeRotation
 from eas_vo.pipeline.parts import Pipeline, check_frame
+from eas_vo.types import FrameRecord, RelativeRotation
 
-
-FRAMES_CSV_FIELDS = ("index", "t", "nc", "inliers", "status", "redetected", "inlier_ratio", "residual_px", "reason",
-                     "events", "contrast_gain")
+FRAMES_CSV_FIELDS = (
+    "index",
+    "t",
+    "nc",
+    "inliers",
+    "status",
+    "redetected",
+    "inlier_ratio",
+    "residual_px",
+    "reason",
+    "events",
+    "contrast_gain",
+)
 
 
 @dataclass
@@ -55,7 +65,10 @@ def track(parts: Pipeline, config: ResolvedConfig, frames_csv: Path | None = Non
         if record.index in repeated and record.status in ("ok", "weak"):
             # No camera's noise repeats to the bit: a driver sent the frame again, or the frontend
             # made nothing new (no events). Its identity measures nothing, stillness least of all.
-            record, edges = with_changes(record, status="lost", inliers=0, reason="the same image as the previous frame"), []
+            record, edges = (
+                with_changes(record, status="lost", inliers=0, reason="the same image as the previous frame"),
+                [],
+            )
         tracked.records.append(record)
         tracked.edges.extend(edges)
         log.write(record)
@@ -65,7 +78,9 @@ def track(parts: Pipeline, config: ResolvedConfig, frames_csv: Path | None = Non
 
     with FrameLog(frames_csv, parts.dataset.clock_origin_ns) as log, _progress(n_window, progress, rc) as bar:
         try:
-            for position, sample in enumerate(concurrency.ahead(parts.dataset.samples(rc.start_s, rc.duration_s))):  # the next one read meanwhile
+            for position, sample in enumerate(
+                concurrency.ahead(parts.dataset.samples(rc.start_s, rc.duration_s))
+            ):  # the next one read meanwhile
                 check_frame(sample.frame, parts.dataset, sample.index, sample.t)
                 image = None
                 if parts.frontend.makes_images:
@@ -99,11 +114,7 @@ def track(parts: Pipeline, config: ResolvedConfig, frames_csv: Path | None = Non
 
 def check_image(image, camera, frontend: str, sample) -> None:
     """A frontend's output must be a uint8 image of sensor size (H, W): else one error line."""
-    if (
-        not isinstance(image, np.ndarray)
-        or image.dtype != np.uint8
-        or image.shape != (camera.height, camera.width)
-    ):
+    if not isinstance(image, np.ndarray) or image.dtype != np.uint8 or image.shape != (camera.height, camera.width):
         got = f"{image.dtype} {image.shape}" if isinstance(image, np.ndarray) else type(image).__name__
         raise EasVoError(
             f"frontend {frontend!r} returned {got} for frame {sample.index} (t={sample.t:.6f} s); "
@@ -127,9 +138,21 @@ class FrameLog:
 
     def write(self, r: FrameRecord) -> None:
         if self._fh:
-            self._writer.writerow([r.index, clock_time(r.t, self.origin_ns), r.nc, r.inliers, r.status, int(r.redetected),
-                                   f"{r.inlier_ratio:.4f}", f"{r.residual_px:.4f}", r.reason, r.events,
-                                   f"{r.contrast_gain:.4f}"])
+            self._writer.writerow(
+                [
+                    r.index,
+                    clock_time(r.t, self.origin_ns),
+                    r.nc,
+                    r.inliers,
+                    r.status,
+                    int(r.redetected),
+                    f"{r.inlier_ratio:.4f}",
+                    f"{r.residual_px:.4f}",
+                    r.reason,
+                    r.events,
+                    f"{r.contrast_gain:.4f}",
+                ]
+            )
             self._fh.flush()
 
     def __exit__(self, *exc):

@@ -59,20 +59,25 @@ def convert(config: ResolvedConfig, out: str | Path, progress: bool = False, rep
         raise EasVoError(next(iter(clocks.values())))
     window = dataset.window(rc.start_s, rc.duration_s)
     if len(window) == 0:
-        raise EasVoError(f"{dataset.label}: the window start={rc.start_s} s, duration={rc.duration_s} s holds no sample")
+        raise EasVoError(
+            f"{dataset.label}: the window start={rc.start_s} s, duration={rc.duration_s} s holds no sample"
+        )
     times = dataset.frame_times()
     t_lo, t_hi = _kept_span(times, window)
     lo, hi = search_times(dataset.events(), [t_lo, t_hi])
     events = dataset.events()[lo:hi]
     if len(events) and events["t"][0] < 0:
-        raise EasVoError(f"{dataset.label}: its events start at {events['t'][0]:.9f} s; events.txt cannot hold "
-                         "negative times")
+        raise EasVoError(
+            f"{dataset.label}: its events start at {events['t'][0]:.9f} s; events.txt cannot hold negative times"
+        )
     imu = None if dataset.imu is None else _imu_within(dataset.imu, t_lo, t_hi)
     poses = None if dataset.ground_truth is None else _poses_within(dataset.ground_truth, t_lo, t_hi)
     frames = None
     if has_frames:
-        frames = (dataset.load_frame(int(k)) for k in tqdm(window, disable=not progress, unit="frame",
-                                                              desc=f"convert {dataset.label}"))
+        frames = (
+            dataset.load_frame(int(k))
+            for k in tqdm(window, disable=not progress, unit="frame", desc=f"convert {dataset.label}")
+        )
     with output_folder(out, replace, keep_partial=False) as staging:
         write_ecd_folder(staging, dataset.camera, times[window], frames, events, poses, imu, dataset.clock_origin_ns)
     return Converted(

@@ -10,9 +10,9 @@ from datetime import datetime, timezone
 import numpy as np
 
 from eas_vo import registry
+from eas_vo.camera import CameraModel
 from eas_vo.config import ResolvedConfig
 from eas_vo.datasets.recording import recording_clock_problems
-from eas_vo.camera import CameraModel
 
 
 @dataclass(frozen=True)
@@ -91,10 +91,21 @@ class SequenceInfo:
         """One phrase per pair of streams: how much of the samples' span (frames, or samples from
         the events) each other stream covers, then of the ground truth's; a stream that covers
         none of it is said to, with both spans and the setting that moves its clock."""
-        hints = {"events": "the events' clock is not the frames'", "IMU": "run.imu_time_offset_s",
-                 "ground truth": "dataset.ground_truth_time_offset_s"}
-        bases = [("frames" if self.frames is not None else "samples", self.samples), ("ground truth", self.ground_truth)]
-        others = [("events", self.events), ("IMU", self.imu), ("ground truth", self.ground_truth), (bases[0][0], self.samples)]
+        hints = {
+            "events": "the events' clock is not the frames'",
+            "IMU": "run.imu_time_offset_s",
+            "ground truth": "dataset.ground_truth_time_offset_s",
+        }
+        bases = [
+            ("frames" if self.frames is not None else "samples", self.samples),
+            ("ground truth", self.ground_truth),
+        ]
+        others = [
+            ("events", self.events),
+            ("IMU", self.imu),
+            ("ground truth", self.ground_truth),
+            (bases[0][0], self.samples),
+        ]
         lines = []
         for base_name, base in bases:
             if base is None or not base.count:
@@ -110,8 +121,10 @@ class SequenceInfo:
                     out.append(f"{name} all")
                 else:
                     hint = hints["ground truth"] if "ground truth" in (name, base_name) else hints.get(name, "")
-                    out.append(f"{name} NONE ({other.t0_s:.3f}-{other.t1_s:.3f} s against {base.t0_s:.3f}-{base.t1_s:.3f} s: "
-                               f"another clock? {hint})")
+                    out.append(
+                        f"{name} NONE ({other.t0_s:.3f}-{other.t1_s:.3f} s against {base.t0_s:.3f}-{base.t1_s:.3f} s: "
+                        f"another clock? {hint})"
+                    )
             if out:
                 lines.append(f"of the {base_name}: {'; '.join(out)}")
         return lines
@@ -125,33 +138,52 @@ class SequenceInfo:
             out.append("no frames: only an event tracker runs on it (--tracker cmax)")
         if self.ground_truth is None:
             out.append("no ground truth: runs are not scored (--set dataset.ground_truth=poses.tum)")
-        elif not self.ground_truth.count or (self.samples.count and (self.ground_truth.t1_s < self.samples.t0_s
-                                                                      or self.ground_truth.t0_s > self.samples.t1_s)):
+        elif not self.ground_truth.count or (
+            self.samples.count
+            and (self.ground_truth.t1_s < self.samples.t0_s or self.ground_truth.t0_s > self.samples.t1_s)
+        ):
             out.append("the ground truth overlaps none of the samples: runs cannot be scored")
         return out
 
     def lines(self) -> list[str]:
         """The report `eas-vo info` prints: what the file holds, then what a run would miss."""
-        present = [name for name, s in (("frames", self.frames), ("events", self.events), ("IMU", self.imu),
-                                        ("ground truth", self.ground_truth)) if s is not None and s.count]
+        present = [
+            name
+            for name, s in (
+                ("frames", self.frames),
+                ("events", self.events),
+                ("IMU", self.imu),
+                ("ground truth", self.ground_truth),
+            )
+            if s is not None and s.count
+        ]
         span = self.span
         out = [f"{self.label} (dataset plugin {self.plugin})"]
         out += [f"  file          {line}" for line in self.contents]
         out.append(f"  streams       {', '.join(present) or 'none'}")
-        out.append(f"  sensor        {self.sensor[0]} x {self.sensor[1]} px" if self.sensor else "  sensor        unknown")
+        out.append(
+            f"  sensor        {self.sensor[0]} x {self.sensor[1]} px" if self.sensor else "  sensor        unknown"
+        )
         if self.camera is not None:
             c = self.camera
             fx, fy, cx, cy = c.K[0, 0], c.K[1, 1], c.K[0, 2], c.K[1, 2]
             dist = ", ".join(f"{v:.6g}" for v in c.dist)
-            out.append(f"  camera        {c.model} lens: fx {fx:.6g} fy {fy:.6g} cx {cx:.6g} cy {cy:.6g} px, distortion [{dist}]")
+            out.append(
+                f"  camera        {c.model} lens: fx {fx:.6g} fy {fy:.6g} cx {cx:.6g} cy {cy:.6g} px, distortion [{dist}]"
+            )
         else:
             out.append("  camera        unknown (no calibration)")
         if self.clock_origin_ns:
             when = datetime.fromtimestamp(self.clock_origin_ns // 10**9, timezone.utc).strftime("%Y-%m-%d %H:%M:%S UTC")
-            out.append(f"  clock         times below are after {self.clock_origin_ns // 10**9} s of the recording's clock "
-                       f"({when} as Unix time); files written add it back")
-        out.append(f"  duration      {span.duration_s:.3f} s ({span.t0_s:.3f}-{span.t1_s:.3f} s, all streams)" if span.count
-                   else "  duration      0 s (no stream holds anything)")
+            out.append(
+                f"  clock         times below are after {self.clock_origin_ns // 10**9} s of the recording's clock "
+                f"({when} as Unix time); files written add it back"
+            )
+        out.append(
+            f"  duration      {span.duration_s:.3f} s ({span.t0_s:.3f}-{span.t1_s:.3f} s, all streams)"
+            if span.count
+            else "  duration      0 s (no stream holds anything)"
+        )
         if self.frames is not None:
             out.append(f"  frames        {self.frames.text('APS frames')}")
         else:

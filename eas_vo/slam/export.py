@@ -16,11 +16,10 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from eas_vo.camera import LENS_MODELS, CameraModel
 from eas_vo.errors import EasVoError
 from eas_vo.io.atomic import write_text_atomic
 from eas_vo.io.outputs import output_folder
-from eas_vo.camera import LENS_MODELS, CameraModel
-
 
 FORMATS = ("tum", "euroc")
 
@@ -29,8 +28,18 @@ FORMATS = ("tum", "euroc")
 ORB_EXTRACTOR = {"nFeatures": 1000, "scaleFactor": 1.2, "nLevels": 8, "iniThFAST": 20, "minThFAST": 7}
 
 
-VIEWER = {"KeyFrameSize": 0.05, "KeyFrameLineWidth": 1, "GraphLineWidth": 0.9, "PointSize": 2, "CameraSize": 0.08,
-          "CameraLineWidth": 3, "ViewpointX": 0, "ViewpointY": -0.7, "ViewpointZ": -1.8, "ViewpointF": 500}
+VIEWER = {
+    "KeyFrameSize": 0.05,
+    "KeyFrameLineWidth": 1,
+    "GraphLineWidth": 0.9,
+    "PointSize": 2,
+    "CameraSize": 0.08,
+    "CameraLineWidth": 3,
+    "ViewpointX": 0,
+    "ViewpointY": -0.7,
+    "ViewpointZ": -1.8,
+    "ViewpointF": 500,
+}
 
 
 #: ORB-SLAM3's name (`Camera.type`) for each lens model; ORB-SLAM2 ignores the key (its one model
@@ -44,15 +53,23 @@ def settings_yaml(camera: CameraModel, fps: float) -> str:
     fisheye (`equidistant`) camera is ORB-SLAM3's KannalaBrandt8 with Camera.k1..k4;
     ORB-SLAM2 has no fisheye model."""
     values = {
-        "Camera.fx": camera.K[0, 0], "Camera.fy": camera.K[1, 1], "Camera.cx": camera.K[0, 2], "Camera.cy": camera.K[1, 2],
+        "Camera.fx": camera.K[0, 0],
+        "Camera.fy": camera.K[1, 1],
+        "Camera.cx": camera.K[0, 2],
+        "Camera.cy": camera.K[1, 2],
         **{f"Camera.{name}": float(v) for name, v in zip(LENS_MODELS[camera.model], camera.dist)},
-        "Camera.width": camera.width, "Camera.height": camera.height, "Camera.fps": fps,
+        "Camera.width": camera.width,
+        "Camera.height": camera.height,
+        "Camera.fps": fps,
         "Camera.RGB": 0,  # the images are grayscale; ORB-SLAM2 reads the flag, not the channel order
         **{f"ORBextractor.{k}": v for k, v in ORB_EXTRACTOR.items()},
         **{f"Viewer.{k}": v for k, v in VIEWER.items()},
     }
-    lines = ["%YAML:1.0", "# written by eas-vo export: monocular ORB-SLAM2 / ORB-SLAM3 settings for this sequence",
-             f'Camera.type: "{ORBSLAM_CAMERA_TYPES[camera.model]}"']
+    lines = [
+        "%YAML:1.0",
+        "# written by eas-vo export: monocular ORB-SLAM2 / ORB-SLAM3 settings for this sequence",
+        f'Camera.type: "{ORBSLAM_CAMERA_TYPES[camera.model]}"',
+    ]
     lines += [f"{key}: {_yaml_number(value)}" for key, value in values.items()]
     return "\n".join(lines) + "\n"
 
@@ -84,8 +101,13 @@ def export(config, out: str | Path, fmt: str, progress: bool = False, replace: b
     with output_folder(out, replace, keep_partial=False) as staging:
         image_dir = staging / ("rgb" if fmt == "tum" else "mav0/cam0/data")
         image_dir.mkdir(parents=True)
-        for sample, name in tqdm(zip(parts.dataset.samples(rc.start_s, rc.duration_s), names), total=len(window),
-                                 disable=not progress, unit="frame", desc=f"export {rc.frontend}"):
+        for sample, name in tqdm(
+            zip(parts.dataset.samples(rc.start_s, rc.duration_s), names),
+            total=len(window),
+            disable=not progress,
+            unit="frame",
+            desc=f"export {rc.frontend}",
+        ):
             image = parts.frontend(sample)
             check_image(image, parts.dataset.camera, rc.frontend, sample)
             if not cv2.imwrite(str(image_dir / name), np.ascontiguousarray(image)):
@@ -97,8 +119,10 @@ def export(config, out: str | Path, fmt: str, progress: bool = False, replace: b
             header = f"# {rc.frontend} images of {parts.dataset.label}\n# file: 'rgb.txt' (eas-vo export)\n# timestamp filename\n"
             write_text_atomic(staging / "rgb.txt", header + "".join(f"{v:.6f} rgb/{v:.6f}.png\n" for v in t))
         else:
-            write_text_atomic(staging / "mav0/cam0/data.csv",
-                              "#timestamp [ns],filename\n" + "".join(f"{_ns(v)},{_ns(v)}.png\n" for v in t))
+            write_text_atomic(
+                staging / "mav0/cam0/data.csv",
+                "#timestamp [ns],filename\n" + "".join(f"{_ns(v)},{_ns(v)}.png\n" for v in t),
+            )
             write_text_atomic(staging / "timestamps.txt", "".join(f"{_ns(v)}\n" for v in t))
         write_text_atomic(staging / "settings.yaml", settings_yaml(parts.dataset.camera, fps))
     return {"frames": len(t), "fps": fps, "format": fmt, "frontend": rc.frontend, "dataset": parts.dataset.label}
@@ -117,8 +141,10 @@ def _image_names(label: str, frames: np.ndarray, times: np.ndarray, fmt: str) ->
     first_of = {}
     for k, name in zip(frames, names):
         if name in first_of:
-            raise EasVoError(f"{label}: frames {first_of[name]} and {k} have one timestamp in the {fmt} layout "
-                             f"({name[:-4]}); ORB-SLAM2 needs one time per image: export a window without them "
-                             "(--start, --duration) or fix the dataset's times")
+            raise EasVoError(
+                f"{label}: frames {first_of[name]} and {k} have one timestamp in the {fmt} layout "
+                f"({name[:-4]}); ORB-SLAM2 needs one time per image: export a window without them "
+                "(--start, --duration) or fix the dataset's times"
+            )
         first_of[name] = int(k)
     return names

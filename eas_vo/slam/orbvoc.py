@@ -20,8 +20,9 @@ SHA1 = "ad82cc2a05da116bf211192e4748024a19b7606e"
 NAME = "ORBvoc.txt"
 
 
-def fetch_orb_vocabulary(folder: str | Path | None = None, progress: bool = False, url: str | None = None,
-                         sha1: str = SHA1) -> Path:
+def fetch_orb_vocabulary(
+    folder: str | Path | None = None, progress: bool = False, url: str | None = None, sha1: str = SHA1
+) -> Path:
     """FOLDER/ORBvoc.txt (default: the data folder), downloaded and extracted unless there. The
     archive is verified by pooch before anything is extracted; the text file appears whole
     or not at all; the archive is removed after."""
@@ -38,12 +39,15 @@ def fetch_orb_vocabulary(folder: str | Path | None = None, progress: bool = Fals
     logger.info(f"fetching {url} (about 40 MB; ORBvoc.txt is 139 MB) into {folder}")
     pooch.get_logger().setLevel(logging.WARNING)
     try:
-        archive = Path(pooch.retrieve(url, known_hash=f"sha1:{sha1}", fname=f"{NAME}.tar.gz", path=folder,
-                                      progressbar=progress))
+        archive = Path(
+            pooch.retrieve(url, known_hash=f"sha1:{sha1}", fname=f"{NAME}.tar.gz", path=folder, progressbar=progress)
+        )
     except (ValueError, requests.RequestException, OSError) as exc:
         detail = str(exc).splitlines()[0] if str(exc) else "no detail"
         if isinstance(exc, ValueError) and "hash" in detail.lower():
-            raise EasVoError(f"{url}: the download does not match its published SHA-1 {sha1}; nothing was kept") from None
+            raise EasVoError(
+                f"{url}: the download does not match its published SHA-1 {sha1}; nothing was kept"
+            ) from None
         raise EasVoError(f"{url}: download failed, nothing was kept ({type(exc).__name__}: {detail})") from None
     try:
         with tarfile.open(archive, "r:gz") as tar:

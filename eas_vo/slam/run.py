@@ -76,8 +76,10 @@ def find_vocabulary(given: str | None) -> Path:
     if not path.is_file():
         if given:
             raise DataError(path, "no such vocabulary file")
-        raise EasVoError(f"no ORB vocabulary: give --vocabulary FILE (one `eas-vo vocabulary` trains), set "
-                         f"PYORBSLAM3_VOCAB, or download ORB-SLAM3's with `eas-vo fetch orb-vocabulary` (into {path})")
+        raise EasVoError(
+            f"no ORB vocabulary: give --vocabulary FILE (one `eas-vo vocabulary` trains), set "
+            f"PYORBSLAM3_VOCAB, or download ORB-SLAM3's with `eas-vo fetch orb-vocabulary` (into {path})"
+        )
     check_vocabulary(path)
     return path
 
@@ -91,8 +93,9 @@ class OrbSlam3Process:
         context = multiprocessing.get_context("spawn")
         self._conn, child = context.Pipe()
         self.log = log
-        self.process = context.Process(target=worker.serve, args=(child, str(vocabulary), str(settings), str(log)),
-                                       daemon=True, name="orbslam3")
+        self.process = context.Process(
+            target=worker.serve, args=(child, str(vocabulary), str(settings), str(log)), daemon=True, name="orbslam3"
+        )
         self.process.start()
         child.close()
         answer = self._receive("while loading the vocabulary and settings")
@@ -164,7 +167,14 @@ def _frames_row(r: FrameResult) -> list:
     if r.T_w_c is None:
         return [r.index, f"{r.t:.9f}", r.state, r.tracked_points] + [""] * 7
     q = quats_from_matrices(r.T_w_c[None, :3, :3])[0]
-    return [r.index, f"{r.t:.9f}", r.state, r.tracked_points, *(f"{v:.9f}" for v in r.T_w_c[:3, 3]), *(f"{v:.12f}" for v in q)]
+    return [
+        r.index,
+        f"{r.t:.9f}",
+        r.state,
+        r.tracked_points,
+        *(f"{v:.9f}" for v in r.T_w_c[:3, 3]),
+        *(f"{v:.12f}" for v in q),
+    ]
 
 
 def relabel(states: list[str]) -> list[str]:
@@ -191,8 +201,9 @@ def track_sequence(images, times, vocabulary: Path, settings: Path, folder: Path
             writer.writerow(FRAMES_FIELDS)
             previous = "not_initialised"
             try:
-                for k, (image, t) in enumerate(tqdm(zip(images, times), total=len(times), disable=not progress,
-                                                    unit="frame", desc=label)):
+                for k, (image, t) in enumerate(
+                    tqdm(zip(images, times), total=len(times), disable=not progress, unit="frame", desc=label)
+                ):
                     state, points, pose = slam.track(image, t)
                     shown = relabel([previous, state])[1]
                     r = FrameResult(k, float(t), shown, points, pose if shown in TRACKED else None)
@@ -201,8 +212,10 @@ def track_sequence(images, times, vocabulary: Path, settings: Path, folder: Path
                     writer.writerow(_frames_row(r))
                     fh.flush()
             except SlamCrashed as exc:
-                raise SlamCrashed(f"{exc}; at frame {len(results)} of {len(times)}: {folder / 'frames.csv'} keeps "
-                                  f"the {len(results)} frame(s) done") from None
+                raise SlamCrashed(
+                    f"{exc}; at frame {len(results)} of {len(times)}: {folder / 'frames.csv'} keeps "
+                    f"the {len(results)} frame(s) done"
+                ) from None
         initialised = any(r.state in TRACKED for r in results)
         slam.finish(folder / "keyframes.tum", folder / "frames.euroc" if initialised else None)
     finally:
@@ -245,7 +258,11 @@ def _euroc_to_tum(src: Path, dst: Path, results: list[FrameResult]) -> None:
     tracking is lost"), so its file can hold one time twice and poses of frames it lost."""
     from eas_vo.io.tables import read_table
 
-    rows = read_table(src, 8, "ORB-SLAM3 EuRoC pose 't_ns tx ty tz qx qy qz qw'") if src.stat().st_size else np.empty((0, 8))
+    rows = (
+        read_table(src, 8, "ORB-SLAM3 EuRoC pose 't_ns tx ty tz qx qy qz qw'")
+        if src.stat().st_size
+        else np.empty((0, 8))
+    )
     t = np.array([r.t for r in results])
     tracked = np.array([r.state in TRACKED for r in results])
     frame = _frame_of(rows[:, 0] * 1e-9, t)
@@ -253,7 +270,9 @@ def _euroc_to_tum(src: Path, dst: Path, results: list[FrameResult]) -> None:
     keep[keep] = tracked[frame[keep]]
     _, first = np.unique(frame[keep], return_index=True)
     rows, frame = rows[keep][first], frame[keep][first]
-    write_text_atomic(dst, "".join(f"{t[k]:.9f} " + " ".join(f"{v:.9f}" for v in r[1:]) + "\n" for k, r in zip(frame, rows)))
+    write_text_atomic(
+        dst, "".join(f"{t[k]:.9f} " + " ".join(f"{v:.9f}" for v in r[1:]) + "\n" for k, r in zip(frame, rows))
+    )
     src.unlink()
 
 
@@ -267,9 +286,15 @@ def on_recording_clock(folder: Path, origin_ns: int) -> None:
         return
     for path in sorted(folder.glob("*.tum")):
         lines = path.read_text().splitlines(keepends=True)
-        write_text_atomic(path, "".join(line if not line.strip() or line.startswith("#") else
-                                        clock_time(float(line.split(maxsplit=1)[0]), origin_ns) + " " + line.split(maxsplit=1)[1]
-                                        for line in lines))
+        write_text_atomic(
+            path,
+            "".join(
+                line
+                if not line.strip() or line.startswith("#")
+                else clock_time(float(line.split(maxsplit=1)[0]), origin_ns) + " " + line.split(maxsplit=1)[1]
+                for line in lines
+            ),
+        )
     frames = folder / "frames.csv"
     if frames.exists():
         rows = list(csv.reader(frames.read_text().splitlines()))
@@ -328,10 +353,14 @@ def rotation_score(ground_truth, path: Path, time_offset_s: float) -> dict | Non
 
 
 #: The figures summarised over runs: (key in a run's metrics, its text in summary.md).
-SUMMARISED = (("ape_keyframes.ape_trans_mean_m", "keyframe APE [m]"), ("ape_frames.ape_trans_mean_m", "all-frame APE [m]"),
-              ("ape_keyframes.ape_rot_mean_rad", "keyframe rotation APE [rad]"),
-              ("rotation_eq3.ape_mean_rad", "tracked frames' rotation APE, Eq. 3 [rad]"), ("time_to_init_s", "time to first init [s]"),
-              ("tracked_fraction", "fraction of frames tracked"))
+SUMMARISED = (
+    ("ape_keyframes.ape_trans_mean_m", "keyframe APE [m]"),
+    ("ape_frames.ape_trans_mean_m", "all-frame APE [m]"),
+    ("ape_keyframes.ape_rot_mean_rad", "keyframe rotation APE [rad]"),
+    ("rotation_eq3.ape_mean_rad", "tracked frames' rotation APE, Eq. 3 [rad]"),
+    ("time_to_init_s", "time to first init [s]"),
+    ("tracked_fraction", "fraction of frames tracked"),
+)
 
 
 def _value(metrics: dict, key: str):
@@ -344,41 +373,69 @@ def summarise(runs: list[dict]) -> dict:
     """Median, min and max of each SUMMARISED figure over the runs whose status is ok; the
     count of each status."""
     good = [m for m in runs if m["status"] == "ok"]
-    out = {"runs": len(runs), "protocol": PROTOCOL, "statuses": {s: sum(m["status"] == s for m in runs) for s in sorted({m["status"] for m in runs})}}
+    out = {
+        "runs": len(runs),
+        "protocol": PROTOCOL,
+        "statuses": {s: sum(m["status"] == s for m in runs) for s in sorted({m["status"] for m in runs})},
+    }
     for key, _ in SUMMARISED:
         values = [v for m in good if (v := _value(m, key)) is not None]
-        out[key] = ({"median": float(np.median(values)), "min": float(np.min(values)), "max": float(np.max(values)),
-                     "n": len(values)} if values else None)
+        out[key] = (
+            {
+                "median": float(np.median(values)),
+                "min": float(np.min(values)),
+                "max": float(np.max(values)),
+                "n": len(values),
+            }
+            if values
+            else None
+        )
     return out
 
 
 def summary_markdown(label: str, frontend: str, summary: dict, orb: dict) -> str:
     """summary.md: the runs' statuses and each figure's median, min and max over the runs, with the
     ORB statistics of the images (`orb`)."""
-    lines = [f"# ORB-SLAM3 (monocular) on {frontend} images of {label}", "",
-             f"{summary['runs']} run(s): " + ", ".join(f"{n} {s}" for s, n in summary["statuses"].items()), "",
-             "| figure | median | min | max | runs |", "|---|---|---|---|---|"]
+    lines = [
+        f"# ORB-SLAM3 (monocular) on {frontend} images of {label}",
+        "",
+        f"{summary['runs']} run(s): " + ", ".join(f"{n} {s}" for s, n in summary["statuses"].items()),
+        "",
+        "| figure | median | min | max | runs |",
+        "|---|---|---|---|---|",
+    ]
     for key, text in SUMMARISED:
         s = summary[key]
-        lines.append(f"| {text} | " + (" | ".join(figure_text(s[k], 3) for k in ("median", "min", "max")) + f" | {s['n']} |"
-                                      if s else "- | - | - | 0 |"))
-    lines += [f"| ORB features per image | {orb['orb_keypoints_mean']:.0f} | | | |",
-              f"| ORB matches per adjacent pair | {orb['orb_matches_mean']:.0f} | | | |", "",
-              f"Figures over the runs whose status is ok (from its first initialisation on, ORB-SLAM3 tracked at least "
-              f"{MIN_TRACKED_FRACTION:.0%} of the frames, the last one among them); the others are counted, not scored. "
-              "APE after Sim(3) Umeyama alignment (evo_ape -as).", ""]
+        lines.append(
+            f"| {text} | "
+            + (
+                " | ".join(figure_text(s[k], 3) for k in ("median", "min", "max")) + f" | {s['n']} |"
+                if s
+                else "- | - | - | 0 |"
+            )
+        )
+    lines += [
+        f"| ORB features per image | {orb['orb_keypoints_mean']:.0f} | | | |",
+        f"| ORB matches per adjacent pair | {orb['orb_matches_mean']:.0f} | | | |",
+        "",
+        f"Figures over the runs whose status is ok (from its first initialisation on, ORB-SLAM3 tracked at least "
+        f"{MIN_TRACKED_FRACTION:.0%} of the frames, the last one among them); the others are counted, not scored. "
+        "APE after Sim(3) Umeyama alignment (evo_ape -as).",
+        "",
+    ]
     return "\n".join(lines)
 
 
-def run_slam(config, out: str | Path, vocabulary: str | None = None, runs: int = 5, progress: bool = False,
-             replace: bool = False) -> dict:
+def run_slam(
+    config, out: str | Path, vocabulary: str | None = None, runs: int = 5, progress: bool = False, replace: bool = False
+) -> dict:
     """`runs` runs of monocular ORB-SLAM3 on the window's frontend images into `out` (module
     docstring). A crashed run is kept (its frames.csv, metrics.json status `crashed`) and named
     in the result's `crashed`; the others go on."""
     from eas_vo.orb import OrbStats
-    from eas_vo.slam.export import settings_yaml
     from eas_vo.pipeline import open_pipeline
     from eas_vo.pipeline.tracking import check_image
+    from eas_vo.slam.export import settings_yaml
 
     require_extra()
     vocabulary = find_vocabulary(vocabulary)
@@ -413,8 +470,10 @@ def run_slam(config, out: str | Path, vocabulary: str | None = None, runs: int =
             except KeyboardInterrupt as exc:  # the folder is kept, marked partial by this run's status
                 on_recording_clock(folder, dataset.clock_origin_ns)
                 write_text_atomic(folder / "metrics.json", json_text({"status": "interrupted", "run": r}))
-                raise Interrupted.keeping(exc, f"{final} keeps the runs so far, run {r} marked interrupted "
-                                               "(its frames.csv up to the interrupt)") from None
+                raise Interrupted.keeping(
+                    exc,
+                    f"{final} keeps the runs so far, run {r} marked interrupted (its frames.csv up to the interrupt)",
+                ) from None
             if gt is not None and metrics["status"] != "crashed":
                 for key, name in (("ape_keyframes", "keyframes.tum"), ("ape_frames", "trajectory.tum")):
                     metrics[key] = score(gt, folder / name, final / folder.name / name)
@@ -423,8 +482,15 @@ def run_slam(config, out: str | Path, vocabulary: str | None = None, runs: int =
             on_recording_clock(folder, dataset.clock_origin_ns)
             write_text_atomic(folder / "metrics.json", json_text(metrics))
             results.append(metrics)
-        summary = {**summarise(results), **orb.summary(), "dataset": dataset.label, "frontend": rc.frontend,
-                   "frames": len(t), "vocabulary": str(vocabulary), "has_ground_truth": gt is not None}
+        summary = {
+            **summarise(results),
+            **orb.summary(),
+            "dataset": dataset.label,
+            "frontend": rc.frontend,
+            "frames": len(t),
+            "vocabulary": str(vocabulary),
+            "has_ground_truth": gt is not None,
+        }
         write_text_atomic(staging / "summary.json", json_text({**summary, "per_run": results}))
         write_text_atomic(staging / "summary.md", summary_markdown(dataset.label, rc.frontend, summary, orb.summary()))
     return {**summary, "per_run": results, "crashed": crashed}

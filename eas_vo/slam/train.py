@@ -18,8 +18,12 @@ def orb_descriptors(image: np.ndarray) -> np.ndarray:
     whose rBRIEF test pattern ORB-SLAM's extractor shares."""
     from eas_vo.slam.export import ORB_EXTRACTOR
 
-    orb = cv2.ORB_create(nfeatures=ORB_EXTRACTOR["nFeatures"], scaleFactor=ORB_EXTRACTOR["scaleFactor"],
-                         nlevels=ORB_EXTRACTOR["nLevels"], fastThreshold=ORB_EXTRACTOR["iniThFAST"])
+    orb = cv2.ORB_create(
+        nfeatures=ORB_EXTRACTOR["nFeatures"],
+        scaleFactor=ORB_EXTRACTOR["scaleFactor"],
+        nlevels=ORB_EXTRACTOR["nLevels"],
+        fastThreshold=ORB_EXTRACTOR["iniThFAST"],
+    )
     _, descriptors = orb.detectAndCompute(image, None)
     return descriptors if descriptors is not None else np.empty((0, DESCRIPTOR_BYTES), np.uint8)
 
@@ -37,13 +41,24 @@ def train_vocabulary(config, out: str | Path, k: int, levels: int, seed: int = 0
     parts = open_pipeline(config)
     window = parts.dataset.window(rc.start_s, rc.duration_s)
     sets = []
-    for sample in tqdm(parts.dataset.samples(rc.start_s, rc.duration_s), total=len(window), disable=not progress,
-                       unit="frame", desc=f"ORB descriptors of {rc.frontend}"):
+    for sample in tqdm(
+        parts.dataset.samples(rc.start_s, rc.duration_s),
+        total=len(window),
+        disable=not progress,
+        unit="frame",
+        desc=f"ORB descriptors of {rc.frontend}",
+    ):
         image = parts.frontend(sample)
         check_image(image, parts.dataset.camera, rc.frontend, sample)
         sets.append(orb_descriptors(image))
     vocabulary = train(sets, k, levels, seed)
     with atomic_path(out) as tmp:
         Path(tmp).write_text(vocabulary.text())
-    return {"images": len(sets), "descriptors": int(sum(len(d) for d in sets)), "nodes": len(vocabulary.parent) - 1,
-            "words": vocabulary.words, "dataset": parts.dataset.label, "frontend": rc.frontend}
+    return {
+        "images": len(sets),
+        "descriptors": int(sum(len(d) for d in sets)),
+        "nodes": len(vocabulary.parent) - 1,
+        "words": vocabulary.words,
+        "dataset": parts.dataset.label,
+        "frontend": rc.frontend,
+    }

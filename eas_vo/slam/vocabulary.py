@@ -51,7 +51,9 @@ class Vocabulary:
         """The vocabulary in DBoW2's text format (module docstring)."""
         lines = [f"{self.k} {self.levels} {SCORING_L1} {WEIGHTING_TF_IDF}"]
         for i in range(1, len(self.parent)):
-            lines.append(f"{self.parent[i]} {int(self.is_leaf[i])} {' '.join(map(str, self.descriptors[i]))} {self.weight[i]:.9g}")
+            lines.append(
+                f"{self.parent[i]} {int(self.is_leaf[i])} {' '.join(map(str, self.descriptors[i]))} {self.weight[i]:.9g}"
+            )
         return "\n".join(lines)
 
     def children(self) -> np.ndarray:
@@ -149,7 +151,9 @@ def train(descriptor_sets: list[np.ndarray], k: int = 10, levels: int = 4, seed:
     sets = [np.ascontiguousarray(d, np.uint8).reshape(-1, DESCRIPTOR_BYTES) for d in descriptor_sets]
     everything = np.concatenate(sets) if sets else np.empty((0, DESCRIPTOR_BYTES), np.uint8)
     if len(everything) < k:
-        raise EasVoError(f"{len(everything)} ORB descriptors in the training images: a vocabulary with k={k} needs at least {k}")
+        raise EasVoError(
+            f"{len(everything)} ORB descriptors in the training images: a vocabulary with k={k} needs at least {k}"
+        )
     rng = np.random.default_rng(seed)
     if len(everything) > MAX_CLUSTERED:
         everything = everything[np.sort(rng.choice(len(everything), MAX_CLUSTERED, replace=False))]
@@ -185,8 +189,12 @@ def _header(path: Path, line: str) -> tuple[int, int, int, int]:
         raise DataError(path, "expected the header 'k L scoring weighting' (DBoW2's text vocabulary)", 1)
     k, levels, scoring, weighting = map(int, head)
     if not (0 <= k <= MAX_K and 1 <= levels <= MAX_LEVELS and 0 <= scoring <= 5 and 0 <= weighting <= 3):
-        raise DataError(path, f"header {line.strip()!r} out of DBoW2's ranges (k 0..{MAX_K}, L 1..{MAX_LEVELS}, "
-                        "scoring 0..5, weighting 0..3)", 1)
+        raise DataError(
+            path,
+            f"header {line.strip()!r} out of DBoW2's ranges (k 0..{MAX_K}, L 1..{MAX_LEVELS}, "
+            "scoring 0..5, weighting 0..3)",
+            1,
+        )
     return k, levels, scoring, weighting
 
 
@@ -236,8 +244,12 @@ def _nodes(path: Path, first: int, block: bytes, count: int):
     fields = np.bincount(line_of[starts], minlength=lines)
     wrong = np.flatnonzero(fields != FIELDS)
     if len(wrong):
-        raise DataError(path, f"expected 'parent is_leaf' then {DESCRIPTOR_BYTES} descriptor bytes and a weight, "
-                        f"got {fields[wrong[0]]} fields", first + int(wrong[0]))
+        raise DataError(
+            path,
+            f"expected 'parent is_leaf' then {DESCRIPTOR_BYTES} descriptor bytes and a weight, "
+            f"got {fields[wrong[0]]} fields",
+            first + int(wrong[0]),
+        )
     import warnings
 
     with warnings.catch_warnings():
@@ -251,12 +263,20 @@ def _nodes(path: Path, first: int, block: bytes, count: int):
     table = values.reshape(lines, FIELDS)
     integers = table[:, :-1]
     node = count + np.arange(lines)
-    bad = ((integers != np.round(integers)).any(1) | ~(table[:, 0] >= 0) | ~(table[:, 0] < node)
-           | ~np.isin(table[:, 1], (0, 1)) | ~((integers[:, 2:] >= 0) & (integers[:, 2:] <= 255)).all(1)
-           | ~np.isfinite(table[:, -1]))
+    bad = (
+        (integers != np.round(integers)).any(1)
+        | ~(table[:, 0] >= 0)
+        | ~(table[:, 0] < node)
+        | ~np.isin(table[:, 1], (0, 1))
+        | ~((integers[:, 2:] >= 0) & (integers[:, 2:] <= 255)).all(1)
+        | ~np.isfinite(table[:, -1])
+    )
     if bad.any():
-        raise DataError(path, "parent not an earlier node, is_leaf not 0/1, a byte not a whole number 0..255 or a weight not finite",
-                        first + int(np.argmax(bad)))
+        raise DataError(
+            path,
+            "parent not an earlier node, is_leaf not 0/1, a byte not a whole number 0..255 or a weight not finite",
+            first + int(np.argmax(bad)),
+        )
     return (table[:, 0].astype(np.int64), table[:, 1] == 1, integers[:, 2:].astype(np.uint8), table[:, -1])
 
 

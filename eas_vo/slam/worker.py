@@ -36,9 +36,15 @@ import threading
 import time
 
 #: ORB-SLAM3's tracking states (pyorbslam3.TrackingState) by the names frames.csv uses.
-STATE_NAMES = {"SYSTEM_NOT_READY": "not_initialised", "NO_IMAGES_YET": "not_initialised",
-               "NOT_INITIALIZED": "not_initialised", "OK": "ok", "OK_KLT": "ok", "RECENTLY_LOST": "recently_lost",
-               "LOST": "lost"}
+STATE_NAMES = {
+    "SYSTEM_NOT_READY": "not_initialised",
+    "NO_IMAGES_YET": "not_initialised",
+    "NOT_INITIALIZED": "not_initialised",
+    "OK": "ok",
+    "OK_KLT": "ok",
+    "RECENTLY_LOST": "recently_lost",
+    "LOST": "lost",
+}
 
 #: The mapping threads count as idle when, over a window this long [s], none of them was
 #: runnable (state R) or in uninterruptible sleep (D) at its end and together they ran on a CPU
@@ -82,8 +88,11 @@ def wait_until_idle() -> None:
             samples.pop(0)
         start, before = samples[0]
         ran_ns = sum(cpu - before.get(tid, ("", 0))[1] for tid, (_, cpu) in now.items())
-        if (end - start >= IDLE_WINDOW_S * 1e9 and ran_ns < IDLE_CPU_SHARE * (end - start)
-                and not any(state in "RD" for state, _ in now.values())):
+        if (
+            end - start >= IDLE_WINDOW_S * 1e9
+            and ran_ns < IDLE_CPU_SHARE * (end - start)
+            and not any(state in "RD" for state, _ in now.values())
+        ):
             return
 
 
@@ -128,8 +137,14 @@ def serve(conn, vocabulary: str, settings: str, log_path: str) -> None:
             result = slam.track_monocular(image, t)
             wait_until_idle()
             pose = result.pose_wc if result.pose_valid else None
-            conn.send(("tracked", STATE_NAMES.get(result.state.name, result.state.name.lower()),
-                       int(result.num_tracked_points), pose))
+            conn.send(
+                (
+                    "tracked",
+                    STATE_NAMES.get(result.state.name, result.state.name.lower()),
+                    int(result.num_tracked_points),
+                    pose,
+                )
+            )
         else:
             _, keyframes, frames = message
             slam.shutdown()

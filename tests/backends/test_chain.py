@@ -3,9 +3,9 @@
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from helpers import assert_rotations_close
 from eas_vo.backends.chain import ChainBackend
 from eas_vo.types import RelativeRotation
+from helpers import assert_rotations_close
 
 
 def random_trajectory(n, seed=0):

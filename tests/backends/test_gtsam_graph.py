@@ -4,12 +4,12 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from helpers import assert_rotations_close
 from eas_vo.backends.chain import ChainBackend
 from eas_vo.backends.gtsam_graph import GtsamBackend, GtsamConfig
 from eas_vo.errors import ConfigError
 from eas_vo.geometry.rotations import geodesic_angle, gyro_rotation
 from eas_vo.types import RelativeRotation
+from helpers import assert_rotations_close
 
 
 def truth(n=120, seed=0):
@@ -75,7 +75,8 @@ def test_robust_kernel_resists_outlier_edges():
     edges = edges_for(R, seed=7, skip=4)
     rng = np.random.default_rng(8)
     outliers = [
-        RelativeRotation(k - 4, k, Rotation.from_rotvec(rng.normal(0, 0.5, 3)).as_matrix(), 100) for k in range(20, 110, 15)
+        RelativeRotation(k - 4, k, Rotation.from_rotvec(rng.normal(0, 0.5, 3)).as_matrix(), 100)
+        for k in range(20, 110, 15)
     ]
     clean = ape(GtsamBackend(GtsamConfig(robust="huber")).solve(len(R), edges).R_w_c, R)
     plain = ape(GtsamBackend(GtsamConfig(robust="none")).solve(len(R), edges + outliers).R_w_c, R)
@@ -125,10 +126,14 @@ def test_gyro_fusion_cuts_the_error_of_the_chain():
     # `auto` fuses the gyro when there is one, and is the vision-only graph without
     auto = GtsamBackend(GtsamConfig(gyro="auto"))
     assert not auto.needs_imu
-    np.testing.assert_array_equal(auto.solve(len(R), with_keyframes, times=t_imu[frames], imu=imu).R_w_c,
-                                  GtsamBackend(GtsamConfig(gyro=True)).solve(len(R), with_keyframes, times=t_imu[frames], imu=imu).R_w_c)
-    np.testing.assert_array_equal(auto.solve(len(R), with_keyframes, times=t_imu[frames], imu=None).R_w_c,
-                                  GtsamBackend(GtsamConfig()).solve(len(R), with_keyframes).R_w_c)
+    np.testing.assert_array_equal(
+        auto.solve(len(R), with_keyframes, times=t_imu[frames], imu=imu).R_w_c,
+        GtsamBackend(GtsamConfig(gyro=True)).solve(len(R), with_keyframes, times=t_imu[frames], imu=imu).R_w_c,
+    )
+    np.testing.assert_array_equal(
+        auto.solve(len(R), with_keyframes, times=t_imu[frames], imu=None).R_w_c,
+        GtsamBackend(GtsamConfig()).solve(len(R), with_keyframes).R_w_c,
+    )
 
 
 @pytest.mark.parametrize("mode", ["batch", "online"])
@@ -152,12 +157,16 @@ def test_edge_quality_sets_the_noise_and_a_weak_edge_yields():
     """Two contradicting measurements of one step: with `residual` noise the one with the small
     residual and high inlier ratio wins, whatever their inlier counts."""
     good, bad = np.eye(3), Rotation.from_rotvec([0.0, 0.05, 0.0]).as_matrix()
-    edges = [RelativeRotation(0, 1, good, 100, inlier_ratio=0.95, residual_rad=0.001),
-             RelativeRotation(0, 1, bad, 300, inlier_ratio=0.4, residual_rad=0.004)]
+    edges = [
+        RelativeRotation(0, 1, good, 100, inlier_ratio=0.95, residual_rad=0.001),
+        RelativeRotation(0, 1, bad, 300, inlier_ratio=0.4, residual_rad=0.004),
+    ]
     backend = GtsamBackend(GtsamConfig(edge_noise="residual"))
     assert backend.edge_sigma(edges[0]) < backend.edge_sigma(edges[1]) / 5
     assert_rotations_close(backend.solve(2, edges).R_w_c[1], good, np.radians(0.2))
-    by_inliers = GtsamBackend(GtsamConfig(edge_noise="inliers")).solve(2, edges).R_w_c[1]  # today's default trusts the count
+    by_inliers = (
+        GtsamBackend(GtsamConfig(edge_noise="inliers")).solve(2, edges).R_w_c[1]
+    )  # today's default trusts the count
     assert_rotations_close(by_inliers, bad, np.radians(1.0))
 
 
@@ -217,6 +226,7 @@ def test_a_gyro_glitch_within_range_never_overrides_confident_images():
     glitch = int(np.searchsorted(imu.t, times[20])) + 3  # inside frame interval 20 -> 21
     rates[glitch, 2] += 30.0
     fused = GtsamBackend(GtsamConfig(gyro=True)).solve(len(R), edges, times=times, imu=ImuSeries(imu.t, imu.acc, rates))
+
     def step(R_w, k):
         return R_w[k - 1].T @ R_w[k]
 
@@ -238,8 +248,10 @@ def test_a_solver_that_fails_is_a_warning_and_the_chain(mode, monkeypatch):
     monkeypatch.setattr(backend, f"_{mode}", fails)
     out = backend.solve(len(R), edges, times=times, imu=imu)
     assert_rotations_close(out.R_w_c, ChainBackend().solve(len(R), edges).R_w_c, 1e-12)
-    assert out.warnings == (f"the pose graph could not be solved ({mode}: Indeterminant linear system detected "
-                            "while working near variable 7): the rotations are the chained measurements, unsmoothed",)
+    assert out.warnings == (
+        f"the pose graph could not be solved ({mode}: Indeterminant linear system detected "
+        "while working near variable 7): the rotations are the chained measurements, unsmoothed",
+    )
     assert out.causal_R_w_c is None
 
 
@@ -260,7 +272,9 @@ def test_levenberg_marquardt_at_its_limit_but_converged_is_not_said():
     steps = {}  # the limit -> how far the step after it turns a frame [rad]
     for limit in range(1, 30):
         backend = GtsamBackend(GtsamConfig(gyro=True, iterations=limit))
-        backend._next_step_rad = lambda optimizer, R_w_c, limit=limit: steps.setdefault(limit, original(optimizer, R_w_c))
+        backend._next_step_rad = lambda optimizer, R_w_c, limit=limit: steps.setdefault(
+            limit, original(optimizer, R_w_c)
+        )
         warnings = backend.solve(len(R), edges, times=times, imu=imu).warnings
         if limit not in steps:  # converged by its tolerances before the limit
             break

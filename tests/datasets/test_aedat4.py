@@ -9,10 +9,10 @@ import re
 from datetime import timedelta
 
 import cv2
-import helpers
 import numpy as np
 import pytest
 
+import helpers
 from eas_vo.datasets.aedat4 import Aedat4Config, Aedat4Dataset
 from eas_vo.errors import DataError, EasVoError
 from eas_vo.registry import open_dataset
@@ -65,8 +65,11 @@ def test_a_missing_calibration_says_what_to_pass(tmp_path):
     write_aedat4(path, events=random_stream(10), kind="events")
     ds = Aedat4Dataset(path)  # described by info all the same
     assert ds.camera is None and ds.sensor_size == (WIDTH, HEIGHT) and len(ds.events()) == 10
-    with pytest.raises(EasVoError, match=r"rec.aedat4: an AEDAT4 file holds no lens calibration: give one with "
-                                         r"--set dataset.calibration=FILE"):
+    with pytest.raises(
+        EasVoError,
+        match=r"rec.aedat4: an AEDAT4 file holds no lens calibration: give one with "
+        r"--set dataset.calibration=FILE",
+    ):
         open_dataset(str(path))
 
 
@@ -92,7 +95,9 @@ def test_events_frames_imu_in_the_projects_units_and_instants(tmp_path):
     np.testing.assert_array_equal(ev["t"], (events[0] - origin) / 1e6)
     for k, name in ((1, "x"), (2, "y"), (3, "p")):
         np.testing.assert_array_equal(ev[name], events[k])
-    np.testing.assert_array_equal(ds.frame_times(), [(t0 - origin + 1000 + 4000) / 1e6, (t0 - origin + 51_000 + 1500.5) / 1e6])
+    np.testing.assert_array_equal(
+        ds.frame_times(), [(t0 - origin + 1000 + 4000) / 1e6, (t0 - origin + 51_000 + 1500.5) / 1e6]
+    )
     np.testing.assert_array_equal(ds.load_frame(0), image)
     np.testing.assert_array_equal(ds.load_frame(1), image[::-1])
     np.testing.assert_array_equal(ds.imu.t, [(t0 - origin) / 1e6, (t0 - origin + 5000) / 1e6])
@@ -151,7 +156,11 @@ def test_frames_and_imu_read_what_dv_processing_reads(tmp_path, compression):
     rng = np.random.default_rng(5)
     t0 = 1_700_000_000_000_000
     grey = rng.integers(0, 256, (HEIGHT, WIDTH), dtype=np.uint8)
-    images = [grey, rng.integers(0, 256, (HEIGHT, WIDTH, 3), dtype=np.uint8), rng.integers(0, 256, (HEIGHT, WIDTH, 4), dtype=np.uint8)]
+    images = [
+        grey,
+        rng.integers(0, 256, (HEIGHT, WIDTH, 3), dtype=np.uint8),
+        rng.integers(0, 256, (HEIGHT, WIDTH, 4), dtype=np.uint8),
+    ]
     frames = [(t0 + 30_000 * k, 1000 + 7 * k, image) for k, image in enumerate(images)]
     imu = [(t0 + 1000 * k, *rng.normal(size=6)) for k in range(50)]
     path = tmp_path / "rec.aedat4"
@@ -166,13 +175,18 @@ def test_frames_and_imu_read_what_dv_processing_reads(tmp_path, compression):
     for k, frame in enumerate(theirs):
         middle_us = frame.timestamp + frame.exposure / timedelta(microseconds=1) / 2
         assert ours.frame_times()[k] == (middle_us - ours.clock_origin_ns // 1000) / 1e6
-        conversion = {2: None, 3: cv2.COLOR_BGR2GRAY, 4: cv2.COLOR_BGRA2GRAY}[frame.image.ndim if frame.image.ndim == 2 else frame.image.shape[2]]
+        conversion = {2: None, 3: cv2.COLOR_BGR2GRAY, 4: cv2.COLOR_BGRA2GRAY}[
+            frame.image.ndim if frame.image.ndim == 2 else frame.image.shape[2]
+        ]
         expected = frame.image if conversion is None else cv2.cvtColor(frame.image, conversion)
         np.testing.assert_array_equal(ours.load_frame(k), expected)
     np.testing.assert_array_equal(ours.imu.t, [(m.timestamp - ours.clock_origin_ns // 1000) / 1e6 for m in readings])
-    np.testing.assert_array_equal(ours.imu.gyro, np.deg2rad([[m.gyroscopeX, m.gyroscopeY, m.gyroscopeZ] for m in readings]))
-    np.testing.assert_array_equal(ours.imu.acc, 9.80665 * np.array([[m.accelerometerX, m.accelerometerY, m.accelerometerZ]
-                                                                   for m in readings]))
+    np.testing.assert_array_equal(
+        ours.imu.gyro, np.deg2rad([[m.gyroscopeX, m.gyroscopeY, m.gyroscopeZ] for m in readings])
+    )
+    np.testing.assert_array_equal(
+        ours.imu.acc, 9.80665 * np.array([[m.accelerometerX, m.accelerometerY, m.accelerometerZ] for m in readings])
+    )
 
 
 def test_a_damaged_event_packet_is_named(tmp_path):
@@ -188,13 +202,19 @@ def test_a_damaged_event_packet_is_named(tmp_path):
     with pytest.raises(DataError) as info:
         Aedat4Dataset(path, Aedat4Config(calibration=str(write_calib(tmp_path)))).events()
     message = str(info.value)
-    assert message.startswith(f"{path}:events: damaged AEDAT4 event packet 3 (at byte {offset - 8}): ") and "\n" not in message
+    assert (
+        message.startswith(f"{path}:events: damaged AEDAT4 event packet 3 (at byte {offset - 8}): ")
+        and "\n" not in message
+    )
 
 
-@pytest.mark.parametrize("damage, what, shown, row", [
-    ("back", "timestamp goes backwards", "", 700),
-    ("off", f"pixel outside the {WIDTH}x{HEIGHT} sensor", f"({WIDTH}, ", 300),
-])
+@pytest.mark.parametrize(
+    "damage, what, shown, row",
+    [
+        ("back", "timestamp goes backwards", "", 700),
+        ("off", f"pixel outside the {WIDTH}x{HEIGHT} sensor", f"({WIDTH}, ", 300),
+    ],
+)
 def test_bad_events_name_the_event_and_lenient_drops_and_counts(tmp_path, damage, what, shown, row):
     t, x, y, p = (c.copy() for c in random_stream(1000, seed=3))
     if damage == "back":
@@ -242,8 +262,18 @@ def test_event_only_and_frame_only_recordings(tmp_path):
     assert ds.load_frame(0) is None and ds.imu is None and ds.ground_truth is None
     np.testing.assert_allclose(np.diff(ds.frame_times()), 0.1, rtol=0, atol=1e-6)  # (Unix seconds: ulp 2.4e-7 s)
     assert "events.aedat4 has no frames stream (an event-only recording)" in ds.no_frames_reason
-    done = run_eas_vo("run", "--dataset", str(events_only), "--frontend", "original", "--set", f"dataset.calibration={calib}",
-                      "--out", str(tmp_path / "out"), "--quiet")
+    done = run_eas_vo(
+        "run",
+        "--dataset",
+        str(events_only),
+        "--frontend",
+        "original",
+        "--set",
+        f"dataset.calibration={calib}",
+        "--out",
+        str(tmp_path / "out"),
+        "--quiet",
+    )
     assert done.returncode == 2 and done.stderr.count("\n") == 1, done.stderr
     assert "needs APS frames" in done.stderr and "has no frames stream (an event-only recording)" in done.stderr
 
@@ -261,8 +291,14 @@ def test_ground_truth_from_a_tum_file_with_a_clock_offset(tmp_path):
     write_aedat4(path, events=random_stream(10), kind="events")
     tum = tmp_path / "gt.tum"
     tum.write_text("# t px py pz qx qy qz qw\n10.0 1 2 3 0 0 0 1\n10.5 1 2 4 0 0 0.6 0.8\n")
-    ds = Aedat4Dataset(path, Aedat4Config(calibration=str(write_calib(tmp_path)), ground_truth=str(tum),
-                                          ground_truth_time_offset_s=1_700_000_000.0 - 10.0))
+    ds = Aedat4Dataset(
+        path,
+        Aedat4Config(
+            calibration=str(write_calib(tmp_path)),
+            ground_truth=str(tum),
+            ground_truth_time_offset_s=1_700_000_000.0 - 10.0,
+        ),
+    )
     assert ds.clock_origin_ns == 1_700_000_000 * 10**9  # DV's Unix clock: times after its first second
     np.testing.assert_array_equal(ds.ground_truth.t, [0.0, 0.5])
     np.testing.assert_array_equal(ds.ground_truth.q_w_c[1], [0, 0, 0.6, 0.8])
@@ -274,7 +310,8 @@ def test_ground_truth_from_a_tum_file_with_a_clock_offset(tmp_path):
 def test_truncated_files_are_named_errors_or_read_whole(tmp_path):
     """An AEDAT4 cut at any byte: a one-line error naming the file, or (accepted) exactly what the
     whole file holds: every event, frame and IMU reading."""
-    from hypothesis import given, strategies as st
+    from hypothesis import given
+    from hypothesis import strategies as st
 
     from helpers import hostile_settings
 
@@ -282,8 +319,12 @@ def test_truncated_files_are_named_errors_or_read_whole(tmp_path):
     t0 = int(events[0][0])
     image = np.random.default_rng(6).integers(0, 256, (HEIGHT, WIDTH), dtype=np.uint8)
     whole = tmp_path / "whole.aedat4"
-    write_aedat4(whole, events=events, frames=[(t0 + 40_000 * k, 5000, image) for k in range(4)],
-                 imu=[(t0 + 5000 * k, 0.0, -1.0, 0.0, 1.0, 2.0, 3.0) for k in range(8)])
+    write_aedat4(
+        whole,
+        events=events,
+        frames=[(t0 + 40_000 * k, 5000, image) for k in range(4)],
+        imu=[(t0 + 5000 * k, 0.0, -1.0, 0.0, 1.0, 2.0, 3.0) for k in range(8)],
+    )
     data = whole.read_bytes()
     config = Aedat4Config(calibration=str(write_calib(tmp_path)))
     expected = Aedat4Dataset(whole, config)
@@ -343,9 +384,14 @@ def test_a_flipped_bit_is_a_one_line_error_naming_the_packet_or_a_read(tmp_path,
     t, x, y, p = random_stream(200, seed=11)
     image = rng.integers(0, 256, (HEIGHT, WIDTH), dtype=np.uint8)
     path = tmp_path / "rec.aedat4"
-    write_aedat4(path, events=(t, x, y, p), frames=[(t[0] + 40_000 * k, 5000, image) for k in range(2)],
-                 imu=[(t[0] + 5000 * k, 0.0, -1.0, 0.0, 1.0, 2.0, 3.0) for k in range(4)],
-                 compression=compression, packet=100)
+    write_aedat4(
+        path,
+        events=(t, x, y, p),
+        frames=[(t[0] + 40_000 * k, 5000, image) for k in range(2)],
+        imu=[(t[0] + 5000 * k, 0.0, -1.0, 0.0, 1.0, 2.0, 3.0) for k in range(4)],
+        compression=compression,
+        packet=100,
+    )
     rng_bits = np.random.default_rng(3)
     flips = [("", at, int(rng_bits.integers(8))) for at in structure_bytes(path.read_bytes(), seed=4)]
     copies = flipped_copies(path, tmp_path / "flips", flips)
@@ -355,8 +401,11 @@ def test_a_flipped_bit_is_a_one_line_error_naming_the_packet_or_a_read(tmp_path,
         outcome = outcomes[str(copy)]
         assert outcome == "ok" or outcome.startswith(str(copy)), (copy, outcome)
         if " packet " in outcome and "AEDAT4" in outcome:
-            assert re.match(rf"{re.escape(str(copy))}:(events|frames|imu)(:\d+)?: damaged AEDAT4 "
-                            r"(event|frame|IMU) packet \d+ \(at byte \d+\): ", outcome), outcome
+            assert re.match(
+                rf"{re.escape(str(copy))}:(events|frames|imu)(:\d+)?: damaged AEDAT4 "
+                r"(event|frame|IMU) packet \d+ \(at byte \d+\): ",
+                outcome,
+            ), outcome
 
 
 #: A CLI run whose event packets each take 0.3 s to decode (a sleep, which releases the GIL as
@@ -389,9 +438,22 @@ def test_sigterm_and_ctrl_c_end_a_long_read_at_once(tmp_path, signum, status):
 
     path = tmp_path / "rec.aedat4"
     write_aedat4(path, events=random_stream(4000, seed=12), kind="events", packet=100)
-    child = subprocess.Popen([sys.executable, "-c", SLOW_READ, "info", "--dataset", str(path), "--set",
-                              f"dataset.calibration={write_calib(tmp_path)}"], cwd=tmp_path,
-                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    child = subprocess.Popen(
+        [
+            sys.executable,
+            "-c",
+            SLOW_READ,
+            "info",
+            "--dataset",
+            str(path),
+            "--set",
+            f"dataset.calibration={write_calib(tmp_path)}",
+        ],
+        cwd=tmp_path,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
     try:
         assert child.stderr.readline() == "decoding\n"
         sent = time.monotonic()
@@ -401,7 +463,9 @@ def test_sigterm_and_ctrl_c_end_a_long_read_at_once(tmp_path, signum, status):
     finally:
         child.kill()
     assert child.returncode == status, err
-    assert [line for line in err.splitlines() if line != "decoding"] == ["eas-vo info: interrupted; nothing was written"], err
+    assert [line for line in err.splitlines() if line != "decoding"] == [
+        "eas-vo info: interrupted; nothing was written"
+    ], err
     assert took < 5, f"{took:.1f} s from the signal to the end"  # 12 s if the read went on
 
 
@@ -411,7 +475,8 @@ def test_damaged_event_packets_are_read_within_their_bytes(tmp_path, monkeypatch
     bytes overwritten or random: it never reads outside them, gives what the compiled walk
     gives, and an accepted packet's events lie inside it; the real packet gives the events
     dv-processing wrote."""
-    from hypothesis import given, strategies as st
+    from hypothesis import given
+    from hypothesis import strategies as st
 
     from eas_vo.datasets import aedat4_packets
     from eas_vo.datasets.aedat4_packets import PACKET_EVENT, Aedat4File, _event_vector
@@ -440,7 +505,9 @@ def test_damaged_event_packets_are_read_within_their_bytes(tmp_path, monkeypatch
                 damaged = damaged[: data.draw(st.integers(0, len(body) - 1))]
             else:
                 at = data.draw(st.integers(0, 40))
-                damaged[at : at + 4] = np.frombuffer(data.draw(st.binary(min_size=4, max_size=4)), np.uint8)[: len(damaged[at : at + 4])]
+                damaged[at : at + 4] = np.frombuffer(data.draw(st.binary(min_size=4, max_size=4)), np.uint8)[
+                    : len(damaged[at : at + 4])
+                ]
         status, a, b = _event_vector.py_func(damaged)  # an IndexError here is a read outside the bytes
         assert (status, a, b) == _event_vector(damaged)
         if status == 0:
@@ -457,10 +524,17 @@ def write_ecd_as_aedat4(ecd, path, exposure_us):
     stamped at the start of an exposure of `exposure_us` centred on the ECD's frame time,
     IMU in g and deg/s (dv-processing stores them as float32)."""
     ev = ecd.events()
-    frames = [(round(t * 1e6) - exposure_us // 2, exposure_us, ecd.load_frame(k)) for k, t in enumerate(ecd.frame_times())]
+    frames = [
+        (round(t * 1e6) - exposure_us // 2, exposure_us, ecd.load_frame(k)) for k, t in enumerate(ecd.frame_times())
+    ]
     imu = np.column_stack([np.round(ecd.imu.t * 1e6), ecd.imu.acc / 9.80665, np.degrees(ecd.imu.gyro)])
-    write_aedat4(path, events=(np.round(ev["t"] * 1e6).astype(np.int64), ev["x"], ev["y"], ev["p"]), frames=frames,
-                 imu=imu.tolist(), size=(ecd.camera.width, ecd.camera.height))
+    write_aedat4(
+        path,
+        events=(np.round(ev["t"] * 1e6).astype(np.int64), ev["x"], ev["y"], ev["p"]),
+        frames=frames,
+        imu=imu.tolist(),
+        size=(ecd.camera.width, ecd.camera.height),
+    )
 
 
 @pytest.fixture(scope="module")
@@ -468,10 +542,9 @@ def both_formats(tmp_path_factory):
     """`eas-vo simulate --duration 1` (ECD folder `sim`); the same with its nanosecond event times
     rounded to the microseconds an AEDAT4 holds and its IMU to the float32 g and deg/s it holds
     (`sim_us`, every digit kept); that written to AEDAT4 by dv-processing (`sim.aedat4`)."""
-    from helpers import run_eas_vo
-
     from eas_vo.datasets.ecd import EcdFolderDataset, write_ecd_folder
     from eas_vo.datasets.simulator import SimConfig
+    from helpers import run_eas_vo
 
     root = tmp_path_factory.mktemp("aedat4_identity")
     done = run_eas_vo("simulate", "--out", str(root / "sim"), "--duration", "1")
@@ -482,12 +555,16 @@ def both_formats(tmp_path_factory):
     frames = [sim.load_frame(k) for k in range(len(sim.frame_times()))]
     # The IMU as the AEDAT4 reader gives it back (float32 g and deg/s, converted in float64),
     # written with every digit (the ECD writer's 9 decimals would round it).
-    stored = (np.float32(sim.imu.acc / 9.80665).astype(np.float64), np.float32(np.degrees(sim.imu.gyro)).astype(np.float64))
+    stored = (
+        np.float32(sim.imu.acc / 9.80665).astype(np.float64),
+        np.float32(np.degrees(sim.imu.gyro)).astype(np.float64),
+    )
     imu = ImuSeries(sim.imu.t, stored[0] * 9.80665, np.deg2rad(stored[1]))
     write_ecd_folder(root / "sim_us", sim.camera, sim.frame_times(), frames, events, sim.ground_truth, imu)
     table = np.column_stack([imu.t, imu.acc, imu.gyro])
     (root / "sim_us" / "imu.txt").write_text(
-        "".join(" ".join(np.format_float_positional(v, unique=True) for v in row) + "\n" for row in table))
+        "".join(" ".join(np.format_float_positional(v, unique=True) for v in row) + "\n" for row in table)
+    )
     write_ecd_as_aedat4(EcdFolderDataset(root / "sim_us"), root / "sim.aedat4", round(SimConfig().aps.exposure_s * 1e6))
     return root
 
@@ -497,14 +574,22 @@ def test_an_aedat4_holds_what_the_ecd_folder_holds(both_formats):
 
     root = both_formats
     sim = EcdFolderDataset(root / "sim")
-    ds = Aedat4Dataset(root / "sim.aedat4", Aedat4Config(calibration=str(root / "sim" / "calib.txt"),
-                                                         ground_truth=str(root / "sim" / "groundtruth.txt")))
-    assert (ds.camera.width, ds.camera.height, ds.camera.model) == (sim.camera.width, sim.camera.height, sim.camera.model)
+    ds = Aedat4Dataset(
+        root / "sim.aedat4",
+        Aedat4Config(calibration=str(root / "sim" / "calib.txt"), ground_truth=str(root / "sim" / "groundtruth.txt")),
+    )
+    assert (ds.camera.width, ds.camera.height, ds.camera.model) == (
+        sim.camera.width,
+        sim.camera.height,
+        sim.camera.model,
+    )
     np.testing.assert_array_equal(ds.camera.K, sim.camera.K)
     np.testing.assert_array_equal(ds.camera.dist, sim.camera.dist)
     ours, theirs = ds.events(), sim.events()
     assert len(ours) == len(theirs) > 100_000
-    np.testing.assert_array_equal(np.round(ours["t"] * 1e6).astype(np.int64), np.round(theirs["t"] * 1e6).astype(np.int64))
+    np.testing.assert_array_equal(
+        np.round(ours["t"] * 1e6).astype(np.int64), np.round(theirs["t"] * 1e6).astype(np.int64)
+    )
     for name in ("x", "y", "p"):
         np.testing.assert_array_equal(ours[name], theirs[name])
     np.testing.assert_array_equal(np.round(ds.frame_times() * 1e6), np.round(sim.frame_times() * 1e6))
@@ -523,11 +608,23 @@ def test_paper_and_best_runs_give_the_same_trajectory_from_both(both_formats, tm
     from helpers import run_eas_vo
 
     root = both_formats
-    ecd = run_eas_vo("run", "--config", config, "--dataset", str(root / "sim_us"), "--out", str(tmp_path / "ecd"), "--quiet")
-    aedat = run_eas_vo("run", "--config", config, "--dataset", str(root / "sim.aedat4"),
-                       "--set", f"dataset.calibration={root / 'sim' / 'calib.txt'}",
-                       "--set", f"dataset.ground_truth={root / 'sim' / 'groundtruth.txt'}",
-                       "--out", str(tmp_path / "aedat"), "--quiet")
+    ecd = run_eas_vo(
+        "run", "--config", config, "--dataset", str(root / "sim_us"), "--out", str(tmp_path / "ecd"), "--quiet"
+    )
+    aedat = run_eas_vo(
+        "run",
+        "--config",
+        config,
+        "--dataset",
+        str(root / "sim.aedat4"),
+        "--set",
+        f"dataset.calibration={root / 'sim' / 'calib.txt'}",
+        "--set",
+        f"dataset.ground_truth={root / 'sim' / 'groundtruth.txt'}",
+        "--out",
+        str(tmp_path / "aedat"),
+        "--quiet",
+    )
     assert ecd.returncode == 0 and aedat.returncode == 0, ecd.stderr + aedat.stderr
     for name in ("trajectory.tum", "groundtruth.tum"):
         a, b = (np.loadtxt(tmp_path / run / name) for run in ("ecd", "aedat"))

@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from eas_vo.datasets.bags import stamp_ns
-from eas_vo.datasets.recording import clock_origin_ns
 from eas_vo.datasets.calibration import camera_from_camera_info
+from eas_vo.datasets.recording import clock_origin_ns
 from eas_vo.errors import DataError
 
 WHERE = "bag.db3:/cam/info"
@@ -26,25 +26,40 @@ def test_plumb_bob_and_equidistant(size):
     assert radtan.model == "radtan" and radtan.dist.tolist() == [-0.3, 0.1, 1e-3, -2e-3, 0.01]
     assert radtan.K.tolist() == [[K[0], 0, K[2]], [0, K[4], K[5]], [0, 0, 1]]
     assert (radtan.width, radtan.height) == size
-    short = camera_from_camera_info(f"{WHERE}:0", width, height, K, [-0.3, 0.1], "plumb_bob")  # k1 k2 only: the rest zero
+    short = camera_from_camera_info(
+        f"{WHERE}:0", width, height, K, [-0.3, 0.1], "plumb_bob"
+    )  # k1 k2 only: the rest zero
     assert short.dist.tolist() == [-0.3, 0.1, 0.0, 0.0, 0.0]
     none = camera_from_camera_info(f"{WHERE}:0", width, height, K, [], "")  # a driver that leaves both empty
     assert none.model == "radtan" and not none.dist.any()
     fisheye = camera_from_camera_info(f"{WHERE}:0", width, height, K, [0.1, -0.02, 3e-3, -4e-4], "equidistant")
     assert fisheye.model == "equidistant" and fisheye.dist.tolist() == [0.1, -0.02, 3e-3, -4e-4]
-    rational = camera_from_camera_info(f"{WHERE}:0", width, height, K, [-0.3, 0.1, 1e-3, -2e-3, 0.01, 0, 0, 0], "rational_polynomial")
+    rational = camera_from_camera_info(
+        f"{WHERE}:0", width, height, K, [-0.3, 0.1, 1e-3, -2e-3, 0.01, 0, 0, 0], "rational_polynomial"
+    )
     assert rational.model == "radtan" and rational.dist.tolist() == radtan.dist.tolist()
 
 
-@pytest.mark.parametrize("model, D, message", [
-    ("rational_polynomial", [-0.3, 0.1, 0, 0, 0.01, 0.2, 0, 0], r"K/D: 8 radial-tangential distortion coefficients: k1 k2 p1 p2 \[k3\] are read"),
-    ("plumb_bob", [0.1] * 6, r"K/D: 6 radial-tangential distortion coefficients"),
-    ("equidistant", [0.1] * 5, r"K/D: the equidistant lens model takes 4 distortion coefficients \(k1 k2 k3 k4\), found 5$"),
-    ("equidistant", [11.0, 0, 0, 0], r"K/D: distortion k1 k2 k3 k4 = 11 0 0 0 out of range"),
-    ("plumb_bob", [20.0], r"K/D: distortion k1 k2 p1 p2 k3 = 20 0 0 0 0 out of range"),
-    ("fov", [0.9], r"distortion_model: 'fov' is not read"),
-    ("plumb_bob", [float("nan")], r"K/D: intrinsics and distortion must be finite"),
-])
+@pytest.mark.parametrize(
+    "model, D, message",
+    [
+        (
+            "rational_polynomial",
+            [-0.3, 0.1, 0, 0, 0.01, 0.2, 0, 0],
+            r"K/D: 8 radial-tangential distortion coefficients: k1 k2 p1 p2 \[k3\] are read",
+        ),
+        ("plumb_bob", [0.1] * 6, r"K/D: 6 radial-tangential distortion coefficients"),
+        (
+            "equidistant",
+            [0.1] * 5,
+            r"K/D: the equidistant lens model takes 4 distortion coefficients \(k1 k2 k3 k4\), found 5$",
+        ),
+        ("equidistant", [11.0, 0, 0, 0], r"K/D: distortion k1 k2 k3 k4 = 11 0 0 0 out of range"),
+        ("plumb_bob", [20.0], r"K/D: distortion k1 k2 p1 p2 k3 = 20 0 0 0 0 out of range"),
+        ("fov", [0.9], r"distortion_model: 'fov' is not read"),
+        ("plumb_bob", [float("nan")], r"K/D: intrinsics and distortion must be finite"),
+    ],
+)
 def test_refusals_name_topic_and_message(model, D, message):
     with pytest.raises(DataError, match=rf"^{WHERE}:7: {message}") as info:
         camera_from_camera_info(f"{WHERE}:7", 640, 480, K_of(640, 480), D, model)
@@ -71,8 +86,9 @@ def test_stamps_are_integer_nanoseconds_read_after_the_clock_origin():
 def _with_camera_info_of(bag, out, width, height, images=True):
     """A copy of `bag` whose CameraInfo is for a width x height sensor (K scaled to it), and
     without its images unless `images`."""
-    from eas_vo.datasets.rosbag import typestore
     from rosbags.rosbag1 import Reader, Writer
+
+    from eas_vo.datasets.rosbag import typestore
 
     store = typestore()
     with Reader(bag) as reader, Writer(out) as writer:

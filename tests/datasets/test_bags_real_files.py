@@ -9,9 +9,9 @@ from __future__ import annotations
 import json
 
 import pytest
-from helpers import EVENT_CAMERA_PY, require, run_eas_vo
 
 from eas_vo.registry import open_dataset
+from helpers import EVENT_CAMERA_PY, require, run_eas_vo
 
 #: Each recording: its sensor, encoding, event count (event_camera_py's tests state them: OFF + ON)
 #: and where its clock starts [s] (the first event's whole second).
@@ -43,7 +43,10 @@ def test_info_says_what_the_file_holds_then_what_a_run_misses(name):
     assert f"  events        {count} events" in out
     assert f"after {origin_s} s of the recording's clock" in out
     assert "camera        unknown (no calibration)" in out
-    assert "to run        " in out and "holds no CameraInfo message: give the intrinsics with --set dataset.calibration=FILE" in out
+    assert (
+        "to run        " in out
+        and "holds no CameraInfo message: give the intrinsics with --set dataset.calibration=FILE" in out
+    )
     ds = open_dataset(str(path), need_camera=False)
     assert ds.clock_origin_ns == origin_s * 10**9 and ds.camera is None and ds.sensor_size == sensor
 
@@ -56,8 +59,20 @@ def test_without_a_calibration_a_run_is_one_line_with_one_a_run_goes_through(nam
     assert refused.returncode == 2 and refused.stderr.count("\n") == 1, refused.stderr
     assert "--set dataset.calibration=FILE" in refused.stderr and not (tmp_path / "no").exists()
     calib = pinhole_calib(tmp_path, *sensor)
-    done = run_eas_vo("run", "--dataset", str(path), "--tracker", "cmax", "--set", f"dataset.calibration={calib}",
-                      "--set", "run.duration_s=0.15", "--out", str(tmp_path / "run"), "--quiet")
+    done = run_eas_vo(
+        "run",
+        "--dataset",
+        str(path),
+        "--tracker",
+        "cmax",
+        "--set",
+        f"dataset.calibration={calib}",
+        "--set",
+        "run.duration_s=0.15",
+        "--out",
+        str(tmp_path / "run"),
+        "--quiet",
+    )
     assert done.returncode == 0, done.stderr
     metrics = json.loads((tmp_path / "run" / "metrics.json").read_text())
     assert metrics["frames"] >= 3

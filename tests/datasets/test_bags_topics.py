@@ -18,7 +18,11 @@ def vicon_bag(tmp_path_factory):
     rng = np.random.default_rng(2)
     events = np.zeros(500, [("t", "<f8"), ("x", "<u2"), ("y", "<u2"), ("p", "i1")])
     events["t"] = np.sort(rng.uniform(0, 1, 500))
-    events["x"], events["y"], events["p"] = rng.integers(0, 240, 500), rng.integers(0, 180, 500), rng.integers(0, 2, 500)
+    events["x"], events["y"], events["p"] = (
+        rng.integers(0, 240, 500),
+        rng.integers(0, 180, 500),
+        rng.integers(0, 2, 500),
+    )
     imu_t = np.arange(20) / 20.0
     imu_t[5] = imu_t[4]
     imu = ImuSeries(imu_t, rng.normal(size=(20, 3)), rng.normal(size=(20, 3)))
@@ -30,10 +34,15 @@ def vicon_bag(tmp_path_factory):
 
 
 def test_a_named_topic_that_is_absent_is_refused_with_the_topics_of_its_type(vicon_bag):
-    with pytest.raises(DataError, match=r"has no topic /optitrack/pose \(dataset.pose_topic\); its geometry_msgs/msg/"
-                                        r"PoseStamped topic: /vicon/davis \(--set dataset.pose_topic=/vicon/davis\); it holds"):
+    with pytest.raises(
+        DataError,
+        match=r"has no topic /optitrack/pose \(dataset.pose_topic\); its geometry_msgs/msg/"
+        r"PoseStamped topic: /vicon/davis \(--set dataset.pose_topic=/vicon/davis\); it holds",
+    ):
         Rosbag2Dataset(str(vicon_bag), BagConfig(pose_topic="/optitrack/pose", lenient=True))
-    with pytest.raises(DataError, match=r"has no topic /dvs/gyro \(dataset.imu_topic\); its sensor_msgs/msg/Imu topic: /dvs/imu"):
+    with pytest.raises(
+        DataError, match=r"has no topic /dvs/gyro \(dataset.imu_topic\); its sensor_msgs/msg/Imu topic: /dvs/imu"
+    ):
         Rosbag2Dataset(str(vicon_bag), BagConfig(imu_topic="/dvs/gyro", lenient=True))
 
 

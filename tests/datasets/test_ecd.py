@@ -7,9 +7,9 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
+from eas_vo.camera import CameraModel
 from eas_vo.datasets.ecd import CAMCHAIN, EcdFolderDataset, camchain_yaml, write_ecd_folder
 from eas_vo.errors import DataError
-from eas_vo.camera import CameraModel
 from eas_vo.types import EVENT_DTYPE
 from helpers import SHAPES_ROTATION, hostile_number, hostile_settings, numeric_rows, require
 
@@ -87,7 +87,9 @@ def test_a_frame_of_the_wrong_size_is_refused_by_its_header(sequence_copy):
 
 def test_an_odd_first_frame_is_blamed_not_the_good_ones(sequence_copy):
     (sequence_copy / "images" / "frame_00000000.png").write_bytes(png_header(346, 260))
-    with pytest.raises(DataError, match=r"frame_00000000.png: frame 0 is 346x260 where the frames after it are 240x180"):
+    with pytest.raises(
+        DataError, match=r"frame_00000000.png: frame 0 is 346x260 where the frames after it are 240x180"
+    ):
         EcdFolderDataset(sequence_copy)
 
 
@@ -110,11 +112,14 @@ def test_unreadable_frame_is_reported_with_its_index(sequence_copy):
 
 
 @pytest.mark.parametrize("door", ["folder", "zip"])
-@pytest.mark.parametrize("content,says", [
-    (b"", "cannot decode frame 5: the file is empty"),
-    (b"P5\n99999 99999\n255\n", "cannot decode frame 5"),  # a header OpenCV raises on, not returns None
-    (b"\x89PNG\r\n\x1a\n\x00\x00\x00\rIHDR\x00\x00\x00\xf0", "cannot decode frame 5"),  # cut inside its size
-])
+@pytest.mark.parametrize(
+    "content,says",
+    [
+        (b"", "cannot decode frame 5: the file is empty"),
+        (b"P5\n99999 99999\n255\n", "cannot decode frame 5"),  # a header OpenCV raises on, not returns None
+        (b"\x89PNG\r\n\x1a\n\x00\x00\x00\rIHDR\x00\x00\x00\xf0", "cannot decode frame 5"),  # cut inside its size
+    ],
+)
 def test_an_empty_or_refused_frame_names_its_file_and_index(sequence_copy, tmp_path, door, content, says):
     (sequence_copy / "images" / "frame_00000005.png").write_bytes(content)
     location = sequence_copy if door == "folder" else shutil.make_archive(str(tmp_path / "seq"), "zip", sequence_copy)
@@ -139,8 +144,13 @@ def test_bad_calibration(sequence_copy):
 
 
 #: A fisheye for the simulated sequences' 240x180 frames.
-FISHEYE_240 = CameraModel(240, 180, np.array([[150.5, 0.0, 120.25], [0.0, 150.75, 89.5], [0.0, 0.0, 1.0]]),
-                          np.array([-0.048, 0.0113, -0.0554, 0.0215]), "equidistant")
+FISHEYE_240 = CameraModel(
+    240,
+    180,
+    np.array([[150.5, 0.0, 120.25], [0.0, 150.75, 89.5], [0.0, 0.0, 1.0]]),
+    np.array([-0.048, 0.0113, -0.0554, 0.0215]),
+    "equidistant",
+)
 
 
 def test_a_fisheye_sequence_carries_its_camera_as_a_kalibr_camchain(sequence_copy):
@@ -159,18 +169,36 @@ def test_the_ecd_calib_txt_takes_no_fisheye(tmp_path):
     assert not (tmp_path / "calib.txt").exists() and EcdFolderDataset(tmp_path).camera.model == "equidistant"
 
 
-@pytest.mark.parametrize("edit, says", [
-    (lambda t: t.replace("equidistant", "omni"), r"distortion_model: 'omni' is not read \(one of radtan, plumb_bob"),
-    (lambda t: t.replace("pinhole", "ds"), r"cam0.camera_model: 'ds' is not read \(pinhole only\)"),
-    (lambda t: t.replace("  resolution: [240, 180]\n", ""), r"cam0.resolution: expected a list of 2 numbers, found missing"),
-    (lambda t: t.replace("[240, 180]", "[346, 260]"), r"cam0.resolution: the calibration is for 346x260 px, the frames are 240x180"),
-    (lambda t: t.replace("-0.048, ", ""), r"cam0.distortion_coeffs: the equidistant lens model takes 4 distortion coefficients"),
-    (lambda t: t.replace("-0.048", ".nan"), r"cam0.distortion_coeffs: intrinsics and distortion must be finite"),
-    (lambda t: t.replace("-0.048", "-48.0"), r"cam0.distortion_coeffs: distortion k1 k2 k3 k4 = -48 .* out of range"),
-    (lambda t: t.replace("150.5", "1.5"), r"cam0.intrinsics: focal lengths fx = 1.5"),
-    (lambda t: t.replace("cam0:", "cam1:"), r"no camera 'cam0'; found cam1"),
-    (lambda t: t + "  [: oops", r"not valid YAML"),
-])
+@pytest.mark.parametrize(
+    "edit, says",
+    [
+        (
+            lambda t: t.replace("equidistant", "omni"),
+            r"distortion_model: 'omni' is not read \(one of radtan, plumb_bob",
+        ),
+        (lambda t: t.replace("pinhole", "ds"), r"cam0.camera_model: 'ds' is not read \(pinhole only\)"),
+        (
+            lambda t: t.replace("  resolution: [240, 180]\n", ""),
+            r"cam0.resolution: expected a list of 2 numbers, found missing",
+        ),
+        (
+            lambda t: t.replace("[240, 180]", "[346, 260]"),
+            r"cam0.resolution: the calibration is for 346x260 px, the frames are 240x180",
+        ),
+        (
+            lambda t: t.replace("-0.048, ", ""),
+            r"cam0.distortion_coeffs: the equidistant lens model takes 4 distortion coefficients",
+        ),
+        (lambda t: t.replace("-0.048", ".nan"), r"cam0.distortion_coeffs: intrinsics and distortion must be finite"),
+        (
+            lambda t: t.replace("-0.048", "-48.0"),
+            r"cam0.distortion_coeffs: distortion k1 k2 k3 k4 = -48 .* out of range",
+        ),
+        (lambda t: t.replace("150.5", "1.5"), r"cam0.intrinsics: focal lengths fx = 1.5"),
+        (lambda t: t.replace("cam0:", "cam1:"), r"no camera 'cam0'; found cam1"),
+        (lambda t: t + "  [: oops", r"not valid YAML"),
+    ],
+)
 def test_a_bad_camchain_is_one_line_naming_the_file_and_key(sequence_copy, edit, says):
     (sequence_copy / "calib.txt").unlink()
     (sequence_copy / CAMCHAIN).write_text(edit(camchain_yaml(FISHEYE_240)))
@@ -209,11 +237,18 @@ def test_hostile_tables_are_named_errors_or_read_exactly(sequence_copy, content)
             assert rows == [] and ds.load_frame(0) is None
 
 
-@pytest.mark.parametrize("name, damage, message", [
-    ("groundtruth.txt", lambda rows: rows[:3] + [rows[3].split()[0] + " 0 0 0 0 0 0 2"] + rows[4:], "quaternion norm 2.000 is not 1"),
-    ("groundtruth.txt", lambda rows: rows[:3] + [rows[1]] + rows[4:], "does not increase"),
-    ("imu.txt", lambda rows: rows[:3] + [rows[1]] + rows[4:], "does not increase"),
-])
+@pytest.mark.parametrize(
+    "name, damage, message",
+    [
+        (
+            "groundtruth.txt",
+            lambda rows: rows[:3] + [rows[3].split()[0] + " 0 0 0 0 0 0 2"] + rows[4:],
+            "quaternion norm 2.000 is not 1",
+        ),
+        ("groundtruth.txt", lambda rows: rows[:3] + [rows[1]] + rows[4:], "does not increase"),
+        ("imu.txt", lambda rows: rows[:3] + [rows[1]] + rows[4:], "does not increase"),
+    ],
+)
 def test_table_errors_name_the_file_line_past_comments_and_blanks(sequence_copy, name, damage, message):
     """Row 3 (from 0) is damaged; two comment lines and a blank line precede it: file line 7."""
     path = sequence_copy / name
@@ -235,7 +270,17 @@ def test_a_damaged_png_is_one_line_on_stderr_not_libpngs_too(sequence_copy, tmp_
     else:
         data[len(data) // 2] ^= 0xFF  # inside the image data: its CRC fails
     frame.write_bytes(bytes(data))
-    done = run_eas_vo("run", "--dataset", str(sequence_copy), "--frontend", "original", "--duration", "1",
-                      "--out", str(tmp_path / "out"), "--quiet")
+    done = run_eas_vo(
+        "run",
+        "--dataset",
+        str(sequence_copy),
+        "--frontend",
+        "original",
+        "--duration",
+        "1",
+        "--out",
+        str(tmp_path / "out"),
+        "--quiet",
+    )
     assert done.returncode == 2 and done.stderr.count("\n") == 1, done.stderr
     assert "frame_00000003.png: cannot decode frame 3" in done.stderr

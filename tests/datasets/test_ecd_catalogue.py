@@ -39,8 +39,19 @@ def test_a_fetched_sequence_is_verified_kept_once_and_runs_as_ecd_name(site, tmp
     assert run_eas_vo("fetch", "ecd:seq_a", env=dict(os.environ)).returncode == 0
     assert hits["seq_a.zip"] == 1  # already there and whole: not downloaded again
     out = tmp_path / "run"
-    ran = run_eas_vo("run", "--dataset", "ecd:seq_a", "--frontend", "eas", "--duration", "1", "--out", str(out), "--quiet",
-                     env=dict(os.environ))
+    ran = run_eas_vo(
+        "run",
+        "--dataset",
+        "ecd:seq_a",
+        "--frontend",
+        "eas",
+        "--duration",
+        "1",
+        "--out",
+        str(out),
+        "--quiet",
+        env=dict(os.environ),
+    )
     assert ran.returncode == 0, ran.stderr
     assert json.loads((out / "metrics.json").read_text())["frames"] > 10
 
@@ -111,8 +122,10 @@ def test_the_built_in_registry_lists_the_datasets_25_sequences(monkeypatch):
     assert {"slider_depth", "urban", "calibration", "office_zigzag"} <= set(md5s)
 
 
-@pytest.mark.parametrize("text, line", [("a 0123456789abcdef0123456789abcdef\nb 12\n", 2),
-                                        ("# mirror\n\nc/d 0123456789abcdef0123456789abcdef\n", 3)])
+@pytest.mark.parametrize(
+    "text, line",
+    [("a 0123456789abcdef0123456789abcdef\nb 12\n", 2), ("# mirror\n\nc/d 0123456789abcdef0123456789abcdef\n", 3)],
+)
 def test_a_bad_registry_line_is_named(tmp_path, monkeypatch, text, line):
     path = tmp_path / "reg.txt"
     path.write_text(text)
@@ -123,9 +136,14 @@ def test_a_bad_registry_line_is_named(tmp_path, monkeypatch, text, line):
 
 def test_a_registry_with_a_byte_order_mark_and_crlf_line_ends_reads_as_plain_text(tmp_path, monkeypatch):
     path = tmp_path / "reg.txt"
-    path.write_bytes(b"\xef\xbb\xbftiny 0123456789abcdef0123456789abcdef\r\n# a mirror's\r\nother 0123456789ABCDEF0123456789abcdef\r\n")
+    path.write_bytes(
+        b"\xef\xbb\xbftiny 0123456789abcdef0123456789abcdef\r\n# a mirror's\r\nother 0123456789ABCDEF0123456789abcdef\r\n"
+    )
     monkeypatch.setenv("EAS_VO_DATA_REGISTRY", str(path))
-    assert ecd_catalogue.registry() == {"tiny": "0123456789abcdef0123456789abcdef", "other": "0123456789abcdef0123456789abcdef"}
+    assert ecd_catalogue.registry() == {
+        "tiny": "0123456789abcdef0123456789abcdef",
+        "other": "0123456789abcdef0123456789abcdef",
+    }
 
 
 def test_the_suite_cannot_reach_the_internet():
@@ -191,7 +209,9 @@ def test_a_local_mirror_is_copied_verified(site, data_server, tmp_path, monkeypa
     assert hits["seq_a.zip"] == 0 and _leftovers(data) == ["seq_a.zip"]
     path.unlink()
     (mirror / "seq_a.zip").write_bytes(b"not the zip")
-    with pytest.raises(EasVoError, match=r"seq_a.zip: does not match its MD5 [0-9a-f]{32} \(found [0-9a-f]{32}\); nothing was kept"):
+    with pytest.raises(
+        EasVoError, match=r"seq_a.zip: does not match its MD5 [0-9a-f]{32} \(found [0-9a-f]{32}\); nothing was kept"
+    ):
         ecd_catalogue.fetch("seq_a")
     assert _leftovers(data) == []
     (mirror / "seq_a.zip").unlink()

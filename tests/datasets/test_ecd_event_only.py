@@ -16,7 +16,9 @@ def test_event_only_real_windows_run_the_slice_frontend(name):
     ds = EcdFolderDataset(folder, EcdConfig(sample_every_events=3000))
     assert ds.load_frame(0) is None and len(ds.events()) == 30_000
     assert len(ds.frame_times()) == 10
-    cfg = config.resolve(None, {"dataset": str(folder), "frontend": "slice"}, ["dataset.sample_every_events=3000", "frontend.n=3000"])
+    cfg = config.resolve(
+        None, {"dataset": str(folder), "frontend": "slice"}, ["dataset.sample_every_events=3000", "frontend.n=3000"]
+    )
     result = pipeline.run(cfg)
     assert result.metrics["frames"] == 10 and result.metrics["nc_mean"] > 50
     assert result.errors is None and np.isfinite(result.R_w_c).all()
@@ -36,8 +38,11 @@ def test_event_only_real_windows_run_cmax_without_a_frontend(name):
     interval): every window is ok, brings its events into sharper focus than no motion does
     (contrast gain over 1), and consecutive ones turn about similar axes."""
     folder = require(EVENT_WINDOWS / name)
-    cfg = config.resolve(None, {"dataset": str(folder), "tracker": "cmax"},
-                         ["dataset.sample_every_events=7500", "tracker.window_events=7500"])
+    cfg = config.resolve(
+        None,
+        {"dataset": str(folder), "tracker": "cmax"},
+        ["dataset.sample_every_events=7500", "tracker.window_events=7500"],
+    )
     assert cfg.run.frontend == "no_image"
     result = pipeline.run(cfg)
     full = [r for r in result.records if r.events > 7000]

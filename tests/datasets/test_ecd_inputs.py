@@ -31,8 +31,10 @@ def test_a_byte_order_mark_and_crlf_line_ends_read_as_plain_text(folder, tmp_pat
 
 def _camchain(fx, fy, cx, cy, dist) -> str:
     """cam0 of a kalibr camchain: a radial-tangential camera of the folder's 346x260 sensor."""
-    return (f"cam0:\n  camera_model: pinhole\n  intrinsics: [{fx}, {fy}, {cx}, {cy}]\n  distortion_model: radtan\n"
-            f"  distortion_coeffs: [{', '.join(map(str, dist))}]\n  resolution: [346, 260]\n")
+    return (
+        f"cam0:\n  camera_model: pinhole\n  intrinsics: [{fx}, {fy}, {cx}, {cy}]\n  distortion_model: radtan\n"
+        f"  distortion_coeffs: [{', '.join(map(str, dist))}]\n  resolution: [346, 260]\n"
+    )
 
 
 def test_calib_txt_and_a_camchain_that_disagree_are_refused_naming_both(folder):
@@ -40,9 +42,12 @@ def test_calib_txt_and_a_camchain_that_disagree_are_refused_naming_both(folder):
     (folder / "camchain.yaml").write_text(_camchain(fx, fy, cx, cy, dist[:4]))  # the same camera (k3 = 0): read
     assert EcdFolderDataset(str(folder)).camera.K[0, 0] == fx and dist[4] == 0
     (folder / "camchain.yaml").write_text(_camchain(fx * 0.75, fy, cx, cy, dist[:4]))
-    with pytest.raises(DataError, match=rf"calib.txt and .*camchain.yaml: two calibrations of the camera that differ \(fx "
-                                        rf"{fx:g} against {fx * 0.75:g}\); remove the wrong one, or choose one with "
-                                        r"--set dataset.calibration=FILE"):
+    with pytest.raises(
+        DataError,
+        match=rf"calib.txt and .*camchain.yaml: two calibrations of the camera that differ \(fx "
+        rf"{fx:g} against {fx * 0.75:g}\); remove the wrong one, or choose one with "
+        r"--set dataset.calibration=FILE",
+    ):
         EcdFolderDataset(str(folder))
     (folder / "camchain.yaml").write_text(_camchain(fx, fy, cx, cy, [dist[0] + 0.05, *dist[1:4]]))
     with pytest.raises(DataError, match=rf"\(distortion {dist[0]:g} .* against {dist[0] + 0.05:g} "):

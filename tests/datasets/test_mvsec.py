@@ -8,7 +8,6 @@ from pathlib import Path
 import h5py
 import numpy as np
 import pytest
-from helpers import hostile_settings, write_mvsec
 from hypothesis import given
 from hypothesis import strategies as st
 from scipy.spatial.transform import Rotation
@@ -18,6 +17,7 @@ from eas_vo.datasets import mvsec
 from eas_vo.datasets.mvsec import MvsecConfig, MvsecDataset
 from eas_vo.errors import DataError, EasVoError
 from eas_vo.registry import open_dataset, resolve_dataset
+from helpers import hostile_settings, write_mvsec
 
 #: An equidistant camchain as MVSEC publishes them (values of its indoor_flying cam0, 346x260).
 CAMCHAIN = """\
@@ -102,9 +102,13 @@ def test_big_endian_datasets_read_alike(tmp_path):
     camchain(tmp_path)
     table = event_table(500)
     native = MvsecDataset(write_file(tmp_path / "n_data.hdf5", **{**GOOD, "davis/left/events": table}))
-    swapped = {name: np.asarray(value).astype(np.asarray(value).dtype.newbyteorder(">")) for name, value in GOOD.items()}
+    swapped = {
+        name: np.asarray(value).astype(np.asarray(value).dtype.newbyteorder(">")) for name, value in GOOD.items()
+    }
     big = MvsecDataset(write_file(tmp_path / "b_data.hdf5", **{**swapped, "davis/left/events": table.astype(">f8")}))
-    assert big.events().tobytes() == native.events().tobytes() == expected_events(table, native.clock_origin_ns).tobytes()
+    assert (
+        big.events().tobytes() == native.events().tobytes() == expected_events(table, native.clock_origin_ns).tobytes()
+    )
     np.testing.assert_array_equal(big.imu.t, native.imu.t)
 
 
@@ -118,7 +122,9 @@ def test_compressed_events_read_through_hdf5plugin(ecd, ecd_folder, tmp_path):
 
 def test_side_selects_the_right_davis_and_its_kalibr_camera(ecd, tmp_path):
     path = write_mvsec(tmp_path, ecd, side="right")
-    (tmp_path / "camchain-imucam-sim.yaml").write_text(CAMCHAIN.replace("[346, 260]", f"[{ecd.camera.width}, {ecd.camera.height}]"))
+    (tmp_path / "camchain-imucam-sim.yaml").write_text(
+        CAMCHAIN.replace("[346, 260]", f"[{ecd.camera.width}, {ecd.camera.height}]")
+    )
     with pytest.raises(DataError, match=r"seq_data.hdf5: has no group davis/left"):
         MvsecDataset(path)
     ds = MvsecDataset(path, MvsecConfig(side="right"))  # the camchain beside the file, cam1
@@ -151,6 +157,7 @@ def test_can_open_looks_at_suffix_signature_and_davis_group(h5_path, tmp_path):
 
 
 # ----------------------------------------------------------------------------- hostile files
+
 
 def camchain(folder: Path) -> Path:
     path = folder / "camchain-imucam-test.yaml"
@@ -196,9 +203,15 @@ DAMAGE = {  # what is written into the row, and what the strict error says
 
 @hostile_settings(60)
 # (from row 1: row 0 going back is no problem, nothing precedes it)
-@given(rows=st.lists(st.tuples(st.integers(1, 2999), st.sampled_from(sorted(DAMAGE))), min_size=1, max_size=4,
-                     unique_by=lambda r: r[0]),
-       block=st.sampled_from([64, 1000, 1 << 20]))
+@given(
+    rows=st.lists(
+        st.tuples(st.integers(1, 2999), st.sampled_from(sorted(DAMAGE))),
+        min_size=1,
+        max_size=4,
+        unique_by=lambda r: r[0],
+    ),
+    block=st.sampled_from([64, 1000, 1 << 20]),
+)
 def test_damaged_event_rows_are_named_or_dropped_exactly(tmp_path_factory, monkeypatch, rows, block):
     monkeypatch.setattr(mvsec, "BLOCK_ROWS", block)
     table = event_table(3000)
@@ -230,33 +243,55 @@ def test_a_small_step_back_is_clamped_not_dropped(tmp_path):
     assert len(events) == 100 and events["t"][50] == table[49, 2] - 1_504_645_177
 
 
-GOOD = {"davis/left/events": event_table(50), "davis/left/image_raw": np.zeros((3, 260, 346), np.uint8),
-        "davis/left/image_raw_ts": [1.0, 2.0, 3.0], "davis/left/imu": np.zeros((4, 6)),
-        "davis/left/imu_ts": [1.0, 1.1, 1.2, 1.3]}
+GOOD = {
+    "davis/left/events": event_table(50),
+    "davis/left/image_raw": np.zeros((3, 260, 346), np.uint8),
+    "davis/left/image_raw_ts": [1.0, 2.0, 3.0],
+    "davis/left/imu": np.zeros((4, 6)),
+    "davis/left/imu_ts": [1.0, 1.1, 1.2, 1.3],
+}
 
 
-@pytest.mark.parametrize("name, value, says", [
-    ("davis/left/events", np.zeros((5, 3)), "davis/left/events: has shape 5 x 3, expected 2 dimensions, 4 columns"),
-    ("davis/left/events", event_table(5).astype(np.float32), "davis/left/events: holds float32, expected float64"),
-    ("davis/left/events", np.zeros(4), "davis/left/events: has shape 4, expected 2 dimensions, 4 columns"),
-    ("davis/left/image_raw", np.zeros((3, 260, 346)), "davis/left/image_raw: holds float64, expected uint8"),
-    ("davis/left/image_raw", np.zeros((3, 260, 346, 3), np.uint8), "davis/left/image_raw: has shape 3 x 260 x 346 x 3"),
-    ("davis/left/image_raw_ts", [1.0, 2.0], "davis/left/image_raw_ts: holds 2 times for 3 frames"),
-    ("davis/left/image_raw_ts", [1.0, 3.0, 2.0], "davis/left/image_raw_ts:2: timestamp 2.000000000 goes back"),
-    ("davis/left/image_raw_ts", [1.0, np.nan, 2.0], "davis/left/image_raw_ts:1: timestamp nan is not finite"),
-    ("davis/left/imu", np.zeros((4, 7)), "davis/left/imu: has shape 4 x 7, expected 2 dimensions, 6 columns"),
-    ("davis/left/imu", np.array([[0.0] * 6] * 3 + [[np.inf] + [0.0] * 5]), "davis/left/imu:3: holds a value that is not finite"),
-    ("davis/left/imu_ts", [1.0, 1.1, 1.1, 1.3], "davis/left/imu_ts:2: timestamp 1.100000000 repeats the previous row's"),
-    ("davis/left/imu_ts", [1.0, 1.1, 1.05, 1.3], "davis/left/imu_ts:2: timestamp 1.050000000 does not increase"),
-    ("davis/left/imu_ts", [1.0, 1.1, 1.2], "davis/left/imu_ts: holds 3 times for 4 rows of davis/left/imu"),
-    ("davis/left/imu_ts", None, "davis/left/imu_ts: missing: the times of davis/left/imu"),
-    ("davis/left/imu", np.zeros((1, 6)), "davis/left/imu_ts: holds 4 times for 1 rows of davis/left/imu"),
-    ({"davis/left/imu": np.zeros((1, 6)), "davis/left/imu_ts": [1.0]}, None,
-     "davis/left/imu: holds 1 row(s); at least 2 are needed"),
-    ("davis/left/events", h5py.Empty("f8"), "davis/left/events: has shape null, expected 2 dimensions"),
-    ("davis/left/events", 3.0, "davis/left/events: has shape scalar, expected 2 dimensions"),
-    ("davis/left/image_raw", np.zeros((3, 0, 346), np.uint8), "frames are 346x0, not an event camera's"),
-])
+@pytest.mark.parametrize(
+    "name, value, says",
+    [
+        ("davis/left/events", np.zeros((5, 3)), "davis/left/events: has shape 5 x 3, expected 2 dimensions, 4 columns"),
+        ("davis/left/events", event_table(5).astype(np.float32), "davis/left/events: holds float32, expected float64"),
+        ("davis/left/events", np.zeros(4), "davis/left/events: has shape 4, expected 2 dimensions, 4 columns"),
+        ("davis/left/image_raw", np.zeros((3, 260, 346)), "davis/left/image_raw: holds float64, expected uint8"),
+        (
+            "davis/left/image_raw",
+            np.zeros((3, 260, 346, 3), np.uint8),
+            "davis/left/image_raw: has shape 3 x 260 x 346 x 3",
+        ),
+        ("davis/left/image_raw_ts", [1.0, 2.0], "davis/left/image_raw_ts: holds 2 times for 3 frames"),
+        ("davis/left/image_raw_ts", [1.0, 3.0, 2.0], "davis/left/image_raw_ts:2: timestamp 2.000000000 goes back"),
+        ("davis/left/image_raw_ts", [1.0, np.nan, 2.0], "davis/left/image_raw_ts:1: timestamp nan is not finite"),
+        ("davis/left/imu", np.zeros((4, 7)), "davis/left/imu: has shape 4 x 7, expected 2 dimensions, 6 columns"),
+        (
+            "davis/left/imu",
+            np.array([[0.0] * 6] * 3 + [[np.inf] + [0.0] * 5]),
+            "davis/left/imu:3: holds a value that is not finite",
+        ),
+        (
+            "davis/left/imu_ts",
+            [1.0, 1.1, 1.1, 1.3],
+            "davis/left/imu_ts:2: timestamp 1.100000000 repeats the previous row's",
+        ),
+        ("davis/left/imu_ts", [1.0, 1.1, 1.05, 1.3], "davis/left/imu_ts:2: timestamp 1.050000000 does not increase"),
+        ("davis/left/imu_ts", [1.0, 1.1, 1.2], "davis/left/imu_ts: holds 3 times for 4 rows of davis/left/imu"),
+        ("davis/left/imu_ts", None, "davis/left/imu_ts: missing: the times of davis/left/imu"),
+        ("davis/left/imu", np.zeros((1, 6)), "davis/left/imu_ts: holds 4 times for 1 rows of davis/left/imu"),
+        (
+            {"davis/left/imu": np.zeros((1, 6)), "davis/left/imu_ts": [1.0]},
+            None,
+            "davis/left/imu: holds 1 row(s); at least 2 are needed",
+        ),
+        ("davis/left/events", h5py.Empty("f8"), "davis/left/events: has shape null, expected 2 dimensions"),
+        ("davis/left/events", 3.0, "davis/left/events: has shape scalar, expected 2 dimensions"),
+        ("davis/left/image_raw", np.zeros((3, 0, 346), np.uint8), "frames are 346x0, not an event camera's"),
+    ],
+)
 def test_datasets_of_the_wrong_shape_dtype_or_times(tmp_path, name, value, says):
     camchain(tmp_path)
     content = dict(GOOD)
@@ -268,14 +303,17 @@ def test_datasets_of_the_wrong_shape_dtype_or_times(tmp_path, name, value, says)
     path = write_file(tmp_path / "x_data.hdf5", **content)
     with pytest.raises(DataError) as err:
         MvsecDataset(path).events()
-    assert str(err.value).startswith(f"{path}:") and says in str(err.value) and "\n" not in str(err.value), str(err.value)
+    assert str(err.value).startswith(f"{path}:") and says in str(err.value) and "\n" not in str(err.value), str(
+        err.value
+    )
 
 
 def test_lenient_drops_frames_going_back(tmp_path):
     camchain(tmp_path)
     frames = np.arange(3, dtype=np.uint8)[:, None, None] * np.ones((3, 260, 346), np.uint8)
-    path = write_file(tmp_path / "x_data.hdf5", **{**GOOD, "davis/left/image_raw": frames,
-                                                   "davis/left/image_raw_ts": [1.0, 3.0, 2.0]})
+    path = write_file(
+        tmp_path / "x_data.hdf5", **{**GOOD, "davis/left/image_raw": frames, "davis/left/image_raw_ts": [1.0, 3.0, 2.0]}
+    )
     ds = MvsecDataset(path, MvsecConfig(lenient=True))
     np.testing.assert_array_equal(ds.frame_times(), [1.0, 3.0])
     assert ds.load_frame(1)[0, 0] == 1
@@ -287,8 +325,10 @@ def test_empty_streams(tmp_path):
     frames_only = write_file(tmp_path / "f_data.hdf5", **{**GOOD, "davis/left/events": np.zeros((0, 4))})
     ds = MvsecDataset(frames_only)
     assert len(ds.events()) == 0 and len(ds.frame_times()) == 3
-    events_only = write_file(tmp_path / "e_data.hdf5", **{"davis/left/events": event_table(1000),
-                                                          "davis/left/image_raw": np.zeros((0, 260, 346), np.uint8)})
+    events_only = write_file(
+        tmp_path / "e_data.hdf5",
+        **{"davis/left/events": event_table(1000), "davis/left/image_raw": np.zeros((0, 260, 346), np.uint8)},
+    )
     ds = MvsecDataset(events_only, MvsecConfig(sample_every_events=100, width=640, height=480))  # size: image_raw's
     assert (ds.camera.width, ds.camera.height) == (346, 260)
     assert ds.load_frame(0) is None and len(ds.frame_times()) == 10 and "event-only" in ds.no_frames_reason
@@ -300,15 +340,23 @@ def test_empty_streams(tmp_path):
 
 
 def pose_file(path: Path, T: np.ndarray, t=None) -> Path:
-    return write_file(path, **{"davis/left/pose": T, "davis/left/pose_ts": np.arange(len(T)) * 0.01 if t is None else t})
+    return write_file(
+        path, **{"davis/left/pose": T, "davis/left/pose_ts": np.arange(len(T)) * 0.01 if t is None else t}
+    )
 
 
-@pytest.mark.parametrize("damage, says", [
-    (lambda T: T.__setitem__((2, 0, 0), 2.0), "x_gt.hdf5:davis/left/pose:2: is not a rigid transform"),
-    (lambda T: T.__setitem__((1, 3, 0), 0.5), "x_gt.hdf5:davis/left/pose:1: is not a rigid transform"),
-    (lambda T: T.__setitem__((3, slice(0, 3), slice(0, 3)), -np.eye(3)), "x_gt.hdf5:davis/left/pose:3: is not a rigid"),
-    (lambda T: T.__setitem__((0, 0, 3), np.nan), "x_gt.hdf5:davis/left/pose:0: holds a value that is not finite"),
-])
+@pytest.mark.parametrize(
+    "damage, says",
+    [
+        (lambda T: T.__setitem__((2, 0, 0), 2.0), "x_gt.hdf5:davis/left/pose:2: is not a rigid transform"),
+        (lambda T: T.__setitem__((1, 3, 0), 0.5), "x_gt.hdf5:davis/left/pose:1: is not a rigid transform"),
+        (
+            lambda T: T.__setitem__((3, slice(0, 3), slice(0, 3)), -np.eye(3)),
+            "x_gt.hdf5:davis/left/pose:3: is not a rigid",
+        ),
+        (lambda T: T.__setitem__((0, 0, 3), np.nan), "x_gt.hdf5:davis/left/pose:0: holds a value that is not finite"),
+    ],
+)
 def test_ground_truth_poses_must_be_rigid(tmp_path, damage, says):
     camchain(tmp_path)
     data = write_file(tmp_path / "x_data.hdf5", **GOOD)

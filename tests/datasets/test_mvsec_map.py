@@ -8,7 +8,6 @@ from pathlib import Path
 import h5py
 import numpy as np
 import pytest
-from helpers import hostile_settings
 from hypothesis import given
 from hypothesis import strategies as st
 
@@ -16,6 +15,7 @@ from eas_vo.datasets import mvsec
 from eas_vo.datasets.mvsec import MvsecConfig, MvsecDataset
 from eas_vo.errors import DataError
 from eas_vo.types import EVENT_DTYPE
+from helpers import hostile_settings
 
 WIDTH, HEIGHT = 346, 260
 CAMCHAIN = """\
@@ -72,14 +72,17 @@ def expected_events(rows: np.ndarray, origin_ns: int = 0) -> np.ndarray:
     return ev
 
 
-@pytest.mark.parametrize("options, mappable", [
-    ({}, True),
-    ({"dtype": ">f8"}, True),
-    ({"file": {"userblock_size": 512}}, True),
-    ({"chunks": (700, 4)}, False),
-    ({"chunks": (1000, 4), "compression": "gzip", "shuffle": True}, False),
-    ({"chunks": (1000, 4), "compression": "lzf", "dtype": ">f8"}, False),
-])
+@pytest.mark.parametrize(
+    "options, mappable",
+    [
+        ({}, True),
+        ({"dtype": ">f8"}, True),
+        ({"file": {"userblock_size": 512}}, True),
+        ({"chunks": (700, 4)}, False),
+        ({"chunks": (1000, 4), "compression": "gzip", "shuffle": True}, False),
+        ({"chunks": (1000, 4), "compression": "lzf", "dtype": ">f8"}, False),
+    ],
+)
 def test_the_map_and_h5py_give_the_same_cache_byte_for_byte(tmp_path, monkeypatch, options, mappable):
     monkeypatch.setattr(mvsec, "MAP_BLOCK_ROWS", 1000)
     monkeypatch.setattr(mvsec, "BLOCK_ROWS", 1400)
@@ -110,8 +113,12 @@ def test_what_the_map_must_not_take_goes_through_h5py(tmp_path, monkeypatch):
     table.tofile(external / "rows.bin")
     (external / "camchain-imucam-test.yaml").write_text(CAMCHAIN)
     with h5py.File(external / "x_data.hdf5", "w") as f:  # the rows in another file
-        f.create_dataset("davis/left/events", shape=table.shape, dtype="<f8",
-                         external=[(str(external / "rows.bin"), 0, table.nbytes)])
+        f.create_dataset(
+            "davis/left/events",
+            shape=table.shape,
+            dtype="<f8",
+            external=[(str(external / "rows.bin"), 0, table.nbytes)],
+        )
     assert not took_the_map(external / "x_data.hdf5", monkeypatch)
     events, _, _, origin_ns = read(external / "x_data.hdf5", tmp_path / "b", monkeypatch, True)
     assert events.tobytes() == expected_events(table, origin_ns).tobytes()
@@ -147,11 +154,18 @@ DAMAGE = {
 
 
 @hostile_settings(60)
-@given(damage=st.lists(st.tuples(st.integers(1, 2499), st.sampled_from(sorted(DAMAGE))), max_size=5,
-                       unique_by=lambda r: r[0]),
-       near_seams=st.booleans(), block=st.sampled_from([100, 256, 1000]), lenient=st.booleans(), big=st.booleans())
-def test_damaged_rows_read_alike_mapped_and_through_h5py(tmp_path_factory, monkeypatch, damage, near_seams, block,
-                                                         lenient, big):
+@given(
+    damage=st.lists(
+        st.tuples(st.integers(1, 2499), st.sampled_from(sorted(DAMAGE))), max_size=5, unique_by=lambda r: r[0]
+    ),
+    near_seams=st.booleans(),
+    block=st.sampled_from([100, 256, 1000]),
+    lenient=st.booleans(),
+    big=st.booleans(),
+)
+def test_damaged_rows_read_alike_mapped_and_through_h5py(
+    tmp_path_factory, monkeypatch, damage, near_seams, block, lenient, big
+):
     """Errors name the same row with the same words; lenient reads drop and count the same rows
     and write the same cache, for damage anywhere and at the seams of the map's blocks."""
     monkeypatch.setattr(mvsec, "MAP_BLOCK_ROWS", block)

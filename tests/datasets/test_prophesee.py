@@ -7,14 +7,21 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from prophesee_words import (
+    ENCODERS,
+    EVENT,
+    event_camera_py_packets,
+    random_stream,
+    random_triggers,
+    write_dat,
+    write_raw,
+)
 
 from eas_vo import registry
 from eas_vo.cli.main import main
 from eas_vo.datasets.prophesee import PropheseeConfig, PropheseeDataset
 from eas_vo.errors import DataError
 from helpers import one_line_failure
-from prophesee_words import (ENCODERS, EVENT, event_camera_py_packets, random_stream, random_triggers, write_dat,
-                             write_raw)
 
 W, H = 640, 480
 
@@ -49,7 +56,10 @@ def test_a_raw_file_reads_its_events_and_triggers_and_says_so(tmp_path, fmt):
     lines = ds.contents()
     rising = int(np.sum(triggers["edge"] == 1))
     assert f"events {len(expected)}" in lines
-    assert f"external triggers {len(triggers)} edges ({rising} rising, {len(triggers) - rising} falling; channels 0, 1)" in lines
+    assert (
+        f"external triggers {len(triggers)} edges ({rising} rising, {len(triggers) - rising} falling; channels 0, 1)"
+        in lines
+    )
     assert len(ds.frame_times()) > 1 and ds.data_warnings() == []
     again = PropheseeDataset(path)  # from the cache: the same events, triggers and description
     assert_events(again.events(), expected)
@@ -63,22 +73,32 @@ def test_header_forms_and_sizes(tmp_path):
     old = write_raw(tmp_path / "old.raw", words, "EVT3", W, H, ["% evt 3.0", f"% geometry {W}x{H}", "% system_ID 48"])
     ds = PropheseeDataset(old)
     assert_events(ds.events(), expected)
-    assert ds.contents()[:2] == [f"format EVT 3.0 (.raw; header: evt 3.0; geometry {W}x{H})",
-                                 f"sensor {W}x{H} px (from the header's geometry)"]
+    assert ds.contents()[:2] == [
+        f"format EVT 3.0 (.raw; header: evt 3.0; geometry {W}x{H})",
+        f"sensor {W}x{H} px (from the header's geometry)",
+    ]
     bare = write_raw(tmp_path / "bare.raw", words, "EVT3", W, H, ["% evt 3.0"])  # no size, no `% end`
     with pytest.raises(DataError, match="states no sensor size: give it with --set dataset.width=W"):
         PropheseeDataset(bare)
     assert_events(PropheseeDataset(bare, PropheseeConfig(width=W, height=H)).events(), expected)
     with pytest.raises(DataError, match=f"dataset.width, dataset.height say 320x240 px, the header's geometry {W}x{H}"):
         PropheseeDataset(old, PropheseeConfig(width=320, height=240))
-    for lines, message in ((["% format EVT4;width=640;height=480"], "event format EVT4 is not read"),
-                           (["% date today"], "names no event format"),
-                           (["% format EVT3;width=640;height=480", "% geometry 320x240"], "its geometry 320x240"),
-                           (["% format EVT3;width=0;height=480"], "header's format's width '0' is not a sensor size")):
+    for lines, message in (
+        (["% format EVT4;width=640;height=480"], "event format EVT4 is not read"),
+        (["% date today"], "names no event format"),
+        (["% format EVT3;width=640;height=480", "% geometry 320x240"], "its geometry 320x240"),
+        (["% format EVT3;width=0;height=480"], "header's format's width '0' is not a sensor size"),
+    ):
         with pytest.raises(DataError, match=message):
             PropheseeDataset(write_raw(tmp_path / "h.raw", words, "EVT3", W, H, lines))
-    legacy = write_raw(tmp_path / "legacy.raw", ENCODERS["EVT21"](events, legacy=True)[0], "EVT21", W, H,
-                       [f"% format EVT21;height={H};width={W};endianness=legacy", "% end"])
+    legacy = write_raw(
+        tmp_path / "legacy.raw",
+        ENCODERS["EVT21"](events, legacy=True)[0],
+        "EVT21",
+        W,
+        H,
+        [f"% format EVT21;height={H};width={W};endianness=legacy", "% end"],
+    )
     ds = PropheseeDataset(legacy)
     assert_events(ds.events(), ENCODERS["EVT21"](events)[1])
     assert ds.contents()[0].startswith("format EVT 2.1, legacy word order")
@@ -87,15 +107,20 @@ def test_header_forms_and_sizes(tmp_path):
 def test_a_dat_file_reads_its_records_and_its_time_roll_over(tmp_path):
     events = random_stream(4000, W, H, seed=4, t0_us=(1 << 32) - 100_000, span_us=300_000, runs=False)
     ds = PropheseeDataset(write_dat(tmp_path / "cd.dat", events, W, H))
-    assert ds.contents()[:3] == ["format DAT of EventCD records, version 2", f"sensor {W}x{H} px (from the header's "
-                                 "Width and Height)", f"events {len(events)}"]
+    assert ds.contents()[:3] == [
+        "format DAT of EventCD records, version 2",
+        f"sensor {W}x{H} px (from the header's Width and Height)",
+        f"events {len(events)}",
+    ]
     assert_events(ds.events(), events)  # the 32-bit times wrapped in the file, unwrapped on reading
     trig = write_dat(tmp_path / "trig.dat", events, W, H, ev_type=14)
     with pytest.raises(DataError, match="holds EventExtTrigger records: only CD events"):
         PropheseeDataset(trig)
     cut = tmp_path / "cut.dat"
     cut.write_bytes((tmp_path / "cd.dat").read_bytes()[:-3])
-    with pytest.raises(DataError, match=r"cut.dat: byte \d+: the file ends inside an event record \(5 of its 8 bytes\)"):
+    with pytest.raises(
+        DataError, match=r"cut.dat: byte \d+: the file ends inside an event record \(5 of its 8 bytes\)"
+    ):
         PropheseeDataset(cut).events()
 
 
@@ -107,7 +132,7 @@ def test_damaged_raw_data_is_one_line_naming_the_file_and_byte(tmp_path, capsys)
     path.write_bytes(bytes(data))
     err = one_line_failure(["info", "--dataset", str(path)], capsys)
     assert f"{path}: byte {offset}: damaged EVT 3.0 data: word 0x9123 is of no EVT 3.0 type (type 9)" in err
-    path.write_bytes(bytes(data[:offset + 1]))  # cut inside a word
+    path.write_bytes(bytes(data[: offset + 1]))  # cut inside a word
     err = one_line_failure(["info", "--dataset", str(path)], capsys)
     assert f"byte {offset}: damaged EVT 3.0 data: 1 byte(s) after the last whole 16-bit EVT 3.0 word" in err
 
@@ -191,7 +216,10 @@ def test_the_real_evt3_bytes_as_a_raw_file(tmp_path):
     ds = PropheseeDataset(path)
     events = ds.events()
     assert len(events) == 218291 + 125183 and int(np.sum(events["p"] == 1)) == 125183
-    assert len(ds.triggers()) == 4157 and "external triggers 4157 edges (2079 rising, 2078 falling; channels 6)" in ds.contents()
+    assert (
+        len(ds.triggers()) == 4157
+        and "external triggers 4157 edges (2079 rising, 2078 falling; channels 6)" in ds.contents()
+    )
     no_triggers = write_raw(tmp_path / "camera_no_triggers.raw", stream[stream >> 12 != 0xA], "EVT3", 640, 480)
     peer = expelliarmus_read(no_triggers, "evt3")
     assert len(peer) == len(events)
@@ -237,12 +265,31 @@ def test_an_event_only_raw_with_a_calibration_runs_cmax(tmp_path):
     words, _, _ = ENCODERS["EVT3"](events, others_every=0)
     path = write_raw(tmp_path / "turn.raw", words, "EVT3", 240, 180)
     calibration = tmp_path / "camera.yaml"
-    calibration.write_text("image_width: 240\nimage_height: 180\ndistortion_model: plumb_bob\n"
-                           "camera_matrix: {rows: 3, cols: 3, data: [200, 0, 120, 0, 200, 90, 0, 0, 1]}\n"
-                           "distortion_coefficients: {rows: 1, cols: 5, data: [0, 0, 0, 0, 0]}\n")
+    calibration.write_text(
+        "image_width: 240\nimage_height: 180\ndistortion_model: plumb_bob\n"
+        "camera_matrix: {rows: 3, cols: 3, data: [200, 0, 120, 0, 200, 90, 0, 0, 1]}\n"
+        "distortion_coefficients: {rows: 1, cols: 5, data: [0, 0, 0, 0, 0]}\n"
+    )
     out = tmp_path / "run"
-    assert main(["run", "--dataset", str(path), "--tracker", "cmax", "--set", f"dataset.calibration={calibration}",
-                 "--set", "dataset.sample_rate_hz=50", "--out", str(out), "--quiet"]) == 0
+    assert (
+        main(
+            [
+                "run",
+                "--dataset",
+                str(path),
+                "--tracker",
+                "cmax",
+                "--set",
+                f"dataset.calibration={calibration}",
+                "--set",
+                "dataset.sample_rate_hz=50",
+                "--out",
+                str(out),
+                "--quiet",
+            ]
+        )
+        == 0
+    )
     trajectory = read_tum(out / "trajectory.tum")
     t, q_xyzw = trajectory.t, trajectory.q_w_c
     R = matrices_from_quats(q_xyzw)

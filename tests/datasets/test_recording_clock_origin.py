@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from helpers import InMemoryDataset, write_aedat4, write_mvsec
 
 from eas_vo import config, pipeline
 from eas_vo.datasets.ecd import EcdFolderDataset, write_ecd_folder
@@ -15,6 +14,7 @@ from eas_vo.datasets.rosbag2 import write_bag2
 from eas_vo.io.tables import clock_time
 from eas_vo.plugins import Dataset
 from eas_vo.sequence.info import describe
+from helpers import InMemoryDataset, write_aedat4, write_mvsec
 
 #: 2023-11-14 22:13:20 UTC [ns].
 UNIX_NS = 1_700_000_000 * 10**9
@@ -36,15 +36,22 @@ def on_clock(base: Dataset, origin_ns: int, absolute: bool = False) -> InMemoryD
     events["t"] = on_grid(events["t"]) + shift
     imu, gt = base.imu, base.ground_truth
     times = on_grid(base.frame_times()) + shift
-    return InMemoryDataset(base.camera, times, [base.load_frame(k) for k in range(len(times))], events,
-                           type(imu)(on_grid(imu.t) + shift, imu.acc, imu.gyro),
-                           type(gt)(on_grid(gt.t) + shift, gt.p_w_c, gt.q_w_c), 0 if absolute else origin_ns)
+    return InMemoryDataset(
+        base.camera,
+        times,
+        [base.load_frame(k) for k in range(len(times))],
+        events,
+        type(imu)(on_grid(imu.t) + shift, imu.acc, imu.gyro),
+        type(gt)(on_grid(gt.t) + shift, gt.p_w_c, gt.q_w_c),
+        0 if absolute else origin_ns,
+    )
 
 
 def ecd_folder(ds, folder):
     frames = (ds.load_frame(k) for k in range(len(ds.frame_times())))
-    write_ecd_folder(folder / "seq", ds.camera, ds.frame_times(), frames, ds.events(), ds.ground_truth, ds.imu,
-                     ds.clock_origin_ns)
+    write_ecd_folder(
+        folder / "seq", ds.camera, ds.frame_times(), frames, ds.events(), ds.ground_truth, ds.imu, ds.clock_origin_ns
+    )
     return folder / "seq"
 
 
@@ -56,11 +63,20 @@ def aedat4_file(ds, folder):
     events = ds.events()
     frames = [(int(us(t)) - 1000, 2000, ds.load_frame(k)) for k, t in enumerate(ds.frame_times())]
     imu = np.column_stack([us(ds.imu.t), ds.imu.acc / 9.80665, np.degrees(ds.imu.gyro)])
-    write_aedat4(folder / "rec.aedat4", size=(ds.camera.width, ds.camera.height), frames=frames, imu=imu.tolist(),
-                 events=(us(events["t"]), events["x"], events["y"], events["p"]))
+    write_aedat4(
+        folder / "rec.aedat4",
+        size=(ds.camera.width, ds.camera.height),
+        frames=frames,
+        imu=imu.tolist(),
+        events=(us(events["t"]), events["x"], events["y"], events["p"]),
+    )
     gt = ds.ground_truth
-    (folder / "gt.tum").write_text("".join(f"{clock_time(t, ds.clock_origin_ns)} {' '.join(repr(float(v)) for v in (*p, *q))}\n"
-                                           for t, p, q in zip(gt.t, gt.p_w_c, gt.q_w_c)))
+    (folder / "gt.tum").write_text(
+        "".join(
+            f"{clock_time(t, ds.clock_origin_ns)} {' '.join(repr(float(v)) for v in (*p, *q))}\n"
+            for t, p, q in zip(gt.t, gt.p_w_c, gt.q_w_c)
+        )
+    )
     return folder / "rec.aedat4"
 
 
@@ -69,7 +85,9 @@ WRITERS = {
     "ecd": ecd_folder,
     "rosbag": lambda ds, folder: (write_bag(ds, folder / "rec.bag"), folder / "rec.bag")[1],
     "rosbag2-sqlite3-dvs": lambda ds, folder: (write_bag2(ds, folder / "bag", "sqlite3"), folder / "bag")[1],
-    "rosbag2-mcap-mono": lambda ds, folder: (write_bag2(ds, folder / "bag", "mcap", encoding="mono"), folder / "bag")[1],
+    "rosbag2-mcap-mono": lambda ds, folder: (write_bag2(ds, folder / "bag", "mcap", encoding="mono"), folder / "bag")[
+        1
+    ],
     "mvsec": lambda ds, folder: write_mvsec(folder, ds),
 }
 
@@ -105,8 +123,10 @@ def test_a_unix_clock_gives_the_same_info_and_trajectory(base, fmt, tmp_path):
     np.testing.assert_allclose(unix.R_w_c, zero.R_w_c, rtol=0, atol=1e-6)
     assert unix.metrics["ape_mean_rad"] == pytest.approx(zero.metrics["ape_mean_rad"], abs=1e-6)
     # The files hold the recording's own times: the Unix run's are the other's + 1.7e9 s, to the digit.
-    zero_t, unix_t = ([line.split()[0] for line in (tmp_path / f"{name}_run" / "trajectory.tum").read_text().splitlines()]
-                      for name in ("zero", "unix"))
+    zero_t, unix_t = (
+        [line.split()[0] for line in (tmp_path / f"{name}_run" / "trajectory.tum").read_text().splitlines()]
+        for name in ("zero", "unix")
+    )
     for a, b in zip(zero_t, unix_t):
         whole, frac = a.split(".")
         assert b == f"{int(whole) + 1_700_000_000}.{frac}"

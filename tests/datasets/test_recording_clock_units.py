@@ -8,12 +8,12 @@ from __future__ import annotations
 import shutil
 
 import pytest
-from helpers import ECD_FILES, UNIX_S, known_sequence, one_line_failure, retimed, sequence_with, write_mvsec
 
 from eas_vo.config import resolve
 from eas_vo.datasets import recording
 from eas_vo.datasets.ecd import EcdFolderDataset
 from eas_vo.sequence.info import describe
+from helpers import ECD_FILES, UNIX_S, known_sequence, one_line_failure, retimed, sequence_with, write_mvsec
 
 UNITS = {"microseconds": 10**6, "nanoseconds": 10**9}
 
@@ -62,12 +62,30 @@ def test_event_only_microseconds_are_refused_before_any_sample_is_made(tmp_path,
 
     monkeypatch.setattr(recording, "event_sample_times", no_sampling)
     sensor = ["--set", "dataset.width=346", "--set", "dataset.height=260"]
-    err = one_line_failure(["run", "--dataset", str(location), "--tracker", "cmax", "--frontend", "none", *sensor, "--out",
-                            str(tmp_path / "run")], capsys)
+    err = one_line_failure(
+        [
+            "run",
+            "--dataset",
+            str(location),
+            "--tracker",
+            "cmax",
+            "--frontend",
+            "none",
+            *sensor,
+            "--out",
+            str(tmp_path / "run"),
+        ],
+        capsys,
+    )
     assert "events.txt: the event timestamps span" in err and "more than a day" in err, err
     info = describe(resolve(None, {"dataset": str(location)}, [sensor[1], sensor[3]]))
-    assert info.samples.count == 0 and [w for w in info.warnings if "more than a day" in w] == [err[len("eas-vo: error: "):-1]]
-    assert one_line_failure(["convert", "--dataset", str(location), *sensor, "--out", str(tmp_path / "copy")], capsys) == err
+    assert info.samples.count == 0 and [w for w in info.warnings if "more than a day" in w] == [
+        err[len("eas-vo: error: ") : -1]
+    ]
+    assert (
+        one_line_failure(["convert", "--dataset", str(location), *sensor, "--out", str(tmp_path / "copy")], capsys)
+        == err
+    )
 
 
 def test_mvsec_pose_ts_in_microseconds_is_refused(tmp_path, capsys):
@@ -75,8 +93,18 @@ def test_mvsec_pose_ts_in_microseconds_is_refused(tmp_path, capsys):
     gt = base.ground_truth
     base.ground_truth = type(gt)(gt.t * 1e6, gt.p_w_c, gt.q_w_c)
     data = write_mvsec(tmp_path / "mvsec", base)
-    err = one_line_failure(["run", "--dataset", str(data), "--set", f"dataset.calibration={tmp_path / 'seq' / 'calib.txt'}",
-                            "--out", str(tmp_path / "run")], capsys)
+    err = one_line_failure(
+        [
+            "run",
+            "--dataset",
+            str(data),
+            "--set",
+            f"dataset.calibration={tmp_path / 'seq' / 'calib.txt'}",
+            "--out",
+            str(tmp_path / "run"),
+        ],
+        capsys,
+    )
     assert f"{tmp_path / 'mvsec' / 'seq_gt.hdf5'}:davis/left/pose_ts: the ground-truth timestamps span" in err, err
     assert "look like microseconds" in err
 
@@ -87,8 +115,10 @@ def test_a_ground_truth_file_in_microseconds_is_refused_naming_it(tmp_path, caps
     tum = tmp_path / "poses.tum"
     shutil.copy(folder / "groundtruth.txt", tum)
     retimed(tum, 10**6, UNIX_S)
-    err = one_line_failure(["run", "--dataset", str(folder), "--set", f"dataset.ground_truth={tum}", "--out",
-                            str(tmp_path / "run")], capsys)
+    err = one_line_failure(
+        ["run", "--dataset", str(folder), "--set", f"dataset.ground_truth={tum}", "--out", str(tmp_path / "run")],
+        capsys,
+    )
     assert f"{tum}: the ground-truth timestamps span" in err and "look like microseconds" in err, err
 
 
@@ -105,6 +135,8 @@ def test_events_on_another_clock_than_the_frames_are_refused_naming_both(tmp_pat
     folder = sequence_with(tmp_path / "seq", None, 1)
     retimed(folder / ECD_FILES["event"], 1, UNIX_S)
     err = one_line_failure(["run", "--dataset", str(folder), "--out", str(tmp_path / "run")], capsys)
-    assert f"{folder / ECD_FILES['event']}: the events (" in err and "do not overlap" in err and ECD_FILES["frame"] in err, err
+    assert (
+        f"{folder / ECD_FILES['event']}: the events (" in err and "do not overlap" in err and ECD_FILES["frame"] in err
+    ), err
     warnings = describe(resolve(None, {"dataset": str(folder)})).warnings
     assert [w for w in warnings if "do not overlap" in w] == [err.removeprefix("eas-vo: error: ").strip()]

@@ -11,8 +11,8 @@ import shutil
 import numpy as np
 import pytest
 
-from eas_vo.datasets.ecd import write_ecd_folder
 from eas_vo.camera import CameraModel
+from eas_vo.datasets.ecd import write_ecd_folder
 from eas_vo.types import EVENT_DTYPE, ImuSeries, PoseSeries
 from helpers import InMemoryDataset, flipped_copies, read_each_bounded, seeded_flips, write_mvsec
 
@@ -29,10 +29,16 @@ def tiny() -> InMemoryDataset:
     frames = [rng.integers(0, 256, (HEIGHT, WIDTH), dtype=np.uint8) for _ in times]
     events = np.zeros(400, EVENT_DTYPE)
     events["t"] = t0 + np.sort(rng.uniform(0, 0.1, 400))
-    events["x"], events["y"], events["p"] = rng.integers(0, WIDTH, 400), rng.integers(0, HEIGHT, 400), rng.integers(0, 2, 400)
+    events["x"], events["y"], events["p"] = (
+        rng.integers(0, WIDTH, 400),
+        rng.integers(0, HEIGHT, 400),
+        rng.integers(0, 2, 400),
+    )
     t = t0 + np.linspace(0, 0.1, 21)
     imu = ImuSeries(t, np.tile([0.0, 0.0, 9.81], (21, 1)), np.tile([0.1, 0.0, 0.0], (21, 1)))
-    return InMemoryDataset(camera, times, frames, events, imu, PoseSeries(t, np.zeros((21, 3)), np.tile([0.0, 0.0, 0.0, 1.0], (21, 1))))
+    return InMemoryDataset(
+        camera, times, frames, events, imu, PoseSeries(t, np.zeros((21, 3)), np.tile([0.0, 0.0, 0.0, 1.0], (21, 1)))
+    )
 
 
 def write_all(root):

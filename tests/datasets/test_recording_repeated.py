@@ -5,15 +5,18 @@ import numpy as np
 import pytest
 
 from eas_vo.datasets.ecd import EcdConfig, EcdFolderDataset
-from eas_vo.io.tables import check_increasing
 from eas_vo.errors import DataError, DataWarnings
+from eas_vo.io.tables import check_increasing
 from helpers import known_sequence
 
 
 def test_a_repeated_time_is_refused_strictly_and_dropped_and_counted_leniently():
     t = np.array([0.0, 0.1, 0.1, 0.1, 0.2, 0.3, 0.3])
-    with pytest.raises(DataError, match=r"imu.txt:3: timestamp 0.100000000 repeats the previous row's \(3 such row\(s\); "
-                                         r"--lenient drops them\)"):
+    with pytest.raises(
+        DataError,
+        match=r"imu.txt:3: timestamp 0.100000000 repeats the previous row's \(3 such row\(s\); "
+        r"--lenient drops them\)",
+    ):
         check_increasing("imu.txt", t)
     warnings = DataWarnings()
     keep = check_increasing("imu.txt", t, warnings=warnings)
@@ -36,4 +39,5 @@ def test_an_ecd_imu_and_ground_truth_with_a_repeated_stamp(tmp_path):
     np.testing.assert_array_equal(lenient.ground_truth.q_w_c, strict.ground_truth.q_w_c)
     assert [line for line in lenient.data_warnings() if "repeated" in line] == [
         f"{seq / 'groundtruth.txt'}: 1 dropped: repeated timestamp (first at line 6)",
-        f"{seq / 'imu.txt'}: 1 dropped: repeated timestamp (first at line 6)"]
+        f"{seq / 'imu.txt'}: 1 dropped: repeated timestamp (first at line 6)",
+    ]

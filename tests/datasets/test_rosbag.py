@@ -33,8 +33,11 @@ def test_bag_topics_are_configurable(sequence, tmp_path):
     assert default.topic["events_topic"] == "/cam/events" and default.topic["image_topic"] == "/cam/image"
     assert len(default.events()) == len(sequence.events()) and len(default.frame_times()) == len(sequence.frame_times())
     # A topic the user names that the bag lacks is refused, listing what the bag holds.
-    with pytest.raises(DataError, match=r"has no topic /wrong \(dataset.events_topic\); its .* topic: /cam/events \(--set dataset.events_topic=/cam/events\); "
-                                        r"it holds .*/cam/events \(dvs_msgs/msg/EventArray\)"):
+    with pytest.raises(
+        DataError,
+        match=r"has no topic /wrong \(dataset.events_topic\); its .* topic: /cam/events \(--set dataset.events_topic=/cam/events\); "
+        r"it holds .*/cam/events \(dvs_msgs/msg/EventArray\)",
+    ):
         RosbagDataset(tmp_path / "custom.bag", BagConfig(events_topic="/wrong"))
 
 
@@ -65,7 +68,6 @@ def test_bag_event_message_damage_names_topic_and_index(bag_path, sequence, tmp_
     lenient = RosbagDataset(dst, BagConfig(lenient=True))
     assert len(lenient.events()) == len(sequence.events()) - 5000
     assert "1 dropped: undecodable event message (first at message 3)" in lenient.warnings.lines()[0]
-
 
 
 def _compressed_copy(src, dst, compression):
@@ -103,14 +105,20 @@ def test_damaged_bytes_inside_a_chunk_name_the_topic_message_and_time(bag_path, 
         else:  # the sixth IMU message's record header
             index = 5
             record = reader.chunks[entries[index].chunk_pos].datapos + entries[index].offset
-            field = {"header_length": (record, 4), "connection": (data.index(b"conn=", record) + 5, 4),
-                     "time": (data.index(b"time=", record) + 5, 4)}[damage]
-            data[field[0]: field[0] + field[1]] = b"\xf0\xff\xff\x7f"
+            field = {
+                "header_length": (record, 4),
+                "connection": (data.index(b"conn=", record) + 5, 4),
+                "time": (data.index(b"time=", record) + 5, 4),
+            }[damage]
+            data[field[0] : field[0] + field[1]] = b"\xf0\xff\xff\x7f"
         t_s = entries[index].time / 1e9
     path = tmp_path / "damaged.bag"
     path.write_bytes(bytes(data))
-    with pytest.raises(DataError, match=rf"damaged.bag:{topic}:{index}: damaged bag data, message unreadable at "
-                                        rf"bag time {t_s:.6f} s") as info:
+    with pytest.raises(
+        DataError,
+        match=rf"damaged.bag:{topic}:{index}: damaged bag data, message unreadable at "
+        rf"bag time {t_s:.6f} s",
+    ) as info:
         RosbagDataset(path)
     assert "\n" not in str(info.value)
 
@@ -137,12 +145,18 @@ def test_truncated_or_damaged_bag_is_named_or_read_whole(bag_path, sequence, tmp
 
 
 def test_a_fisheye_camera_info_is_read_back_as_written(short_sequence, tmp_path):
-    from eas_vo.datasets.ecd import CAMCHAIN, camchain_yaml
-    from eas_vo.camera import CameraModel
     import shutil
 
-    fisheye = CameraModel(240, 180, np.array([[150.5, 0.0, 120.25], [0.0, 150.75, 89.5], [0.0, 0.0, 1.0]]),
-                          np.array([-0.048, 0.0113, -0.0554, 0.0215]), "equidistant")
+    from eas_vo.camera import CameraModel
+    from eas_vo.datasets.ecd import CAMCHAIN, camchain_yaml
+
+    fisheye = CameraModel(
+        240,
+        180,
+        np.array([[150.5, 0.0, 120.25], [0.0, 150.75, 89.5], [0.0, 0.0, 1.0]]),
+        np.array([-0.048, 0.0113, -0.0554, 0.0215]),
+        "equidistant",
+    )
     folder = tmp_path / "seq"
     shutil.copytree(short_sequence, folder, ignore=shutil.ignore_patterns("calib.txt"))
     (folder / CAMCHAIN).write_text(camchain_yaml(fisheye))

@@ -7,7 +7,6 @@ import shutil
 
 import numpy as np
 import pytest
-from helpers import InMemoryDataset, hostile_settings, random_events, run_eas_vo
 from hypothesis import given
 from hypothesis import strategies as st
 
@@ -25,6 +24,7 @@ from eas_vo.datasets.rosbag2 import (
 from eas_vo.errors import DataError
 from eas_vo.registry import open_dataset, resolve_dataset
 from eas_vo.types import ImuSeries, PoseSeries
+from helpers import InMemoryDataset, hostile_settings, random_events, run_eas_vo
 
 STORAGES = {"sqlite3": "db3", "mcap": "mcap"}
 
@@ -37,10 +37,14 @@ class Excerpt(InMemoryDataset):
         end = times[-1]
         events = dataset.events()
         imu, gt = dataset.imu, dataset.ground_truth
-        super().__init__(dataset.camera, times, [dataset.load_frame(k) for k in range(n_frames)],
-                         np.asarray(events[events["t"] <= end]),
-                         ImuSeries(imu.t[imu.t <= end], imu.acc[imu.t <= end], imu.gyro[imu.t <= end]),
-                         PoseSeries(gt.t[gt.t <= end], gt.p_w_c[gt.t <= end], gt.q_w_c[gt.t <= end]))
+        super().__init__(
+            dataset.camera,
+            times,
+            [dataset.load_frame(k) for k in range(n_frames)],
+            np.asarray(events[events["t"] <= end]),
+            ImuSeries(imu.t[imu.t <= end], imu.acc[imu.t <= end], imu.gyro[imu.t <= end]),
+            PoseSeries(gt.t[gt.t <= end], gt.p_w_c[gt.t <= end], gt.q_w_c[gt.t <= end]),
+        )
 
 
 @pytest.fixture(scope="module")
@@ -85,9 +89,18 @@ def test_dvs_array_bytes_are_rosbags_serialisation(n):
     ns = np.round(events["t"] * 1e9).astype(np.int64)
     time = T["builtin_interfaces/msg/Time"]
     msg = T[DVS_ARRAY](
-        header=T["std_msgs/msg/Header"](stamp=time(sec=12, nanosec=34), frame_id="davis"), height=180, width=240,
-        events=[T["dvs_msgs/msg/Event"](x=int(e["x"]), y=int(e["y"]), ts=time(sec=int(t // 10**9), nanosec=int(t % 10**9)),
-                                        polarity=bool(e["p"])) for e, t in zip(events, ns)],
+        header=T["std_msgs/msg/Header"](stamp=time(sec=12, nanosec=34), frame_id="davis"),
+        height=180,
+        width=240,
+        events=[
+            T["dvs_msgs/msg/Event"](
+                x=int(e["x"]),
+                y=int(e["y"]),
+                ts=time(sec=int(t // 10**9), nanosec=int(t % 10**9)),
+                polarity=bool(e["p"]),
+            )
+            for e, t in zip(events, ns)
+        ],
     )
     reference = bytes(store.serialize_cdr(msg, DVS_ARRAY))
     assert encode_dvs_array(12.000000034, 240, 180, events) == reference
@@ -101,9 +114,9 @@ def test_dvs_array_bytes_are_rosbags_serialisation(n):
 
 def test_mono_known_answer():
     """event_camera_codecs' mono layout: time offset in bits 0-31, x 32-47, y 48-62, polarity 63."""
-    words = np.array([(1 << 63) | (200 << 48) | (300 << 32) | 123456,
-                      (0x7FFF << 48) | (0xFFFF << 32) | 0xFFFFFFFF,
-                      0], "<u8")
+    words = np.array(
+        [(1 << 63) | (200 << 48) | (300 << 32) | 123456, (0x7FFF << 48) | (0xFFFF << 32) | 0xFFFFFFFF, 0], "<u8"
+    )
     t_ns, x, y, p = decode_mono(10**18, words.view(np.uint8))
     assert t_ns.tolist() == [10**18 + 123456, 10**18 + 2**32 - 1, 10**18]
     assert x.tolist() == [300, 0xFFFF, 0] and y.tolist() == [200, 0x7FFF, 0] and p.tolist() == [1, 0, 0]
@@ -169,8 +182,13 @@ def test_paper_and_best_runs_give_the_same_trajectory_from_each_storage(simulate
 def test_equidistant_camera_and_custom_topics(excerpt, tmp_path):
     from eas_vo.camera import CameraModel
 
-    fisheye = CameraModel(excerpt.camera.width, excerpt.camera.height, excerpt.camera.K, np.array([0.1, -0.02, 0.003, -0.0004]),
-                          model="equidistant")
+    fisheye = CameraModel(
+        excerpt.camera.width,
+        excerpt.camera.height,
+        excerpt.camera.K,
+        np.array([0.1, -0.02, 0.003, -0.0004]),
+        model="equidistant",
+    )
     excerpt_fisheye = Excerpt(excerpt, 3)
     excerpt_fisheye.camera = fisheye
     custom = BagConfig(events_topic="/cam/events", image_topic="/cam/image", camera_info_topic="/cam/info")
@@ -215,8 +233,11 @@ def test_metadata_that_names_no_storage_plugin_is_read_from_its_one_file(small_b
     assert Rosbag2Dataset(bag).events().tobytes() == excerpt.events().tobytes()
     info["relative_file_paths"] = [*info["relative_file_paths"], "second.db3"]
     (bag / "metadata.yaml").write_text(yaml.safe_dump(meta))
-    with pytest.raises(DataError, match=r"metadata.yaml: names no storage plugin \(storage_identifier is empty\) and 2 bag "
-                                        r"files: write the storage \(sqlite3 or mcap\) into it$"):
+    with pytest.raises(
+        DataError,
+        match=r"metadata.yaml: names no storage plugin \(storage_identifier is empty\) and 2 bag "
+        r"files: write the storage \(sqlite3 or mcap\) into it$",
+    ):
         Rosbag2Dataset(bag)
 
 
@@ -232,8 +253,12 @@ def test_metadata_yaml_of_text_is_named(small_bags, tmp_path):
 
 
 @hostile_settings(max_examples=30)
-@given(storage=st.sampled_from(sorted(STORAGES)), cut=st.floats(0.0, 1.0), flip=st.integers(0, 10**9), lone=st.booleans())
-def test_truncated_or_damaged_bag_is_named_or_read_within_bounds(small_bags, excerpt, tmp_path_factory, storage, cut, flip, lone):
+@given(
+    storage=st.sampled_from(sorted(STORAGES)), cut=st.floats(0.0, 1.0), flip=st.integers(0, 10**9), lone=st.booleans()
+)
+def test_truncated_or_damaged_bag_is_named_or_read_within_bounds(
+    small_bags, excerpt, tmp_path_factory, storage, cut, flip, lone
+):
     """A bag cut at any offset, perhaps with one byte flipped: a one-line error naming it, or
     what it held (never more; unflipped, exactly its events)."""
     source = small_bags[storage]
@@ -288,7 +313,9 @@ def test_damaged_event_message_named_and_dropped_when_lenient(small_bags, excerp
     lenient = Rosbag2Dataset(tmp_path / "bag", BagConfig(lenient=True))
     kept = np.concatenate([excerpt.events()[:6000], excerpt.events()[8000:]])
     assert lenient.events().tobytes() == kept.tobytes()
-    assert lenient.data_warnings() == [f"{tmp_path / 'bag'}:/dvs/events: 1 dropped: undecodable event message (first at message 3)"]
+    assert lenient.data_warnings() == [
+        f"{tmp_path / 'bag'}:/dvs/events: 1 dropped: undecodable event message (first at message 3)"
+    ]
 
 
 def test_mono_events_are_on_the_header_clock(small_bags, excerpt, tmp_path):
@@ -307,10 +334,19 @@ def test_mono_events_are_on_the_header_clock(small_bags, excerpt, tmp_path):
         events["t"] = (wire["sec"].astype(np.int64) * 10**9 + wire["nsec"]) / 1e9
         events["x"], events["y"], events["p"] = wire["x"], wire["y"], wire["p"]
         first_ns = int(wire["sec"][0]) * 10**9 + int(wire["nsec"][0])
-        header = T["std_msgs/msg/Header"](stamp=T["builtin_interfaces/msg/Time"](sec=first_ns // 10**9, nanosec=first_ns % 10**9),
-                                          frame_id="")
-        msg = T[PACKET_TYPES[1]](header=header, height=180, width=240, seq=index, time_base=first_ns + 10**12, encoding="mono",
-                                 is_bigendian=False, events=encode_mono(first_ns, events))
+        header = T["std_msgs/msg/Header"](
+            stamp=T["builtin_interfaces/msg/Time"](sec=first_ns // 10**9, nanosec=first_ns % 10**9), frame_id=""
+        )
+        msg = T[PACKET_TYPES[1]](
+            header=header,
+            height=180,
+            width=240,
+            seq=index,
+            time_base=first_ns + 10**12,
+            encoding="mono",
+            is_bigendian=False,
+            events=encode_mono(first_ns, events),
+        )
         return PACKET_TYPES[1], bytes(store.serialize_cdr(msg, PACKET_TYPES[1]))
 
     _rewrite(small_bags["sqlite3"], tmp_path / "bag", as_mono)
@@ -326,13 +362,24 @@ def test_packed_encodings_not_read_are_refused_by_name(small_bags, tmp_path, enc
         if topic != "/dvs/events":
             return msgtype, raw
         header = T["std_msgs/msg/Header"](stamp=T["builtin_interfaces/msg/Time"](sec=0, nanosec=0), frame_id="")
-        msg = T[PACKET_TYPES[0]](header=header, height=180, width=240, seq=index, time_base=0, encoding=encoding,
-                                 is_bigendian=False, events=np.zeros(16, np.uint8))
+        msg = T[PACKET_TYPES[0]](
+            header=header,
+            height=180,
+            width=240,
+            seq=index,
+            time_base=0,
+            encoding=encoding,
+            is_bigendian=False,
+            events=np.zeros(16, np.uint8),
+        )
         return PACKET_TYPES[0], bytes(store.serialize_cdr(msg, PACKET_TYPES[0]))
 
     _rewrite(small_bags["mcap"], tmp_path / "bag", as_packet)
     for lenient in (False, True):
-        with pytest.raises(DataError, match=rf"bag:/dvs/events:0: event encoding '{encoding}'.*\(eas-vo reads mono, evt3, libcaer, libcaer_cmp\)$"):
+        with pytest.raises(
+            DataError,
+            match=rf"bag:/dvs/events:0: event encoding '{encoding}'.*\(eas-vo reads mono, evt3, libcaer, libcaer_cmp\)$",
+        ):
             Rosbag2Dataset(tmp_path / "bag", BagConfig(lenient=lenient)).events()
 
 
@@ -345,8 +392,11 @@ def test_wrong_message_type_is_named(small_bags, tmp_path):
     assert ds.load_frame(0) is None and "an event-only stream" in ds.no_frames_reason
     with pytest.raises(DataError, match=r"topic /dvs/imu carries sensor_msgs/msg/Imu, expected sensor_msgs/msg/Image$"):
         Rosbag2Dataset(tmp_path / "noframes", BagConfig(image_topic="/dvs/imu"))
-    with pytest.raises(DataError, match=r"topic /dvs/image_raw carries sensor_msgs/msg/Image, expected "
-                                        r"dvs_msgs/msg/EventArray or event_camera_msgs/msg/EventPacket or"):
+    with pytest.raises(
+        DataError,
+        match=r"topic /dvs/image_raw carries sensor_msgs/msg/Image, expected "
+        r"dvs_msgs/msg/EventArray or event_camera_msgs/msg/EventPacket or",
+    ):
         Rosbag2Dataset(small_bags["sqlite3"], BagConfig(events_topic="/dvs/image_raw")).events()
 
 
@@ -380,6 +430,7 @@ def test_times_going_back(small_bags, excerpt, tmp_path):
             msg = store.deserialize_cdr(raw, msgtype)
             msg.header.stamp.sec, msg.header.stamp.nanosec = 0, 0
             return msgtype, bytes(store.serialize_cdr(msg, msgtype))
+
         return change
 
     _rewrite(small_bags["mcap"], tmp_path / "frames", restamp("/dvs/image_raw", 2))
@@ -408,10 +459,15 @@ def test_definitions_come_from_the_bag(small_bags, tmp_path):
             conns = {}
             for c in reader.connections:
                 odd = c.topic == "/dvs/events" and events_definition is not None
-                conns[c.id] = (writer.add_connection(c.topic, c.msgtype, msgdef=events_definition, rihs01="RIHS01_" + "0" * 64)
-                               if odd else writer.add_connection(c.topic, c.msgtype, typestore=store))
+                conns[c.id] = (
+                    writer.add_connection(c.topic, c.msgtype, msgdef=events_definition, rihs01="RIHS01_" + "0" * 64)
+                    if odd
+                    else writer.add_connection(c.topic, c.msgtype, typestore=store)
+                )
             thing = writer.add_connection("/thing", "my_msgs/msg/Thing", typestore=store)
-            writer.write(thing, 1, store.serialize_cdr(store.types["my_msgs/msg/Thing"](answer=42), "my_msgs/msg/Thing"))
+            writer.write(
+                thing, 1, store.serialize_cdr(store.types["my_msgs/msg/Thing"](answer=42), "my_msgs/msg/Thing")
+            )
             for conn, t, raw in reader.messages():
                 writer.write(conns[conn.id], t, raw)
 
@@ -423,7 +479,9 @@ def test_definitions_come_from_the_bag(small_bags, tmp_path):
     assert mine.deserialize_cdr(raw, "my_msgs/msg/Thing").answer == 42
     assert len(Rosbag2Dataset(tmp_path / "bag").events()) > 0
     copy(tmp_path / "odd", foreign)
-    with pytest.raises(DataError, match=r"odd: topic /dvs/events: the bag defines dvs_msgs/msg/EventArray unlike its driver$"):
+    with pytest.raises(
+        DataError, match=r"odd: topic /dvs/events: the bag defines dvs_msgs/msg/EventArray unlike its driver$"
+    ):
         Rosbag2Dataset(tmp_path / "odd")
 
 

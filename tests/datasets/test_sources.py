@@ -4,11 +4,10 @@ zip archives (hypothesis): a one-line error naming the archive, or exactly what 
 import io
 import zipfile
 
-from hypothesis import given
-from hypothesis import strategies as st
-
 import numpy as np
 import pytest
+from hypothesis import given
+from hypothesis import strategies as st
 
 from eas_vo.datasets.ecd import EcdFolderDataset
 from eas_vo.datasets.rosbag import write_bag

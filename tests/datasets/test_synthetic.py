@@ -19,7 +19,9 @@ def test_another_sensor_size_keeps_the_diagonal_field_of_view_and_the_lens():
     for width, height in ((346, 260), (640, 480), (1280, 720)):
         cam = SyntheticConfig(width=width, height=height).camera()
         assert (cam.width, cam.height, cam.lens, cam.dist) == (width, height, base.lens, base.dist)
-        assert math.hypot(width, height) / cam.fx == pytest.approx(math.hypot(base.width, base.height) / base.fx, rel=1e-12)
+        assert math.hypot(width, height) / cam.fx == pytest.approx(
+            math.hypot(base.width, base.height) / base.fx, rel=1e-12
+        )
         assert (cam.cx + 0.5) / width == pytest.approx((base.cx + 0.5) / base.width, rel=1e-12)
         assert (cam.cy + 0.5) / height == pytest.approx((base.cy + 0.5) / base.height, rel=1e-12)
     assert SyntheticConfig(width=346, height=260, focal_px=300.0).camera().fx == 300.0
@@ -27,23 +29,35 @@ def test_another_sensor_size_keeps_the_diagonal_field_of_view_and_the_lens():
 
 def test_the_davis346_preset_and_a_lens_of_ones_own():
     assert SyntheticConfig(sensor="davis346").camera() == SENSORS["davis346"]
-    assert SENSORS["davis346"].lens == "equidistant" and (SENSORS["davis346"].width, SENSORS["davis346"].height) == (346, 260)
+    assert SENSORS["davis346"].lens == "equidistant" and (SENSORS["davis346"].width, SENSORS["davis346"].height) == (
+        346,
+        260,
+    )
     pinhole = SyntheticConfig(sensor="davis346", lens="radtan").camera()
     assert pinhole.lens == "radtan" and pinhole.dist == (0.0,) * 5  # another lens: no coefficients unless given
     fisheye = build(SyntheticConfig, {"lens": "equidistant", "dist": [0.1, 0, -0.01, 0]}, "dataset").camera()
     assert (fisheye.width, fisheye.lens, fisheye.dist) == (240, "equidistant", (0.1, 0.0, -0.01, 0.0))
 
 
-@pytest.mark.parametrize("values, says", [
-    ({"sensor": "davis640"}, "dataset.sensor = 'davis640'; allowed: davis240, davis346"),
-    ({"lens": "fisheye"}, "dataset.lens = 'fisheye'; allowed: , radtan, equidistant"),
-    ({"lens": "equidistant", "dist": [0.1, 0.0]}, r"dataset.dist = \[0.1, 0.0\]: the equidistant lens takes 4 finite numbers \(k1 k2 k3 k4\)"),
-    ({"dist": [0.1, 0.0, 0.0, 0.0]}, r"the radtan lens takes 5 finite numbers \(k1 k2 p1 p2 k3\)"),
-    ({"dist": [0.1, 0.0, 0.0, 0.0, "x"]}, "the radtan lens takes 5 finite numbers"),
-    ({"width": 346, "height": 260, "focal_px": 1.0}, "dataset.focal_px: the camera is impossible: focal lengths fx = 1, fy = 1 px"),
-    ({"dist": [0.1, 0.0, 3.0, 0.0, 0.0]}, "dataset.dist: the camera is impossible: distortion k1 k2 p1 p2 k3"),
-    ({"width": -1}, "dataset.width = -1 is out of range"),
-])
+@pytest.mark.parametrize(
+    "values, says",
+    [
+        ({"sensor": "davis640"}, "dataset.sensor = 'davis640'; allowed: davis240, davis346"),
+        ({"lens": "fisheye"}, "dataset.lens = 'fisheye'; allowed: , radtan, equidistant"),
+        (
+            {"lens": "equidistant", "dist": [0.1, 0.0]},
+            r"dataset.dist = \[0.1, 0.0\]: the equidistant lens takes 4 finite numbers \(k1 k2 k3 k4\)",
+        ),
+        ({"dist": [0.1, 0.0, 0.0, 0.0]}, r"the radtan lens takes 5 finite numbers \(k1 k2 p1 p2 k3\)"),
+        ({"dist": [0.1, 0.0, 0.0, 0.0, "x"]}, "the radtan lens takes 5 finite numbers"),
+        (
+            {"width": 346, "height": 260, "focal_px": 1.0},
+            "dataset.focal_px: the camera is impossible: focal lengths fx = 1, fy = 1 px",
+        ),
+        ({"dist": [0.1, 0.0, 3.0, 0.0, 0.0]}, "dataset.dist: the camera is impossible: distortion k1 k2 p1 p2 k3"),
+        ({"width": -1}, "dataset.width = -1 is out of range"),
+    ],
+)
 def test_an_impossible_camera_is_one_line_naming_the_key(values, says):
     with pytest.raises(ConfigError, match=says):
         build(SyntheticConfig, values, "dataset")

@@ -29,7 +29,17 @@ def test_run_writes_every_output(eas_run):
     for name in OUTPUTS:
         assert (eas_run / name).stat().st_size > 0, name
     metrics = json.loads((eas_run / "metrics.json").read_text())
-    for key in ("ape_mean_rad", "ape_rmse_rad", "ape_max_rad", "nc_mean", "frames", "frontend", "backend", "dataset", "elapsed_s"):
+    for key in (
+        "ape_mean_rad",
+        "ape_rmse_rad",
+        "ape_max_rad",
+        "nc_mean",
+        "frames",
+        "frontend",
+        "backend",
+        "dataset",
+        "elapsed_s",
+    ):
         assert key in metrics, key
     assert metrics["frontend"] == "eas" and metrics["backend"] == "chain"
     rows = list(csv.DictReader(open(eas_run / "frames.csv")))
@@ -48,20 +58,41 @@ def test_cache_lists_clears_and_a_run_rebuilds_what_was_cleared(short_sequence, 
     listed = capsys.readouterr().out
     assert re.search(r"events +1 entries +[0-9.]+ MB +binary event caches", listed), listed
     assert main(["cache", "--clear", "events", "--clear", "nothing_here"]) == 2  # every name checked first
-    assert "cache 'nothing_here': not in" in capsys.readouterr().err and len(list((tmp_path / "cache" / "events").glob("*.ev"))) == 1
+    assert (
+        "cache 'nothing_here': not in" in capsys.readouterr().err
+        and len(list((tmp_path / "cache" / "events").glob("*.ev"))) == 1
+    )
     assert main(["cache", "--clear", "events"]) == 0
     assert re.fullmatch(r"events: cleared, [0-9.]+ MB freed\n", capsys.readouterr().out)
     assert list((tmp_path / "cache" / "events").glob("*.ev")) == []
     again = tmp_path / "again"
     assert main(["run", "--dataset", str(short_sequence), "--out", str(again), "--quiet"]) == 0
     assert len(list((tmp_path / "cache" / "events").glob("*.ev"))) == 1
-    assert json.loads((again / "metrics.json").read_text())["ape_mean_rad"] == json.loads((first / "metrics.json").read_text())["ape_mean_rad"]
+    assert (
+        json.loads((again / "metrics.json").read_text())["ape_mean_rad"]
+        == json.loads((first / "metrics.json").read_text())["ape_mean_rad"]
+    )
 
 
 def test_a_run_with_loop_closure_says_how_many_loops_closed(short_sequence, tmp_path, capsys):
     out = tmp_path / "loops"
-    assert main(["run", "--dataset", str(short_sequence), "--frontend", "eas", "--set", "tracker.loop_closure=true",
-                 "--out", str(out), "--quiet"]) == 0
+    assert (
+        main(
+            [
+                "run",
+                "--dataset",
+                str(short_sequence),
+                "--frontend",
+                "eas",
+                "--set",
+                "tracker.loop_closure=true",
+                "--out",
+                str(out),
+                "--quiet",
+            ]
+        )
+        == 0
+    )
     loops = json.loads((out / "metrics.json").read_text())["loop_count"]
     assert f", {loops} loop(s) closed, " in capsys.readouterr().out
 
@@ -72,7 +103,15 @@ def test_evo_reports_the_same_average_ape(eas_run):
     if evo_ape is None:
         pytest.skip("evo_ape not found beside the Python interpreter nor on PATH")
     result = subprocess.run(
-        [evo_ape, "tum", str(eas_run / "groundtruth.tum"), str(eas_run / "trajectory.tum"), "-r", "angle_rad", "--align_origin"],
+        [
+            evo_ape,
+            "tum",
+            str(eas_run / "groundtruth.tum"),
+            str(eas_run / "trajectory.tum"),
+            "-r",
+            "angle_rad",
+            "--align_origin",
+        ],
         capture_output=True,
         text=True,
         check=True,
@@ -92,8 +131,25 @@ def test_resolved_config_reproduces_the_run(eas_run, tmp_path):
 
 def test_start_and_duration_select_the_window(short_sequence, tmp_path):
     out = tmp_path / "w"
-    assert main(["run", "--dataset", str(short_sequence), "--frontend", "original", "--start", "0.5",
-                 "--duration", "0.5", "--out", str(out), "--quiet"]) == 0
+    assert (
+        main(
+            [
+                "run",
+                "--dataset",
+                str(short_sequence),
+                "--frontend",
+                "original",
+                "--start",
+                "0.5",
+                "--duration",
+                "0.5",
+                "--out",
+                str(out),
+                "--quiet",
+            ]
+        )
+        == 0
+    )
     assert json.loads((out / "metrics.json").read_text())["frames"] == 10
 
 
@@ -151,9 +207,15 @@ def test_run_help_lists_the_installed_plugins_of_every_kind(monkeypatch, capsys)
     with pytest.raises(SystemExit):
         main(["run", "--help"])
     shown = " ".join(capsys.readouterr().out.split())
-    for option, kind in (("--dataset", "datasets"), ("--frontend", "frontends"), ("--tracker", "trackers"),
-                         ("--backend", "backends")):
-        assert re.search(rf"{option} \S+ (?:(?! --[a-z]).)*one of {', '.join(real(kind))}, thirdparty_{kind}\b", shown), (option, shown)
+    for option, kind in (
+        ("--dataset", "datasets"),
+        ("--frontend", "frontends"),
+        ("--tracker", "trackers"),
+        ("--backend", "backends"),
+    ):
+        assert re.search(
+            rf"{option} \S+ (?:(?! --[a-z]).)*one of {', '.join(real(kind))}, thirdparty_{kind}\b", shown
+        ), (option, shown)
 
 
 def test_simulate_command(tmp_path, capsys):
@@ -166,12 +228,31 @@ def test_simulate_command(tmp_path, capsys):
         out = tmp_path / speed
         assert main(["simulate", "--out", str(out), "--seed", "2", "--duration", "0.4", "--speed", speed]) == 0
         assert (out / "images.txt").exists()
-        assert f"wrote a 0.4 s synthetic sequence (seed 2, illumination 1, speed {speed}, 240x180 radtan)" in capsys.readouterr().out
+        assert (
+            f"wrote a 0.4 s synthetic sequence (seed 2, illumination 1, speed {speed}, 240x180 radtan)"
+            in capsys.readouterr().out
+        )
         q = Rotation.from_quat(np.loadtxt(out / "groundtruth.txt")[:2, 4:8])
         turned[speed] = (q[0].inv() * q[1]).magnitude()
     assert turned["3"] / turned["1"] == pytest.approx(3.0, rel=0.02), turned
-    assert main(["simulate", "--out", str(tmp_path / "set"), "--duration", "0.3", "--set", "dataset.speed=2",
-                 "--set", "dataset.illumination=0.5", "--set", "dataset.sensor=davis346"]) == 0
+    assert (
+        main(
+            [
+                "simulate",
+                "--out",
+                str(tmp_path / "set"),
+                "--duration",
+                "0.3",
+                "--set",
+                "dataset.speed=2",
+                "--set",
+                "dataset.illumination=0.5",
+                "--set",
+                "dataset.sensor=davis346",
+            ]
+        )
+        == 0
+    )
     assert "(seed 0, illumination 0.5, speed 2, 346x260 equidistant)" in capsys.readouterr().out
     assert (tmp_path / "set" / "camchain.yaml").exists() and not (tmp_path / "set" / "calib.txt").exists()
     line = user_error(["simulate", "--out", str(tmp_path / "both"), "--speed", "2", "--set", "dataset.speed=3"], capsys)
@@ -182,8 +263,21 @@ def stats_of(capsys, tmp_path, illumination):
     """`eas-vo simulate --stats` output -> (events/s, noise fraction, dark latency [ms])."""
     import re
 
-    assert main(["simulate", "--out", str(tmp_path / str(illumination)), "--duration", "1.0",
-                 "--illumination", str(illumination), "--stats"]) == 0
+    assert (
+        main(
+            [
+                "simulate",
+                "--out",
+                str(tmp_path / str(illumination)),
+                "--duration",
+                "1.0",
+                "--illumination",
+                str(illumination),
+                "--stats",
+            ]
+        )
+        == 0
+    )
     text = capsys.readouterr().out
     rate = float(re.search(r"\(([\d.]+) M events/s\)", text).group(1))
     noise = float(re.search(r"noise fraction ([\d.]+)", text).group(1))
@@ -205,7 +299,9 @@ def test_lenient_flag_counts_and_reports(sequence_copy, tmp_path, capsys):
     path.write_bytes(b"\n".join(lines))
     assert main(["run", "--dataset", str(sequence_copy), "--out", str(tmp_path / "strict"), "--quiet"]) == 2
     assert "events.txt:101: " in capsys.readouterr().err
-    assert main(["run", "--dataset", str(sequence_copy), "--out", str(tmp_path / "lenient"), "--quiet", "--lenient"]) == 0
+    assert (
+        main(["run", "--dataset", str(sequence_copy), "--out", str(tmp_path / "lenient"), "--quiet", "--lenient"]) == 0
+    )
     err = capsys.readouterr().err
     assert "eas-vo: warning:" in err and "1 dropped: malformed line (first at line 201)" in err
     assert "1 dropped: pixel outside the 240x180 sensor (first at line 101)" in err
@@ -264,21 +360,40 @@ def test_results_are_strict_json_with_or_without_ground_truth(sequence_copy, tmp
     assert "ape_mean_rad" not in metrics and metrics["frames_evaluated"] == 0
 
 
-@pytest.mark.parametrize("argv, says", [
-    (["run", "--set", "run.imu_time_offset_s=nan"], "imu_time_offset_s = nan is out of range"),
-    (["run", "--set", "run.imu_rotvec_cam=[0.0, nan, 0.0]"], "imu_rotvec_cam"),
-    (["run", "--set", "backend.imu_rotvec_cam=[0.0, 0.1, 0.0]", "--set", "tracker.imu_rotvec_cam=[0, 0, 0]", "--backend", "gtsam"],
-     "tracker.imu_rotvec_cam = [0, 0, 0], backend.imu_rotvec_cam = [0.0, 0.1, 0.0]: the rig has one IMU; set run.imu_rotvec_cam only"),
-    (["simulate", "--seed", "-1", "--out", "{tmp}/sim"], "seed = -1 is out of range"),
-    (["compare", "--jobs", "0", "--out", "{tmp}/cmp"], "--jobs: must be at least 1"),
-    (["run", "--duration", "0", "--out", "{tmp}/run"], "argument --duration: must be more than 0 seconds, got 0"),
-    (["compare", "--start", "-1", "--out", "{tmp}/cmp"], "argument --start: must be at least 0 seconds, got -1"),
-    (["run", "--start", "inf", "--out", "{tmp}/run"], "argument --start: must be at least 0 seconds, got inf"),
-    (["reproduce", "table1", "--duration", "nan", "--out", "{tmp}/rep"], "argument --duration: must be more than 0 seconds"),
-    (["evaluate", "--dataset", "{tmp}", "--estimate", "{tmp}/e.txt", "--max-diff", "-0.1"], "argument --max-diff: must be at least 0"),
-    (["run", "--frobnicate"], "unrecognized arguments: --frobnicate"),
-    (["rn"], "invalid choice: 'rn'"),
-])
+@pytest.mark.parametrize(
+    "argv, says",
+    [
+        (["run", "--set", "run.imu_time_offset_s=nan"], "imu_time_offset_s = nan is out of range"),
+        (["run", "--set", "run.imu_rotvec_cam=[0.0, nan, 0.0]"], "imu_rotvec_cam"),
+        (
+            [
+                "run",
+                "--set",
+                "backend.imu_rotvec_cam=[0.0, 0.1, 0.0]",
+                "--set",
+                "tracker.imu_rotvec_cam=[0, 0, 0]",
+                "--backend",
+                "gtsam",
+            ],
+            "tracker.imu_rotvec_cam = [0, 0, 0], backend.imu_rotvec_cam = [0.0, 0.1, 0.0]: the rig has one IMU; set run.imu_rotvec_cam only",
+        ),
+        (["simulate", "--seed", "-1", "--out", "{tmp}/sim"], "seed = -1 is out of range"),
+        (["compare", "--jobs", "0", "--out", "{tmp}/cmp"], "--jobs: must be at least 1"),
+        (["run", "--duration", "0", "--out", "{tmp}/run"], "argument --duration: must be more than 0 seconds, got 0"),
+        (["compare", "--start", "-1", "--out", "{tmp}/cmp"], "argument --start: must be at least 0 seconds, got -1"),
+        (["run", "--start", "inf", "--out", "{tmp}/run"], "argument --start: must be at least 0 seconds, got inf"),
+        (
+            ["reproduce", "table1", "--duration", "nan", "--out", "{tmp}/rep"],
+            "argument --duration: must be more than 0 seconds",
+        ),
+        (
+            ["evaluate", "--dataset", "{tmp}", "--estimate", "{tmp}/e.txt", "--max-diff", "-0.1"],
+            "argument --max-diff: must be at least 0",
+        ),
+        (["run", "--frobnicate"], "unrecognized arguments: --frobnicate"),
+        (["rn"], "invalid choice: 'rn'"),
+    ],
+)
 def test_nonsense_values_and_usage_errors_are_one_line(argv, says, tmp_path, capsys):
     err = one_line_failure([a.replace("{tmp}", str(tmp_path)) for a in argv], capsys)
     assert says in err
@@ -292,17 +407,23 @@ def test_evaluate_names_the_origin_alignment_for_a_rotation_only_trajectory(shor
     from eas_vo.io.tum import format_tum
 
     gt = EcdFolderDataset(short_sequence).ground_truth
-    (tmp_path / "rotation_only.tum").write_text(format_tum(gt.t, np.zeros_like(gt.p_w_c), matrices_from_quats(gt.q_w_c)))
+    (tmp_path / "rotation_only.tum").write_text(
+        format_tum(gt.t, np.zeros_like(gt.p_w_c), matrices_from_quats(gt.q_w_c))
+    )
     argv = ["evaluate", "--dataset", str(short_sequence), "--estimate", str(tmp_path / "rotation_only.tum")]
     err = one_line_failure(argv, capsys)
     assert "sim3 alignment needs them to span a plane" in err and "--align origin" in err
     assert main([*argv, "--align", "origin"]) == 0 and "rotation APE mean 0.0000 rad" in capsys.readouterr().out
 
 
-@pytest.mark.parametrize("option", [["--backend", "gtsam", "--set", "backend.gyro=true"], ["--set", "tracker.predict='gyro'"]])
+@pytest.mark.parametrize(
+    "option", [["--backend", "gtsam", "--set", "backend.gyro=true"], ["--set", "tracker.predict='gyro'"]]
+)
 def test_an_option_that_needs_an_imu_refuses_a_dataset_without_one(sequence_copy, tmp_path, capsys, option):
     (sequence_copy / "imu.txt").unlink()
-    err = one_line_failure(["run", "--dataset", str(sequence_copy), *option, "--out", str(tmp_path / "out"), "--quiet"], capsys)
+    err = one_line_failure(
+        ["run", "--dataset", str(sequence_copy), *option, "--out", str(tmp_path / "out"), "--quiet"], capsys
+    )
     assert "needs an IMU" in err and not (tmp_path / "out").exists()
 
 
@@ -336,35 +457,43 @@ def damage(seq, what):
         (seq / "imu.txt").write_text((seq / "imu.txt").read_text().splitlines()[0] + "\n")
 
 
-@pytest.mark.parametrize("what, says", [
-    ("calib zeros", "focal lengths fx = 0, fy = 0 px are not those of a 240x180 camera"),
-    ("calib huge focal", "are not those of a 240x180 camera (24 to 24000 px)"),
-    ("calib tiny focal", "focal lengths fx = 1e-06"),
-    ("calib principal point", "principal point cx = 1e+308, cy = 90 px lies off the 240x180 sensor"),
-    ("calib negative principal point", "principal point cx = -5000"),
-    ("calib distortion", "out of range (|k| <= 10, |p| <= 1)"),
-    ("huge frames", "frame 0 is 20000x20000, not an event camera's frame"),
-    ("calib nan", "must be finite"),
-    ("empty groundtruth", "groundtruth.txt: holds 0 row(s)"),
-    ("huge quaternion", "groundtruth.txt:4: quaternion norm inf is not 1"),
-    ("one-line imu", "imu.txt: holds 1 row(s)"),
-])
+@pytest.mark.parametrize(
+    "what, says",
+    [
+        ("calib zeros", "focal lengths fx = 0, fy = 0 px are not those of a 240x180 camera"),
+        ("calib huge focal", "are not those of a 240x180 camera (24 to 24000 px)"),
+        ("calib tiny focal", "focal lengths fx = 1e-06"),
+        ("calib principal point", "principal point cx = 1e+308, cy = 90 px lies off the 240x180 sensor"),
+        ("calib negative principal point", "principal point cx = -5000"),
+        ("calib distortion", "out of range (|k| <= 10, |p| <= 1)"),
+        ("huge frames", "frame 0 is 20000x20000, not an event camera's frame"),
+        ("calib nan", "must be finite"),
+        ("empty groundtruth", "groundtruth.txt: holds 0 row(s)"),
+        ("huge quaternion", "groundtruth.txt:4: quaternion norm inf is not 1"),
+        ("one-line imu", "imu.txt: holds 1 row(s)"),
+    ],
+)
 def test_damaged_datasets_are_one_line_before_any_work(sequence_copy, tmp_path, capsys, what, says):
     """No warning either: a numpy RuntimeWarning would print its own lines."""
     damage(sequence_copy, what)
     with warnings.catch_warnings():
         warnings.simplefilter("error")
-        err = one_line_failure(["run", "--dataset", str(sequence_copy), "--out", str(tmp_path / "out"), "--quiet"], capsys)
+        err = one_line_failure(
+            ["run", "--dataset", str(sequence_copy), "--out", str(tmp_path / "out"), "--quiet"], capsys
+        )
     assert says in err and not (tmp_path / "out").exists()
 
 
-@pytest.mark.parametrize("argv, says", [
-    (["run", "--out", "{tmp}/a_file"], "is a file, not a folder"),
-    (["run", "--config", "{tmp}"], "not a config file"),
-    (["render", "--frames", "1", "--out", "{tmp}"], "is a folder; give the name of the file to write"),
-    (["compare", "--frontends", ",", "--out", "{tmp}/cmp"], "names nothing"),
-    (["simulate", "--out", "{tmp}", "--duration", "0.3"], "is not empty"),
-])
+@pytest.mark.parametrize(
+    "argv, says",
+    [
+        (["run", "--out", "{tmp}/a_file"], "is a file, not a folder"),
+        (["run", "--config", "{tmp}"], "not a config file"),
+        (["render", "--frames", "1", "--out", "{tmp}"], "is a folder; give the name of the file to write"),
+        (["compare", "--frontends", ",", "--out", "{tmp}/cmp"], "names nothing"),
+        (["simulate", "--out", "{tmp}", "--duration", "0.3"], "is not empty"),
+    ],
+)
 def test_paths_in_the_way_are_one_line(tmp_path, capsys, argv, says):
     (tmp_path / "a_file").write_text("mine\n")
     err = one_line_failure([a.replace("{tmp}", str(tmp_path)) for a in argv], capsys)
@@ -381,8 +510,20 @@ def test_simulate_overwrite_replaces_the_folder_whole(tmp_path):
 
 
 def test_an_absurd_window_is_one_line_without_numpy_warnings(short_sequence, tmp_path, capsys):
-    err = one_line_failure(["run", "--dataset", str(short_sequence), "--start", "1e308", "--duration", "1e308",
-                            "--out", str(tmp_path / "out")], capsys)
+    err = one_line_failure(
+        [
+            "run",
+            "--dataset",
+            str(short_sequence),
+            "--start",
+            "1e308",
+            "--duration",
+            "1e308",
+            "--out",
+            str(tmp_path / "out"),
+        ],
+        capsys,
+    )
     assert "holds 0 sample(s); at least 2 are needed" in err
 
 
@@ -402,21 +543,35 @@ def test_render_writes_over_a_file_only_with_overwrite_and_never_over_an_input(s
     config.write_text(f'[run]\ndataset = "{dataset}"\n')
     (tmp_path / "frame.png").symlink_to(frame)
     render = ["render", "--frames", "1", "--frontends", "original", "--config", str(config)]
-    for out, overwrite, says in ((estimate, [], "exists; choose another name or add --overwrite"),
-                                 (frame, ["--overwrite"], "is the dataset"),
-                                 (tmp_path / "frame.png", ["--overwrite"], "is the dataset"),
-                                 (config, ["--overwrite"], "is the --config"),
-                                 (estimate, ["--overwrite"], "is no PNG image, so not a file eas-vo wrote")):
+    for out, overwrite, says in (
+        (estimate, [], "exists; choose another name or add --overwrite"),
+        (frame, ["--overwrite"], "is the dataset"),
+        (tmp_path / "frame.png", ["--overwrite"], "is the dataset"),
+        (config, ["--overwrite"], "is the --config"),
+        (estimate, ["--overwrite"], "is no PNG image, so not a file eas-vo wrote"),
+    ):
         assert says in one_line_failure([*render, "--out", str(out), *overwrite], capsys)
-    assert frame.read_bytes() == kept and estimate.read_text() == "0 0 0 0 0 0 0 1\n" and config.read_text().startswith("[run]")
+    assert (
+        frame.read_bytes() == kept
+        and estimate.read_text() == "0 0 0 0 0 0 0 1\n"
+        and config.read_text().startswith("[run]")
+    )
     image = tmp_path / "gallery.png"
     image.write_bytes(frame.read_bytes())  # a PNG, as render's own
     assert main([*render, "--out", str(image), "--overwrite"]) == 0
-    assert image.read_bytes() != kept and image.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and not list(tmp_path.glob(".*.tmp"))
+    assert (
+        image.read_bytes() != kept
+        and image.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+        and not list(tmp_path.glob(".*.tmp"))
+    )
 
 
-@pytest.mark.parametrize("command", [["run", "--overwrite"], ["export", "--overwrite"], ["compare", "--frontends", "original"]])
-def test_an_output_folder_holding_the_config_file_is_refused_even_with_overwrite(short_sequence, tmp_path, capsys, command):
+@pytest.mark.parametrize(
+    "command", [["run", "--overwrite"], ["export", "--overwrite"], ["compare", "--frontends", "original"]]
+)
+def test_an_output_folder_holding_the_config_file_is_refused_even_with_overwrite(
+    short_sequence, tmp_path, capsys, command
+):
     from helpers import mark_as_eas_vo_output
 
     out = tmp_path / "earlier"
@@ -429,7 +584,9 @@ def test_an_output_folder_holding_the_config_file_is_refused_even_with_overwrite
     assert sorted(p.name for p in out.iterdir()) == [".eas-vo-output", "config.toml"]
 
 
-@pytest.mark.parametrize("command", [["run", "--overwrite"], ["export", "--overwrite"], ["compare", "--frontends", "original"]])
+@pytest.mark.parametrize(
+    "command", [["run", "--overwrite"], ["export", "--overwrite"], ["compare", "--frontends", "original"]]
+)
 @pytest.mark.parametrize("inside", [False, True])
 def test_an_output_folder_that_is_or_holds_the_dataset_is_refused(short_sequence, tmp_path, capsys, command, inside):
     """--out the dataset's folder, or the folder holding it (marked as an eas-vo output, as
@@ -441,6 +598,8 @@ def test_an_output_folder_that_is_or_holds_the_dataset_is_refused(short_sequence
     out = dataset if inside else dataset.parent
     mark_as_eas_vo_output(out)
     before = sorted(p.relative_to(tmp_path) for p in tmp_path.rglob("*"))
-    err = one_line_failure([*command, "--dataset", str(dataset), "--duration", "0.2", "--out", str(out), "--quiet"], capsys)
+    err = one_line_failure(
+        [*command, "--dataset", str(dataset), "--duration", "0.2", "--out", str(out), "--quiet"], capsys
+    )
     assert f"holds the dataset {dataset}" in err
     assert sorted(p.relative_to(tmp_path) for p in tmp_path.rglob("*")) == before

@@ -24,8 +24,21 @@ def linked_sequence(short_sequence, tmp_path):
 def test_render_never_writes_over_the_file_a_dataset_link_leads_to(linked_sequence, tmp_path, capsys):
     events = tmp_path / "store" / "events.txt"
     kept = events.read_bytes()
-    err = one_line_failure(["render", "--dataset", str(linked_sequence), "--frames", "1", "--frontends", "original",
-                            "--out", str(events), "--overwrite"], capsys)
+    err = one_line_failure(
+        [
+            "render",
+            "--dataset",
+            str(linked_sequence),
+            "--frames",
+            "1",
+            "--frontends",
+            "original",
+            "--out",
+            str(events),
+            "--overwrite",
+        ],
+        capsys,
+    )
     assert "is the dataset" in err and "(its events.txt)" in err and events.read_bytes() == kept
 
 
@@ -33,10 +46,28 @@ def test_vocabulary_never_writes_over_the_calibration_given_with_set(short_seque
     calibration = tmp_path / "calib.txt"
     shutil.copy(short_sequence / "calib.txt", calibration)
     kept = calibration.read_bytes()
-    err = one_line_failure(["vocabulary", "--dataset", str(short_sequence), "--frontend", "eas", "--duration", "0.5",
-                            "--k", "2", "--levels", "1",
-                            "--set", f"dataset.calibration={calibration}", "--out", str(calibration), "--overwrite",
-                            "--quiet"], capsys)
+    err = one_line_failure(
+        [
+            "vocabulary",
+            "--dataset",
+            str(short_sequence),
+            "--frontend",
+            "eas",
+            "--duration",
+            "0.5",
+            "--k",
+            "2",
+            "--levels",
+            "1",
+            "--set",
+            f"dataset.calibration={calibration}",
+            "--out",
+            str(calibration),
+            "--overwrite",
+            "--quiet",
+        ],
+        capsys,
+    )
     assert "is dataset.calibration" in err and calibration.read_bytes() == kept
 
 
@@ -46,15 +77,42 @@ def test_run_never_replaces_a_folder_holding_the_ground_truth_given_with_set(sho
     ground_truth = earlier / "groundtruth.tum"
     shutil.copy(short_sequence / "groundtruth.txt", ground_truth)
     mark_as_eas_vo_output(earlier)
-    err = one_line_failure(["run", "--dataset", str(short_sequence), "--duration", "0.2", "--set",
-                            f"dataset.ground_truth={ground_truth}", "--out", str(earlier), "--overwrite", "--quiet"], capsys)
-    assert "holds dataset.ground_truth" in err and ground_truth.read_bytes() == (short_sequence / "groundtruth.txt").read_bytes()
+    err = one_line_failure(
+        [
+            "run",
+            "--dataset",
+            str(short_sequence),
+            "--duration",
+            "0.2",
+            "--set",
+            f"dataset.ground_truth={ground_truth}",
+            "--out",
+            str(earlier),
+            "--overwrite",
+            "--quiet",
+        ],
+        capsys,
+    )
+    assert (
+        "holds dataset.ground_truth" in err
+        and ground_truth.read_bytes() == (short_sequence / "groundtruth.txt").read_bytes()
+    )
 
 
-@pytest.mark.parametrize("command", [
-    ["run"], ["compare"], ["render", "--frames", "1"], ["vocabulary"], ["convert"], ["export"], ["simulate"],
-    ["evaluate", "--estimate", "trajectory.tum"], ["reproduce", "table1"],
-])
+@pytest.mark.parametrize(
+    "command",
+    [
+        ["run"],
+        ["compare"],
+        ["render", "--frames", "1"],
+        ["vocabulary"],
+        ["convert"],
+        ["export"],
+        ["simulate"],
+        ["evaluate", "--estimate", "trajectory.tum"],
+        ["reproduce", "table1"],
+    ],
+)
 def test_an_out_whose_links_loop_is_one_line_naming_it(short_sequence, tmp_path, capsys, command):
     (tmp_path / "a").symlink_to(tmp_path / "b")
     (tmp_path / "b").symlink_to(tmp_path / "a")
@@ -63,8 +121,13 @@ def test_an_out_whose_links_loop_is_one_line_naming_it(short_sequence, tmp_path,
     assert f"--out {tmp_path / 'a' / 'out'}: its symbolic links form a loop" in err
 
 
-@pytest.mark.parametrize("command", [["render", "--frames", "1", "--frontends", "original"],
-                                     ["vocabulary", "--frontend", "eas", "--duration", "0.5", "--k", "2", "--levels", "1"]])
+@pytest.mark.parametrize(
+    "command",
+    [
+        ["render", "--frames", "1", "--frontends", "original"],
+        ["vocabulary", "--frontend", "eas", "--duration", "0.5", "--k", "2", "--levels", "1"],
+    ],
+)
 def test_overwrite_replaces_only_a_file_of_the_kind_the_command_writes(short_sequence, tmp_path, capsys, command):
     """A note anywhere is never replaced by --overwrite; the command's own earlier file is."""
     note = tmp_path / "notes.txt"

@@ -25,9 +25,14 @@ def test_signal_mid_run_leaves_valid_partial_outputs(short_sequence, tmp_path, m
 
     monkeypatch.setattr(OriginalFrontend, "__call__", interrupting)
     out = tmp_path / "run"
-    assert main(["run", "--dataset", str(short_sequence), "--frontend", "original", "--out", str(out), "--quiet"]) == code
+    assert (
+        main(["run", "--dataset", str(short_sequence), "--frontend", "original", "--out", str(out), "--quiet"]) == code
+    )
     err = capsys.readouterr().err
-    assert err == f"eas-vo run: interrupted; the 12 frames processed so far were written to {out} (metrics.json: partial)\n"
+    assert (
+        err
+        == f"eas-vo run: interrupted; the 12 frames processed so far were written to {out} (metrics.json: partial)\n"
+    )
     metrics = json.loads((out / "metrics.json").read_text())
     assert metrics["partial"] is True and metrics["frames"] == 12
     assert len((out / "trajectory.tum").read_text().splitlines()) == 12
@@ -48,8 +53,20 @@ def test_existing_results_need_overwrite(short_sequence, tmp_path, capsys):
 
 def test_compare_reruns_a_partial_cell(short_sequence, tmp_path, capsys):
     out = tmp_path / "cmp"
-    argv = ["compare", "--dataset", str(short_sequence), "--frontends", "original", "--backends", "chain",
-            "--out", str(out), "--jobs", "1", "--quiet"]
+    argv = [
+        "compare",
+        "--dataset",
+        str(short_sequence),
+        "--frontends",
+        "original",
+        "--backends",
+        "chain",
+        "--out",
+        str(out),
+        "--jobs",
+        "1",
+        "--quiet",
+    ]
     assert main(argv) == 0
     (metrics_path,) = out.rglob("metrics.json")
     metrics = json.loads(metrics_path.read_text())
@@ -75,11 +92,26 @@ def test_compare_interrupted_writes_its_table_and_resumes(short_sequence, tmp_pa
 
     monkeypatch.setattr(grid, "run_cell", interrupting)
     out = tmp_path / "cmp"
-    argv = ["compare", "--dataset", str(short_sequence), "--frontends", "original,slice,eas",
-            "--backends", "chain", "--out", str(out), "--jobs", "1", "--quiet"]
+    argv = [
+        "compare",
+        "--dataset",
+        str(short_sequence),
+        "--frontends",
+        "original,slice,eas",
+        "--backends",
+        "chain",
+        "--out",
+        str(out),
+        "--jobs",
+        "1",
+        "--quiet",
+    ]
     assert main(argv) == 130
     err = capsys.readouterr().err
-    assert err == f"eas-vo compare: interrupted; the table of the 1 finished cells was written to {out}; the same command resumes the rest\n"
+    assert (
+        err
+        == f"eas-vo compare: interrupted; the table of the 1 finished cells was written to {out}; the same command resumes the rest\n"
+    )
     rows = json.loads((out / "table.json").read_text())
     assert [r["status"] for r in rows] == ["ok", "not run", "not run"]
     monkeypatch.setattr(grid, "run_cell", real_run_cell)
@@ -97,11 +129,33 @@ def test_sigterm_to_a_parallel_compare_stops_it_at_once_without_orphans(short_se
     import time
 
     out = tmp_path / "cmp"
-    argv = [sys.executable, "-m", "eas_vo", "compare", "--dataset", str(short_sequence), "--frontends", "original,slice,eas",
-            "--backends", "chain", "--sweep", "tracker.max_corners=100,200,300,400", "--out", str(out), "--jobs", "2", "--quiet"]
-    parent = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=tempfile.gettempdir())
+    argv = [
+        sys.executable,
+        "-m",
+        "eas_vo",
+        "compare",
+        "--dataset",
+        str(short_sequence),
+        "--frontends",
+        "original,slice,eas",
+        "--backends",
+        "chain",
+        "--sweep",
+        "tracker.max_corners=100,200,300,400",
+        "--out",
+        str(out),
+        "--jobs",
+        "2",
+        "--quiet",
+    ]
+    parent = subprocess.Popen(
+        argv, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=tempfile.gettempdir()
+    )
     deadline = time.monotonic() + 120
-    while not [f for f in out.glob("*/*/metrics.json") if not f.parent.name.startswith(".")] and time.monotonic() < deadline:
+    while (
+        not [f for f in out.glob("*/*/metrics.json") if not f.parent.name.startswith(".")]
+        and time.monotonic() < deadline
+    ):
         time.sleep(0.05)
     parent.send_signal(signal.SIGTERM)
     stopped = time.monotonic()
@@ -123,11 +177,31 @@ def test_kill_9_of_a_parallel_compare_leaves_no_worker_and_the_rerun_completes(s
     import time
 
     out = tmp_path / "cmp"
-    argv = [sys.executable, "-m", "eas_vo", "compare", "--dataset", str(short_sequence), "--frontends", "original,slice,eas",
-            "--backends", "chain", "--sweep", "tracker.max_corners=100,200,300,400", "--out", str(out), "--jobs", "2", "--quiet"]
+    argv = [
+        sys.executable,
+        "-m",
+        "eas_vo",
+        "compare",
+        "--dataset",
+        str(short_sequence),
+        "--frontends",
+        "original,slice,eas",
+        "--backends",
+        "chain",
+        "--sweep",
+        "tracker.max_corners=100,200,300,400",
+        "--out",
+        str(out),
+        "--jobs",
+        "2",
+        "--quiet",
+    ]
     parent = subprocess.Popen(argv, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, cwd=tempfile.gettempdir())
     deadline = time.monotonic() + 120
-    while not [f for f in out.glob("*/*/metrics.json") if not f.parent.name.startswith(".")] and time.monotonic() < deadline:
+    while (
+        not [f for f in out.glob("*/*/metrics.json") if not f.parent.name.startswith(".")]
+        and time.monotonic() < deadline
+    ):
         time.sleep(0.05)
     parent.kill()
     parent.wait(timeout=10)

@@ -17,10 +17,14 @@ def test_info_prints_each_stream(tmp_path, capsys):
     assert main(["info", "--dataset", str(folder)]) == 0
     out = capsys.readouterr().out
     assert out.startswith(f"{folder} (dataset plugin ecd)\n")
-    for says in ("streams       frames, events, IMU, ground truth", "sensor        346 x 260 px",
-                 f"frames        {N_FRAMES} APS frames, 0.500-0.940 s (0.440 s), 25 Hz",
-                 "IMU           150 readings, 0.420-1.016 s (0.596 s), 250 Hz",
-                 "ground truth  100 poses, 0.450-0.945 s (0.495 s), 200 Hz", f"events        {N_EVENTS} events, "):
+    for says in (
+        "streams       frames, events, IMU, ground truth",
+        "sensor        346 x 260 px",
+        f"frames        {N_FRAMES} APS frames, 0.500-0.940 s (0.440 s), 25 Hz",
+        "IMU           150 readings, 0.420-1.016 s (0.596 s), 250 Hz",
+        "ground truth  100 poses, 0.450-0.945 s (0.495 s), 200 Hz",
+        f"events        {N_EVENTS} events, ",
+    ):
         assert says in out, (says, out)
 
 
@@ -34,11 +38,27 @@ def test_a_run_on_a_converted_sequence_gives_the_same_trajectory(short_sequence,
     assert f"as an Event Camera Dataset folder to {converted}" in capsys.readouterr().out
     trajectories = []
     for name, folder in (("original", short_sequence), ("converted", converted)):
-        assert main(["run", "--dataset", str(folder), "--config", "paper", "--out", str(tmp_path / f"run_{name}"), "--quiet"]) == 0
+        assert (
+            main(
+                [
+                    "run",
+                    "--dataset",
+                    str(folder),
+                    "--config",
+                    "paper",
+                    "--out",
+                    str(tmp_path / f"run_{name}"),
+                    "--quiet",
+                ]
+            )
+            == 0
+        )
         trajectories.append(np.loadtxt(tmp_path / f"run_{name}" / "trajectory.tum"))
     assert trajectories[0].shape == trajectories[1].shape and len(trajectories[0]) > 10
     np.testing.assert_allclose(trajectories[1], trajectories[0], rtol=0, atol=1e-6)
-    metrics = [json.loads((tmp_path / f"run_{name}" / "metrics.json").read_text()) for name in ("original", "converted")]
+    metrics = [
+        json.loads((tmp_path / f"run_{name}" / "metrics.json").read_text()) for name in ("original", "converted")
+    ]
     assert metrics[1]["ape_mean_rad"] == pytest.approx(metrics[0]["ape_mean_rad"], abs=1e-9)
 
 
@@ -48,17 +68,21 @@ def test_convert_follows_the_output_rules_of_every_writing_command(tmp_path, cap
     assert main(["convert", "--dataset", str(folder), "--out", str(out), "--duration", "0.2"]) == 0
     first = (out / "images.txt").read_text()
     assert "is not empty; choose another folder or add --overwrite" in one_line_failure(
-        ["convert", "--dataset", str(folder), "--out", str(out)], capsys)
+        ["convert", "--dataset", str(folder), "--out", str(out)], capsys
+    )
     assert main(["convert", "--dataset", str(folder), "--out", str(out), "--overwrite"]) == 0  # its own output
     assert len((out / "images.txt").read_text().splitlines()) == N_FRAMES > len(first.splitlines())
     (out / "notes.txt").write_text("mine")
     assert "which eas-vo did not write" in one_line_failure(
-        ["convert", "--dataset", str(folder), "--out", str(out), "--overwrite"], capsys)
+        ["convert", "--dataset", str(folder), "--out", str(out), "--overwrite"], capsys
+    )
     (out / "notes.txt").unlink()
     assert "holds the dataset" in one_line_failure(  # a converted folder is a dataset too: never replaced by itself
-        ["convert", "--dataset", str(out), "--out", str(out), "--overwrite"], capsys)
+        ["convert", "--dataset", str(out), "--out", str(out), "--overwrite"], capsys
+    )
     assert "holds no sample" in one_line_failure(
-        ["convert", "--dataset", str(folder), "--out", str(tmp_path / "late"), "--start", "5"], capsys)
+        ["convert", "--dataset", str(folder), "--out", str(tmp_path / "late"), "--start", "5"], capsys
+    )
     assert not (tmp_path / "late").exists()
 
 

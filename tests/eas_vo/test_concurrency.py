@@ -21,8 +21,9 @@ def threads():
 @pytest.mark.parametrize("n", [1, 2, 3])
 def test_split_and_in_order_give_one_threads_results(threads, n):
     threads(n)
-    assert concurrency.split(lambda a, b: list(range(a, b)), 10, 2) == [list(range(a, b)) for a, b in
-                                                                        _parts(10, min(n, 5))]
+    assert concurrency.split(lambda a, b: list(range(a, b)), 10, 2) == [
+        list(range(a, b)) for a, b in _parts(10, min(n, 5))
+    ]
     assert list(concurrency.in_order(lambda k: k * k, 20, ahead=3)) == [k * k for k in range(20)]
 
 

@@ -39,15 +39,29 @@ def _spelled(dotted: str, value) -> str:
 #: [run] or in the places older config files hold it.
 SPELLINGS = {
     "threshold2": ("tracker", ["tracker.threshold2", "tracker.klt.threshold2"], 150, 100),
-    "imu_time_offset_s": ("run", ["run.imu_time_offset_s", "tracker.imu_time_offset_s", "tracker.klt.imu_time_offset_s",
-                                  "backend.chain.imu_time_offset_s"], 0.004, 0.009),
+    "imu_time_offset_s": (
+        "run",
+        [
+            "run.imu_time_offset_s",
+            "tracker.imu_time_offset_s",
+            "tracker.klt.imu_time_offset_s",
+            "backend.chain.imu_time_offset_s",
+        ],
+        0.004,
+        0.009,
+    ),
 }
 
 
-@pytest.mark.parametrize("key,in_file,in_set", [
-    (key, in_file, in_set) for key, (_, spellings, _, _) in SPELLINGS.items()
-    for in_file in [None, *spellings] for in_set in [None, *spellings]
-])
+@pytest.mark.parametrize(
+    "key,in_file,in_set",
+    [
+        (key, in_file, in_set)
+        for key, (_, spellings, _, _) in SPELLINGS.items()
+        for in_file in [None, *spellings]
+        for in_set in [None, *spellings]
+    ],
+)
 def test_precedence_is_by_source_whatever_the_spelling(tmp_path, key, in_file, in_set):
     """--set beats the file and the file beats the defaults, flat key or plugin table alike."""
     section, _, file_value, set_value = SPELLINGS[key]
@@ -68,20 +82,28 @@ def test_precedence_of_the_file_the_options_and_set(tmp_path, in_file, in_option
     assert cfg.run.start_s == (3.0 if in_set else 2.0 if in_options else 1.0 if in_file else 0.0)
 
 
-@pytest.mark.parametrize("text", ["[tracker]\nmax_corners = 20\n[tracker.klt]\nmax_corners = 10\n",
-                                  "[tracker.klt]\nmax_corners = 10\n[tracker]\nmax_corners = 20\n"])
+@pytest.mark.parametrize(
+    "text",
+    [
+        "[tracker]\nmax_corners = 20\n[tracker.klt]\nmax_corners = 10\n",
+        "[tracker.klt]\nmax_corners = 10\n[tracker]\nmax_corners = 20\n",
+    ],
+)
 def test_in_a_file_the_plugins_table_wins_over_the_flat_key_whatever_their_order(tmp_path, text):
     path = tmp_path / "c.toml"
     path.write_text(text)
     assert resolve(path).tracker.max_corners == 10
-    assert resolve(path, {}, ["tracker.max_corners=30"]).tracker.max_corners == 30  # --set over the file, either spelling
+    assert (
+        resolve(path, {}, ["tracker.max_corners=30"]).tracker.max_corners == 30
+    )  # --set over the file, either spelling
     path.write_text("[frontend]\nn = 3000\n[frontend.slice]\nn = 5000\n")  # another plugin's table: not read
     assert resolve(path, {"frontend": "eas"}).frontend.n == 3000
     assert resolve(path, {"frontend": "slice"}).frontend.n == 5000
 
 
-@pytest.mark.parametrize("first,then", [("tracker.threshold2", "tracker.klt.threshold2"),
-                                        ("tracker.klt.threshold2", "tracker.threshold2")])
+@pytest.mark.parametrize(
+    "first,then", [("tracker.threshold2", "tracker.klt.threshold2"), ("tracker.klt.threshold2", "tracker.threshold2")]
+)
 def test_among_set_assignments_the_later_wins_whatever_the_spelling(first, then):
     assert resolve(None, {}, [f"{first}=120", f"{then}=130"]).tracker.threshold2 == 130
 
@@ -179,9 +201,23 @@ def resolved_value(cfg, section: str, key: str):
 
 
 @hostile_settings()
-@given(key=st.sampled_from(["frontend.n", "frontend.beta", "frontend.sigma_px", "tracker.threshold1", "tracker.max_corners",
-                            "run.start_s", "run.duration_s", "backend.x", "nosuch.key", "frontend"]),
-       value=st.one_of(hostile_number(), st.text(max_size=8)))
+@given(
+    key=st.sampled_from(
+        [
+            "frontend.n",
+            "frontend.beta",
+            "frontend.sigma_px",
+            "tracker.threshold1",
+            "tracker.max_corners",
+            "run.start_s",
+            "run.duration_s",
+            "backend.x",
+            "nosuch.key",
+            "frontend",
+        ]
+    ),
+    value=st.one_of(hostile_number(), st.text(max_size=8)),
+)
 def test_hostile_set_values_are_one_line_errors_or_taken_exactly(key, value):
     try:
         cfg = resolve(None, {}, [f"{key}={value}"])
@@ -224,8 +260,10 @@ def test_a_config_written_before_the_imu_moved_to_run_still_resolves(tmp_path):
     [run] says otherwise, and a later source (--set) wins however it spells the key; two old
     places in one source that disagree are one error naming both."""
     old = tmp_path / "old.toml"
-    text = ('[run]\ntracker = "klt"\nbackend = "gtsam"\n[tracker]\nimu_rotvec_cam = [0.0, 0.0, 1.5]\n'
-            'imu_time_offset_s = 0.004\n[backend.gtsam]\nimu_rotvec_cam = [0, 0, 1.5]\nimu_time_offset_s = 0.004\n')
+    text = (
+        '[run]\ntracker = "klt"\nbackend = "gtsam"\n[tracker]\nimu_rotvec_cam = [0.0, 0.0, 1.5]\n'
+        "imu_time_offset_s = 0.004\n[backend.gtsam]\nimu_rotvec_cam = [0, 0, 1.5]\nimu_time_offset_s = 0.004\n"
+    )
     old.write_text(text)
     cfg = resolve(old)
     assert cfg.run.imu_rotvec_cam == (0.0, 0.0, 1.5) and cfg.run.imu_time_offset_s == 0.004
@@ -234,24 +272,30 @@ def test_a_config_written_before_the_imu_moved_to_run_still_resolves(tmp_path):
     assert resolve(old, assignments=["run.imu_time_offset_s=0.009"]).run.imu_time_offset_s == 0.009
     assert resolve(old, assignments=["backend.gtsam.imu_time_offset_s=0.005"]).run.imu_time_offset_s == 0.005
     assert resolve(old, assignments=["backend.chain.imu_time_offset_s=0.5"]).run.imu_time_offset_s == 0.004
-    old.write_text(text.replace("tracker = \"klt\"\n", "tracker = \"klt\"\nimu_time_offset_s = 0.001\n"))
+    old.write_text(text.replace('tracker = "klt"\n', 'tracker = "klt"\nimu_time_offset_s = 0.001\n'))
     assert resolve(old).run.imu_time_offset_s == 0.001  # the file's [run] over its old places
     old.write_text(text.replace("imu_time_offset_s = 0.004\n", "imu_time_offset_s = 0.005\n", 1))
-    with pytest.raises(ConfigError, match=rf"^{old}: tracker.imu_time_offset_s = 0.005, backend.gtsam.imu_time_offset_s = "
-                                          r"0.004: the rig has one IMU; set run.imu_time_offset_s only$"):
+    with pytest.raises(
+        ConfigError,
+        match=rf"^{old}: tracker.imu_time_offset_s = 0.005, backend.gtsam.imu_time_offset_s = "
+        r"0.004: the rig has one IMU; set run.imu_time_offset_s only$",
+    ):
         resolve(old, assignments=["run.imu_time_offset_s=0.009"])
 
 
-@pytest.mark.parametrize("text,says", [
-    ('frontend = "eas"\n', 'frontend must be a table \\(\\[frontend\\] and its keys\\), found "eas"'),
-    ("run = 5\n", "run must be a table .*, found 5"),
-    ('run = "x"\n', 'run must be a table .*, found "x"'),
-    ('[[run]]\nfrontend = "eas"\n', r"run must be a table .*, found an array of tables"),
-    ('dataset = "x"\n', 'dataset must be a table .*, found "x"'),
-    ("[tracker]\nklt = 5\n", r"tracker.klt must be a table \(the klt tracker's keys, \[tracker.klt\]\), found 5"),
-    ("[[tracker.klt]]\nmax_corners = 5\n", r"tracker.klt must be a table .*, found an array of tables"),
-    ("[frontend]\neas = [1, 2]\n", r"frontend.eas must be a table .*, found \[1, 2\]"),
-])
+@pytest.mark.parametrize(
+    "text,says",
+    [
+        ('frontend = "eas"\n', 'frontend must be a table \\(\\[frontend\\] and its keys\\), found "eas"'),
+        ("run = 5\n", "run must be a table .*, found 5"),
+        ('run = "x"\n', 'run must be a table .*, found "x"'),
+        ('[[run]]\nfrontend = "eas"\n', r"run must be a table .*, found an array of tables"),
+        ('dataset = "x"\n', 'dataset must be a table .*, found "x"'),
+        ("[tracker]\nklt = 5\n", r"tracker.klt must be a table \(the klt tracker's keys, \[tracker.klt\]\), found 5"),
+        ("[[tracker.klt]]\nmax_corners = 5\n", r"tracker.klt must be a table .*, found an array of tables"),
+        ("[frontend]\neas = [1, 2]\n", r"frontend.eas must be a table .*, found \[1, 2\]"),
+    ],
+)
 def test_a_section_or_plugin_table_that_is_not_one_names_the_file_and_key(tmp_path, text, says):
     from eas_vo.config import run_section
 
@@ -297,5 +341,5 @@ def test_a_vector_key_its_config_does_not_check_is_still_refused_unless_an_array
 def test_a_tracker_that_reads_no_images_runs_with_the_none_frontend(given):
     cfg = resolve(None, {"tracker": "cmax", "frontend": given})
     assert cfg.run.frontend == "no_image" and not registry.get("frontends", "no_image").makes_images
-    assert "frontend = \"no_image\"" in cfg.to_toml()
+    assert 'frontend = "no_image"' in cfg.to_toml()
     assert resolve(None, {"tracker": "klt", "frontend": given}).run.frontend == (given or "eas")

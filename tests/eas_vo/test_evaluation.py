@@ -89,7 +89,7 @@ def test_frames_in_a_gap_of_the_ground_truth_are_not_scored():
     coverage = err.coverage(t)
     assert coverage["frames_in_ground_truth_gaps"] == 7 and coverage["frames_scored_fraction"] == pytest.approx(34 / 41)
     assert coverage["ground_truth_span_s"] == [0.0, 2.0] and coverage["ground_truth_max_gap_s"] == pytest.approx(0.02)
-    warning, = err.coverage_warning(t)
+    (warning,) = err.coverage_warning(t)
     assert "34 of the run's 41 frames" in warning and "7 frames lie in its gaps" in warning
 
 
@@ -128,7 +128,9 @@ def test_time_offset_known_answer():
 
 def _steps(R_w_c: np.ndarray, noise_rad: float, seed: int) -> list[RelativeRotation]:
     """Consecutive relative rotations of `R_w_c` (N, 3, 3), each with random noise of about `noise_rad`."""
-    noise = Rotation.from_rotvec(np.random.default_rng(seed).normal(0, noise_rad / np.sqrt(3), (len(R_w_c), 3))).as_matrix()
+    noise = Rotation.from_rotvec(
+        np.random.default_rng(seed).normal(0, noise_rad / np.sqrt(3), (len(R_w_c), 3))
+    ).as_matrix()
     return [RelativeRotation(k - 1, k, R_w_c[k - 1].T @ R_w_c[k] @ noise[k]) for k in range(1, len(R_w_c))]
 
 
@@ -145,8 +147,12 @@ def test_a_time_offset_without_a_clear_best_fit_is_not_an_estimate():
     steady = PoseSeries(t_gt, np.zeros((len(t_gt), 3)), quats_from_matrices(steady))
     identical = np.tile(np.eye(3), (len(t_frames), 1, 1))
     noise = np.radians(0.03)
-    for gt, R_measured in ((still, identical), (moving, identical), (steady, interpolate_poses(steady, t_frames)[1]),
-                           (moving, interpolate_poses(moving, t_frames + 0.13)[1])):
+    for gt, R_measured in (
+        (still, identical),
+        (moving, identical),
+        (steady, interpolate_poses(steady, t_frames)[1]),
+        (moving, interpolate_poses(moving, t_frames + 0.13)[1]),
+    ):
         assert estimate_time_offset(t_frames, _steps(R_measured, noise, seed=2), gt) is None
     # the same 2 s of turning, measured on time and 20 ms late: estimated
     for late_s in (0.0, 0.02):
@@ -154,25 +160,38 @@ def test_a_time_offset_without_a_clear_best_fit_is_not_an_estimate():
         assert estimate_time_offset(t_frames, edges, moving) == pytest.approx(late_s, abs=0.001)
 
 
-
-
-
-
-
-
-
-
 def test_auto_time_offset_on_the_real_excerpt(tmp_path, capsys):
     """--time-offset auto finds the excerpt's offset, and the summary line says it was fitted
     on the ground truth the APE is measured against."""
     folder = str(require(SHAPES_ROTATION))
     out = tmp_path / "auto"
-    assert main(["run", "--dataset", folder, "--frontend", "original", "--duration", "25", "--time-offset", "auto", "--out", str(out), "--quiet"]) == 0
+    assert (
+        main(
+            [
+                "run",
+                "--dataset",
+                folder,
+                "--frontend",
+                "original",
+                "--duration",
+                "25",
+                "--time-offset",
+                "auto",
+                "--out",
+                str(out),
+                "--quiet",
+            ]
+        )
+        == 0
+    )
     metrics = json.loads((out / "metrics.json").read_text())
     # The excerpt's README: frames lead ground truth by about 10 ms. Measured: +9.1 ms.
     assert metrics["time_offset_estimated"] and 0.005 < metrics["time_offset_s"] < 0.015
     said = capsys.readouterr().out
-    assert f"(time offset {metrics['time_offset_s'] * 1e3:+.1f} ms, estimated on the ground truth it scores against)" in said
+    assert (
+        f"(time offset {metrics['time_offset_s'] * 1e3:+.1f} ms, estimated on the ground truth it scores against)"
+        in said
+    )
 
 
 def test_tum_files_are_scored_like_the_run(tmp_path):
@@ -198,12 +217,23 @@ def _path_of_three(seed=0):
     return PoseSeries(t, p, Rotation.from_rotvec(rng.normal(0, 0.1, (3, 3))).as_quat())
 
 
-@pytest.mark.parametrize("align, positions, says", [
-    ("sim3", lambda p: p + np.random.default_rng(1).normal(0, 0.01, p.shape), "fix the sim3 alignment's rotation only"),
-    ("se3", lambda p: p + np.random.default_rng(1).normal(0, 0.01, p.shape), "fix the se3 alignment's rotation only"),
-    ("sim3", lambda p: np.array([[10.0, 20, 30], [11, 22, 33], [12, 24, 36 + 1e-9]]), "lie on a line or a point"),
-    ("se3", lambda p: 1e200 * (p + 1), "overflow floating point"),
-])
+@pytest.mark.parametrize(
+    "align, positions, says",
+    [
+        (
+            "sim3",
+            lambda p: p + np.random.default_rng(1).normal(0, 0.01, p.shape),
+            "fix the sim3 alignment's rotation only",
+        ),
+        (
+            "se3",
+            lambda p: p + np.random.default_rng(1).normal(0, 0.01, p.shape),
+            "fix the se3 alignment's rotation only",
+        ),
+        ("sim3", lambda p: np.array([[10.0, 20, 30], [11, 22, 33], [12, 24, 36 + 1e-9]]), "lie on a line or a point"),
+        ("se3", lambda p: 1e200 * (p + 1), "overflow floating point"),
+    ],
+)
 def test_an_alignment_the_positions_cannot_fix_is_refused(align, positions, says):
     """Three poses with the ground truth's rotations: positions off by 1 cm where the path
     spans 2 cm leave the alignment's rotation free (it turned them by 2.9 rad); positions on
@@ -216,20 +246,26 @@ def test_an_alignment_the_positions_cannot_fix_is_refused(align, positions, says
 
 
 @pytest.mark.parametrize("align", ["sim3", "se3"])
-@pytest.mark.parametrize("positions", [
-    lambda p: np.zeros_like(p),  # eas-vo's own trajectories: rotation only
-    lambda p: np.array([[10.0, 20, 30], [11, 22, 33], [12, 24, 36 + 1e-9]]),  # on a line
-    lambda p: p + np.random.default_rng(1).normal(0, 0.01, p.shape),  # too little spread
-    lambda p: p[:2],  # too few poses
-])
+@pytest.mark.parametrize(
+    "positions",
+    [
+        lambda p: np.zeros_like(p),  # eas-vo's own trajectories: rotation only
+        lambda p: np.array([[10.0, 20, 30], [11, 22, 33], [12, 24, 36 + 1e-9]]),  # on a line
+        lambda p: p + np.random.default_rng(1).normal(0, 0.01, p.shape),  # too little spread
+        lambda p: p[:2],  # too few poses
+    ],
+)
 def test_an_alignment_the_positions_cannot_fix_names_the_origin_alignment(align, positions):
     from eas_vo.evaluation.trajectory import trajectory_ape
 
     gt = _path_of_three()
     p = positions(gt.p_w_c)
     with pytest.raises(ValueError, match=f"{align} alignment.*; to score the rotations alone .*: --align origin$"):
-        trajectory_ape(gt, PoseSeries(gt.t[:len(p)], p, gt.q_w_c[:len(p)]), align)
-    assert trajectory_ape(gt, PoseSeries(gt.t[:len(p)], p, gt.q_w_c[:len(p)]), "origin").summary()["ape_rot_mean_rad"] < 1e-9
+        trajectory_ape(gt, PoseSeries(gt.t[: len(p)], p, gt.q_w_c[: len(p)]), align)
+    assert (
+        trajectory_ape(gt, PoseSeries(gt.t[: len(p)], p, gt.q_w_c[: len(p)]), "origin").summary()["ape_rot_mean_rad"]
+        < 1e-9
+    )
 
 
 def test_an_alignment_needs_its_least_poses_and_reaches_any_finite_scale():
@@ -242,7 +278,9 @@ def test_an_alignment_needs_its_least_poses_and_reaches_any_finite_scale():
         trajectory_ape(gt, PoseSeries(gt.t[:2], gt.p_w_c[:2], gt.q_w_c[:2]), "sim3")
     huge = trajectory_ape(gt, PoseSeries(gt.t, 1e200 * (gt.p_w_c + 1), gt.q_w_c), "sim3")
     assert huge.scale == pytest.approx(1e-200, rel=1e-9) and huge.summary()["ape_trans_mean_m"] < 1e-12
-    near = trajectory_ape(gt, PoseSeries(gt.t, gt.p_w_c + np.random.default_rng(1).normal(0, 1e-4, (3, 3)), gt.q_w_c), "sim3")
+    near = trajectory_ape(
+        gt, PoseSeries(gt.t, gt.p_w_c + np.random.default_rng(1).normal(0, 1e-4, (3, 3)), gt.q_w_c), "sim3"
+    )
     assert near.summary()["ape_rot_mean_rad"] < 0.05
 
 
@@ -282,4 +320,6 @@ def test_motion_errors_say_none_where_nothing_compares():
 
     t, errors, _ = _constant_rotation_run(np.zeros(3), 0.0, np.zeros(3), n=10)
     m = motion_errors(t, errors, [])
-    assert m["omega_pairs"] == 0 and m["omega_rms_deg_s"] is None and m["rpe_pairs"] == 0 and m["rpe_1s_mean_deg"] is None
+    assert (
+        m["omega_pairs"] == 0 and m["omega_rms_deg_s"] is None and m["rpe_pairs"] == 0 and m["rpe_1s_mean_deg"] is None
+    )

@@ -211,16 +211,35 @@ def test_run_refuses_to_write_over_its_own_dataset(sequence_copy):
     from helpers import mark_as_eas_vo_output, run_eas_vo
 
     mark_as_eas_vo_output(sequence_copy)  # as `eas-vo simulate` leaves it: an eas-vo output, yet a dataset
-    done = run_eas_vo("run", "--dataset", str(sequence_copy), "--duration", "0.5", "--out", str(sequence_copy), "--overwrite")
+    done = run_eas_vo(
+        "run", "--dataset", str(sequence_copy), "--duration", "0.5", "--out", str(sequence_copy), "--overwrite"
+    )
     assert done.returncode == 2 and "holds the dataset" in done.stderr
     assert (sequence_copy / "events.txt").exists()
 
 
 def run_into(folder: Path, dataset: Path, duration: str) -> subprocess.Popen:
     return subprocess.Popen(
-        [sys.executable, "-m", "eas_vo", "run", "--dataset", str(dataset), "--frontend", "original", "--duration", duration,
-         "--out", str(folder), "--overwrite", "--quiet"],
-        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=tempfile.gettempdir(),
+        [
+            sys.executable,
+            "-m",
+            "eas_vo",
+            "run",
+            "--dataset",
+            str(dataset),
+            "--frontend",
+            "original",
+            "--duration",
+            duration,
+            "--out",
+            str(folder),
+            "--overwrite",
+            "--quiet",
+        ],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        cwd=tempfile.gettempdir(),
     )
 
 
@@ -255,7 +274,7 @@ def test_a_lock_held_by_a_zombie_is_taken_over(tmp_path):
     child = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(60)"])
     try:
         started = Path(f"/proc/{child.pid}/stat").read_text()
-        (tmp_path / ".out.lock").write_text(f"{child.pid} {started[started.rindex(')') + 2:].split()[19]}\n")
+        (tmp_path / ".out.lock").write_text(f"{child.pid} {started[started.rindex(')') + 2 :].split()[19]}\n")
         os.kill(child.pid, signal.SIGKILL)
         deadline = time.monotonic() + 10
         while Path(f"/proc/{child.pid}/stat").read_text().split(") ")[1][0] != "Z" and time.monotonic() < deadline:
@@ -292,18 +311,28 @@ def test_the_cache_is_listed_and_cleared_folder_by_folder(tmp_path, monkeypatch)
     elsewhere.mkdir(parents=True)
     (elsewhere / "seq.zip").write_bytes(b"d" * 9)
     (cache / "data").symlink_to(elsewhere)
-    assert cache_usage() == {"data": CachePart(1, 9, "", True), "events": CachePart(2, 100, "event caches"),
-                             "synthetic": CachePart(1, 57, "")}
+    assert cache_usage() == {
+        "data": CachePart(1, 9, "", True),
+        "events": CachePart(2, 100, "event caches"),
+        "synthetic": CachePart(1, 57, ""),
+    }
     with pytest.raises(EasVoError, match="cache 'bench': not in .*cache .there: data, events, synthetic"):
         clear_cache(["events", "bench"])
     assert cache_usage()["events"].entries == 2  # nothing removed
-    with pytest.raises(EasVoError, match=rf"cache 'data': .*data is a link to {elsewhere}, which eas-vo does not empty"):
+    with pytest.raises(
+        EasVoError, match=rf"cache 'data': .*data is a link to {elsewhere}, which eas-vo does not empty"
+    ):
         clear_cache(["events", "data"])
     assert cache_usage()["events"].entries == 2 and (elsewhere / "seq.zip").read_bytes() == b"d" * 9
     assert clear_cache(["events", "synthetic", "events"]) == {"events": 100, "synthetic": 57}
-    assert cache_usage() == {"data": CachePart(1, 9, "", True), "events": CachePart(0, 0, "event caches"),
-                             "synthetic": CachePart(0, 0, "")}
-    assert outside.read_bytes() == b"y" * 1000 and (events / ".a.ev.123.tmp").exists() and (elsewhere / "seq.zip").exists()
+    assert cache_usage() == {
+        "data": CachePart(1, 9, "", True),
+        "events": CachePart(0, 0, "event caches"),
+        "synthetic": CachePart(0, 0, ""),
+    }
+    assert (
+        outside.read_bytes() == b"y" * 1000 and (events / ".a.ev.123.tmp").exists() and (elsewhere / "seq.zip").exists()
+    )
     monkeypatch.setenv("EAS_VO_CACHE_DIR", str(outside))
     with pytest.raises(EasVoError, match="precious.ev: the cache folder .EAS_VO_CACHE_DIR. is not a folder"):
         cache_usage()

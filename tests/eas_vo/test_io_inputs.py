@@ -34,7 +34,9 @@ def test_an_output_file_hard_linked_to_an_input_is_refused(tmp_path):
     calibration.write_text("<dv/>")
     os.link(calibration, tmp_path / "gallery.png")
     with pytest.raises(EasVoError, match="is dataset.calibration"):
-        refuse_inputs(resolved_out(tmp_path / "gallery.png"), [("dataset.calibration", str(calibration))], out_is_file=True)
+        refuse_inputs(
+            resolved_out(tmp_path / "gallery.png"), [("dataset.calibration", str(calibration))], out_is_file=True
+        )
 
 
 def test_an_output_folder_holding_where_a_dataset_file_leads_is_refused(dataset, tmp_path):
@@ -62,11 +64,14 @@ def test_an_output_folder_reached_through_a_second_mount_of_an_input_is_refused(
 def test_outputs_beside_the_inputs_are_allowed(dataset, tmp_path):
     refuse_inputs(resolved_out(tmp_path / "run"), [("the dataset", str(dataset)), ("the --config", None)])
     refuse_inputs(resolved_out(tmp_path / "gallery.png"), [("the dataset", str(dataset))], out_is_file=True)
-    refuse_inputs(resolved_out(dataset / "runs" / "one"), [("the dataset", str(dataset))])  # a new folder inside the dataset's
+    refuse_inputs(
+        resolved_out(dataset / "runs" / "one"), [("the dataset", str(dataset))]
+    )  # a new folder inside the dataset's
 
 
-@pytest.mark.parametrize("check", [lambda out: check_output_folder(out, True), lambda out: check_output_file(out, True),
-                                   resolved_out])
+@pytest.mark.parametrize(
+    "check", [lambda out: check_output_folder(out, True), lambda out: check_output_file(out, True), resolved_out]
+)
 def test_an_out_whose_links_loop_is_one_line_naming_it(tmp_path, check):
     (tmp_path / "a").symlink_to(tmp_path / "b")
     (tmp_path / "b").symlink_to(tmp_path / "a")

@@ -40,7 +40,9 @@ def test_run_on_a_full_disk_is_one_line_naming_the_file(short_sequence, tmp_path
         return write(self, *args, **kwargs)
 
     monkeypatch.setattr(Path, "write_text", full_for_metrics)
-    err = one_line_failure(["run", "--dataset", str(short_sequence), "--duration", "0.2", "--out", str(tmp_path / "run"),
-                            "--quiet"], capsys)
+    err = one_line_failure(
+        ["run", "--dataset", str(short_sequence), "--duration", "0.2", "--out", str(tmp_path / "run"), "--quiet"],
+        capsys,
+    )
     assert err == f"eas-vo: error: No space left on device ({(tmp_path / 'run').resolve() / 'metrics.json'})\n"
     assert not (tmp_path / "run").exists()

@@ -27,9 +27,11 @@ def test_records_become_one_line_each_with_the_warning_word_from_warning_up(pack
     log.info("simulating synthetic:default (10 s) into /tmp/x (once)")
     log.warning("the event cache folder /tmp/c cannot be written")
     log.error("worse")
-    assert capsys.readouterr().err == ("eas-vo: simulating synthetic:default (10 s) into /tmp/x (once)\n"
-                                       "eas-vo: warning: the event cache folder /tmp/c cannot be written\n"
-                                       "eas-vo: warning: worse\n")
+    assert capsys.readouterr().err == (
+        "eas-vo: simulating synthetic:default (10 s) into /tmp/x (once)\n"
+        "eas-vo: warning: the event cache folder /tmp/c cannot be written\n"
+        "eas-vo: warning: worse\n"
+    )
 
 
 def test_without_the_handler_the_library_prints_nothing(package_logger, capsys):

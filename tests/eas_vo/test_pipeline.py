@@ -4,8 +4,8 @@ and the frame path on the real Event Camera Dataset excerpt."""
 import numpy as np
 import pytest
 
-from helpers import REPOSITORY, SHAPES_ROTATION, require
 from eas_vo import config, pipeline, registry
+from helpers import REPOSITORY, SHAPES_ROTATION, require
 
 
 def run(dataset, frontend, **run_overrides):
@@ -54,7 +54,9 @@ def test_best_config_beats_the_paper_config():
     best = pipeline.run(config.resolve("best", {"frontend": "eas"})).metrics
     assert best["ape_mean_rad"] < 0.5 * paper["ape_mean_rad"]
     folder = str(require(SHAPES_ROTATION))
-    real = pipeline.run(config.resolve("best", {"dataset": folder, "frontend": "histeq", "duration_s": 25.0, "time_offset_s": 0.01}))
+    real = pipeline.run(
+        config.resolve("best", {"dataset": folder, "frontend": "histeq", "duration_s": 25.0, "time_offset_s": 0.01})
+    )
     assert real.metrics["ape_mean_rad"] <= 0.08
 
 
@@ -76,8 +78,11 @@ def test_a_gyro_on_another_clock_is_found_on_real_images(tmp_path, benchmarks_im
     rig = with_gyro_from_ground_truth(require(SHAPES_ROTATION), tmp_path / "with_gyro", seed=0)
 
     def best(imu_offset_s, *changes):
-        cfg = config.resolve("best", {"dataset": str(rig), "frontend": "histeq", "start_s": 20.0, "duration_s": 10.0,
-                                      "time_offset_s": 0.01}, [f"run.imu_time_offset_s={imu_offset_s}", *changes])
+        cfg = config.resolve(
+            "best",
+            {"dataset": str(rig), "frontend": "histeq", "start_s": 20.0, "duration_s": 10.0, "time_offset_s": 0.01},
+            [f"run.imu_time_offset_s={imu_offset_s}", *changes],
+        )
         return pipeline.run(cfg).metrics
 
     on_frames_clock, on_its_clock = best(0.0), best(0.009)
@@ -97,17 +102,20 @@ def test_twice_the_excerpts_speed_holds_and_lk_alone_marks_its_failures(tmp_path
     made from the ground truth best.toml holds (0.007 rad measured), and from frames alone too
     (0.051: its `align` fallback). LK alone does not (0.71), and then every frame whose measured
     step is more than 5 deg off the truth says so in its status (`weak` or `lost`, not `ok`)."""
-    from eas_vo.geometry.rotations import geodesic_angle, interpolate_poses
-
     from faster_real import GYRO_CLOCK_S, thinned
     from gyro_clock import with_gyro_from_ground_truth
+
+    from eas_vo.geometry.rotations import geodesic_angle, interpolate_poses
 
     real = require(SHAPES_ROTATION)
     rig = with_gyro_from_ground_truth(real, tmp_path / "rig", seed=0)
 
     def best(folder, *changes):
-        cfg = config.resolve("best", {"dataset": str(folder), "frontend": "histeq", "duration_s": 20.0, "time_offset_s": 0.01},
-                             list(changes))
+        cfg = config.resolve(
+            "best",
+            {"dataset": str(folder), "frontend": "histeq", "duration_s": 20.0, "time_offset_s": 0.01},
+            list(changes),
+        )
         return pipeline.run(cfg)
 
     with_gyro = best(thinned(rig, tmp_path / "fast-gyro", 2), f"run.imu_time_offset_s={GYRO_CLOCK_S}")
@@ -119,7 +127,11 @@ def test_twice_the_excerpts_speed_holds_and_lk_alone_marks_its_failures(tmp_path
     valid, R_gt, _ = interpolate_poses(registry.open_dataset(str(real), None).ground_truth, lk_alone.t + 0.01)
     assert valid.all()
     status = {r.index: r.status for r in lk_alone.records}
-    off = [e.j for e in lk_alone.edges if e.j == e.i + 1 and np.degrees(geodesic_angle(R_gt[e.i].T @ R_gt[e.j], e.R_i_j)) > 5]
+    off = [
+        e.j
+        for e in lk_alone.edges
+        if e.j == e.i + 1 and np.degrees(geodesic_angle(R_gt[e.i].T @ R_gt[e.j], e.R_i_j)) > 5
+    ]
     assert len(off) >= 10 and all(status[k] in ("weak", "lost") for k in off), [(k, status[k]) for k in off]
 
 
@@ -128,12 +140,6 @@ def test_an_automatic_imu_clock_changes_nothing_when_the_images_ask_for_nothing(
     runs = [pipeline.run(config.resolve("best", {}, changes)) for changes in ([], ["run.imu_time_offset_auto=true"])]
     assert runs[1].metrics["imu_time_offset_s"] == 0.0 and not runs[1].metrics["imu_time_offset_estimated"]
     np.testing.assert_array_equal(runs[0].R_w_c, runs[1].R_w_c)
-
-
-
-
-
-
 
 
 def test_the_trackers_own_warnings_reach_the_run(sequence_copy, monkeypatch):
@@ -154,5 +160,7 @@ def test_a_backend_that_returns_no_backend_result_is_named_in_one_line(sequence_
 
     monkeypatch.setattr(ChainBackend, "solve", lambda self, n, edges, **kw: np.tile(np.eye(3), (n, 1, 1)))
     cfg = config.resolve(None, {"dataset": str(sequence_copy), "duration_s": 0.5, "backend": "chain"})
-    with pytest.raises(EasVoError, match="backend 'chain' returned ndarray: Backend.solve returns an eas_vo.plugins.BackendResult"):
+    with pytest.raises(
+        EasVoError, match="backend 'chain' returned ndarray: Backend.solve returns an eas_vo.plugins.BackendResult"
+    ):
         pipeline.run(cfg)

@@ -20,7 +20,9 @@ def run_all(folder, tmp_path, extra=()):
     results = {}
     for frontend in FRONTENDS:
         out = tmp_path / f"out_{frontend}"
-        assert main(["run", "--dataset", str(folder), "--frontend", frontend, "--out", str(out), "--quiet", *extra]) == 0
+        assert (
+            main(["run", "--dataset", str(folder), "--frontend", frontend, "--out", str(out), "--quiet", *extra]) == 0
+        )
         metrics = json.loads((out / "metrics.json").read_text())
         rows = list(csv.DictReader(open(out / "frames.csv")))
         assert len(rows) == metrics["frames"] and all(r["status"] for r in rows)
@@ -61,11 +63,32 @@ def test_an_event_burst_and_slices_longer_than_the_events_left(sequence_copy, tm
     lines = (sequence_copy / "events.txt").read_text().splitlines()
     t_burst = float(lines[len(lines) // 2].split()[0])
     rng = np.random.default_rng(0)
-    burst = [f"{t_burst:.9f} {x} {y} {p}" for x, y, p in zip(rng.integers(0, 240, 300_000), rng.integers(0, 180, 300_000), rng.integers(0, 2, 300_000))]
-    (sequence_copy / "events.txt").write_text("\n".join(lines[: len(lines) // 2] + burst + lines[len(lines) // 2 :]) + "\n")
+    burst = [
+        f"{t_burst:.9f} {x} {y} {p}"
+        for x, y, p in zip(rng.integers(0, 240, 300_000), rng.integers(0, 180, 300_000), rng.integers(0, 2, 300_000))
+    ]
+    (sequence_copy / "events.txt").write_text(
+        "\n".join(lines[: len(lines) // 2] + burst + lines[len(lines) // 2 :]) + "\n"
+    )
     run_all(sequence_copy, tmp_path)
     out = tmp_path / "big_slice"
-    assert main(["run", "--dataset", str(sequence_copy), "--frontend", "slice", "--set", "frontend.n=100000000", "--out", str(out), "--quiet"]) == 0
+    assert (
+        main(
+            [
+                "run",
+                "--dataset",
+                str(sequence_copy),
+                "--frontend",
+                "slice",
+                "--set",
+                "frontend.n=100000000",
+                "--out",
+                str(out),
+                "--quiet",
+            ]
+        )
+        == 0
+    )
 
 
 def test_gaps_in_ground_truth(sequence_copy, tmp_path):
@@ -98,7 +121,9 @@ def test_frame_timestamps_going_back(sequence_copy, tmp_path, capsys):
     path.write_text("\n".join(lines) + "\n")
     assert main(["run", "--dataset", str(sequence_copy), "--out", str(tmp_path / "strict"), "--quiet"]) == 2
     assert "images.txt:6: timestamp 0.000000000 goes back" in capsys.readouterr().err
-    assert main(["run", "--dataset", str(sequence_copy), "--out", str(tmp_path / "lenient"), "--quiet", "--lenient"]) == 0
+    assert (
+        main(["run", "--dataset", str(sequence_copy), "--out", str(tmp_path / "lenient"), "--quiet", "--lenient"]) == 0
+    )
     metrics = json.loads((tmp_path / "lenient" / "metrics.json").read_text())
     assert "1 dropped: timestamp going back (first at line 6)" in metrics["data_warnings"][0]
 
@@ -108,15 +133,23 @@ def test_a_run_made_to_fail_says_so_frame_by_frame(sequence_copy, tmp_path, caps
     explains it. frames.csv must show weak or lost frames with a reason, not `ok`, and the
     summary line counts them."""
     rng = np.random.default_rng(0)
-    rewrite_frames(sequence_copy, lambda im: cv2.GaussianBlur(rng.integers(0, 256, im.shape).astype(np.uint8), (5, 5), 1.5))
+    rewrite_frames(
+        sequence_copy, lambda im: cv2.GaussianBlur(rng.integers(0, 256, im.shape).astype(np.uint8), (5, 5), 1.5)
+    )
     out = tmp_path / "failing"
     assert main(["run", "--dataset", str(sequence_copy), "--frontend", "original", "--out", str(out), "--quiet"]) == 0
     rows = list(csv.DictReader(open(out / "frames.csv")))[1:]
-    assert all(r["status"] in ("weak", "lost") and r["reason"] for r in rows), [r for r in rows if r["status"] == "ok"][:3]
+    assert all(r["status"] in ("weak", "lost") and r["reason"] for r in rows), [r for r in rows if r["status"] == "ok"][
+        :3
+    ]
     weak = [r for r in rows if r["status"] == "weak"]
     c = TwoViewConfig()
-    assert all(float(r["inlier_ratio"]) < c.min_inlier_ratio or float(r["residual_px"]) > c.max_residual_px
-               or int(r["inliers"]) < c.min_inliers for r in weak)
+    assert all(
+        float(r["inlier_ratio"]) < c.min_inlier_ratio
+        or float(r["residual_px"]) > c.max_residual_px
+        or int(r["inliers"]) < c.min_inliers
+        for r in weak
+    )
     reasons = {s: Counter(r["reason"].split(" (")[0] for r in rows if r["status"] == s) for s in ("weak", "lost")}
     assert json.loads((out / "metrics.json").read_text())["status_reasons"] == reasons
     line = capsys.readouterr().out
@@ -126,7 +159,9 @@ def test_a_run_made_to_fail_says_so_frame_by_frame(sequence_copy, tmp_path, caps
     for part in said[1:]:  # e.g. "40 weak: 31 low inlier ratio, 9 few inliers"
         head, why = part.split(": ")
         n, status = head.split(" ")
-        assert int(n) == sum(reasons[status].values()) and sorted(why.split(", ")) == sorted(f"{k} {r}" for r, k in reasons[status].items())
+        assert int(n) == sum(reasons[status].values()) and sorted(why.split(", ")) == sorted(
+            f"{k} {r}" for r, k in reasons[status].items()
+        )
 
 
 def test_event_frontends_say_when_the_events_end_or_there_are_none(sequence_copy, tmp_path, capsys):
@@ -151,7 +186,9 @@ def test_event_frontends_say_when_the_events_end_or_there_are_none(sequence_copy
     assert len(said) == 1 and ends in said[0]
     events.write_text("")
     for frontend in ("slice", "ts", "sits", "eas"):
-        assert warnings(frontend) == [f"{sequence_copy} holds no events: the {frontend} images of its {len(frame_times)} frames hold none"]
+        assert warnings(frontend) == [
+            f"{sequence_copy} holds no events: the {frontend} images of its {len(frame_times)} frames hold none"
+        ]
     assert warnings("original") == []
 
 
@@ -179,10 +216,14 @@ def test_an_imu_mounted_otherwise_than_configured_is_named(sequence_copy, tmp_pa
     capsys.readouterr()
 
     for configured in ("[0.0, 0.0, 0.0]", "[0.0, 1.5707963267948966, 0.0]"):
-        moved = best(sequence_copy, f"moved{len(list(tmp_path.iterdir()))}", "--set", f"run.imu_rotvec_cam={configured}")
+        moved = best(
+            sequence_copy, f"moved{len(list(tmp_path.iterdir()))}", "--set", f"run.imu_rotvec_cam={configured}"
+        )
         assert len(moved["data_warnings"]) == 1 and moved["data_warnings"][0] in capsys.readouterr().err
-        said = re.search(r"run.imu_rotvec_cam = \[([^]]+)\] \(axes swapped or flipped, [0-9.]+ deg from the fit\), not",
-                         moved["data_warnings"][0])
+        said = re.search(
+            r"run.imu_rotvec_cam = \[([^]]+)\] \(axes swapped or flipped, [0-9.]+ deg from the fit\), not",
+            moved["data_warnings"][0],
+        )
         assert said, moved["data_warnings"][0]
         suggested = Rotation.from_rotvec([float(x) for x in said.group(1).split(",")]).as_matrix()
         assert np.allclose(suggested, R_imu_cam, atol=1e-9)
@@ -202,8 +243,15 @@ def test_frames_repeated_while_the_camera_turns_are_no_evidence(sequence_copy, t
     rewrite_frames(sequence_copy, lambda im: first)
     for extra in ([], ["--config", "best"]):
         out = tmp_path / f"out{len(extra)}"
-        assert main(["run", "--dataset", str(sequence_copy), "--frontend", "original", "--out", str(out), "--quiet", *extra]) == 0
+        assert (
+            main(
+                ["run", "--dataset", str(sequence_copy), "--frontend", "original", "--out", str(out), "--quiet", *extra]
+            )
+            == 0
+        )
         metrics = json.loads((out / "metrics.json").read_text())
         rows = list(csv.DictReader(open(out / "frames.csv")))
-        assert Counter((r["status"], r["reason"]) for r in rows[1:]) == {("lost", "the same image as the previous frame"): len(rows) - 1}
+        assert Counter((r["status"], r["reason"]) for r in rows[1:]) == {
+            ("lost", "the same image as the previous frame"): len(rows) - 1
+        }
     assert "gyro not used" not in " ".join(metrics["data_warnings"]) and metrics["gyro_use"], metrics

@@ -107,8 +107,16 @@ def test_a_grossly_wrong_gyro_is_refused_or_not_used(rig, case):
 
 
 #: What each perturbation leaves as it was: hypothesis changes one or two of them per example.
-UNCHANGED = {"axes": np.eye(3), "scale": 1.0, "bias": np.zeros(3), "time_unit": 1.0, "offset": 0.0, "gap": None,
-             "spike": None, "every": 1}
+UNCHANGED = {
+    "axes": np.eye(3),
+    "scale": 1.0,
+    "bias": np.zeros(3),
+    "time_unit": 1.0,
+    "offset": 0.0,
+    "gap": None,
+    "spike": None,
+    "every": 1,
+}
 
 
 def perturbed(rows: np.ndarray, drawn: dict, changes: set) -> tuple[np.ndarray, list[str]]:
@@ -140,17 +148,21 @@ def signed_permutations():
     return matrices
 
 
-perturbations = st.fixed_dictionaries({
-    "axes": st.one_of(st.sampled_from(signed_permutations()),
-                      st.floats(-np.pi, np.pi).map(lambda a: Rotation.from_rotvec([0.3 * a, -0.5 * a, 0.8 * a]).as_matrix())),
-    "scale": st.sampled_from([np.degrees(1.0), np.radians(1.0), 0.5, 0.7, 1.4, 2.0, 1e3, 0.0, -1.0]),
-    "bias": st.sampled_from([np.array([0.2, -0.15, 0.1]), np.array([0.0, 0.0, -0.5])]),
-    "time_unit": st.sampled_from([1e3, 1e6, 1e9]),
-    "offset": st.sampled_from([0.005, -0.02, 0.1, -0.5, 1.0, 100.0]),
-    "gap": st.tuples(st.floats(0.0, 1.8), st.floats(0.02, 1.0)),
-    "spike": st.tuples(st.integers(0, 399), st.sampled_from([5.0, 30.0, -60.0, 1000.0])),
-    "every": st.sampled_from([2, 5, 20, 200]),
-})
+perturbations = st.fixed_dictionaries(
+    {
+        "axes": st.one_of(
+            st.sampled_from(signed_permutations()),
+            st.floats(-np.pi, np.pi).map(lambda a: Rotation.from_rotvec([0.3 * a, -0.5 * a, 0.8 * a]).as_matrix()),
+        ),
+        "scale": st.sampled_from([np.degrees(1.0), np.radians(1.0), 0.5, 0.7, 1.4, 2.0, 1e3, 0.0, -1.0]),
+        "bias": st.sampled_from([np.array([0.2, -0.15, 0.1]), np.array([0.0, 0.0, -0.5])]),
+        "time_unit": st.sampled_from([1e3, 1e6, 1e9]),
+        "offset": st.sampled_from([0.005, -0.02, 0.1, -0.5, 1.0, 100.0]),
+        "gap": st.tuples(st.floats(0.0, 1.8), st.floats(0.02, 1.0)),
+        "spike": st.tuples(st.integers(0, 399), st.sampled_from([5.0, 30.0, -60.0, 1000.0])),
+        "every": st.sampled_from([2, 5, 20, 200]),
+    }
+)
 
 
 @settings(max_examples=30, deadline=None, derandomize=True, suppress_health_check=[HealthCheck.function_scoped_fixture])
@@ -190,11 +202,14 @@ def test_a_mirrored_gyro_is_named_for_what_it_is(rig):
     assert "its axes are mirrored" in line and "negate its rates in the file" in line
 
 
-@pytest.mark.parametrize("reader, assignments", [
-    ("nothing", ("tracker.predict=none", "backend.gyro=false")),
-    ("the backend", ("tracker.predict=none",)),  # best.toml's backend.gyro = "auto"
-    ("the tracker", ("backend.gyro=false",)),  # best.toml's tracker.predict = "auto"
-])
+@pytest.mark.parametrize(
+    "reader, assignments",
+    [
+        ("nothing", ("tracker.predict=none", "backend.gyro=false")),
+        ("the backend", ("tracker.predict=none",)),  # best.toml's backend.gyro = "auto"
+        ("the tracker", ("backend.gyro=false",)),  # best.toml's tracker.predict = "auto"
+    ],
+)
 def test_only_a_run_that_reads_the_imu_checks_its_clock(short_sequence, tmp_path, reader, assignments):
     """A gyro stamped 40 ms late: a run whose tracker or backend reads it is told the clock the
     images ask for; a run that reads no IMU says nothing of one (nor reports an IMU clock)."""

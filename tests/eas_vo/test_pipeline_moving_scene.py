@@ -51,13 +51,13 @@ def write_moving_rectangle(folder) -> None:
     pw, ph = WIDTH // 2, HEIGHT // 2
     texture = _texture(rng, (ph, pw), 1.5, 1.5, 0.6)
     x0, y0 = WIDTH // 8, HEIGHT // 4
-    rows, columns = np.mgrid[y0:y0 + ph, 0:WIDTH].astype(float)
+    rows, columns = np.mgrid[y0 : y0 + ph, 0:WIDTH].astype(float)
 
     def render(t: float) -> np.ndarray:
         u = columns - (x0 + SPEED_PX_S * t)  # the texture moves with the rectangle
         inside = (u >= 0) & (u <= pw - 1)
         img = background.copy()
-        img[y0:y0 + ph][inside] = map_coordinates(texture, [rows[inside] - y0, u[inside]], order=1)
+        img[y0 : y0 + ph][inside] = map_coordinates(texture, [rows[inside] - y0, u[inside]], order=1)
         return (0.4 * white * np.clip(img, 0.02, 3.0)).astype(np.float32)
 
     sim = EventSimulator(DVS, (HEIGHT, WIDTH), np.random.default_rng(4))
@@ -65,7 +65,15 @@ def write_moving_rectangle(folder) -> None:
     steps = np.arange(0.0, DURATION_S + 1e-9, 0.4 / SPEED_PX_S)  # under half a pixel a step
     events = np.concatenate([sim.step(a, b, render(b))[0] for a, b in zip(steps, steps[1:])])
     n = len(np.arange(0.0, DURATION_S, 1.0 / IMU_HZ))
-    write_ecd_folder(folder, CAMERA.model(), np.empty(0), None, events, None, _gyro(np.tile(np.eye(3), (n, 1, 1)), np.zeros((n, 3)), 5))
+    write_ecd_folder(
+        folder,
+        CAMERA.model(),
+        np.empty(0),
+        None,
+        events,
+        None,
+        _gyro(np.tile(np.eye(3), (n, 1, 1)), np.zeros((n, 3)), 5),
+    )
 
 
 def write_turning_camera(folder) -> None:
@@ -74,15 +82,20 @@ def write_turning_camera(folder) -> None:
     motion = ConstantMotion(omega, R_w_c0=np.eye(3))
     events, _ = simulate_events(SimConfig(duration_s=DURATION_S, seed=6, dvs=DVS, camera=CAMERA), motion)
     t = np.arange(0.0, DURATION_S, 1.0 / IMU_HZ)
-    write_ecd_folder(folder, CAMERA.model(), np.empty(0), None, events, None, _gyro(motion.pose(t)[0], motion.angular_velocity(t), 7))
+    write_ecd_folder(
+        folder, CAMERA.model(), np.empty(0), None, events, None, _gyro(motion.pose(t)[0], motion.angular_velocity(t), 7)
+    )
 
 
 @functools.lru_cache(maxsize=None)
 def run_cmax(kind: str, root: str) -> pipeline.RunResult:
     folder = f"{root}/{kind}"
     {"moving": write_moving_rectangle, "turning": write_turning_camera}[kind](folder)
-    cfg = config.resolve(None, {"dataset": folder, "tracker": "cmax", "backend": "chain"},
-                         [f"dataset.width={WIDTH}", f"dataset.height={HEIGHT}", "dataset.sample_every_events=40000"])
+    cfg = config.resolve(
+        None,
+        {"dataset": folder, "tracker": "cmax", "backend": "chain"},
+        [f"dataset.width={WIDTH}", f"dataset.height={HEIGHT}", "dataset.sample_every_events=40000"],
+    )
     return pipeline.run(cfg, f"{folder}/out")
 
 
@@ -93,7 +106,9 @@ def test_a_still_camera_before_a_moving_scene_reads_no_confident_rotation(tmp_pa
     assert len(measured) >= 10 and all(r.status == "weak" for r in measured), m["status_counts"]
     assert all("gyro reads still" in r.reason for r in measured)
     apart_rad = {r.index: np.radians(float(r.reason.split("(")[1].split(" deg")[0])) for r in measured}
-    widened = [e.estimated_sigma_rad >= (apart_rad[e.j] - np.radians(0.005)) / np.sqrt(3.0) for e in result.edges]  # 2 decimals
+    widened = [
+        e.estimated_sigma_rad >= (apart_rad[e.j] - np.radians(0.005)) / np.sqrt(3.0) for e in result.edges
+    ]  # 2 decimals
     assert widened and all(widened)  # a backend weighing edges by their sigma trusts the gyro there
     still = [w for w in m["data_warnings"] if "gyro reads still" in w]
     assert len(still) == 1 and "\n" not in still[0] and "independent motion" in still[0], m["data_warnings"]

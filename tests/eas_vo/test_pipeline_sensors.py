@@ -70,9 +70,14 @@ def test_a_dataset_frame_of_another_size_than_the_camera_is_one_line(monkeypatch
 
     dataset = registry.open_dataset(str(short_sequence))
     load_frame = dataset.load_frame
-    monkeypatch.setattr(dataset, "load_frame", lambda k: cv2.resize(load_frame(k), size) if k >= bad_from else load_frame(k))
+    monkeypatch.setattr(
+        dataset, "load_frame", lambda k: cv2.resize(load_frame(k), size) if k >= bad_from else load_frame(k)
+    )
     monkeypatch.setattr(registry, "open_dataset", lambda spec, config=None: dataset)
     cfg = config.resolve(None, {"dataset": str(short_sequence), "frontend": "eas", "backend": "chain"})
-    with pytest.raises(EasVoError, match=rf"^{short_sequence}: frame {bad_from} \(t=[0-9.]+ s\): the calibration is for "
-                                         rf"240x180 px, the frame is {size[0]}x{size[1]}$"):
+    with pytest.raises(
+        EasVoError,
+        match=rf"^{short_sequence}: frame {bad_from} \(t=[0-9.]+ s\): the calibration is for "
+        rf"240x180 px, the frame is {size[0]}x{size[1]}$",
+    ):
         pipeline.run(cfg)

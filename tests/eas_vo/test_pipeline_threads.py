@@ -27,18 +27,27 @@ def outputs_by_threads(tmp_path, argv: list[str]) -> dict:
             out = tmp_path / f"threads-{threads}"
             assert main(["run", *argv, "--threads", str(threads), "--out", str(out), "--quiet"]) == 0
             metrics = json.loads((out / "metrics.json").read_text())
-            outputs[threads] = ((out / "trajectory.tum").read_text(), (out / "frames.csv").read_text(),
-                                {k: v for k, v in metrics.items() if k not in TIMINGS})
+            outputs[threads] = (
+                (out / "trajectory.tum").read_text(),
+                (out / "frames.csv").read_text(),
+                {k: v for k, v in metrics.items() if k not in TIMINGS},
+            )
     finally:
         concurrency.set_threads(before)
     return outputs
 
 
-@pytest.mark.parametrize("config, frontend", [(None, None), ("paper", None), ("best", None)]
-                         + [(None, f) for f in ("original", "histeq", "slice", "ts", "sits")])
+@pytest.mark.parametrize(
+    "config, frontend",
+    [(None, None), ("paper", None), ("best", None)]
+    + [(None, f) for f in ("original", "histeq", "slice", "ts", "sits")],
+)
 def test_threads_change_nothing_but_the_time(short_sequence, tmp_path, config, frontend):
-    argv = ["--dataset", str(short_sequence)] + (["--config", config] if config else []) + (
-        ["--frontend", frontend] if frontend else [])
+    argv = (
+        ["--dataset", str(short_sequence)]
+        + (["--config", config] if config else [])
+        + (["--frontend", frontend] if frontend else [])
+    )
     outputs = outputs_by_threads(tmp_path, argv)
     assert outputs[1][0] == outputs[2][0]
     assert outputs[1][1] == outputs[2][1]

@@ -22,17 +22,39 @@ def test_plotting_leaves_the_backend_and_pyplot_alone(tmp_path):
 
 
 def draw(tmp_path):
-    rows = [{"dataset": "d", "method": "klt+chain", "frontend": f, "sweep": "", "status": "ok", "ape_mean_rad": v, "nc_mean": 30.0}
-            for f, v in (("original", 0.4), ("eas", 0.04))]
+    rows = [
+        {
+            "dataset": "d",
+            "method": "klt+chain",
+            "frontend": f,
+            "sweep": "",
+            "status": "ok",
+            "ape_mean_rad": v,
+            "nc_mean": 30.0,
+        }
+        for f, v in (("original", 0.4), ("eas", 0.04))
+    ]
     plots.plot_ape_bars(tmp_path / "bars.png", rows)
-    plots.plot_ape_time(tmp_path / "time.png", {("d", "klt+chain", "eas", ""): (np.arange(5.0), np.linspace(0, 0.1, 5))})
+    plots.plot_ape_time(
+        tmp_path / "time.png", {("d", "klt+chain", "eas", ""): (np.arange(5.0), np.linspace(0, 0.1, 5))}
+    )
 
 
 def _compare_rows(frontends, methods=("klt+chain", "klt+gtsam")):
     """Rows as compare's table, APE and NC distinct per cell (k: the cell's index)."""
     cells = [(m, f) for m in methods for f in frontends]
-    return [{"dataset": "d", "method": m, "frontend": f, "sweep": "", "status": "ok", "ape_mean_rad": 0.01 * (k + 1),
-             "nc_mean": 100.0 + k} for k, (m, f) in enumerate(cells)]
+    return [
+        {
+            "dataset": "d",
+            "method": m,
+            "frontend": f,
+            "sweep": "",
+            "status": "ok",
+            "ape_mean_rad": 0.01 * (k + 1),
+            "nc_mean": 100.0 + k,
+        }
+        for k, (m, f) in enumerate(cells)
+    ]
 
 
 def _frontend_of(label: str) -> str:
@@ -55,14 +77,23 @@ def test_a_frontend_has_one_colour_in_every_compare_figure():
         for container in ax.containers:
             for patch in container:
                 seen.setdefault(_frontend_of(container.get_label()), set()).add(to_rgb(patch.get_facecolor()))
-    series = {("d", m, f, ""): (np.arange(3.0), np.full(3, 0.1)) for m in ("klt+chain", "klt+gtsam") for f in reversed(frontends)}
+    series = {
+        ("d", m, f, ""): (np.arange(3.0), np.full(3, 0.1))
+        for m in ("klt+chain", "klt+gtsam")
+        for f in reversed(frontends)
+    }
     for ax in plots.ape_time_figure(series, colours=colours).axes:
         for line in ax.lines:
             seen.setdefault(_frontend_of(line.get_label()), set()).add(to_rgb(line.get_color()))
     assert seen == {f: {to_rgb(colours[f])} for f in frontends}
     assert {f: to_rgb(c) for f, c in colours.items() if f in PAPER_COLOURS} == {
-        "original": to_rgb("tab:blue"), "histeq": to_rgb("tab:orange"), "slice": to_rgb("tab:green"),
-        "eas": to_rgb("tab:red"), "ts": to_rgb("tab:purple"), "sits": to_rgb("tab:brown")}
+        "original": to_rgb("tab:blue"),
+        "histeq": to_rgb("tab:orange"),
+        "slice": to_rgb("tab:green"),
+        "eas": to_rgb("tab:red"),
+        "ts": to_rgb("tab:purple"),
+        "sits": to_rgb("tab:brown"),
+    }
 
 
 def test_the_bars_carry_their_apes_and_ncs():
@@ -80,10 +111,17 @@ def test_the_bars_carry_their_apes_and_ncs():
 
 def test_ape_over_time_has_a_panel_per_method_and_draws_an_equal_one_once():
     t = np.arange(4.0)
-    series = {("d", m, f, ""): (t, 0.1 * t) for m in ("klt+chain", "klt+gtsam (keyframe_interval=3)") for f in ("original", "eas")}
+    series = {
+        ("d", m, f, ""): (t, 0.1 * t)
+        for m in ("klt+chain", "klt+gtsam (keyframe_interval=3)")
+        for f in ("original", "eas")
+    }
     fig = plots.ape_time_figure(series, equal={("d", "klt+chain"): ["klt+gtsam"]})
     drawn = [ax for ax in fig.axes if ax.lines]
-    assert [ax.get_title() for ax in drawn] == ["klt+chain\n= klt+gtsam (same trajectories)", "klt+gtsam (keyframe_interval=3)"]
+    assert [ax.get_title() for ax in drawn] == [
+        "klt+chain\n= klt+gtsam (same trajectories)",
+        "klt+gtsam (keyframe_interval=3)",
+    ]
     assert [[line.get_label() for line in ax.lines] for ax in drawn] == [["original", "eas"]] * 2
 
 
@@ -97,9 +135,13 @@ def test_the_rotation_plot_shows_where_tracking_was_weak_or_lost_and_where_loops
     statuses = ["first", "ok", "weak", "weak", "ok", "lost", "ok", "weak", "ok", "ok"]
     t = 0.1 * np.arange(len(statuses))
     records = [FrameRecord(k, t[k], 0, 0, s, False) for k, s in enumerate(statuses)]
-    edges = [RelativeRotation(0, 6, np.eye(3), loop=True), RelativeRotation(1, 6, np.eye(3), loop=True),
-             RelativeRotation(2, 8, np.eye(3), loop=True), RelativeRotation(8, 9, np.eye(3)),
-             RelativeRotation(3, 12, np.eye(3), loop=True)]  # a frame the run does not have: not drawn
+    edges = [
+        RelativeRotation(0, 6, np.eye(3), loop=True),
+        RelativeRotation(1, 6, np.eye(3), loop=True),
+        RelativeRotation(2, 8, np.eye(3), loop=True),
+        RelativeRotation(8, 9, np.eye(3)),
+        RelativeRotation(3, 12, np.eye(3), loop=True),
+    ]  # a frame the run does not have: not drawn
     R_w_c = np.stack([rotvec_to_matrix(np.array([0.0, 0.0, 0.01 * k])) for k in range(len(t))])  # 0.01 rad per frame
     t_gt = np.linspace(0.15, 0.95, 9)  # ground truth from frame 2 on
     gt = PoseSeries(t_gt, np.zeros((9, 3)), np.tile([0.0, 0.0, 0.0, 1.0], (9, 1)))
@@ -111,9 +153,13 @@ def test_the_rotation_plot_shows_where_tracking_was_weak_or_lost_and_where_loops
         spans = {}
         for collection in strip.collections:
             colour = collection.get_facecolor()[0][:3]
-            status = next(s for s, c in plots.STATUS_COLOURS.items() if np.allclose(matplotlib.colors.to_rgb(c), colour))
-            spans[status] = [np.round(p.get_extents().intervalx, 6).tolist() + [round(p.get_extents().y0, 6)]
-                             for p in collection.get_paths()]
+            status = next(
+                s for s, c in plots.STATUS_COLOURS.items() if np.allclose(matplotlib.colors.to_rgb(c), colour)
+            )
+            spans[status] = [
+                np.round(p.get_extents().intervalx, 6).tolist() + [round(p.get_extents().y0, 6)]
+                for p in collection.get_paths()
+            ]
         assert spans == {"weak": [[0.1, 0.3, 0.1], [0.6, 0.7, 0.1]], "lost": [[0.4, 0.5, 1.1]]}, spans
         assert [label.get_text() for label in strip.get_yticklabels()] == ["weak (3)", "lost (1)"]
         omega = axes[3]  # angular velocity: the one consecutive edge measured (8 -> 9, no motion) at its middle
@@ -122,7 +168,9 @@ def test_the_rotation_plot_shows_where_tracking_was_weak_or_lost_and_where_loops
         assert all(line.get_ydata().tolist() == [0.0] for line in estimates)
         assert len(omega.lines) == (3 if errors is None else 6)  # and the truth's, where it has one
         marks = [line for line in axes[4].lines if line.get_label() != "error"]
-        np.testing.assert_allclose([line.get_xdata()[0] for line in marks], [0.6, 0.8])  # loops closed at frames 6 and 8
+        np.testing.assert_allclose(
+            [line.get_xdata()[0] for line in marks], [0.6, 0.8]
+        )  # loops closed at frames 6 and 8
         labels = set(axes[4].get_legend_handles_labels()[1])
         assert labels == {"loop closed"} | ({"error"} if errors is not None else set())
         if errors is not None:  # the error [deg] of frames 2-9, aligned at frame 2
@@ -141,9 +189,14 @@ def test_the_rotation_plot_title_gives_the_ground_truth_time_offset_it_was_measu
     gt = PoseSeries(t, np.zeros((4, 3)), np.tile([0.0, 0.0, 0.0, 1.0], (4, 1)))
     records = [FrameRecord(k, t[k], 0, 0, "ok", False) for k in range(4)]
     R_w_c = np.tile(np.eye(3), (4, 1, 1))
-    for estimated, words in ((False, "ground truth time offset +10.0 ms"), (True, "ground truth time offset +10.0 ms (estimated)")):
+    for estimated, words in (
+        (False, "ground truth time offset +10.0 ms"),
+        (True, "ground truth time offset +10.0 ms (estimated)"),
+    ):
         metrics = {"ape_mean_rad": 0.0, "nc_mean": 5.0, "time_offset_s": 0.01, "time_offset_estimated": estimated}
-        result = SimpleNamespace(t=t, R_w_c=R_w_c, errors=rotation_errors(t, R_w_c, gt), records=records, edges=[], metrics=metrics)
+        result = SimpleNamespace(
+            t=t, R_w_c=R_w_c, errors=rotation_errors(t, R_w_c, gt), records=records, edges=[], metrics=metrics
+        )
         title = plots.rotation_figure(result, "eas + klt + chain (paper): a sequence").get_suptitle()
         assert title == f"eas + klt + chain (paper): a sequence\naverage APE 0.0000 rad, average NC 5.0, {words}"
 

@@ -48,7 +48,10 @@ def install_privately(folder, dist: str, module: str, source: str, entry_points:
     info.mkdir()
     (info / "METADATA").write_text(f"Metadata-Version: 2.1\nName: {dist}\nVersion: 0.1\n")
     (info / "entry_points.txt").write_text(
-        "".join(f"[{group}]\n" + "".join(f"{k} = {v}\n" for k, v in eps.items()) + "\n" for group, eps in entry_points.items())
+        "".join(
+            f"[{group}]\n" + "".join(f"{k} = {v}\n" for k, v in eps.items()) + "\n"
+            for group, eps in entry_points.items()
+        )
     )
 
 
@@ -56,8 +59,16 @@ def write_npz(dataset, path) -> None:
     """A recording in the plugin guide's .npz layout (docs/plugins.md)."""
     gt = dataset.ground_truth
     frames = np.stack([dataset.load_frame(k) for k in range(len(dataset.frame_times()))])
-    np.savez(path, frames=frames, frame_times=dataset.frame_times(), events=np.asarray(dataset.events()),
-             K=dataset.camera.K, gt_t=gt.t, gt_p_w_c=gt.p_w_c, gt_q_w_c=gt.q_w_c)
+    np.savez(
+        path,
+        frames=frames,
+        frame_times=dataset.frame_times(),
+        events=np.asarray(dataset.events()),
+        K=dataset.camera.K,
+        gt_t=gt.t,
+        gt_p_w_c=gt.p_w_c,
+        gt_q_w_c=gt.q_w_c,
+    )
 
 
 def test_the_readme_example_plugins_run_through_the_cli(short_sequence, tmp_path):
@@ -79,8 +90,22 @@ def test_the_readme_example_plugins_run_through_the_cli(short_sequence, tmp_path
     recording = tmp_path / "recording.npz"  # no plugin prefix: the npz plugin claims the suffix
     write_npz(registry.open_dataset(str(short_sequence)), recording)
     out = tmp_path / "run"
-    run = run_eas_vo("run", "--dataset", str(recording), "--frontend", "sobel", "--tracker", "orbmatch",
-                     "--backend", "trusted_chain", "--set", "backend.min_inliers=30", "--out", str(out), env=env)
+    run = run_eas_vo(
+        "run",
+        "--dataset",
+        str(recording),
+        "--frontend",
+        "sobel",
+        "--tracker",
+        "orbmatch",
+        "--backend",
+        "trusted_chain",
+        "--set",
+        "backend.min_inliers=30",
+        "--out",
+        str(out),
+        env=env,
+    )
     assert run.returncode == 0, run.stderr
     assert "sobel+orbmatch+trusted_chain" in run.stdout and "average APE" in run.stdout
     assert "min_inliers = 30" in (out / "config.toml").read_text()
@@ -88,7 +113,10 @@ def test_the_readme_example_plugins_run_through_the_cli(short_sequence, tmp_path
     assert len(frames) == 1 + len(np.load(recording)["frame_times"]) and ",ok," in frames[2]
 
     bad = run_eas_vo("run", "--dataset", str(recording), "--frontend", "sobel", "--set", "frontend.nope=1", env=env)
-    assert bad.returncode == 2 and bad.stderr.strip() == "eas-vo: error: unknown key frontend.sobel.nope; allowed keys: blur_px"
+    assert (
+        bad.returncode == 2
+        and bad.stderr.strip() == "eas-vo: error: unknown key frontend.sobel.nope; allowed keys: blur_px"
+    )
 
 
 @pytest.fixture(scope="module")
@@ -124,7 +152,18 @@ def test_a_pip_installed_plugin_runs_through_the_cli(plugin_site, short_sequence
     assert "edges      Canny edges of the equalised frame (an example plugin)" in listing.stdout
     assert "config: low=50 high=150" in listing.stdout
     out = tmp_path / "edges"
-    run = run_eas_vo("run", "--dataset", str(short_sequence), "--frontend", "edges", "--set", "frontend.high=120", "--out", str(out), env=env)
+    run = run_eas_vo(
+        "run",
+        "--dataset",
+        str(short_sequence),
+        "--frontend",
+        "edges",
+        "--set",
+        "frontend.high=120",
+        "--out",
+        str(out),
+        env=env,
+    )
     assert run.returncode == 0, run.stderr
     assert "edges+klt+chain" in run.stdout and (out / "metrics.json").exists()
     assert "high = 120" in (out / "config.toml").read_text()
@@ -135,7 +174,9 @@ def test_a_pip_installed_event_tracker_follows_the_camera(plugin_site, short_seq
     rotations follow the camera: far closer to the ground truth than a camera kept still."""
     env = with_site(plugin_site)
     listing = run_eas_vo("list", env=env)
-    assert "evflow     pan and tilt from the flow between consecutive event images (an example plugin)" in listing.stdout
+    assert (
+        "evflow     pan and tilt from the flow between consecutive event images (an example plugin)" in listing.stdout
+    )
     out = tmp_path / "evflow"
     run = run_eas_vo("run", "--dataset", str(short_sequence), "--tracker", "evflow", "--out", str(out), env=env)
     assert run.returncode == 0, run.stderr

@@ -10,7 +10,12 @@ from eas_vo import plugins, registry
 from eas_vo.errors import EasVoError
 from helpers import REPOSITORY
 
-CONTRACTS = {"datasets": plugins.Dataset, "frontends": plugins.Frontend, "trackers": plugins.Tracker, "backends": plugins.Backend}
+CONTRACTS = {
+    "datasets": plugins.Dataset,
+    "frontends": plugins.Frontend,
+    "trackers": plugins.Tracker,
+    "backends": plugins.Backend,
+}
 
 
 def test_builtins_register_through_entry_points_and_honour_their_contract():
@@ -73,7 +78,9 @@ def test_a_built_in_that_fails_to_import_is_named(monkeypatch):
     with pytest.raises(EasVoError) as info:
         registry.get("datasets", "ecd")
     message = str(info.value)
-    assert message.startswith(f"unknown dataset 'ecd'; installed: none; built-in datasets that failed to import: ecd ({why})")
+    assert message.startswith(
+        f"unknown dataset 'ecd'; installed: none; built-in datasets that failed to import: ecd ({why})"
+    )
     assert "eas_vo was imported from" in message
     with pytest.raises(EasVoError, match=r"no dataset plugin 'ecd' \(installed: none\); built-in datasets that failed"):
         registry.resolve_dataset("ecd:/some/folder")
@@ -91,8 +98,14 @@ def test_names_are_the_installed_plugins_without_importing_them(tmp_path):
         assert registry.names(kind) == sorted(registry.available(kind)) == sorted(registry._entry_points(kind))
     with pytest.raises(ValueError, match="unknown plugin kind 'frontend'"):
         registry.names("frontend")
-    check = ("import sys; from eas_vo import registry; [registry.names(k) for k in registry.KINDS]; "
-             "print(sorted(m for m in sys.modules if m.startswith(('eas_vo.frontends', 'eas_vo.trackers', 'eas_vo.backends', "
-             "'eas_vo.datasets'))))")
-    assert subprocess.run([sys.executable, "-c", check], capture_output=True, text=True, check=True,
-                          cwd=tmp_path).stdout.strip() == "[]"
+    check = (
+        "import sys; from eas_vo import registry; [registry.names(k) for k in registry.KINDS]; "
+        "print(sorted(m for m in sys.modules if m.startswith(('eas_vo.frontends', 'eas_vo.trackers', 'eas_vo.backends', "
+        "'eas_vo.datasets'))))"
+    )
+    assert (
+        subprocess.run(
+            [sys.executable, "-c", check], capture_output=True, text=True, check=True, cwd=tmp_path
+        ).stdout.strip()
+        == "[]"
+    )

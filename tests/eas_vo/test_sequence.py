@@ -9,14 +9,23 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from eas_vo.camera import CameraModel
 from eas_vo.config import resolve
 from eas_vo.datasets.ecd import EcdFolderDataset
 from eas_vo.errors import DataError, EasVoError
 from eas_vo.sequence.convert import convert
 from eas_vo.sequence.info import describe
-from eas_vo.camera import CameraModel
-from helpers import (FRAME_HZ, FRAME_T0, N_EVENTS, N_FRAMES, N_POSES, N_READINGS, SHAPES_ROTATION, known_sequence,
-                     require)
+from helpers import (
+    FRAME_HZ,
+    FRAME_T0,
+    N_EVENTS,
+    N_FRAMES,
+    N_POSES,
+    N_READINGS,
+    SHAPES_ROTATION,
+    known_sequence,
+    require,
+)
 
 #: How an event-only folder of the written sequence is opened: its sensor size is not in it.
 SENSOR = ("dataset.width=346", "dataset.height=260")
@@ -39,11 +48,23 @@ def test_describe_gives_every_stream_its_count_span_and_rate(tmp_path, width, he
     assert info.frames.rate_hz == pytest.approx(FRAME_HZ, rel=1e-9)
     assert info.events.count == N_EVENTS and 0.4 <= info.events.t0_s < info.events.t1_s < 1.0
     assert (info.imu.count, info.ground_truth.count) == (N_READINGS, N_POSES)
-    assert info.imu.rate_hz == pytest.approx(250.0, rel=1e-9) and info.ground_truth.rate_hz == pytest.approx(200.0, rel=1e-9)
+    assert info.imu.rate_hz == pytest.approx(250.0, rel=1e-9) and info.ground_truth.rate_hz == pytest.approx(
+        200.0, rel=1e-9
+    )
     assert info.span.t0_s == info.events.t0_s and info.span.t1_s == info.imu.t1_s == 0.42 + (N_READINGS - 1) / 250.0
     text = "\n".join(info.lines())
-    for says in (f"{width} x {height} px", "frames, events, IMU, ground truth", f"{N_FRAMES} APS frames", "25 Hz",
-                 f"{N_EVENTS} events", f"{N_READINGS} readings", "250 Hz", f"{N_POSES} poses", "200 Hz", "radtan lens"):
+    for says in (
+        f"{width} x {height} px",
+        "frames, events, IMU, ground truth",
+        f"{N_FRAMES} APS frames",
+        "25 Hz",
+        f"{N_EVENTS} events",
+        f"{N_READINGS} readings",
+        "250 Hz",
+        f"{N_POSES} poses",
+        "200 Hz",
+        "radtan lens",
+    ):
         assert says in text, (says, text)
 
 
@@ -84,8 +105,12 @@ def test_convert_gives_back_every_file_of_a_simulated_sequence(short_sequence, t
     assert_same_recording(a, b)
     assert np.array_equal(b.events(), a.events())
     assert np.array_equal(b.imu.gyro, a.imu.gyro) and np.array_equal(b.ground_truth.q_w_c, a.ground_truth.q_w_c)
-    assert (done.frames, done.events, done.imu, done.poses) == (len(a.frame_times()), len(a.events()), len(a.imu.t),
-                                                                len(a.ground_truth.t))
+    assert (done.frames, done.events, done.imu, done.poses) == (
+        len(a.frame_times()),
+        len(a.events()),
+        len(a.imu.t),
+        len(a.ground_truth.t),
+    )
 
 
 def test_convert_reads_the_written_text_back_exactly(tmp_path, monkeypatch):
@@ -115,7 +140,7 @@ def test_convert_of_a_window_keeps_its_frames_and_the_streams_between_its_neighb
     assert np.array_equal(b.events(), events[(events["t"] >= lo) & (events["t"] < hi)])
     for got, source in ((b.ground_truth.t, a.ground_truth.t), (b.imu.t, a.imu.t)):
         inside = np.flatnonzero((source >= lo) & (source < hi))
-        assert np.array_equal(got, source[inside[0] - 1:inside[-1] + 2])  # and one more at each end
+        assert np.array_equal(got, source[inside[0] - 1 : inside[-1] + 2])  # and one more at each end
     assert np.array_equal(b.ground_truth.q_w_c, a.ground_truth.q_w_c[np.isin(a.ground_truth.t, b.ground_truth.t)])
     assert np.array_equal(b.imu.gyro, a.imu.gyro[np.isin(a.imu.t, b.imu.t)])
     assert done.imu == len(b.imu.t) and done.poses == len(b.ground_truth.t)
@@ -158,7 +183,6 @@ def test_convert_writes_a_fisheye_as_a_kalibr_camchain(tmp_path, monkeypatch):
     np.testing.assert_array_equal(back.K, fisheye.camera.K)
 
 
-
 def test_convert_refuses_events_before_time_zero(tmp_path, monkeypatch):
     from eas_vo import registry
 
@@ -195,11 +219,17 @@ def test_a_ground_truth_on_another_clock_is_said_to_overlap_nothing_and_a_run_na
     gt = sequence_copy / "groundtruth.txt"
     lines = gt.read_text().splitlines()
     first = float(lines[0].split()[0])
-    gt.write_text("".join(f"{int(t.split('.')[0]) + 1_700_000_000}.{t.split('.')[1]} {rest}\n"
-                          for t, rest in (line.split(" ", 1) for line in lines)))
+    gt.write_text(
+        "".join(
+            f"{int(t.split('.')[0]) + 1_700_000_000}.{t.split('.')[1]} {rest}\n"
+            for t, rest in (line.split(" ", 1) for line in lines)
+        )
+    )
     info = describe(resolve(None, {"dataset": str(sequence_copy)}))
     overlap = next(line for line in info.lines() if line.lstrip().startswith("overlap"))
-    assert "ground truth NONE (1700000000." in overlap and "another clock? dataset.ground_truth_time_offset_s" in overlap
+    assert (
+        "ground truth NONE (1700000000." in overlap and "another clock? dataset.ground_truth_time_offset_s" in overlap
+    )
     assert any("the ground truth overlaps none of the samples" in line for line in info.lines())
     done = run_eas_vo("run", "--dataset", str(sequence_copy), "--out", str(tmp_path / "run"), "--quiet")
     assert done.returncode == 2 and done.stderr.count("\n") == 1, done.stderr

@@ -19,7 +19,6 @@ def test_search_times_equals_searchsorted_without_copying(tmp_path):
     assert len(search_times(ev[:0], [1.0])) == 1 and search_times(ev[:0], [1.0])[0] == 0
 
 
-
 def test_gyro_rates_between_cut_at_readings_and_are_held_outside():
     """Readings every 5 ms of a rate growing 10 rad/s per s: pieces end on readings (none of
     zero length), each piece's rate is its mean, and before or after the readings they are held."""
@@ -46,7 +45,12 @@ def test_the_integral_since_start_agrees_with_rates_between():
     t = np.cumsum(rng.uniform(0.003, 0.007, 200))
     imu = ImuSeries(t, np.zeros((len(t), 3)), rng.normal(0, 2.0, (len(t), 3)))
     turned = imu.turned_since_start()
-    for t0, t1 in [(t[10], t[20]), (t[10] + 0.001, t[20] - 0.002), (t[0] - 0.02, t[3] + 0.001), (t[-3] - 0.001, t[-1] + 0.03)]:
+    for t0, t1 in [
+        (t[10], t[20]),
+        (t[10] + 0.001, t[20] - 0.002),
+        (t[0] - 0.02, t[3] + 0.001),
+        (t[-3] - 0.001, t[-1] + 0.03),
+    ]:
         rates, dt = imu.rates_between(t0, t1)
         np.testing.assert_allclose(turned(t1) - turned(t0), (rates * dt[:, None]).sum(axis=0), atol=1e-12)
 
@@ -62,8 +66,12 @@ def test_equidistant_puts_a_ray_at_its_distorted_angle_from_the_axis():
     k1, k2, k3, k4 = cam.dist
     theta_d = theta * (1 + k1 * theta**2 + k2 * theta**4 + k3 * theta**6 + k4 * theta**8)
     rays = np.column_stack([np.sin(theta), np.zeros_like(theta), np.cos(theta)])  # in the x-z plane
-    np.testing.assert_allclose(cam.project(rays), np.column_stack([cam.K[0, 2] + cam.K[0, 0] * theta_d, np.full(5, cam.K[1, 2])]),
-                               rtol=0, atol=1e-9)
+    np.testing.assert_allclose(
+        cam.project(rays),
+        np.column_stack([cam.K[0, 2] + cam.K[0, 0] * theta_d, np.full(5, cam.K[1, 2])]),
+        rtol=0,
+        atol=1e-9,
+    )
 
 
 def test_equidistant_equals_cv2_fisheye_over_the_whole_sensor():
@@ -72,17 +80,23 @@ def test_equidistant_equals_cv2_fisheye_over_the_whole_sensor():
     reference = cv2.fisheye.undistortPoints(px.reshape(-1, 1, 2), cam.K, cam.dist).reshape(-1, 2)
     np.testing.assert_allclose(cam.focal_px * normalised, cam.focal_px * reference, rtol=0, atol=1e-6)
     rays = np.column_stack([normalised, np.ones(len(px))])
-    projected = cv2.fisheye.projectPoints(rays.reshape(-1, 1, 3), np.zeros(3), np.zeros(3), cam.K, cam.dist)[0].reshape(-1, 2)
+    projected = cv2.fisheye.projectPoints(rays.reshape(-1, 1, 3), np.zeros(3), np.zeros(3), cam.K, cam.dist)[0].reshape(
+        -1, 2
+    )
     np.testing.assert_allclose(cam.project(normalised), projected, rtol=0, atol=1e-6)
     np.testing.assert_allclose(cam.project(normalised), px, rtol=0, atol=1e-6)  # the round trip
-    np.testing.assert_allclose(cam.project(rays * np.linspace(0.1, 10, len(px))[:, None]), px, rtol=0, atol=1e-6)  # any ray length
+    np.testing.assert_allclose(
+        cam.project(rays * np.linspace(0.1, 10, len(px))[:, None]), px, rtol=0, atol=1e-6
+    )  # any ray length
 
 
 def test_radtan_equals_cv2_project_points_and_undistort_points_over_the_whole_sensor():
     cam, px = ECD_DAVIS240, _sensor_pixels(ECD_DAVIS240)
     normalised = cam.undistort(px)
     np.testing.assert_array_equal(normalised, cv2.undistortPoints(px.reshape(-1, 1, 2), cam.K, cam.dist).reshape(-1, 2))
-    projected = cv2.projectPoints(np.column_stack([normalised, np.ones(len(px))]), np.zeros(3), np.zeros(3), cam.K, cam.dist)[0]
+    projected = cv2.projectPoints(
+        np.column_stack([normalised, np.ones(len(px))]), np.zeros(3), np.zeros(3), cam.K, cam.dist
+    )[0]
     np.testing.assert_allclose(cam.project(normalised), projected.reshape(-1, 2), rtol=0, atol=1e-6)
     # cv2.undistortPoints iterates 5 times: at this lens' corners it stops short by a few
     # hundredths of a pixel (which is why the equidistant round trip above is the stricter test).
@@ -108,7 +122,9 @@ ROTATION = cv2.Rodrigues(np.radians([3.0, -5.0, 8.0]))[0]
 @pytest.mark.parametrize("camera", [MVSEC_LEFT, ECD_DAVIS240], ids=["equidistant", "radtan"])
 def test_rotated_views_follow_the_lens_as_opencv_does(camera):
     px = _sensor_pixels(camera)[::37]
-    np.testing.assert_allclose(camera.rotated_pixels(ROTATION, px), opencv_rotated(camera, ROTATION, px), rtol=0, atol=1e-6)
+    np.testing.assert_allclose(
+        camera.rotated_pixels(ROTATION, px), opencv_rotated(camera, ROTATION, px), rtol=0, atol=1e-6
+    )
     map_x, map_y = camera.rotation_maps(ROTATION)  # each pixel of the rotated view, where it is in the other
     assert map_x.shape == (camera.height, camera.width) and map_x.dtype == np.float32
     expected = opencv_rotated(camera, ROTATION, _sensor_pixels(camera))
@@ -150,7 +166,8 @@ def test_an_equidistant_lens_folds_where_its_angle_stops_growing_or_at_180_degre
     K = np.array([[200.0, 0, 120], [0, 200.0, 90], [0, 0, 1]])
     theta = 1 / np.sqrt(3 * 0.5)  # theta (1 - 0.5 theta^2) peaks there, at 2/3 of it
     assert CameraModel(240, 180, K, np.array([-0.5, 0, 0, 0]), "equidistant").fold() == pytest.approx(
-        (2 / 3 * theta * 200, theta, 150.0))
+        (2 / 3 * theta * 200, theta, 150.0)
+    )
     assert CameraModel(240, 180, K, np.zeros(4), "equidistant").fold() is None
     tiny = np.array([[30.0, 0, 120], [0, 30.0, 90], [0, 0, 1]])  # corners 5 rad off the axis: past any ray
     assert CameraModel(240, 180, tiny, np.zeros(4), "equidistant").fold() == pytest.approx((np.pi * 30, np.pi, 150.0))

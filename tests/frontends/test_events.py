@@ -4,9 +4,9 @@ import numpy as np
 import pytest
 from scipy.ndimage import gaussian_filter
 
+from eas_vo.camera import CameraModel
 from eas_vo.frontends.events import EasConfig, EasFrontend, SliceFrontend, eas_fuse, event_slice
 from eas_vo.frontends.intensity import HistEqFrontend, OriginalFrontend
-from eas_vo.camera import CameraModel
 from eas_vo.types import EVENT_DTYPE, Sample
 
 

@@ -3,11 +3,11 @@
 import numpy as np
 import pytest
 
-from helpers import EVENT_WINDOWS, require
+from eas_vo.camera import CameraModel
 from eas_vo.datasets.ecd import EcdFolderDataset
 from eas_vo.frontends.surfaces import SitsConfig, SitsFrontend, TsConfig, TsFrontend
-from eas_vo.camera import CameraModel
 from eas_vo.types import EVENT_DTYPE, Sample
+from helpers import EVENT_WINDOWS, require
 
 
 def random_events(n, width, height, seed=0, t_scale=1.0):
@@ -132,7 +132,9 @@ def test_ts_equals_tonic_time_surfaces():
         upto = int(search_times(ev, [t_us * 1e-6])[0])  # the events before the render time
         frontend.consume(ev[consumed:upto])
         consumed = upto
-        np.testing.assert_allclose(time_surface(frontend.latest, t_us * 1e-6, tau_us * 1e-6), expected, rtol=1e-9, atol=1e-12)
+        np.testing.assert_allclose(
+            time_surface(frontend.latest, t_us * 1e-6, tau_us * 1e-6), expected, rtol=1e-9, atol=1e-12
+        )
 
 
 def test_ts_render_merged_and_split():

@@ -9,8 +9,8 @@ import cv2
 import numpy as np
 import pytest
 
-from eas_vo.plugins import Dataset
 from eas_vo.camera import CameraModel
+from eas_vo.plugins import Dataset
 from eas_vo.types import EVENT_DTYPE, ImuSeries, PoseSeries
 
 SHARED_DATA = Path(__file__).resolve().parents[3] / "shared" / "data"
@@ -51,17 +51,24 @@ def load_event_file(path, lenient=False, warnings=None, width=240, height=180, t
     """An events.txt through eas_vo.eventfile.load_event_text (and its cache)."""
     from eas_vo.eventfile import file_identity, load_event_text
 
-    return load_event_text(lambda: open(path, "rb"), file_identity(path), str(path), width, height, tolerance_s, lenient, warnings)
+    return load_event_text(
+        lambda: open(path, "rb"), file_identity(path), str(path), width, height, tolerance_s, lenient, warnings
+    )
 
 
 # ----------------------------------------------------------------------------- hostile input (hypothesis)
+
 
 def hostile_settings(max_examples: int = 150):
     """Property-test settings: deterministic, no deadline (the readers hit the disk)."""
     from hypothesis import HealthCheck, settings
 
-    return settings(max_examples=max_examples, deadline=None, derandomize=True,
-                    suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow])
+    return settings(
+        max_examples=max_examples,
+        deadline=None,
+        derandomize=True,
+        suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow],
+    )
 
 
 def hostile_number():
@@ -78,7 +85,11 @@ def hostile_number():
 
 def numeric_rows(text: str) -> list[list[float]]:
     """A reference reading of a whitespace table: the non-blank, non-comment lines as floats."""
-    return [[float(v) for v in line.split()] for line in text.splitlines() if line.strip() and not line.strip().startswith("#")]
+    return [
+        [float(v) for v in line.split()]
+        for line in text.splitlines()
+        if line.strip() and not line.strip().startswith("#")
+    ]
 
 
 def run_eas_vo(*argv: str, env: dict | None = None):
@@ -90,8 +101,9 @@ def run_eas_vo(*argv: str, env: dict | None = None):
     import tempfile
 
     with tempfile.TemporaryDirectory() as neutral:
-        return subprocess.run([sys.executable, "-m", "eas_vo", *argv], capture_output=True, text=True, env=env, cwd=neutral)
-
+        return subprocess.run(
+            [sys.executable, "-m", "eas_vo", *argv], capture_output=True, text=True, env=env, cwd=neutral
+        )
 
 
 def one_line_failure(argv, capsys) -> str:
@@ -105,6 +117,7 @@ def one_line_failure(argv, capsys) -> str:
     err = capsys.readouterr().err
     assert status == 2 and err.count("\n") == 1 and "Traceback" not in err, (status, err)
     return err
+
 
 # ----------------------------------------------------------------------------- synthetic views
 
@@ -147,13 +160,29 @@ def large_rotation(rng, angle_deg=(15, 25), roll_deg=(10, 12)) -> np.ndarray:
 
 #: MVSEC's left DAVIS346 (its indoor_flying kalibr camchain): an equidistant fisheye, 118 deg
 #: across the diagonal, so the sensor's corners are 60 deg off the axis.
-MVSEC_LEFT = CameraModel(346, 260, np.array([[226.38018519795807, 0.0, 173.6470807871759], [0.0, 226.15002947047415, 133.73271487507847],
-                                             [0.0, 0.0, 1.0]]),
-                         np.array([-0.048031442223833355, 0.011330957517194437, -0.055378166304281135, 0.021500973881459395]),
-                         "equidistant")
+MVSEC_LEFT = CameraModel(
+    346,
+    260,
+    np.array(
+        [[226.38018519795807, 0.0, 173.6470807871759], [0.0, 226.15002947047415, 133.73271487507847], [0.0, 0.0, 1.0]]
+    ),
+    np.array([-0.048031442223833355, 0.011330957517194437, -0.055378166304281135, 0.021500973881459395]),
+    "equidistant",
+)
 #: The Event Camera Dataset's DAVIS240C (shapes_rotation calib.txt): strong barrel distortion.
-ECD_DAVIS240 = CameraModel.from_calib([199.092366542, 198.82882047, 132.192071378, 110.712660011,
-                                       -0.368436311798, 0.150947243557, -0.000296130534385, -0.000759431726241, 0.0])
+ECD_DAVIS240 = CameraModel.from_calib(
+    [
+        199.092366542,
+        198.82882047,
+        132.192071378,
+        110.712660011,
+        -0.368436311798,
+        0.150947243557,
+        -0.000296130534385,
+        -0.000759431726241,
+        0.0,
+    ]
+)
 
 
 def opencv_rotated(camera: CameraModel, R_to_from: np.ndarray, px: np.ndarray) -> np.ndarray:
@@ -165,7 +194,9 @@ def opencv_rotated(camera: CameraModel, R_to_from: np.ndarray, px: np.ndarray) -
     rays = np.column_stack([normalised, np.ones(len(px))])
     rvec = cv2.Rodrigues(np.asarray(R_to_from, np.float64))[0]
     if fisheye:
-        return cv2.fisheye.projectPoints(rays.reshape(-1, 1, 3), rvec, np.zeros(3), camera.K, camera.dist)[0].reshape(-1, 2)
+        return cv2.fisheye.projectPoints(rays.reshape(-1, 1, 3), rvec, np.zeros(3), camera.K, camera.dist)[0].reshape(
+            -1, 2
+        )
     return cv2.projectPoints(rays, rvec, np.zeros(3), camera.K, camera.dist)[0].reshape(-1, 2)
 
 
@@ -214,8 +245,12 @@ def known_sequence(folder: Path, width: int = 346, height: int = 260, frames: bo
 
     rng = np.random.default_rng(7)
     f = 0.8 * width
-    camera = CameraModel(width, height, np.array([[f, 0, width / 2 - 0.3], [0, f * 1.01, height / 2 + 0.7], [0, 0, 1]]),
-                         np.array([-0.21, 0.047, 1.3e-4, -2.1e-4, 0.0]))
+    camera = CameraModel(
+        width,
+        height,
+        np.array([[f, 0, width / 2 - 0.3], [0, f * 1.01, height / 2 + 0.7], [0, 0, 1]]),
+        np.array([-0.21, 0.047, 1.3e-4, -2.1e-4, 0.0]),
+    )
     times = FRAME_T0 + np.arange(N_FRAMES) / FRAME_HZ
     images = [rng.integers(0, 256, (height, width), dtype=np.uint8) for _ in times]
     events = np.zeros(N_EVENTS, EVENT_DTYPE)
@@ -223,8 +258,12 @@ def known_sequence(folder: Path, width: int = 346, height: int = 260, frames: bo
     events["x"], events["y"] = rng.integers(0, width, N_EVENTS), rng.integers(0, height, N_EVENTS)
     events["p"] = rng.integers(0, 2, N_EVENTS)
     q = rng.normal(size=(N_POSES, 4))
-    poses = PoseSeries(0.45 + np.arange(N_POSES) / 200.0, rng.normal(size=(N_POSES, 3)), q / np.linalg.norm(q, axis=1, keepdims=True))
-    imu = ImuSeries(0.42 + np.arange(N_READINGS) / 250.0, rng.normal(size=(N_READINGS, 3)), rng.normal(size=(N_READINGS, 3)))
+    poses = PoseSeries(
+        0.45 + np.arange(N_POSES) / 200.0, rng.normal(size=(N_POSES, 3)), q / np.linalg.norm(q, axis=1, keepdims=True)
+    )
+    imu = ImuSeries(
+        0.42 + np.arange(N_READINGS) / 250.0, rng.normal(size=(N_READINGS, 3)), rng.normal(size=(N_READINGS, 3))
+    )
     write_ecd_folder(folder, camera, times, images if frames else None, events, poses, imu)
     return folder
 
@@ -259,13 +298,22 @@ def sequence_with(folder, stream: str | None, factor: int, shift_s: int = 0):
 
 # ----------------------------------------------------------------------------- writers and damage
 
+
 class InMemoryDataset(Dataset):
     """A recording held in memory (what the formats' writers take): the camera, frame times [s]
     with their uint8 frames, EVENT_DTYPE events, IMU and ground truth (or None), all after the
     clock origin `clock_origin_ns`."""
 
-    def __init__(self, camera: CameraModel, times, frames, events, imu: ImuSeries | None = None,
-                 ground_truth: PoseSeries | None = None, clock_origin_ns: int = 0):
+    def __init__(
+        self,
+        camera: CameraModel,
+        times,
+        frames,
+        events,
+        imu: ImuSeries | None = None,
+        ground_truth: PoseSeries | None = None,
+        clock_origin_ns: int = 0,
+    ):
         self.camera, self._times, self._frames, self._events = camera, np.asarray(times), list(frames), events
         self.imu, self.ground_truth, self.clock_origin_ns = imu, ground_truth, clock_origin_ns
 
@@ -316,7 +364,11 @@ def seeded_flips(source: Path, count: int, seed: int) -> list[tuple[str, int, in
     import random
 
     rng = random.Random(seed)
-    names = tuple(sorted(str(p.relative_to(source)) for p in source.rglob("*") if p.is_file())) if source.is_dir() else ("",)
+    names = (
+        tuple(sorted(str(p.relative_to(source)) for p in source.rglob("*") if p.is_file()))
+        if source.is_dir()
+        else ("",)
+    )
     sizes = [(source / name).stat().st_size for name in names]
     flips = []
     for _ in range(count):
@@ -355,8 +407,13 @@ def read_each_bounded(locations: list[Path], assignments: list[str] = (), per_re
     import time
 
     script = Path(__file__).with_name("read_damaged.py")
-    child = subprocess.Popen([sys.executable, str(script), json.dumps([str(p) for p in locations]), *assignments],
-                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, bufsize=1)
+    child = subprocess.Popen(
+        [sys.executable, str(script), json.dumps([str(p) for p in locations]), *assignments],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        bufsize=1,
+    )
     outcomes, current = {}, "(starting)"
     deadline = time.monotonic() + 3 * per_read_s  # the first read also imports the readers
     try:
@@ -386,8 +443,11 @@ def write_aedat4(path, *, size, events=None, frames=(), imu=None, kind="davis", 
     (t_us, acc [g] x3, gyro [deg/s] x3)."""
     import dv_processing as dv
 
-    config = {"davis": dv.io.MonoCameraWriter.DAVISConfig, "events": dv.io.MonoCameraWriter.EventOnlyConfig,
-              "frames": dv.io.MonoCameraWriter.FrameOnlyConfig}[kind]("DAVIS_test", size)
+    config = {
+        "davis": dv.io.MonoCameraWriter.DAVISConfig,
+        "events": dv.io.MonoCameraWriter.EventOnlyConfig,
+        "frames": dv.io.MonoCameraWriter.FrameOnlyConfig,
+    }[kind]("DAVIS_test", size)
     config.compression = dv.CompressionType.__members__[compression]
     writer = dv.io.MonoCameraWriter(str(path), config)
     if events is not None:

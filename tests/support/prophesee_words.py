@@ -22,8 +22,9 @@ EVENT = np.dtype([("t", "<i8"), ("x", "<u2"), ("y", "<u2"), ("p", "u1")])
 TRIGGER = np.dtype([("t", "<i8"), ("edge", "u1"), ("id", "u1")])
 
 
-def random_stream(n: int, width: int, height: int, seed: int = 0, t0_us: int = 0, span_us: int = 200_000,
-                  runs: bool = True) -> np.ndarray:
+def random_stream(
+    n: int, width: int, height: int, seed: int = 0, t0_us: int = 0, span_us: int = 200_000, runs: bool = True
+) -> np.ndarray:
     """n events over [t0, t0 + span) us, sorted by time; with `runs`, many in rows of neighbours
     at one time and polarity (what EVT 3.0 and 2.1 vectorise)."""
     rng = np.random.default_rng(seed)
@@ -86,7 +87,9 @@ def encode_evt3(events, triggers=None, others_every: int = 7):
             low = t & 0xFFF
         step += 1
         if others_every and step % others_every == 0:
-            words.extend([0xE000 | 0x014, 0xF000 | 0x123, 0xF000 | 0x001, 0x7000 | 0x5])  # OTHERS, CONTINUED_12 x2, CONTINUED_4
+            words.extend(
+                [0xE000 | 0x014, 0xF000 | 0x123, 0xF000 | 0x001, 0x7000 | 0x5]
+            )  # OTHERS, CONTINUED_12 x2, CONTINUED_4
 
     pending = []  # event indices of the current time
 
@@ -200,11 +203,23 @@ def encode_evt21(events, triggers=None, others_every: int = 7, legacy: bool = Fa
 ENCODERS = {"EVT3": encode_evt3, "EVT2": encode_evt2, "EVT21": encode_evt21}
 
 
-def write_raw(path: Path, words: np.ndarray, fmt: str, width: int, height: int, header: list[str] | None = None) -> Path:
+def write_raw(
+    path: Path, words: np.ndarray, fmt: str, width: int, height: int, header: list[str] | None = None
+) -> Path:
     """A `.raw` file: Metavision's header lines (or `header`), `% end`, then the words little-endian."""
-    lines = header if header is not None else ["% camera_integrator_name Prophesee", "% date 2024-01-01 00:00:00",
-                                               f"% format {fmt};height={height};width={width}", "% end"]
-    path.write_bytes("".join(line + "\n" for line in lines).encode() + words.astype(words.dtype.newbyteorder("<")).tobytes())
+    lines = (
+        header
+        if header is not None
+        else [
+            "% camera_integrator_name Prophesee",
+            "% date 2024-01-01 00:00:00",
+            f"% format {fmt};height={height};width={width}",
+            "% end",
+        ]
+    )
+    path.write_bytes(
+        "".join(line + "\n" for line in lines).encode() + words.astype(words.dtype.newbyteorder("<")).tobytes()
+    )
     return path
 
 
@@ -213,7 +228,9 @@ def write_dat(path: Path, events: np.ndarray, width: int, height: int, ev_type: 
     header = f"% Data file containing CD events.\n% Version 2\n% Width {width}\n% Height {height}\n".encode()
     records = np.empty((len(events), 2), "<u4")
     records[:, 0] = events["t"]
-    records[:, 1] = events["x"].astype(np.uint32) | events["y"].astype(np.uint32) << 14 | events["p"].astype(np.uint32) << 28
+    records[:, 1] = (
+        events["x"].astype(np.uint32) | events["y"].astype(np.uint32) << 14 | events["p"].astype(np.uint32) << 28
+    )
     path.write_bytes(header + bytes([ev_type, 8]) + records.tobytes())
     return path
 

@@ -5,9 +5,9 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
+from eas_vo.camera import CameraModel
 from eas_vo.trackers.alignment import SCORE_FOCAL_PX, PhotometricAlignment
 from eas_vo.trackers.klt import KltConfig, KltTracker
-from eas_vo.camera import CameraModel
 from helpers import CAMERA, assert_rotations_close, large_rotation, textured_image, warp_by_rotation
 
 #: The real excerpt's calibration: strong radial distortion.
@@ -92,7 +92,11 @@ def test_the_alignment_alone_is_a_weak_edge_without_correspondences():
     tracker.process(base, 0.0)
     record, (edge,) = tracker.process(warp_by_rotation(base, R_c0_c1.T), 0.05)
     assert (record.status, record.reason, record.inliers, edge.inliers) == (
-        "weak", "aligned by intensities alone (no correspondences)", 0, 0)
+        "weak",
+        "aligned by intensities alone (no correspondences)",
+        0,
+        0,
+    )
     assert edge.sigma_rad == np.inf
     assert_rotations_close(edge.R_i_j, R_c0_c1, np.radians(0.1))
 
@@ -150,8 +154,10 @@ def test_a_gauss_newton_step_is_numpys_formulation():
     align = PhotometricAlignment(DAVIS)
     f = 50.0
     level = align._levels[f]
-    a, b = (align.pyramid(rendered_through_lens(DAVIS, Rotation.from_rotvec(r).as_matrix(), 4))[f]
-            for r in ([0, 0, 0], [0.03, -0.05, 0.02]))
+    a, b = (
+        align.pyramid(rendered_through_lens(DAVIS, Rotation.from_rotvec(r).as_matrix(), 4))[f]
+        for r in ([0, 0, 0], [0.03, -0.05, 0.02])
+    )
     gx = cv2.Sobel(b, cv2.CV_32F, 1, 0, ksize=3)[level.ys, level.xs] / 8
     gy = cv2.Sobel(b, cv2.CV_32F, 0, 1, ksize=3)[level.ys, level.xs] / 8
     X, Y = level.bearings[0], level.bearings[1]
@@ -216,7 +222,10 @@ def test_scores_do_not_depend_on_the_thread_count(threads):
         concurrency.set_threads(1)
         serial = align.align(a, b, [np.eye(3)]), align._levels[25.0].scores([a[25.0]], [b["pixels"][25.0]], align._grid)
         concurrency.set_threads(threads)
-        parallel = align.align(a, b, [np.eye(3)]), align._levels[25.0].scores([a[25.0]], [b["pixels"][25.0]], align._grid)
+        parallel = (
+            align.align(a, b, [np.eye(3)]),
+            align._levels[25.0].scores([a[25.0]], [b["pixels"][25.0]], align._grid),
+        )
     finally:
         concurrency.set_threads(before)
     assert (serial[0] is None) == (parallel[0] is None)
@@ -295,10 +304,18 @@ def test_what_explains_two_views_no_better_than_no_motion_is_no_measurement():
         assert (record.status, edges) == ("lost", []), lk_not_counted
 
 
-@pytest.mark.parametrize("camera", [
-    CameraModel(640, 480, np.array([[530.0, 0, 320], [0, 530.0, 240], [0, 0, 1]])),  # more columns than one remap takes
-    CameraModel(240, 180, np.array([[200.0, 0, 120], [0, 200.0, 90], [0, 0, 1]]), np.array([0.3, 0.0, 0.0, 0.0, 0.0])),  # pincushion: unseen corners
-], ids=["640x480", "pincushion"])
+@pytest.mark.parametrize(
+    "camera",
+    [
+        CameraModel(
+            640, 480, np.array([[530.0, 0, 320], [0, 530.0, 240], [0, 0, 1]])
+        ),  # more columns than one remap takes
+        CameraModel(
+            240, 180, np.array([[200.0, 0, 120], [0, 200.0, 90], [0, 0, 1]]), np.array([0.3, 0.0, 0.0, 0.0, 0.0])
+        ),  # pincushion: unseen corners
+    ],
+    ids=["640x480", "pincushion"],
+)
 def test_other_sensors_and_lenses(camera):
     R_c0_c1 = Rotation.from_rotvec(np.radians([8, -12, 6])).as_matrix()
     align = PhotometricAlignment(camera)
@@ -361,8 +378,10 @@ def test_the_audit_turns_off_a_fallback_its_neighbours_contradict(error_deg, tur
     if turned_off:
         assert len(audit.judged) == AUDIT_MIN_JUDGED and fallback_frames == list(range(3, 3 * AUDIT_MIN_JUDGED + 1, 3))
         frames = ", ".join(map(str, fallback_frames))
-        assert audit.warning == (f"the align fallback is off from frame {3 * AUDIT_MIN_JUDGED + 2}: {AUDIT_MIN_JUDGED} of the "
-                                 f"{AUDIT_MIN_JUDGED} steps of it judged disagree with the measurements beside them (frames {frames})")
+        assert audit.warning == (
+            f"the align fallback is off from frame {3 * AUDIT_MIN_JUDGED + 2}: {AUDIT_MIN_JUDGED} of the "
+            f"{AUDIT_MIN_JUDGED} steps of it judged disagree with the measurements beside them (frames {frames})"
+        )
     else:
         assert audit.warning == "" and len(audit.judged) == len(fallback_frames) == 19
 
@@ -394,7 +413,9 @@ def test_klt_stops_aligning_where_the_alignment_contradicts_lk(monkeypatch, righ
     from eas_vo.trackers.alignment import AUDIT_MIN_JUDGED
 
     real_measure = klt.measure
-    monkeypatch.setattr(klt, "measure", lambda config, camera, a, b, i, j: None if j % 2 else real_measure(config, camera, a, b, i, j))
+    monkeypatch.setattr(
+        klt, "measure", lambda config, camera, a, b, i, j: None if j % 2 else real_measure(config, camera, a, b, i, j)
+    )
     error = np.eye(3) if right else Rotation.from_rotvec(np.radians([0.0, 0.0, 5.0])).as_matrix()
     aligned_at = []
 

@@ -16,13 +16,13 @@ import itertools
 import numpy as np
 import pytest
 
+from eas_vo import config as config_module
 from eas_vo.datasets.simulator.generate import SENSORS, SimConfig, simulate_events
 from eas_vo.datasets.simulator.motion import ConstantMotion
 from eas_vo.datasets.simulator.sensor import DvsModel
 from eas_vo.errors import ConfigError
 from eas_vo.geometry.rotations import geodesic_angle, rotvec_to_matrix
 from eas_vo.trackers.cmax import CmaxConfig, CmaxTracker, _newton
-from eas_vo import config as config_module
 from eas_vo.types import Sample
 
 HALF_DISPLACEMENT_PX = 12.0
@@ -31,21 +31,25 @@ WARM_UP_S = 0.01
 
 
 @functools.lru_cache(maxsize=None)
-def events_of(omega_deg: tuple, sensor: str, duration_s: float, velocity=(0.0, 0.0, 0.0), p0=(0.0, 0.0, 0.0),
-              ideal: bool = True) -> np.ndarray:
+def events_of(
+    omega_deg: tuple, sensor: str, duration_s: float, velocity=(0.0, 0.0, 0.0), p0=(0.0, 0.0, 0.0), ideal: bool = True
+) -> np.ndarray:
     dvs = DvsModel(cutoff_hz=0.0) if ideal else DvsModel()
     motion = ConstantMotion(np.radians(omega_deg), velocity, R_W_C0 if not any(velocity) else np.eye(3), p0)
     events, _ = simulate_events(SimConfig(duration_s=duration_s, seed=5, dvs=dvs, camera=SENSORS[sensor]), motion)
     return events
 
 
-@pytest.mark.parametrize("sensor,omega_deg", [
-    ("davis240", (200.0, 0.0, 0.0)),
-    ("davis240", (0.0, 0.0, 300.0)),  # roll: the image centre does not move, its rim does
-    ("davis240", (346.4, 346.4, 346.4)),  # 600 deg/s about the diagonal
-    ("davis240", (0.0, -1000.0, 0.0)),
-    ("davis346", (150.0, -480.0, 90.0)),  # 510 deg/s, the equidistant lens
-])
+@pytest.mark.parametrize(
+    "sensor,omega_deg",
+    [
+        ("davis240", (200.0, 0.0, 0.0)),
+        ("davis240", (0.0, 0.0, 300.0)),  # roll: the image centre does not move, its rim does
+        ("davis240", (346.4, 346.4, 346.4)),  # 600 deg/s about the diagonal
+        ("davis240", (0.0, -1000.0, 0.0)),
+        ("davis346", (150.0, -480.0, 90.0)),  # 510 deg/s, the equidistant lens
+    ],
+)
 def test_cmax_recovers_a_constant_angular_velocity_within_2_percent(sensor, omega_deg):
     camera = SENSORS[sensor].model()
     omega = np.radians(omega_deg)
@@ -62,8 +66,10 @@ def test_cmax_recovers_a_constant_angular_velocity_within_2_percent(sensor, omeg
 
 def samples_of(events: np.ndarray, times: np.ndarray):
     starts = np.searchsorted(events["t"], times)
-    return [Sample(n, float(t), None, events, int(first), int(starts[n - 1]) if n else 0)
-            for n, (t, first) in enumerate(zip(times, starts))]
+    return [
+        Sample(n, float(t), None, events, int(first), int(starts[n - 1]) if n else 0)
+        for n, (t, first) in enumerate(zip(times, starts))
+    ]
 
 
 def statuses(tracker: CmaxTracker, events: np.ndarray, times: np.ndarray):
@@ -72,18 +78,21 @@ def statuses(tracker: CmaxTracker, events: np.ndarray, times: np.ndarray):
 
 def test_a_still_camera_seeing_only_noise_measures_nothing():
     events = events_of((0.0, 0.0, 0.0), "davis240", 0.3, ideal=False)  # shot noise, leaks, 500 Hz hot pixels
-    results = statuses(CmaxTracker(CmaxConfig(window_events=15000), SENSORS["davis240"].model()), events,
-                       np.arange(0.05, 0.3, 0.05))
+    results = statuses(
+        CmaxTracker(CmaxConfig(window_events=15000), SENSORS["davis240"].model()), events, np.arange(0.05, 0.3, 0.05)
+    )
     assert results[0][0].status == "first"
-    assert all(r.status in ("weak", "lost") and "in focus" in r.reason for r, _ in results[1:]), \
-        [(r.status, r.reason) for r, _ in results]
+    assert all(r.status in ("weak", "lost") and "in focus" in r.reason for r, _ in results[1:]), [
+        (r.status, r.reason) for r, _ in results
+    ]
 
 
 def test_a_camera_moving_forward_before_a_near_box_is_not_reported_ok():
     # 2 m/s along the optical axis, 1 m from the box ahead: the image expands, no rotation explains it
     events = events_of((0.0, 0.0, 0.0), "davis240", 0.1, velocity=(0.0, 0.0, 2.0), p0=(0.0, 0.0, 1.0), ideal=False)
-    results = statuses(CmaxTracker(CmaxConfig(window_events=15000), SENSORS["davis240"].model()), events,
-                       np.arange(0.02, 0.1, 0.02))
+    results = statuses(
+        CmaxTracker(CmaxConfig(window_events=15000), SENSORS["davis240"].model()), events, np.arange(0.02, 0.1, 0.02)
+    )
     assert all(r.status in ("weak", "lost") for r, _ in results[1:]), [(r.status, r.reason) for r, _ in results]
 
 
@@ -148,7 +157,9 @@ def test_an_interval_is_measured_only_from_its_own_events():
         assert records[k].status == "weak" and "miss part of the interval" in records[k].reason, records[k]
         assert results[k][1][0].inliers == 0  # a weak window is no confident pair for the gyro's check
     inside = [(events["t"] >= a) & (events["t"] < b) for a, b in itertools.pairwise(times)]
-    assert all(0 < r.events <= m.sum() for m, r in zip(inside, records[1:]) if r.status != "lost")  # hot pixels left out
+    assert all(
+        0 < r.events <= m.sum() for m, r in zip(inside, records[1:]) if r.status != "lost"
+    )  # hot pixels left out
 
 
 def test_a_window_of_any_length_holds_a_bounded_number_of_windows():

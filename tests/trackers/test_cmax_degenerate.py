@@ -38,14 +38,22 @@ def unit(v) -> np.ndarray:
 
 
 axes = st.tuples(*[st.floats(-1, 1)] * 3).filter(lambda v: np.linalg.norm(v) > 0.3).map(unit)
-across = st.tuples(st.floats(-1, 1), st.floats(-1, 1)).filter(lambda v: np.hypot(*v) > 0.3).map(
-    lambda v: unit([v[0], v[1], 0.0]))
+across = (
+    st.tuples(st.floats(-1, 1), st.floats(-1, 1))
+    .filter(lambda v: np.hypot(*v) > 0.3)
+    .map(lambda v: unit([v[0], v[1], 0.0]))
+)
 SCENARIOS = st.one_of(
     st.builds(lambda: {"omega_deg": np.zeros(3)}),  # still camera: noise and hot pixels only
     st.builds(lambda w: {"omega_deg": np.array([0.0, 0.0, w])}, st.floats(100, 400) | st.floats(-400, -100)),
     st.builds(lambda a, w: {"omega_deg": a * w}, axes, st.floats(1, 8)),  # tiny: under a pixel per interval
-    st.builds(lambda a, w, start, length: {"omega_deg": a * w, "gap": (start, start + length)},
-              across, st.floats(100, 300), st.floats(0.015, 0.04), st.floats(0.01, 0.03)),
+    st.builds(
+        lambda a, w, start, length: {"omega_deg": a * w, "gap": (start, start + length)},
+        across,
+        st.floats(100, 300),
+        st.floats(0.015, 0.04),
+        st.floats(0.01, 0.03),
+    ),
     st.builds(lambda a, w, hot: {"omega_deg": a * w, "hot": hot}, axes, st.floats(60, 300), st.floats(5e-4, 5e-3)),
 )
 
@@ -61,8 +69,9 @@ def intervals(omega_deg, gap=None, hot=5e-4, times=TIMES):
     tracker = CmaxTracker(CmaxConfig(), CAMERA.model())
     out = []
     for n, t in enumerate(times):
-        record, edges = tracker.process(None, float(t), sample=Sample(n, float(t), None, events, int(starts[n]),
-                                                                      int(starts[n - 1]) if n else 0))
+        record, edges = tracker.process(
+            None, float(t), sample=Sample(n, float(t), None, events, int(starts[n]), int(starts[n - 1]) if n else 0)
+        )
         if n:
             out.append((record, edges, rotvec_to_matrix(np.radians(omega_deg) * (t - times[n - 1]))))
     return out
@@ -85,9 +94,16 @@ def test_every_interval_is_ok_within_its_bound_weak_within_its_sigma_or_lost(sce
             assert error <= bound, (scenario, record, np.degrees([error, bound]))
         else:
             assert record.status == "weak", record
-            assert error <= WEAK_SIGMAS * edge.estimated_sigma_rad, (scenario, record, np.degrees(
-                [error, edge.estimated_sigma_rad]))
-        if scenario.get("gap") is not None and record.t - 0.025 >= scenario["gap"][0] and record.t <= scenario["gap"][1]:
+            assert error <= WEAK_SIGMAS * edge.estimated_sigma_rad, (
+                scenario,
+                record,
+                np.degrees([error, edge.estimated_sigma_rad]),
+            )
+        if (
+            scenario.get("gap") is not None
+            and record.t - 0.025 >= scenario["gap"][0]
+            and record.t <= scenario["gap"][1]
+        ):
             raise AssertionError(f"an interval inside the gap was measured: {record}")
 
 

@@ -6,8 +6,17 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from eas_vo import concurrency
-from eas_vo.trackers.contrast import (CHUNK, MIN_CHUNKS, Contrast, WarpGrid, accumulate, blur, gather_gradient,
-                                      quadrant_labels, variance_numpy)
+from eas_vo.trackers.contrast import (
+    CHUNK,
+    MIN_CHUNKS,
+    Contrast,
+    WarpGrid,
+    accumulate,
+    blur,
+    gather_gradient,
+    quadrant_labels,
+    variance_numpy,
+)
 
 
 def window(seed: int, n: int, width: int, height: int, focal: float, span_s: float = 0.02):
@@ -30,7 +39,10 @@ def test_one_event_lands_where_scipy_rotates_its_bearing(omega_deg):
     q = Rotation.from_rotvec(omega * dt).apply(b)
     expected = grid.fx * q[0] / q[2] + grid.cx, grid.fy * q[1] / q[2] + grid.cy
     H = np.zeros((grid.height, grid.width))
-    assert accumulate(np.array([b[0]]), np.array([b[1]]), np.array([dt]), omega, grid.fx, grid.fy, grid.cx, grid.cy, H) == 1
+    assert (
+        accumulate(np.array([b[0]]), np.array([b[1]]), np.array([dt]), omega, grid.fx, grid.fy, grid.cx, grid.cy, H)
+        == 1
+    )
     rows, cols = np.nonzero(H)
     centroid = (np.sum(cols * H[rows, cols]), np.sum(rows * H[rows, cols]))
     assert H.sum() == pytest.approx(1.0)

@@ -12,11 +12,12 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from eas_vo import concurrency
+from eas_vo.camera import CameraModel
 from eas_vo.errors import ConfigError
 from eas_vo.trackers.klt import KltConfig, KltTracker
-from eas_vo.camera import CameraModel
 from eas_vo.types import ImuSeries
 from helpers import CAMERA, K, assert_rotations_close, large_rotation, textured_image, warp_by_rotation
+
 
 @pytest.mark.parametrize("seed", range(6))
 def test_recovers_known_rotations_to_0_2_degrees_per_frame(seed):
@@ -42,7 +43,13 @@ def test_featureless_frames_keep_the_previous_rotation_and_trigger_redetection()
     record, edges = tracker.process(np.zeros((180, 240), np.uint8), 0.0)
     assert record.status == "first" and edges == []
     record, edges = tracker.process(np.zeros((180, 240), np.uint8), 0.05)
-    assert (record.status, record.reason, record.nc, edges, record.redetected) == ("lost", "few correspondences", 0, [], True)
+    assert (record.status, record.reason, record.nc, edges, record.redetected) == (
+        "lost",
+        "few correspondences",
+        0,
+        [],
+        True,
+    )
 
 
 def test_threshold2_controls_redetection():
@@ -240,13 +247,21 @@ def choices() -> list[tuple[str, object]]:
     """(field, value): every value of every choice field of KltConfig (a bool's both, a text
     field's every allowed value), so a new option is tried without being listed here."""
     types = typing.get_type_hints(KltConfig)
-    return [(f.name, value) for f in dataclasses.fields(KltConfig)
-            for value in ((False, True) if types[f.name] is bool else allowed_values(f.name) if types[f.name] is str else ())]
+    return [
+        (f.name, value)
+        for f in dataclasses.fields(KltConfig)
+        for value in (
+            (False, True) if types[f.name] is bool else allowed_values(f.name) if types[f.name] is str else ()
+        )
+    ]
 
 
 #: What a choice needs switched on to act at all: its values are tried with these set.
-ENABLED_BY = {"fallback_detector": {"fallback": "match"}, "loop_detector": {"loop_closure": True},
-              "loop_geometry": {"loop_closure": True}}
+ENABLED_BY = {
+    "fallback_detector": {"fallback": "match"},
+    "loop_detector": {"loop_closure": True},
+    "loop_geometry": {"loop_closure": True},
+}
 
 
 @functools.cache
@@ -271,8 +286,10 @@ def tracked(config: KltConfig, threads: int) -> tuple:
             results.append(pending())
     finally:
         concurrency.set_threads(before)
-    return tuple((record, tuple(repr(dataclasses.replace(e, R_i_j=e.R_i_j.tobytes())) for e in edges))
-                 for record, edges in results), tracker.tracker_warnings
+    return tuple(
+        (record, tuple(repr(dataclasses.replace(e, R_i_j=e.R_i_j.tobytes())) for e in edges))
+        for record, edges in results
+    ), tracker.tracker_warnings
 
 
 @pytest.mark.parametrize("field, value", choices(), ids=lambda value: str(value))
@@ -287,6 +304,7 @@ def test_results_taken_late_equal_those_taken_at_once(field, value):
 def test_the_thread_tests_sequence_exercises_the_options():
     """LK loses the turn (frame 11), which either fallback measures; a loop closes; each
     prediction changes what is measured."""
+
     def frame(config: KltConfig, k: int):
         return tracked(config, 1)[0][k]
 

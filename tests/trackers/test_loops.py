@@ -27,11 +27,15 @@ def sweep():
     world = textured_image(7, size=(720, 960), shapes=2500)
     K_world = np.array([[200.0, 0, 480], [0, 200.0, 360], [0, 0, 1]])
     phase = np.linspace(0, 2 * np.pi, N)
-    R_w_c = Rotation.from_euler("yx", np.column_stack([np.radians(35) * np.sin(phase), np.radians(8) * np.sin(2 * phase)])).as_matrix()
+    R_w_c = Rotation.from_euler(
+        "yx", np.column_stack([np.radians(35) * np.sin(phase), np.radians(8) * np.sin(2 * phase)])
+    ).as_matrix()
     rng = np.random.default_rng(0)
     views = []
     for R in R_w_c:
-        image = cv2.warpPerspective(world, K_world @ R @ np.linalg.inv(K), (240, 180), flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP)
+        image = cv2.warpPerspective(
+            world, K_world @ R @ np.linalg.inv(K), (240, 180), flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP
+        )
         views.append(np.clip(image + rng.normal(0, 6, image.shape), 0, 255).astype(np.uint8))
     return R_w_c, views
 
@@ -79,7 +83,9 @@ def test_false_loops_do_not_wreck_a_robust_graph(sweep, mode):
     clean = errors_deg(R_w_c, graph.solve(N, edges, times=TIMES).R_w_c).mean()
     fooled = errors_deg(R_w_c, graph.solve(N, edges + false, times=TIMES).R_w_c).mean()
     assert fooled <= 1.5 * clean, (fooled, clean)
-    trusting = errors_deg(R_w_c, GtsamBackend(GtsamConfig(robust="none", mode=mode)).solve(N, edges + false, times=TIMES).R_w_c).mean()
+    trusting = errors_deg(
+        R_w_c, GtsamBackend(GtsamConfig(robust="none", mode=mode)).solve(N, edges + false, times=TIMES).R_w_c
+    ).mean()
     assert trusting > 5 * clean  # what the robust kernel prevented
 
 
@@ -95,7 +101,9 @@ def test_queries_wait_for_motion_and_catch_a_return():
     start's keyframe once it is within the overlap again."""
     closer = LoopCloser(LoopClosureConfig(loop_closure=True), CAMERA)
     queried = []
-    closer.matching.rotation = lambda source, corners, detected_src, image, detected, i, j: queried.append((i, j)) or (None, 0)
+    closer.matching.rotation = lambda source, corners, detected_src, image, detected, i, j: (
+        queried.append((i, j)) or (None, 0)
+    )
     image = np.zeros((180, 240), np.uint8)
     steps = [0.0] * 40 + [5.0] * 12 + [-5.0] * 12 + [0.0] * 10  # yaw per frame [deg]
     for k, yaw in enumerate(steps):

@@ -4,25 +4,35 @@ a measurement's status on correspondences of known motion (a right one is ok, a 
 import numpy as np
 import pytest
 
+from eas_vo.camera import CameraModel
 from eas_vo.geometry.rotations import geodesic_angle, rotvec_to_matrix
 from eas_vo.geometry.two_view import bearings, explains, rotation_from_correspondences
 from eas_vo.trackers.klt import KltConfig, KltTracker
-from eas_vo.trackers.measurement import REFERENCE_FOCAL_PX, PixelScale, TrackingExtents, TwoViewConfig, measure, weakness
-from eas_vo.camera import CameraModel
+from eas_vo.trackers.measurement import (
+    REFERENCE_FOCAL_PX,
+    PixelScale,
+    TrackingExtents,
+    TwoViewConfig,
+    measure,
+    weakness,
+)
 
 
 def camera_of_focal(focal_px: float) -> CameraModel:
     return CameraModel(640, 480, np.array([[focal_px, 0, 320], [0, focal_px, 240], [0, 0, 1]]))
 
 
-@pytest.mark.parametrize("focal_px, levels, window, min_distance, block", [
-    (200.0, 3, 21, 7.0, 7),    # the reference: as stated
-    (198.96, 3, 21, 6.9636, 7),  # the ECD DAVIS240C: the same windows and pyramid
-    (400.0, 4, 21, 14.0, 14),  # one octave: one level more of the same window
-    (288.0, 3, 30, 10.08, 10),  # DAVIS346-like: less than an octave, the window takes it
-    (1066.7, 5, 28, 37.3345, 37),  # 1280x720: two whole octaves, the window the rest (x1.33)
-    (100.0, 2, 21, 3.5, 4),    # half the reference: a level less
-])
+@pytest.mark.parametrize(
+    "focal_px, levels, window, min_distance, block",
+    [
+        (200.0, 3, 21, 7.0, 7),  # the reference: as stated
+        (198.96, 3, 21, 6.9636, 7),  # the ECD DAVIS240C: the same windows and pyramid
+        (400.0, 4, 21, 14.0, 14),  # one octave: one level more of the same window
+        (288.0, 3, 30, 10.08, 10),  # DAVIS346-like: less than an octave, the window takes it
+        (1066.7, 5, 28, 37.3345, 37),  # 1280x720: two whole octaves, the window the rest (x1.33)
+        (100.0, 2, 21, 3.5, 4),  # half the reference: a level less
+    ],
+)
 def test_extents_follow_the_focal_length(focal_px, levels, window, min_distance, block):
     extents = PixelScale.of(camera_of_focal(focal_px)).extents(KltConfig())
     assert (extents.lk_max_level, extents.lk_win_size, extents.block_size) == (levels, window, block)
@@ -35,7 +45,11 @@ def test_the_tracker_works_with_the_converted_extents_and_keeps_its_config():
     config = KltConfig(lk_max_level=2, fb_max_px=1.0)
     tracker = KltTracker(config, camera_of_focal(2 * REFERENCE_FOCAL_PX))
     assert (tracker.extents.lk_max_level, tracker.extents.lk_win_size, tracker.extents.min_distance_px) == (3, 21, 14.0)
-    assert (tracker._lk_params["winSize"], tracker._lk_params["maxLevel"], tracker._lk_params["criteria"][1:]) == ((21, 21), 3, (30, 0.01))
+    assert (tracker._lk_params["winSize"], tracker._lk_params["maxLevel"], tracker._lk_params["criteria"][1:]) == (
+        (21, 21),
+        3,
+        (30, 0.01),
+    )
     assert tracker.config is config
     assert KltTracker(KltConfig(), None).extents == TrackingExtents(7.0, 7, 3, 21)
 
@@ -109,7 +123,8 @@ def test_a_step_that_departs_from_the_recent_rate_more_than_the_motion_allows_is
     def frame(k, status, angle_deg):
         R = rotvec_to_matrix(np.radians([angle_deg, 0.0, 0.0]))
         return FrameRecord(k, 0.05 * k, 100, 50, status, False, reason="few inliers" * (status == "weak")), [
-            RelativeRotation(k - 1, k, R, 50, 0.5, 0.001)]
+            RelativeRotation(k - 1, k, R, 50, 0.5, 0.001)
+        ]
 
     bound = StepBound(TwoViewConfig(), camera)
     record, edges = bound.judge(*frame(1, "weak", 180.0), 0.0, 0.05)
@@ -122,4 +137,6 @@ def test_a_step_that_departs_from_the_recent_rate_more_than_the_motion_allows_is
     record, edges = bound.judge(*frame(5, "ok", 1.2), 0.20, 0.25)
     assert record.status == "ok" and len(edges) == 1
     record, edges = bound.judge(*frame(6, "ok", 180.0), 0.25, 0.30)  # an image turned upside down
-    assert (record.status, len(edges)) == ("weak", 1) and record.reason.startswith("178.8 deg from the last ok step's rate")
+    assert (record.status, len(edges)) == ("weak", 1) and record.reason.startswith(
+        "178.8 deg from the last ok step's rate"
+    )

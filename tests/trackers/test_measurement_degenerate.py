@@ -113,8 +113,10 @@ def test_events_that_end_leave_no_weak_half_turn_in_the_trajectory(sequence_copy
     assert main(["run", "--dataset", str(sequence_copy), "--frontend", frontend, "--out", str(out), "--quiet"]) == 0
     with open(out / "frames.csv") as frames:
         status = [r["status"] for r in csv.DictReader(frames)]
-    R_est, R_true = (Rotation.from_quat(np.loadtxt(out / name, ndmin=2)[:, 4:8]).as_matrix()
-                     for name in ("trajectory.tum", "groundtruth.tum"))
+    R_est, R_true = (
+        Rotation.from_quat(np.loadtxt(out / name, ndmin=2)[:, 4:8]).as_matrix()
+        for name in ("trajectory.tum", "groundtruth.tum")
+    )
     config = KltConfig()
     reach_rad = (2 ** (config.lk_max_level + 1) - 1) * (config.lk_win_size // 2) / CAMERA.focal_px
     for k in range(1, len(status)):

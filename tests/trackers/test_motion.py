@@ -16,7 +16,9 @@ def test_lk_from_a_predicted_rotation_lands_on_the_true_points_through_the_lens(
     R_source_image = cv2.Rodrigues(np.radians([4.0, -7.0, 12.0]))[0]  # 14 deg, most of it roll
     u, v = np.meshgrid(np.arange(camera.width, dtype=float), np.arange(camera.height, dtype=float))
     where = opencv_rotated(camera, R_source_image, np.column_stack([u.ravel(), v.ravel()])).astype(np.float32)
-    image = cv2.remap(source, where[:, 0].reshape(u.shape), where[:, 1].reshape(u.shape), cv2.INTER_LINEAR, borderValue=60)
+    image = cv2.remap(
+        source, where[:, 0].reshape(u.shape), where[:, 1].reshape(u.shape), cv2.INTER_LINEAR, borderValue=60
+    )
     corners = cv2.goodFeaturesToTrack(source, 400, 0.01, 7, blockSize=3).reshape(-1, 2)
     truth = opencv_rotated(camera, R_source_image.T, corners)
     margin = 12  # corners whose patch stays whole in the image

@@ -7,6 +7,7 @@ import re
 import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
+
 from eas_vo.datasets.ecd import EcdFolderDataset
 from eas_vo.datasets.simulator import SimConfig, simulate
 from eas_vo.datasets.simulator.generate import SENSORS, camera_rays
@@ -30,14 +31,25 @@ def test_a_sequence_is_cached_under_its_values_not_their_python_types():
     assert SimConfig(seed=3).fingerprint() != SimConfig(seed=4).fingerprint()
     # the default's key is what it was before types were normalised and the camera and the
     # translation scale could change: its cached folder stays valid
-    before = {key: value for key, value in dataclasses.asdict(SimConfig()).items() if key not in ("camera", "translation_scale")}
+    before = {
+        key: value
+        for key, value in dataclasses.asdict(SimConfig()).items()
+        if key not in ("camera", "translation_scale")
+    }
     assert SimConfig().fingerprint() == repr((SIMULATOR_VERSION, before))
     assert SimConfig(camera=SENSORS["davis346"]).fingerprint() != SimConfig().fingerprint()
 
 
 def test_event_times_are_float64_and_sorted_late_in_a_long_sequence():
-    model = DvsModel(contrast_threshold=0.3, threshold_sigma=0.0, cutoff_hz=0.0, shot_noise_rate_hz=0.0, leak_rate_hz=0.0,
-                     hot_pixel_fraction=0.0, refractory_s=0.0)
+    model = DvsModel(
+        contrast_threshold=0.3,
+        threshold_sigma=0.0,
+        cutoff_hz=0.0,
+        shot_noise_rate_hz=0.0,
+        leak_rate_hz=0.0,
+        hot_pixel_fraction=0.0,
+        refractory_s=0.0,
+    )
     sim = EventSimulator(model, (1, 1), np.random.default_rng(0))
     sim.start(np.array([[1.0]]) - model.log_eps)
     t0 = 1000.0  # where float32 resolution would be 61 us
@@ -58,7 +70,6 @@ def test_ground_truth_and_imu_agree(short_sequence):
     assert np.linalg.norm(imu.acc, axis=1).mean() == pytest.approx(9.81, abs=0.3)
 
 
-
 def test_a_davis346_fisheye_sequence_is_written_at_its_size_with_its_lens(tmp_path):
     camera = SENSORS["davis346"]
     simulate(SimConfig(duration_s=0.3, seed=2, camera=camera), tmp_path / "fisheye")
@@ -76,7 +87,9 @@ def test_the_rendered_rays_are_those_of_the_lens():
     for name, atol_px in (("davis346", 1e-3), ("davis240", 0.01)):  # radtan: cv2.undistortPoints' 5 steps
         camera = SENSORS[name].model()
         u, v = np.meshgrid(np.arange(camera.width), np.arange(camera.height))
-        np.testing.assert_allclose(camera.project(camera_rays(camera)), np.stack([u.ravel(), v.ravel()], 1), rtol=0, atol=atol_px)
+        np.testing.assert_allclose(
+            camera.project(camera_rays(camera)), np.stack([u.ravel(), v.ravel()], 1), rtol=0, atol=atol_px
+        )
 
 
 #: What a 0.3 s sequence (seed 3, the default camera) holds, hashed: its events, frames, frame
@@ -94,8 +107,15 @@ def test_a_short_sequence_is_what_it_always_was(tmp_path):
     digest = hashlib.sha256(np.asarray(ds.events()).tobytes())
     for k in range(len(ds.frame_times())):
         digest.update(ds.load_frame(k).tobytes())
-    for values in (ds.frame_times(), ds.imu.t, ds.imu.acc, ds.imu.gyro, ds.ground_truth.t, ds.ground_truth.p_w_c,
-                   ds.ground_truth.q_w_c):
+    for values in (
+        ds.frame_times(),
+        ds.imu.t,
+        ds.imu.acc,
+        ds.imu.gyro,
+        ds.ground_truth.t,
+        ds.ground_truth.p_w_c,
+        ds.ground_truth.q_w_c,
+    ):
         digest.update(np.ascontiguousarray(values).tobytes())
     assert len(ds.events()) == 286_785
     assert digest.hexdigest()[:16] == SHORT_SEQUENCE_SHA256

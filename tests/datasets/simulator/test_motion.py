@@ -1,6 +1,7 @@
 """The hand-held motion: speed growth, mostly rotation."""
 
 import numpy as np
+
 from eas_vo.datasets.simulator.motion import HandHeldMotion
 
 
@@ -13,7 +14,6 @@ def test_motion_speed_grows_and_is_mostly_rotation():
     assert np.ptp(p, axis=0).max() < 0.2  # centimetres, not metres
 
 
-
 def test_a_faster_motion_is_the_same_path_travelled_faster():
     """Without speed growth, speed v at time t is speed 1 at v t: the same poses, v times the
     angular velocity."""
@@ -24,7 +24,9 @@ def test_a_faster_motion_is_the_same_path_travelled_faster():
     R_slow, p_slow = slow.pose(4.0 * t)
     np.testing.assert_allclose(R_fast, R_slow, atol=1e-12)
     np.testing.assert_allclose(p_fast, p_slow, atol=1e-12)
-    np.testing.assert_allclose(fast.angular_velocity(t), 4.0 * slow.angular_velocity(4.0 * t), atol=1e-4)  # central differences
+    np.testing.assert_allclose(
+        fast.angular_velocity(t), 4.0 * slow.angular_velocity(4.0 * t), atol=1e-4
+    )  # central differences
 
 
 def test_a_scaled_translation_is_the_same_path_its_positions_scaled():

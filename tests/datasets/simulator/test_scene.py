@@ -1,6 +1,7 @@
 """The HDR room: radiance range, dim view, parallax."""
 
 import numpy as np
+
 from eas_vo.datasets.simulator.generate import DAVIS240_CAMERA, camera_rays
 from eas_vo.datasets.simulator.motion import HandHeldMotion
 from eas_vo.datasets.simulator.scene import Scene
@@ -26,4 +27,3 @@ def test_render_sees_parallax_from_translation():
     a = scene.render(np.eye(3), np.zeros(3), rays, (180, 240))
     b = scene.render(np.eye(3), np.array([0.05, 0, 0]), rays, (180, 240))
     assert np.abs(np.log(a + 1e-3) - np.log(b + 1e-3)).mean() > 0.05
-

@@ -4,11 +4,19 @@ mismatch, and APS frames."""
 
 import numpy as np
 import pytest
+
 from eas_vo.datasets.simulator.sensor import ApsModel, DvsModel, EventSimulator
 
 #: An ideal pixel: no filter, no noise, exact thresholds of 0.3.
-IDEAL = DvsModel(contrast_threshold=0.3, threshold_sigma=0.0, cutoff_hz=0.0, shot_noise_rate_hz=0.0, leak_rate_hz=0.0,
-                 hot_pixel_fraction=0.0, refractory_s=0.0)
+IDEAL = DvsModel(
+    contrast_threshold=0.3,
+    threshold_sigma=0.0,
+    cutoff_hz=0.0,
+    shot_noise_rate_hz=0.0,
+    leak_rate_hz=0.0,
+    hot_pixel_fraction=0.0,
+    refractory_s=0.0,
+)
 
 
 def test_events_count_threshold_crossings_with_interpolated_times():

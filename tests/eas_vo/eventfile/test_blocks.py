@@ -1,6 +1,5 @@
 """The compiled block parser: exact times, two threads equal one, unusual lines leave the fast path."""
 
-
 import numpy as np
 import pytest
 
@@ -10,11 +9,19 @@ from helpers import random_events
 
 def test_compiled_parser_equals_python_float_exactly():
     rng = np.random.default_rng(3)
-    text = "".join(
-        f"{t:.{d}f} {x} {y} {p}\n"
-        for t, d, x, y, p in zip(rng.uniform(0, 5000, 3000), rng.integers(0, 10, 3000), rng.integers(0, 240, 3000),
-                                 rng.integers(0, 180, 3000), rng.integers(0, 2, 3000))
-    ) + "7 1 2 -1\r\n  \n0.5\t3  4 1"  # integer time, CRLF, -1 polarity, blank line, tabs, no final newline
+    text = (
+        "".join(
+            f"{t:.{d}f} {x} {y} {p}\n"
+            for t, d, x, y, p in zip(
+                rng.uniform(0, 5000, 3000),
+                rng.integers(0, 10, 3000),
+                rng.integers(0, 240, 3000),
+                rng.integers(0, 180, 3000),
+                rng.integers(0, 2, 3000),
+            )
+        )
+        + "7 1 2 -1\r\n  \n0.5\t3  4 1"
+    )  # integer time, CRLF, -1 polarity, blank line, tabs, no final newline
     ev = parse_block(np.frombuffer(text.encode(), np.uint8), tolerance_s=np.inf)
     rows = [line.split() for line in text.splitlines() if line.strip()]
     t = np.maximum.accumulate([float(r[0]) for r in rows])  # steps back are clamped
@@ -35,12 +42,22 @@ def test_parser_in_two_threads_equals_one():
     np.testing.assert_allclose(parse_block(buf)["t"], ev["t"], atol=5e-10)
 
 
-@pytest.mark.parametrize("text", ["1e-3 1 2 1\n", "-0.5 1 2 1\n", "0.1 1 2\n", "0.1 1 2 1 9\n", "0.1 1.5 2 1\n",
-                                  "0.1 1.05 2 1\n", ". 1 2 1\n", "0.1 .0 2 1\n",
-                                  "10000000000000000.5 1 2 1\n"])  # an integer part beyond 2**53 / 10 s
+@pytest.mark.parametrize(
+    "text",
+    [
+        "1e-3 1 2 1\n",
+        "-0.5 1 2 1\n",
+        "0.1 1 2\n",
+        "0.1 1 2 1 9\n",
+        "0.1 1.5 2 1\n",
+        "0.1 1.05 2 1\n",
+        ". 1 2 1\n",
+        "0.1 .0 2 1\n",
+        "10000000000000000.5 1 2 1\n",
+    ],
+)  # an integer part beyond 2**53 / 10 s
 def test_unusual_lines_leave_the_fast_path(text):
     assert parse_block(np.frombuffer(text.encode(), np.uint8)) is None
-
 
 
 def _times_of(text: str) -> list[float]:
@@ -52,7 +69,9 @@ def test_unix_times_with_any_number_of_digits_take_the_compiled_path_exactly():
     parser takes them, each the float64 nearest to its text, like integer parts and fractions
     of other lengths (it may leave a line to the text path only to be sure of the nearest)."""
     rng = np.random.default_rng(8)
-    unix = "".join(f"{1_700_000_000 + k // 7}.{ns:09d} 239 11 0\n" for k, ns in enumerate(np.sort(rng.integers(0, 10**9, 5000))))
+    unix = "".join(
+        f"{1_700_000_000 + k // 7}.{ns:09d} 239 11 0\n" for k, ns in enumerate(np.sort(rng.integers(0, 10**9, 5000)))
+    )
     ev = parse_block(np.frombuffer(unix.encode(), np.uint8), tolerance_s=np.inf)
     assert ev is not None
     np.testing.assert_array_equal(ev["t"], np.maximum.accumulate(_times_of(unix)))  # bit-exact

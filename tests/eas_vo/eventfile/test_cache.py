@@ -166,11 +166,12 @@ def test_strict_reports_the_earliest_bad_line_whatever_its_problem(tmp_path):
     assert info.value.line == 2
     warnings = DataWarnings()
     assert len(load_event_file(path, lenient=True, warnings=warnings)) == 1
-    assert sorted(warnings.lines()) == sorted([
-        f"{path}: 1 dropped: polarity not 0/1 (or -1/1) (first at line 2)",
-        f"{path}: 1 dropped: pixel outside the 240x180 sensor (first at line 3)",
-    ])
-
+    assert sorted(warnings.lines()) == sorted(
+        [
+            f"{path}: 1 dropped: polarity not 0/1 (or -1/1) (first at line 2)",
+            f"{path}: 1 dropped: pixel outside the 240x180 sensor (first at line 3)",
+        ]
+    )
 
 
 def test_the_checksum_taken_while_writing_is_the_records_checksum(tmp_path):
@@ -237,13 +238,15 @@ def test_validator_divides_integer_ticks_as_numpy_does():
     seconds = raw["timestamp"] / 1e6
     valid = raw[[0, 1, 2, 3, 5]]  # (x = 300 is off the sensor)
     assert not valid["x"].flags.c_contiguous
-    fast = Validator("f", 240, 180, 1e-6, False, DataWarnings())(valid["timestamp"], valid["x"], valid["y"],
-                                                                  valid["polarity"], lambda i: i, per_second=1e6)
+    fast = Validator("f", 240, 180, 1e-6, False, DataWarnings())(
+        valid["timestamp"], valid["x"], valid["y"], valid["polarity"], lambda i: i, per_second=1e6
+    )
     assert np.array_equal(fast["t"], seconds[[0, 1, 2, 3, 5]])
     assert np.array_equal(fast["x"], valid["x"]) and np.array_equal(fast["p"], valid["polarity"])
     warnings = DataWarnings()
-    slow = Validator("f", 240, 180, 1e-6, True, warnings)(raw["timestamp"], raw["x"], raw["y"], raw["polarity"],
-                                                          lambda i: i, per_second=1e6)
+    slow = Validator("f", 240, 180, 1e-6, True, warnings)(
+        raw["timestamp"], raw["x"], raw["y"], raw["polarity"], lambda i: i, per_second=1e6
+    )
     assert slow.tobytes() == fast.tobytes()
     assert sum(warnings.counts.values()) == 1
 
@@ -263,8 +266,17 @@ def test_the_block_check_agrees_with_row_by_row_verdicts(data):
     x, y, p = rng.integers(0, 240, n), rng.integers(0, 180, n), rng.integers(0, 2, n)
     ticks = ticks.astype(float)
     for _ in range(data.draw(st.integers(0, 4))):
-        i = data.draw(st.sampled_from([0, n - 1, min(n - 1, TABLE_CHUNK_ROWS), min(n - 1, TABLE_CHUNK_ROWS - 1),
-                                       data.draw(st.integers(0, n - 1))]))
+        i = data.draw(
+            st.sampled_from(
+                [
+                    0,
+                    n - 1,
+                    min(n - 1, TABLE_CHUNK_ROWS),
+                    min(n - 1, TABLE_CHUNK_ROWS - 1),
+                    data.draw(st.integers(0, n - 1)),
+                ]
+            )
+        )
         kind = data.draw(st.sampled_from(["x", "y", "p", "nan", "back_small", "back_big"]))
         if kind == "x":
             x[i] = data.draw(st.sampled_from([-1, 240, 5000]))
@@ -312,8 +324,17 @@ def test_the_dv_record_check_agrees_with_the_field_check(data):
     records["x"], records["y"] = rng.integers(0, min(width, 32767), n), rng.integers(0, min(height, 32767), n)
     records["p"] = rng.integers(0, 2, n)
     for _ in range(data.draw(st.integers(0, 4))):
-        i = data.draw(st.sampled_from([0, n - 1, min(n - 1, TABLE_CHUNK_ROWS), min(n - 1, TABLE_CHUNK_ROWS - 1),
-                                       data.draw(st.integers(0, n - 1))]))
+        i = data.draw(
+            st.sampled_from(
+                [
+                    0,
+                    n - 1,
+                    min(n - 1, TABLE_CHUNK_ROWS),
+                    min(n - 1, TABLE_CHUNK_ROWS - 1),
+                    data.draw(st.integers(0, n - 1)),
+                ]
+            )
+        )
         kind = data.draw(st.sampled_from(["x", "y", "p", "back_small", "back_big"]))
         if kind in ("x", "y"):
             records[kind][i] = data.draw(st.sampled_from([-1, -32768, min(width, 32767), min(height, 32767), 32767]))
@@ -323,8 +344,9 @@ def test_the_dv_record_check_agrees_with_the_field_check(data):
             records["t"][i] -= 1 if kind == "back_small" else 5000
     last_t = data.draw(st.sampled_from([-np.inf, 9.0, 10.0000005]))
     want = np.zeros(n, EVENT_DTYPE)
-    want_bad, want_last = check_and_pack(records["t"], 1e6, records["x"], records["y"], records["p"], last_t,
-                                         width, height, 1e-6, want)
+    want_bad, want_last = check_and_pack(
+        records["t"], 1e6, records["x"], records["y"], records["p"], last_t, width, height, 1e-6, want
+    )
     got = np.zeros(n, EVENT_DTYPE)
     bad, got_last = check_and_pack_dv(records.view(np.int64).reshape(-1, 2), 0, last_t, width, height, 1e-6, got)
     assert (bad, got_last) == (want_bad, want_last)

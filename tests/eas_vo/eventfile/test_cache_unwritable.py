@@ -48,8 +48,10 @@ def test_events_are_read_into_memory_with_one_notice(read_only_cache, tmp_path, 
         np.testing.assert_array_equal(loaded["x"], events["x"])
     said = [(r.levelno, r.getMessage()) for r in caplog.records if r.name.startswith("eas_vo")]
     assert len(said) == 1 and said[0][0] == logging.WARNING, said
-    assert said[0][1].startswith(f"the event cache folder {read_only_cache / 'events'} cannot be written "
-                                 "(Read-only file system); events are read into memory")
+    assert said[0][1].startswith(
+        f"the event cache folder {read_only_cache / 'events'} cannot be written "
+        "(Read-only file system); events are read into memory"
+    )
     assert not read_only_cache.exists()
 
 

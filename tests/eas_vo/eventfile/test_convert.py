@@ -3,16 +3,14 @@ hostile text (hypothesis): one-line errors naming the line, or exactly the valid
 
 import io
 
+import numpy as np
+import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-import numpy as np
-import pytest
-
-from eas_vo.errors import DataError
+from eas_vo.errors import DataError, DataWarnings
 from eas_vo.eventfile import convert_text_to_cache, format_events
 from eas_vo.types import EVENT_DTYPE
-from eas_vo.errors import DataWarnings
 from helpers import hostile_number, hostile_settings, random_events
 
 
@@ -36,11 +34,10 @@ def load_ref(text):
     return ev
 
 
-
 line = st.one_of(
-    st.tuples(st.floats(0, 10).map(lambda v: f"{v:.6f}"), st.integers(0, 239), st.integers(0, 179), st.integers(0, 1)).map(
-        lambda r: " ".join(map(str, r))
-    ),
+    st.tuples(
+        st.floats(0, 10).map(lambda v: f"{v:.6f}"), st.integers(0, 239), st.integers(0, 179), st.integers(0, 1)
+    ).map(lambda r: " ".join(map(str, r))),
     st.lists(hostile_number(), min_size=0, max_size=6).map(" ".join),
     st.binary(max_size=20).map(lambda b: b.decode("latin-1")),
 )
@@ -59,7 +56,15 @@ def reference_rows(data: bytes):
             t, x, y, p = (float(v) for v in parts) if len(parts) == 4 else (None,) * 4
         except ValueError:
             t = None
-        ok = t is not None and np.isfinite(t) and 0 <= x < 240 and 0 <= y < 180 and x == int(x) and y == int(y) and p in (0, 1, -1)
+        ok = (
+            t is not None
+            and np.isfinite(t)
+            and 0 <= x < 240
+            and 0 <= y < 180
+            and x == int(x)
+            and y == int(y)
+            and p in (0, 1, -1)
+        )
         rows.append((t, int(x), int(y), int(p > 0)) if ok else None)
     return rows
 
@@ -118,16 +123,20 @@ def _convert_cpu_s(data: bytes, lenient: bool) -> float:
     return best
 
 
-@pytest.mark.parametrize("lenient, line", [
-    (False, "{t:e} {x} 33 1{pad}\n"),  # valid, in a form only the text path reads (an exponent)
-    (True, "{t:.6f} {x}.5 33 1{pad}\n"),  # dropped and counted: a pixel coordinate that is not an integer
-    (False, "{t:e} {x} 33 1{pad}\n{t:.6f} {x} 34 0{pad}\n"),  # the two paths taking turns
-])
+@pytest.mark.parametrize(
+    "lenient, line",
+    [
+        (False, "{t:e} {x} 33 1{pad}\n"),  # valid, in a form only the text path reads (an exponent)
+        (True, "{t:.6f} {x}.5 33 1{pad}\n"),  # dropped and counted: a pixel coordinate that is not an integer
+        (False, "{t:e} {x} 33 1{pad}\n{t:.6f} {x} 34 0{pad}\n"),  # the two paths taking turns
+    ],
+)
 def test_the_text_path_is_linear_in_the_lines(lenient, line):
     """Lines the compiled parser does not take cost the same per line however many there are:
     4x the lines take under 8x the time. Each line ends in 1000 blanks (allowed), so that a path
     scanning the rest of the text for each such line, as it once did, shows its 16x at a size a
     test can afford."""
+
     def text(n):
         return "".join(line.format(t=k * 1e-6, x=k % 240, pad=" " * 1000) for k in range(n)).encode()
 
@@ -137,8 +146,11 @@ def test_the_text_path_is_linear_in_the_lines(lenient, line):
 
 def test_pixel_coordinates_that_are_not_integers_are_named_or_counted():
     data = b"0.1 1 2 1\n0.5 120.5 33.0 1\n0.6 120 33 1\n"
-    with pytest.raises(DataError, match=r"^events.txt:2: pixel coordinates and polarity must be integers, "
-                                        r"found x y p = 120.5 33 1$"):
+    with pytest.raises(
+        DataError,
+        match=r"^events.txt:2: pixel coordinates and polarity must be integers, "
+        r"found x y p = 120.5 33 1$",
+    ):
         convert(data, lenient=False)
     events, warnings = convert(data, lenient=True)
     assert events["x"].tolist() == [1, 120]

@@ -6,9 +6,9 @@ import re
 
 import numpy as np
 import pytest
-from helpers import SHARED_DATA, require
 
 from eas_vo.eventfile.libcaer import LibcaerCmpDecoder, LibcaerDecoder
+from helpers import SHARED_DATA, require
 
 #: A host clock at Unix time [ns] (its last digits not zero: nothing may round them).
 HOST_NS = 1_744_227_144_123_456_789
@@ -88,7 +88,12 @@ def assert_events(decoded, t_us, x, y, p):
     np.testing.assert_array_equal(decoded.x, x)
     np.testing.assert_array_equal(decoded.y, y)
     np.testing.assert_array_equal(decoded.p, p)
-    assert (decoded.t_ns.dtype, decoded.x.dtype, decoded.y.dtype, decoded.p.dtype) == (np.int64, np.uint16, np.uint16, np.uint8)
+    assert (decoded.t_ns.dtype, decoded.x.dtype, decoded.y.dtype, decoded.p.dtype) == (
+        np.int64,
+        np.uint16,
+        np.uint16,
+        np.uint8,
+    )
     assert len(decoded.trigger_t_ns) == len(decoded.trigger_edge) == len(decoded.trigger_id) == 0
 
 
@@ -97,6 +102,7 @@ def word_codes(data: bytes) -> set[int]:
 
 
 # ----------------------------------------------------------------------------- known answers
+
 
 @pytest.mark.parametrize("width, height", SIZES)
 def test_libcaer_events_come_back_exactly_across_a_roll_over_with_invalid_events_skipped(width, height):
@@ -129,7 +135,13 @@ def cmp_words(*words) -> np.ndarray:
     return np.array(words, "<u2").view(np.uint8)
 
 
-ADDR_X_5, ADDR_X_7, ADDR_Y_3_ON, BASE_Y_16_OFF, VECT_8_BITS_0_2 = 2 << 12 | 5, 2 << 12 | 7, 3 << 12 | 1 << 11 | 3, 4 << 12 | 16, 5 << 12 | 0b101
+ADDR_X_5, ADDR_X_7, ADDR_Y_3_ON, BASE_Y_16_OFF, VECT_8_BITS_0_2 = (
+    2 << 12 | 5,
+    2 << 12 | 7,
+    3 << 12 | 1 << 11 | 3,
+    4 << 12 | 16,
+    5 << 12 | 0b101,
+)
 
 
 def test_libcaer_cmp_carries_the_address_to_the_next_packet_but_not_from_a_damaged_one():
@@ -143,6 +155,7 @@ def test_libcaer_cmp_carries_the_address_to_the_next_packet_but_not_from_a_damag
 
 
 # ----------------------------------------------------------------------------- the real bag
+
 
 def test_the_real_davis346_bag_gives_event_camera_pys_stated_sums():
     """event_camera_py's tests/test_2.py: 360223 OFF and 211043 ON events, no triggers, and 335555680277 as
@@ -177,21 +190,25 @@ def test_the_real_davis346_bag_gives_event_camera_pys_stated_sums():
 
 # ----------------------------------------------------------------------------- damaged bytes
 
+
 def offset_named(exc: pytest.ExceptionInfo) -> int:
     found = re.search(r"byte (\d+)", str(exc.value))
     assert found, f"no byte offset in {exc.value}"
     return int(found.group(1))
 
 
-@pytest.mark.parametrize("words, offset, what", [
-    ((ADDR_X_5, 6 << 12), 2, "VECT_12, which libcaer_driver does not write"),
-    ((ADDR_X_5, 15 << 12 | 0xFFF), 2, "word code 15"),
-    ((1 << 12 | 4, ADDR_Y_3_ON), 2, "ADDR_Y event before any ADDR_X"),
-    ((ADDR_X_5, VECT_8_BITS_0_2), 2, "VECT_8 event before any VECT_BASE_Y"),
-    ((2 << 12 | 346, ADDR_Y_3_ON), 2, "x=346, y=3 outside the 346x260 sensor"),
-    ((ADDR_X_5, 4 << 12 | 248, 5 << 12 | 0x80, 5 << 12 | 0x10), 6, "x=5, y=260 outside"),
-    ((1 << 12 | 9, ADDR_X_5, ADDR_Y_3_ON, 1 << 12 | 8, ADDR_Y_3_ON), 8, "steps back from 9 us to 8 us"),
-])
+@pytest.mark.parametrize(
+    "words, offset, what",
+    [
+        ((ADDR_X_5, 6 << 12), 2, "VECT_12, which libcaer_driver does not write"),
+        ((ADDR_X_5, 15 << 12 | 0xFFF), 2, "word code 15"),
+        ((1 << 12 | 4, ADDR_Y_3_ON), 2, "ADDR_Y event before any ADDR_X"),
+        ((ADDR_X_5, VECT_8_BITS_0_2), 2, "VECT_8 event before any VECT_BASE_Y"),
+        ((2 << 12 | 346, ADDR_Y_3_ON), 2, "x=346, y=3 outside the 346x260 sensor"),
+        ((ADDR_X_5, 4 << 12 | 248, 5 << 12 | 0x80, 5 << 12 | 0x10), 6, "x=5, y=260 outside"),
+        ((1 << 12 | 9, ADDR_X_5, ADDR_Y_3_ON, 1 << 12 | 8, ADDR_Y_3_ON), 8, "steps back from 9 us to 8 us"),
+    ],
+)
 def test_damaged_libcaer_cmp_words_are_named_by_their_byte(words, offset, what):
     with pytest.raises(ValueError, match=re.escape(what)) as exc:
         LibcaerCmpDecoder(346, 260).decode(cmp_words(*words), HOST_NS)
@@ -202,13 +219,16 @@ def libcaer_words(*pairs) -> np.ndarray:
     return np.array(pairs, "<u4").view(np.uint8)
 
 
-@pytest.mark.parametrize("pairs, offset, what", [
-    (((1 | 3 << 17, 10), (1, 1 << 31)), 12, "has bit 31 set"),
-    (((1, 10), (1, 10 + (1 << 30))), 12, "time jumps from 10 us to 1073741834 us"),
-    (((1, 10), (1, 9)), 12, "time jumps from 10 us to 9 us"),
-    (((1, 5), (1 | 346 << 17, 6)), 8, "x=346, y=0 outside the 346x260 sensor"),
-    (((1 | 260 << 2, 5),), 0, "x=0, y=260 outside"),
-])
+@pytest.mark.parametrize(
+    "pairs, offset, what",
+    [
+        (((1 | 3 << 17, 10), (1, 1 << 31)), 12, "has bit 31 set"),
+        (((1, 10), (1, 10 + (1 << 30))), 12, "time jumps from 10 us to 1073741834 us"),
+        (((1, 10), (1, 9)), 12, "time jumps from 10 us to 9 us"),
+        (((1, 5), (1 | 346 << 17, 6)), 8, "x=346, y=0 outside the 346x260 sensor"),
+        (((1 | 260 << 2, 5),), 0, "x=0, y=260 outside"),
+    ],
+)
 def test_damaged_libcaer_events_are_named_by_their_byte(pairs, offset, what):
     with pytest.raises(ValueError, match=re.escape(what)) as exc:
         LibcaerDecoder(346, 260).decode(libcaer_words(*pairs), HOST_NS)
@@ -221,11 +241,13 @@ def test_cut_packets_name_the_byte_where_the_last_word_breaks_off(decoder, word)
     data, time_base = (encode_libcaer if word == 8 else encode_cmp)(t_us, x, y, p)
     for cut in range(1, word):
         with pytest.raises(ValueError, match=rf"cut inside a word \(\d+ bytes, not a multiple of {word}\)") as exc:
-            decoder(346, 260).decode(np.frombuffer(data[:len(data) - cut], np.uint8), time_base)
+            decoder(346, 260).decode(np.frombuffer(data[: len(data) - cut], np.uint8), time_base)
         assert offset_named(exc) == (len(data) - cut) // word * word
 
 
-@pytest.mark.parametrize("decoder, span_ns", [(LibcaerDecoder, (1 << 31) * 1000), (LibcaerCmpDecoder, (1 << 24) * 1000)])
+@pytest.mark.parametrize(
+    "decoder, span_ns", [(LibcaerDecoder, (1 << 31) * 1000), (LibcaerCmpDecoder, (1 << 24) * 1000)]
+)
 def test_a_time_base_that_leaves_no_room_for_the_packets_times_is_refused(decoder, span_ns):
     for time_base in (-1, np.iinfo(np.int64).max - span_ns + 1):
         with pytest.raises(ValueError, match="time_base"):

@@ -7,10 +7,16 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from prophesee_words import (
+    encode_evt2,
+    encode_evt3,
+    encode_evt21,
+    event_camera_py_packets,
+    random_stream,
+    random_triggers,
+)
 
-from eas_vo.eventfile.prophesee import (OUTSIDE_REFUSED_MIN, Evt2Decoder, Evt3Decoder, Evt21Decoder, WordError)
-from prophesee_words import (encode_evt2, encode_evt3, encode_evt21, event_camera_py_packets, random_stream,
-                             random_triggers)
+from eas_vo.eventfile.prophesee import OUTSIDE_REFUSED_MIN, Evt2Decoder, Evt3Decoder, Evt21Decoder, WordError
 
 W, H = 640, 480
 
@@ -19,8 +25,11 @@ FORMATS = {
     "evt3": (Evt3Decoder, encode_evt3, (1 << 24) - 150_000),
     "evt2": (Evt2Decoder, encode_evt2, (1 << 34) - 150_000),
     "evt21": (Evt21Decoder, encode_evt21, (1 << 34) - 150_000),
-    "evt21-legacy": (lambda w, h: Evt21Decoder(w, h, legacy=True), lambda e, t: encode_evt21(e, t, legacy=True),
-                     (1 << 34) - 150_000),
+    "evt21-legacy": (
+        lambda w, h: Evt21Decoder(w, h, legacy=True),
+        lambda e, t: encode_evt21(e, t, legacy=True),
+        (1 << 34) - 150_000,
+    ),
 }
 
 
@@ -28,8 +37,10 @@ def decode_all(decoder, words, cuts=()):
     """The words decoded in packets cut at word indices `cuts`, joined."""
     bounds = [0, *cuts, len(words)]
     parts = [decoder.decode(words[a:b].view(np.uint8), 0) for a, b in zip(bounds, bounds[1:])]
-    return {name: np.concatenate([getattr(d, name) for d in parts]) for name in
-            ("t_ns", "x", "y", "p", "trigger_t_ns", "trigger_edge", "trigger_id")}
+    return {
+        name: np.concatenate([getattr(d, name) for d in parts])
+        for name in ("t_ns", "x", "y", "p", "trigger_t_ns", "trigger_edge", "trigger_id")
+    }
 
 
 def assert_decoded(got, events, triggers):
@@ -87,7 +98,7 @@ def test_events_before_the_first_time_are_skipped_and_counted(name):
     decoder = make(W, H)
     got = decoder.decode(cut.view(np.uint8))
     assert decoder.skipped > 0 and len(got.t_ns) + decoder.skipped == len(expected)
-    np.testing.assert_array_equal(got.t_ns, expected["t"][decoder.skipped:] * 1000)
+    np.testing.assert_array_equal(got.t_ns, expected["t"][decoder.skipped :] * 1000)
 
 
 def _is_time(name: str, word: int) -> bool:
@@ -139,7 +150,9 @@ def test_damaged_words_are_a_value_error_naming_the_byte(name):
     assert refused > 100
     bad = words.copy()
     bad[len(bad) // 2] = {"evt3": 0x9ABC, "evt2": 0x9000_0001, "evt21": 0x9 << 60, "evt21-legacy": 0x9 << 28}[name]
-    with pytest.raises(WordError, match=rf"^byte {len(bad) // 2 * bad.itemsize}: word 0x[0-9a-f]+ is of no EVT .* type \(type 9\)"):
+    with pytest.raises(
+        WordError, match=rf"^byte {len(bad) // 2 * bad.itemsize}: word 0x[0-9a-f]+ is of no EVT .* type \(type 9\)"
+    ):
         make(W, H).decode(bad.view(np.uint8))
 
 

@@ -3,13 +3,13 @@ the last time, and a pixel or polarity that is not a whole number is named by it
 
 import numpy as np
 import pytest
-from helpers import hostile_settings
 from hypothesis import given
 from hypothesis import strategies as st
 
 from eas_vo.errors import DataError, DataWarnings
 from eas_vo.eventfile import Validator, pack_rows, pack_table
 from eas_vo.types import EVENT_DTYPE
+from helpers import hostile_settings
 
 WIDTH, HEIGHT = 640, 480
 
@@ -17,12 +17,20 @@ WIDTH, HEIGHT = 640, 480
 def table(n: int, seed: int = 0) -> np.ndarray:
     """n rows `t x y p` (p in {-1, 1}) on a 640x480 sensor, times increasing [s]."""
     rng = np.random.default_rng(seed)
-    return np.column_stack([np.cumsum(rng.uniform(0, 1e-4, n)), rng.integers(0, WIDTH, n), rng.integers(0, HEIGHT, n),
-                            rng.choice([-1.0, 1.0], n)])
+    return np.column_stack(
+        [
+            np.cumsum(rng.uniform(0, 1e-4, n)),
+            rng.integers(0, WIDTH, n),
+            rng.integers(0, HEIGHT, n),
+            rng.choice([-1.0, 1.0], n),
+        ]
+    )
 
 
 def validator(lenient: bool = False, warnings: DataWarnings | None = None) -> Validator:
-    return Validator("f.h5:events", WIDTH, HEIGHT, 1e-6, lenient, warnings if warnings is not None else DataWarnings(), "row")
+    return Validator(
+        "f.h5:events", WIDTH, HEIGHT, 1e-6, lenient, warnings if warnings is not None else DataWarnings(), "row"
+    )
 
 
 def test_clean_rows_are_packed_exactly_in_any_column_order():
@@ -60,15 +68,24 @@ def test_a_pixel_or_polarity_not_whole_is_named_or_dropped(column, value):
 
 
 @hostile_settings(80)
-@given(damage=st.lists(st.tuples(st.integers(0, 199), st.integers(0, 3),
-                                 st.sampled_from([-1.0, 0.0, 0.5, 2.0, 479.0, 480.0, 640.0, 1e20, np.nan, np.inf, -5.0])),
-                       max_size=6),
-       lenient=st.booleans())
+@given(
+    damage=st.lists(
+        st.tuples(
+            st.integers(0, 199),
+            st.integers(0, 3),
+            st.sampled_from([-1.0, 0.0, 0.5, 2.0, 479.0, 480.0, 640.0, 1e20, np.nan, np.inf, -5.0]),
+        ),
+        max_size=6,
+    ),
+    lenient=st.booleans(),
+)
 def test_the_compiled_pass_agrees_with_row_by_row_verdicts(damage, lenient):
     rows = table(200, seed=len(damage))
     for row, column, value in damage:
         rows[row, column] = rows[row, column] + value if column == 0 else value
-    whole = np.all(np.isfinite(rows[:, 1:]) & (rows[:, 1:] == np.round(rows[:, 1:])) & (np.abs(rows[:, 1:]) < 2**31), axis=1)
+    whole = np.all(
+        np.isfinite(rows[:, 1:]) & (rows[:, 1:] == np.round(rows[:, 1:])) & (np.abs(rows[:, 1:]) < 2**31), axis=1
+    )
     got_w, want_w = DataWarnings(), DataWarnings()
     try:
         got = pack_rows(rows, (0, 1, 2, 3), validator(lenient, got_w), 0)
@@ -111,8 +128,16 @@ def packed_table(rows: np.ndarray, block: int, group: int, lenient: bool, thread
     """pack_table's records and warning lines (or its error), and the rows `touch` was given."""
     warnings, parts, touched = DataWarnings(), [], []
     try:
-        count = pack_table(rows, (0, 1, 2, 3), validator(lenient, warnings), lambda ev: parts.append(ev.copy()),
-                           block, threads, group, touch=lambda a, b: touched.append((a, b)))
+        count = pack_table(
+            rows,
+            (0, 1, 2, 3),
+            validator(lenient, warnings),
+            lambda ev: parts.append(ev.copy()),
+            block,
+            threads,
+            group,
+            touch=lambda a, b: touched.append((a, b)),
+        )
     except DataError as exc:
         return str(exc), touched
     events = np.concatenate(parts) if parts else np.empty(0, EVENT_DTYPE)
@@ -121,11 +146,22 @@ def packed_table(rows: np.ndarray, block: int, group: int, lenient: bool, thread
 
 
 @hostile_settings(120)
-@given(damage=st.lists(st.tuples(st.integers(1, 2999), st.integers(0, 3),
-                                 st.sampled_from([-0.5, -5e-7, -1e-9, 0.5, 640.0, -1.0, np.nan, np.inf, 1e300])),
-                       max_size=6),
-       near_seams=st.booleans(), block=st.sampled_from([1, 7, 100, 256, 1024, 5000]),
-       group=st.sampled_from([0, 300, 1000]), lenient=st.booleans(), big_endian=st.booleans(), threads=st.sampled_from([1, 2, 3]))
+@given(
+    damage=st.lists(
+        st.tuples(
+            st.integers(1, 2999),
+            st.integers(0, 3),
+            st.sampled_from([-0.5, -5e-7, -1e-9, 0.5, 640.0, -1.0, np.nan, np.inf, 1e300]),
+        ),
+        max_size=6,
+    ),
+    near_seams=st.booleans(),
+    block=st.sampled_from([1, 7, 100, 256, 1024, 5000]),
+    group=st.sampled_from([0, 300, 1000]),
+    lenient=st.booleans(),
+    big_endian=st.booleans(),
+    threads=st.sampled_from([1, 2, 3]),
+)
 def test_pack_table_is_pack_rows_over_groups_in_turn(damage, near_seams, block, group, lenient, big_endian, threads):
     """On several threads, blocks packed from the previous row's time, a block taken again
     when it had a problem or the time before it was clamped or dropped: the same records, the

@@ -25,4 +25,3 @@ def test_round_trip_through_text_and_cache(tmp_path):
     np.testing.assert_array_equal(parsed, primed)  # the primed cache equals a fresh parse, bit for bit
     np.testing.assert_array_equal(parsed[["x", "y", "p"]], ev[["x", "y", "p"]])
     np.testing.assert_allclose(parsed["t"], ev["t"], atol=1e-9)
-

@@ -14,8 +14,8 @@ from scipy.spatial.transform import Rotation
 from eas_vo.errors import DataError
 from eas_vo.evaluation.trajectory import associate, trajectory_ape
 from eas_vo.geometry.rotations import matrices_from_quats
-from eas_vo.io.tum import read_tum as read_estimate
 from eas_vo.io.tum import format_tum
+from eas_vo.io.tum import read_tum as read_estimate
 from eas_vo.types import PoseSeries
 from helpers import mark_as_eas_vo_output, run_eas_vo
 
@@ -30,8 +30,20 @@ def _frontend_pixels(sequence, frames, frontend):
 @pytest.mark.parametrize("fmt", ["tum", "euroc"])
 def test_an_exported_sequence_reads_back_as_the_frontends_images(short_sequence, tmp_path, fmt):
     out = tmp_path / fmt
-    done = run_eas_vo("export", "--dataset", str(short_sequence), "--frontend", "eas", "--format", fmt, "--duration", "1",
-                      "--out", str(out), "--quiet")
+    done = run_eas_vo(
+        "export",
+        "--dataset",
+        str(short_sequence),
+        "--frontend",
+        "eas",
+        "--format",
+        fmt,
+        "--duration",
+        "1",
+        "--out",
+        str(out),
+        "--quiet",
+    )
     assert done.returncode == 0, done.stderr
     if fmt == "tum":
         lines = (out / "rgb.txt").read_text().splitlines()
@@ -55,8 +67,12 @@ def test_an_exported_sequence_reads_back_as_the_frontends_images(short_sequence,
 
 def test_settings_yaml_holds_the_calibration_as_orbslam2_reads_it(short_sequence, tmp_path):
     out = tmp_path / "tum"
-    assert run_eas_vo("export", "--dataset", str(short_sequence), "--frontend", "original", "--out", str(out),
-                      "--quiet").returncode == 0
+    assert (
+        run_eas_vo(
+            "export", "--dataset", str(short_sequence), "--frontend", "original", "--out", str(out), "--quiet"
+        ).returncode
+        == 0
+    )
     fs = cv2.FileStorage(str(out / "settings.yaml"), cv2.FILE_STORAGE_READ)  # ORB-SLAM2's own reader
     calib = np.loadtxt(short_sequence / "calib.txt")
     keys = ["fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2", "k3"]
@@ -95,7 +111,9 @@ def test_sim3_alignment_recovers_a_known_similarity():
     assert np.degrees(Rotation.from_matrix(ape.R_align @ R_a).magnitude()) < 0.05
     np.testing.assert_allclose(ape.t_align, -(1 / s) * R_a.T @ t_a, atol=5e-3)
     summary = ape.summary()
-    assert summary["matched_poses"] == 134 and summary["ape_trans_mean_m"] < 0.01 and summary["ape_rot_mean_rad"] < 0.005
+    assert (
+        summary["matched_poses"] == 134 and summary["ape_trans_mean_m"] < 0.01 and summary["ape_rot_mean_rad"] < 0.005
+    )
 
 
 def _evo_ape(gt_path, est_path, align, relation):
@@ -125,8 +143,9 @@ def test_evaluate_equals_evo_ape_on_the_same_files(short_sequence, tmp_path, ali
     est_path = tmp_path / "KeyFrameTrajectory.txt"
     est_path.write_text(format_tum(est.t, est.p_w_c, matrices_from_quats(est.q_w_c)))
     out = tmp_path / "eval"
-    done = run_eas_vo("evaluate", "--dataset", str(short_sequence), "--estimate", str(est_path), "--align", align,
-                      "--out", str(out))
+    done = run_eas_vo(
+        "evaluate", "--dataset", str(short_sequence), "--estimate", str(est_path), "--align", align, "--out", str(out)
+    )
     assert done.returncode == 0, done.stderr
     ours = json.loads((out / "metrics.json").read_text())
     trans = _evo_ape(out / "groundtruth.tum", est_path, align, PoseRelation.translation_part)
@@ -146,12 +165,21 @@ def test_evaluate_equals_the_evo_ape_command(short_sequence, tmp_path):
     est_path = tmp_path / "est.tum"
     est_path.write_text(format_tum(est.t, est.p_w_c, matrices_from_quats(est.q_w_c)))
     out = tmp_path / "eval"
-    assert run_eas_vo("evaluate", "--dataset", str(short_sequence), "--estimate", str(est_path), "--out", str(out)).returncode == 0
+    assert (
+        run_eas_vo(
+            "evaluate", "--dataset", str(short_sequence), "--estimate", str(est_path), "--out", str(out)
+        ).returncode
+        == 0
+    )
     evo_ape = Path(sys.executable).with_name("evo_ape")
     if not evo_ape.exists():
         pytest.skip("evo_ape is not installed beside this Python")
-    printed = subprocess.run([str(evo_ape), "tum", str(out / "groundtruth.tum"), str(est_path), "-as"],
-                             capture_output=True, text=True, cwd=tmp_path).stdout
+    printed = subprocess.run(
+        [str(evo_ape), "tum", str(out / "groundtruth.tum"), str(est_path), "-as"],
+        capture_output=True,
+        text=True,
+        cwd=tmp_path,
+    ).stdout
     mean = float(next(line.split()[1] for line in printed.splitlines() if line.strip().startswith("mean")))
     assert json.loads((out / "metrics.json").read_text())["ape_trans_mean_m"] == pytest.approx(mean, abs=1e-6)
 
@@ -170,11 +198,14 @@ def test_association_equals_evos():
         assert list(i_a) == list(expected[0]) and list(i_b) == list(expected[1])
 
 
-@pytest.mark.parametrize("text, line, message", [
-    ("1 0 0 0 0 0 0 1\n# c\n1 0 0 0 0 0 0 1\n", 3, "timestamp 1.000000000 repeats the previous row's"),
-    ("1 0 0 0 0 0 0 1\n\n2 0 0 0 0 0 0 0\n", 3, "quaternion norm 0.000 is not 1"),
-    ("1 0 0 0 0 0 0 1\n2 0 0 0 0 0 1\n", 2, "expected 8 columns"),
-])
+@pytest.mark.parametrize(
+    "text, line, message",
+    [
+        ("1 0 0 0 0 0 0 1\n# c\n1 0 0 0 0 0 0 1\n", 3, "timestamp 1.000000000 repeats the previous row's"),
+        ("1 0 0 0 0 0 0 1\n\n2 0 0 0 0 0 0 0\n", 3, "quaternion norm 0.000 is not 1"),
+        ("1 0 0 0 0 0 0 1\n2 0 0 0 0 0 1\n", 2, "expected 8 columns"),
+    ],
+)
 def test_a_bad_estimate_file_names_its_line(tmp_path, text, line, message):
     path = tmp_path / "est.txt"
     path.write_text(text)
@@ -194,7 +225,9 @@ def test_evaluate_never_writes_over_its_dataset_or_its_estimate(short_sequence, 
     estimate.write_text("".join(" ".join(f"{v:.9f}" for v in row) + "\n" for row in gt))
     for out, says in ((dataset, "holds the dataset"), (estimate.parent, "holds the --estimate")):
         mark_as_eas_vo_output(out)  # as if eas-vo wrote all of it
-        done = run_eas_vo("evaluate", "--dataset", str(dataset), "--estimate", str(estimate), "--out", str(out), "--overwrite")
+        done = run_eas_vo(
+            "evaluate", "--dataset", str(dataset), "--estimate", str(estimate), "--out", str(out), "--overwrite"
+        )
         assert done.returncode == 2 and says in done.stderr and done.stderr.count("\n") == 1, done.stderr
     assert (dataset / "events.txt").exists() and estimate.exists()
 
@@ -233,7 +266,13 @@ def test_a_label_never_breaks_the_table_row():
     """A `|`, a newline or a control character in --label: one row of six cells, the `|` escaped."""
     from eas_vo.experiments.external import table2_row
 
-    metrics = {"ape_trans_mean_m": 0.02, "ape_trans_rmse_m": 0.03, "ape_rot_mean_rad": 0.1, "scale": 1.5, "matched_poses": 9}
+    metrics = {
+        "ape_trans_mean_m": 0.02,
+        "ape_trans_rmse_m": 0.03,
+        "ape_rot_mean_rad": 0.1,
+        "scale": 1.5,
+        "matched_poses": 9,
+    }
     header, rule, row = table2_row("eas | v2\nsecond\tline\x1b", metrics).splitlines()
     assert row == "| eas \\| v2 second line | 0.020 | 0.030 | 0.100 | 1.5 | 9 |"
     assert row.replace("\\|", "").count("|") == header.count("|") == 7
@@ -251,8 +290,22 @@ def test_a_huge_error_is_printed_readably(short_sequence, tmp_path, capsys):
     estimate = tmp_path / "huge.tum"
     estimate.write_text("".join(" ".join(f"{v:.17g}" for v in row) + "\n" for row in gt))
     out = tmp_path / "ev"
-    assert main(["evaluate", "--dataset", str(short_sequence), "--estimate", str(estimate), "--align", "se3",
-                 "--out", str(out)]) == 0
+    assert (
+        main(
+            [
+                "evaluate",
+                "--dataset",
+                str(short_sequence),
+                "--estimate",
+                str(estimate),
+                "--align",
+                "se3",
+                "--out",
+                str(out),
+            ]
+        )
+        == 0
+    )
     said = capsys.readouterr().out
     row = (out / "table2_row.md").read_text().splitlines()[2]
     mean = json.loads((out / "metrics.json").read_text())["ape_trans_mean_m"]
@@ -263,13 +316,16 @@ def test_a_huge_error_is_printed_readably(short_sequence, tmp_path, capsys):
         assert shown and shown[0] == pytest.approx(mean, rel=10.0**-digits), text
 
 
-@pytest.mark.parametrize("model, dist, camera_type", [
-    ("radtan", [-0.3, 0.1, 0.001, -0.002, 0.01], "PinHole"),
-    ("equidistant", [-0.048, 0.0113, -0.0554, 0.0215], "KannalaBrandt8"),
-])
+@pytest.mark.parametrize(
+    "model, dist, camera_type",
+    [
+        ("radtan", [-0.3, 0.1, 0.001, -0.002, 0.01], "PinHole"),
+        ("equidistant", [-0.048, 0.0113, -0.0554, 0.0215], "KannalaBrandt8"),
+    ],
+)
 def test_settings_yaml_names_the_lens_as_orbslam3_reads_it(tmp_path, model, dist, camera_type):
-    from eas_vo.slam.export import settings_yaml
     from eas_vo.camera import LENS_MODELS, CameraModel
+    from eas_vo.slam.export import settings_yaml
 
     K = np.array([[226.4, 0.0, 173.6], [0.0, 226.2, 133.7], [0.0, 0.0, 1.0]])
     (tmp_path / "settings.yaml").write_text(settings_yaml(CameraModel(346, 260, K, np.array(dist), model), 20.0))
@@ -285,24 +341,38 @@ def test_settings_yaml_names_the_lens_as_orbslam3_reads_it(tmp_path, model, dist
 def test_evaluate_reads_an_estimate_on_the_recordings_own_clock(tmp_path, capsys, shift_s):
     """An estimate holds the recording's own times (a run's trajectory.tum adds the clock origin
     back): its own ground truth scores it exactly, and the files written keep those times."""
-    from helpers import sequence_with
-
     from eas_vo.cli.main import main
+    from helpers import sequence_with
 
     folder = sequence_with(tmp_path / "seq", None, 1, shift_s)
     out = tmp_path / "ev"
-    assert main(["evaluate", "--dataset", str(folder), "--estimate", str(folder / "groundtruth.txt"), "--align", "origin",
-                 "--out", str(out)]) == 0
+    assert (
+        main(
+            [
+                "evaluate",
+                "--dataset",
+                str(folder),
+                "--estimate",
+                str(folder / "groundtruth.txt"),
+                "--align",
+                "origin",
+                "--out",
+                str(out),
+            ]
+        )
+        == 0
+    )
     metrics = json.loads((out / "metrics.json").read_text())
     assert (metrics["matched_poses"], metrics["matched_fraction"], metrics["warnings"]) == (100, 1.0, [])
     assert metrics["ape_rot_mean_rad"] < 1e-9 and metrics["ground_truth_span_s"] == [0.0, pytest.approx(0.495)]
-    np.testing.assert_array_equal(np.loadtxt(out / "groundtruth.tum")[:, 0], np.loadtxt(folder / "groundtruth.txt")[:, 0])
+    np.testing.assert_array_equal(
+        np.loadtxt(out / "groundtruth.tum")[:, 0], np.loadtxt(folder / "groundtruth.txt")[:, 0]
+    )
 
 
 def test_evaluate_refuses_an_estimate_in_microseconds_and_warns_on_a_partial_ground_truth(tmp_path, capsys):
-    from helpers import one_line_failure, retimed, sequence_with
-
     from eas_vo.cli.main import main
+    from helpers import one_line_failure, retimed, sequence_with
 
     folder = sequence_with(tmp_path / "seq", None, 1)
     micro = tmp_path / "micro.tum"

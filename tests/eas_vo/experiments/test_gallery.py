@@ -14,8 +14,22 @@ def test_render_draws_a_gallery_of_every_installed_frontend(short_sequence, tmp_
     n_frontends = sum(registry.get("frontends", name).makes_images for name in registry.available("frontends"))
     assert n_frontends >= 6
     assert f"2 frame(s) x {n_frontends} frontend(s)" in capsys.readouterr().out
-    assert main(["render", "--dataset", str(short_sequence), "--frames", "3", "--frontends", "no_image",
-                 "--out", str(tmp_path / "none.png")]) == 2
+    assert (
+        main(
+            [
+                "render",
+                "--dataset",
+                str(short_sequence),
+                "--frames",
+                "3",
+                "--frontends",
+                "no_image",
+                "--out",
+                str(tmp_path / "none.png"),
+            ]
+        )
+        == 2
+    )
     assert "makes no image" in capsys.readouterr().err
 
 

@@ -24,8 +24,20 @@ from helpers import hostile_settings
 @pytest.fixture(scope="module")
 def grid(short_sequence, tmp_path_factory):
     out = tmp_path_factory.mktemp("cmp") / "grid"
-    argv = ["compare", "--dataset", str(short_sequence), "--frontends", "original,eas", "--backends", "chain,gtsam",
-            "--out", str(out), "--jobs", "2", "--quiet"]
+    argv = [
+        "compare",
+        "--dataset",
+        str(short_sequence),
+        "--frontends",
+        "original,eas",
+        "--backends",
+        "chain,gtsam",
+        "--out",
+        str(out),
+        "--jobs",
+        "2",
+        "--quiet",
+    ]
     assert main(argv) == 0
     return out, argv
 
@@ -40,8 +52,9 @@ def test_table_equals_each_cells_metrics(grid):
         assert (out / r["folder"] / "rotation.png").exists()
     md = (out / "table.md").read_text()
     name = rows[0]["dataset_name"]
-    assert md.splitlines()[0] == (f"| Source type | {name} klt+chain = klt+gtsam: average NC | "
-                                  f"{name} klt+chain = klt+gtsam: average APE [rad] |")
+    assert md.splitlines()[0] == (
+        f"| Source type | {name} klt+chain = klt+gtsam: average NC | {name} klt+chain = klt+gtsam: average APE [rad] |"
+    )
     assert md.count("**") >= 4
     assert b"\r" not in (out / "table.csv").read_bytes()
     csv_lines = (out / "table.csv").read_text().splitlines()
@@ -67,8 +80,22 @@ def test_a_second_invocation_runs_nothing(grid, capsys):
 
 def test_a_failing_cell_is_reported_the_rest_complete_and_the_exit_says_so(short_sequence, tmp_path, capsys):
     out = tmp_path / "sweep"
-    argv = ["compare", "--dataset", str(short_sequence), "--frontends", "slice", "--backends", "chain",
-            "--sweep", "run.start_s=0,100", "--out", str(out), "--jobs", "1", "--quiet"]
+    argv = [
+        "compare",
+        "--dataset",
+        str(short_sequence),
+        "--frontends",
+        "slice",
+        "--backends",
+        "chain",
+        "--sweep",
+        "run.start_s=0,100",
+        "--out",
+        str(out),
+        "--jobs",
+        "1",
+        "--quiet",
+    ]
     assert main(argv) == 1
     captured = capsys.readouterr()
     assert "2 cells (2 run, 0 already complete, 1 failed)" in captured.out
@@ -88,8 +115,24 @@ def test_a_data_warning_is_said_once_with_the_cells_it_came_from(short_sequence,
     """The IMU configured a quarter turn off: both backends' cells see the same gyro against the
     same tracks, and stderr says it once naming both, on the run and on the resume."""
     out = tmp_path / "imu"
-    argv = ["compare", "--dataset", str(short_sequence), "--frontends", "eas", "--backends", "chain,gtsam", "--config", "best",
-            "--set", "run.imu_rotvec_cam=[0.0, 0.0, 1.5708]", "--out", str(out), "--jobs", "1", "--quiet"]
+    argv = [
+        "compare",
+        "--dataset",
+        str(short_sequence),
+        "--frontends",
+        "eas",
+        "--backends",
+        "chain,gtsam",
+        "--config",
+        "best",
+        "--set",
+        "run.imu_rotvec_cam=[0.0, 0.0, 1.5708]",
+        "--out",
+        str(out),
+        "--jobs",
+        "1",
+        "--quiet",
+    ]
     for _ in range(2):
         assert main(argv) == 0
         lines = [line for line in capsys.readouterr().err.splitlines() if "warning" in line]
@@ -101,8 +144,20 @@ def test_a_data_warning_is_said_once_with_the_cells_it_came_from(short_sequence,
 
 def test_a_configuration_error_stops_compare_before_any_work(short_sequence, tmp_path, capsys):
     out = tmp_path / "bad"
-    argv = ["compare", "--dataset", str(short_sequence), "--frontends", "slice", "--backends", "chain",
-            "--sweep", "frontend.n=2000,0", "--out", str(out), "--quiet"]
+    argv = [
+        "compare",
+        "--dataset",
+        str(short_sequence),
+        "--frontends",
+        "slice",
+        "--backends",
+        "chain",
+        "--sweep",
+        "frontend.n=2000,0",
+        "--out",
+        str(out),
+        "--quiet",
+    ]
     assert main(argv) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "n = 0 is out of range" in err
@@ -112,8 +167,15 @@ def test_a_configuration_error_stops_compare_before_any_work(short_sequence, tmp
 def test_sweep_curves_follow_one_numeric_key():
     from eas_vo.experiments.results import sweep_curves, table_rows
 
-    cells = [Cell("d", f, "klt", "chain", (("dataset.illumination", v),)) for f in ("eas", "slice") for v in ("1", "0.1", "0.5")]
-    results = {c: {"status": "ok", "nc_mean": 10.0 * float(c.sweep[0][1]), "ape_mean_rad": 1.0 / float(c.sweep[0][1])} for c in cells}
+    cells = [
+        Cell("d", f, "klt", "chain", (("dataset.illumination", v),))
+        for f in ("eas", "slice")
+        for v in ("1", "0.1", "0.5")
+    ]
+    results = {
+        c: {"status": "ok", "nc_mean": 10.0 * float(c.sweep[0][1]), "ape_mean_rad": 1.0 / float(c.sweep[0][1])}
+        for c in cells
+    }
     results[cells[0]] = {"status": "failed", "error": "boom"}
     key, curves = sweep_curves(cells, table_rows(cells, results))
     assert key == "dataset.illumination" and set(curves) == {("d", "klt+chain", "eas"), ("d", "klt+chain", "slice")}
@@ -136,11 +198,16 @@ def test_one_and_two_jobs_give_the_same_table(grid, short_sequence, tmp_path):
 def test_plan_is_the_cartesian_product():
     from eas_vo.experiments.cells import Method, grid_methods
 
-    cells = plan(["a", "b"], ["x"], grid_methods(["klt", "other"], ["chain", "gtsam"]), ["frontend.n=1,2", "frontend.beta=3,4,5"])
+    cells = plan(
+        ["a", "b"], ["x"], grid_methods(["klt", "other"], ["chain", "gtsam"]), ["frontend.n=1,2", "frontend.beta=3,4,5"]
+    )
     assert len(cells) == 2 * 2 * 2 * 2 * 3
     assert Cell("a", "x", "other", "chain", (("frontend.n", "1"), ("frontend.beta", "3")), "a") in cells
     (smoothed,) = plan(["a"], ["x"], [Method("klt", "gtsam", (("tracker.klt.keyframe_interval", "3"),))], [])
-    assert smoothed.folder == "a/x_klt_gtsam_keyframe_interval-3" and smoothed.method.label == "klt+gtsam (keyframe_interval=3)"
+    assert (
+        smoothed.folder == "a/x_klt_gtsam_keyframe_interval-3"
+        and smoothed.method.label == "klt+gtsam (keyframe_interval=3)"
+    )
 
 
 def test_a_tracker_of_events_alone_is_one_cell_per_dataset_with_the_none_frontend():
@@ -158,12 +225,31 @@ def test_compares_default_grid_runs_the_smoothed_method_beside_the_chain(short_s
     import tomllib
 
     out = tmp_path / "cmp"
-    assert main(["compare", "--dataset", str(short_sequence), "--frontends", "eas", "--duration", "1", "--out", str(out),
-                 "--jobs", "2", "--quiet"]) == 0
+    assert (
+        main(
+            [
+                "compare",
+                "--dataset",
+                str(short_sequence),
+                "--frontends",
+                "eas",
+                "--duration",
+                "1",
+                "--out",
+                str(out),
+                "--jobs",
+                "2",
+                "--quiet",
+            ]
+        )
+        == 0
+    )
     rows = {r["method"]: r for r in json.loads((out / "table.json").read_text())}
     assert list(rows) == ["klt+chain", "klt+gtsam (keyframe_interval=3)"]
-    intervals = {m: tomllib.loads((out / r["folder"] / "config.toml").read_text())["tracker"]["keyframe_interval"]
-                 for m, r in rows.items()}
+    intervals = {
+        m: tomllib.loads((out / r["folder"] / "config.toml").read_text())["tracker"]["keyframe_interval"]
+        for m, r in rows.items()
+    }
     assert intervals == {"klt+chain": 0, "klt+gtsam (keyframe_interval=3)": 3}
     assert [r["same_as"] for r in rows.values()] == ["", ""]
     assert "klt+gtsam (keyframe_interval=3): average APE [rad]" in (out / "table.md").read_text().splitlines()[0]
@@ -179,8 +265,22 @@ def test_datasets_sharing_a_folder_name_never_share_cells(short_sequence, tmp_pa
     lines = (b / "images.txt").read_text().splitlines()
     (b / "images.txt").write_text("\n".join(lines[:20]) + "\n")  # b: a different (shorter) sequence
     out = tmp_path / "cmp"
-    argv = ["compare", "--dataset", str(a), "--dataset", str(b), "--frontends", "original", "--backends", "chain",
-            "--out", str(out), "--jobs", "1", "--quiet"]
+    argv = [
+        "compare",
+        "--dataset",
+        str(a),
+        "--dataset",
+        str(b),
+        "--frontends",
+        "original",
+        "--backends",
+        "chain",
+        "--out",
+        str(out),
+        "--jobs",
+        "1",
+        "--quiet",
+    ]
     assert main(argv) == 0
     first = capsys.readouterr().out
     rows = {r["dataset"]: r for r in json.loads((out / "table.json").read_text())}
@@ -189,13 +289,27 @@ def test_datasets_sharing_a_folder_name_never_share_cells(short_sequence, tmp_pa
     frames = {d: json.loads((out / r["folder"] / "metrics.json").read_text())["frames"] for d, r in rows.items()}
     assert frames[str(b)] == 20 and frames[str(a)] > 20
     assert main(argv) == 0  # the rerun reads each its own
-    assert {r["dataset"]: r["nc_mean"] for r in json.loads((out / "table.json").read_text())} == {d: r["nc_mean"] for d, r in rows.items()}
+    assert {r["dataset"]: r["nc_mean"] for r in json.loads((out / "table.json").read_text())} == {
+        d: r["nc_mean"] for d, r in rows.items()
+    }
 
 
 def test_a_cell_is_reused_only_if_made_with_the_same_inputs(short_sequence, tmp_path, capsys):
     out = tmp_path / "cmp"
-    base = ["compare", "--dataset", str(short_sequence), "--frontends", "original", "--backends", "chain",
-            "--out", str(out), "--jobs", "1", "--quiet"]
+    base = [
+        "compare",
+        "--dataset",
+        str(short_sequence),
+        "--frontends",
+        "original",
+        "--backends",
+        "chain",
+        "--out",
+        str(out),
+        "--jobs",
+        "1",
+        "--quiet",
+    ]
     assert main(base + ["--duration", "1"]) == 0
     assert "1 cells (1 run, 0 already complete" in capsys.readouterr().out
     assert main(base + ["--duration", "1"]) == 0
@@ -208,8 +322,16 @@ def test_a_cell_is_reused_only_if_made_with_the_same_inputs(short_sequence, tmp_
 
 def test_markdown_marks_the_best_of_each_column():
     rows = [
-        {"dataset": "d", "method": "klt+chain", "frontend": f, "sweep": "", "status": "ok", "nc_mean": nc, "ape_mean_rad": ape,
-         "same_as": ""}
+        {
+            "dataset": "d",
+            "method": "klt+chain",
+            "frontend": f,
+            "sweep": "",
+            "status": "ok",
+            "nc_mean": nc,
+            "ape_mean_rad": ape,
+            "same_as": "",
+        }
         for f, nc, ape in (("original", 20.0, 0.6), ("eas", 60.0, 0.2))
     ]
     md = table_markdown(rows)
@@ -222,9 +344,22 @@ def test_an_nc_of_zero_is_never_the_best(ncs):
     in table.md or table.csv; the best of the real values still is."""
     from eas_vo.experiments.results import table_csv
 
-    rows = [{"dataset": "d", "method": "cmax+chain", "frontend": f, "sweep": "", "status": "ok", "nc_mean": nc,
-             "ape_mean_rad": ape, "same_as": ""} for f, nc, ape in (("no_image", ncs[0], 0.05), ("other", ncs[1], 0.08))]
-    rows += [{**rows[0], "method": "klt+chain", "frontend": f, "nc_mean": nc} for f, nc in (("eas", 60.0), ("histeq", 0.0))]
+    rows = [
+        {
+            "dataset": "d",
+            "method": "cmax+chain",
+            "frontend": f,
+            "sweep": "",
+            "status": "ok",
+            "nc_mean": nc,
+            "ape_mean_rad": ape,
+            "same_as": "",
+        }
+        for f, nc, ape in (("no_image", ncs[0], 0.05), ("other", ncs[1], 0.08))
+    ]
+    rows += [
+        {**rows[0], "method": "klt+chain", "frontend": f, "nc_mean": nc} for f, nc in (("eas", 60.0), ("histeq", 0.0))
+    ]
     lines = table_markdown(rows).splitlines()
     assert lines[2].startswith("| no_image | 0 | **0.050** |") and "**0**" not in "".join(lines)
     assert lines[4] == "| eas |  |  | **60** | **0.050** |" and lines[5].startswith("| histeq |  |  | 0 |")
@@ -234,32 +369,66 @@ def test_an_nc_of_zero_is_never_the_best(ncs):
 def test_the_motion_table_gives_angular_velocity_and_rpe_with_the_best_in_bold():
     from eas_vo.experiments.results import MOTION_FIGURES
 
-    rows = [{"dataset": "d", "method": m, "frontend": f, "sweep": "", "status": "ok", "nc_mean": 0.0, "ape_mean_rad": 0.1,
-             "omega_rms_deg_s": w, "rpe_1s_mean_deg": r, "same_as": ""}
-            for m, f, w, r in (("klt+chain", "eas", 30.2, 6.5), ("cmax+chain", "no_image", 7.0, 2.68))]
+    rows = [
+        {
+            "dataset": "d",
+            "method": m,
+            "frontend": f,
+            "sweep": "",
+            "status": "ok",
+            "nc_mean": 0.0,
+            "ape_mean_rad": 0.1,
+            "omega_rms_deg_s": w,
+            "rpe_1s_mean_deg": r,
+            "same_as": "",
+        }
+        for m, f, w, r in (("klt+chain", "eas", 30.2, 6.5), ("cmax+chain", "no_image", 7.0, 2.68))
+    ]
     rows.append({**rows[0], "frontend": "original", "status": "failed", "error": "boom"})
     lines = table_markdown(rows, MOTION_FIGURES).splitlines()
-    assert lines[0] == ("| Source type | d klt+chain: omega RMS [deg/s] | d klt+chain: RPE 1 s [deg] "
-                        "| d cmax+chain: omega RMS [deg/s] | d cmax+chain: RPE 1 s [deg] |")
-    assert lines[2:] == ["| eas | **30.2** | **6.50** |  |  |", "| no_image |  |  | **7.0** | **2.68** |",
-                         "| original | failed | boom |  |  |"]
+    assert lines[0] == (
+        "| Source type | d klt+chain: omega RMS [deg/s] | d klt+chain: RPE 1 s [deg] "
+        "| d cmax+chain: omega RMS [deg/s] | d cmax+chain: RPE 1 s [deg] |"
+    )
+    assert lines[2:] == [
+        "| eas | **30.2** | **6.50** |  |  |",
+        "| no_image |  |  | **7.0** | **2.68** |",
+        "| original | failed | boom |  |  |",
+    ]
 
 
 def test_markdown_has_one_header_row_and_a_column_pair_per_distinct_method():
     """Two sequences x three methods, the second of which repeats the first on sequence a only:
     one header row naming sequence, method and figure; the repeated method's column dropped
     where it repeats and named in the header of the one it repeats."""
-    rows = [{"dataset": d, "dataset_name": d, "method": m, "frontend": f, "sweep": "", "status": "ok",
-             "nc_mean": nc + k, "ape_mean_rad": 0.1 * (k + 1), "same_as": "klt+chain" if (d, m) == ("a", "klt+gtsam") else ""}
-            for d in ("a", "b") for k, m in enumerate(("klt+chain", "klt+gtsam", "other+chain")) for f, nc in (("original", 20), ("eas", 60))]
+    rows = [
+        {
+            "dataset": d,
+            "dataset_name": d,
+            "method": m,
+            "frontend": f,
+            "sweep": "",
+            "status": "ok",
+            "nc_mean": nc + k,
+            "ape_mean_rad": 0.1 * (k + 1),
+            "same_as": "klt+chain" if (d, m) == ("a", "klt+gtsam") else "",
+        }
+        for d in ("a", "b")
+        for k, m in enumerate(("klt+chain", "klt+gtsam", "other+chain"))
+        for f, nc in (("original", 20), ("eas", 60))
+    ]
     lines = table_markdown(rows).splitlines()
-    assert lines[0] == ("| Source type | a klt+chain = klt+gtsam: average NC | a klt+chain = klt+gtsam: average APE [rad] "
-                        "| a other+chain: average NC | a other+chain: average APE [rad] "
-                        "| b klt+chain: average NC | b klt+chain: average APE [rad] | b klt+gtsam: average NC "
-                        "| b klt+gtsam: average APE [rad] | b other+chain: average NC | b other+chain: average APE [rad] |")
+    assert lines[0] == (
+        "| Source type | a klt+chain = klt+gtsam: average NC | a klt+chain = klt+gtsam: average APE [rad] "
+        "| a other+chain: average NC | a other+chain: average APE [rad] "
+        "| b klt+chain: average NC | b klt+chain: average APE [rad] | b klt+gtsam: average NC "
+        "| b klt+gtsam: average APE [rad] | b other+chain: average NC | b other+chain: average APE [rad] |"
+    )
     assert lines[1] == "|" + "---|" * 11
-    assert lines[2:] == ["| original | 20 | **0.100** | 22 | **0.300** | 20 | **0.100** | 21 | **0.200** | 22 | **0.300** |",
-                         "| eas | **60** | **0.100** | **62** | **0.300** | **60** | **0.100** | **61** | **0.200** | **62** | **0.300** |"]
+    assert lines[2:] == [
+        "| original | 20 | **0.100** | 22 | **0.300** | 20 | **0.100** | 21 | **0.200** | 22 | **0.300** |",
+        "| eas | **60** | **0.100** | **62** | **0.300** | **60** | **0.100** | **61** | **0.200** | **62** | **0.300** |",
+    ]
 
 
 def _write_tum(path: Path, t, R) -> None:
@@ -281,14 +450,22 @@ def test_identical_methods_are_found_exactly(tmp_path):
     t = 0.05 * np.arange(30)
     tilted = R.copy()
     tilted[17] = Rotation.from_rotvec([1e-7, 0, 0]).as_matrix() @ R[17]
-    methods = {"a+x": (t, R), "b+x": (t, R), "c+x": (t, R), "tilt+x": (t, tilted), "late+x": (t + np.r_[np.zeros(29), 1e-3], R),
-               "nc+x": (t, R), "failed+x": (t, R)}
+    methods = {
+        "a+x": (t, R),
+        "b+x": (t, R),
+        "c+x": (t, R),
+        "tilt+x": (t, tilted),
+        "late+x": (t + np.r_[np.zeros(29), 1e-3], R),
+        "nc+x": (t, R),
+        "failed+x": (t, R),
+    }
     cells = [Cell("d", f, m.split("+")[0], "x", ()) for m in methods for f in ("eas", "slice")]
     for cell in cells:
         _write_tum(tmp_path / cell.folder / "trajectory.tum", *methods[cell.method.label])
     text = (tmp_path / cells[2].folder / "trajectory.tum").read_text().splitlines()  # b+x eas: every quaternion negated
-    (tmp_path / cells[2].folder / "trajectory.tum").write_text("".join(
-        " ".join(v[:4] + [f"{-float(q):.12f}" for q in v[4:]]) + "\n" for v in (line.split() for line in text)))
+    (tmp_path / cells[2].folder / "trajectory.tum").write_text(
+        "".join(" ".join(v[:4] + [f"{-float(q):.12f}" for q in v[4:]]) + "\n" for v in (line.split() for line in text))
+    )
     results = {c: {"status": "ok", "nc_mean": 50.0 + (c.tracker == "nc"), "ape_mean_rad": 0.1} for c in cells}
     results[cells[-1]] = {"status": "failed", "error": "boom"}
     same_as = {r["method"]: r["same_as"] for r in mark_identical(tmp_path, cells, table_rows(cells, results))}
@@ -300,7 +477,12 @@ def test_dask_executor_gives_the_same_table(grid, tmp_path):
     out, argv = grid
     with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as cluster:
         target = tmp_path / "dask"
-        argv = [a if a != str(out) else str(target) for a in argv] + ["--executor", "dask", "--scheduler", cluster.scheduler_address]
+        argv = [a if a != str(out) else str(target) for a in argv] + [
+            "--executor",
+            "dask",
+            "--scheduler",
+            cluster.scheduler_address,
+        ]
         assert main(argv) == 0
     strip = lambda rows: [{k: v for k, v in r.items() if k != "folder"} for r in rows]  # noqa: E731
     assert strip(json.loads((target / "table.json").read_text())) == strip(json.loads((out / "table.json").read_text()))
@@ -310,8 +492,22 @@ def test_dask_executor_gives_the_same_table(grid, tmp_path):
 def one_cell(short_sequence, tmp_path_factory):
     """A finished one-cell compare folder (1 s of the short sequence), its argv and its table row."""
     out = tmp_path_factory.mktemp("cmp") / "one"
-    argv = ["compare", "--dataset", str(short_sequence), "--frontends", "eas", "--backends", "chain",
-            "--duration", "1", "--out", str(out), "--jobs", "1", "--quiet"]
+    argv = [
+        "compare",
+        "--dataset",
+        str(short_sequence),
+        "--frontends",
+        "eas",
+        "--backends",
+        "chain",
+        "--duration",
+        "1",
+        "--out",
+        str(out),
+        "--jobs",
+        "1",
+        "--quiet",
+    ]
     assert main(argv) == 0
     (row,) = json.loads((out / "table.json").read_text())
     return out, argv, row
@@ -363,10 +559,14 @@ def test_a_damaged_cell_folder_is_run_again_never_trusted(one_cell, data):
         reused = "0 run, 1 already complete" in said.getvalue()
         assert reused <= may_reuse, said.getvalue()
         (again,) = json.loads((copy / "table.json").read_text())
-        assert {k: again[k] for k in ("status", "nc_mean", "ape_mean_rad")} == {k: row[k] for k in ("status", "nc_mean", "ape_mean_rad")}
+        assert {k: again[k] for k in ("status", "nc_mean", "ape_mean_rad")} == {
+            k: row[k] for k in ("status", "nc_mean", "ape_mean_rad")
+        }
         folder = copy / row["folder"]
         assert all((folder / f).is_file() for f in RUN_FILES)
-        assert json.loads((folder / "identity.json").read_text()) == json.loads((out / row["folder"] / "identity.json").read_text())
+        assert json.loads((folder / "identity.json").read_text()) == json.loads(
+            (out / row["folder"] / "identity.json").read_text()
+        )
 
 
 def test_a_pool_never_has_more_workers_than_cells(short_sequence, tmp_path, monkeypatch):
@@ -383,8 +583,22 @@ def test_a_pool_never_has_more_workers_than_cells(short_sequence, tmp_path, monk
             super().__init__(max_workers, *args, **kwargs)
 
     monkeypatch.setattr(grid, "ProcessPoolExecutor", Recording)
-    argv = ["compare", "--dataset", str(short_sequence), "--frontends", "original,histeq", "--backends", "chain",
-            "--duration", "0.5", "--out", str(tmp_path / "cmp"), "--jobs", "100000", "--quiet"]
+    argv = [
+        "compare",
+        "--dataset",
+        str(short_sequence),
+        "--frontends",
+        "original,histeq",
+        "--backends",
+        "chain",
+        "--duration",
+        "0.5",
+        "--out",
+        str(tmp_path / "cmp"),
+        "--jobs",
+        "100000",
+        "--quiet",
+    ]
     assert main(argv) == 0
     assert sizes == [2]
     assert main(argv) == 0 and sizes == [2]  # nothing left to run: no pool at all
@@ -395,8 +609,22 @@ def test_a_cell_is_run_again_when_the_code_that_made_it_changed(short_sequence, 
     run: the identity holds a hash of the code (pipeline.identity.code_identity)."""
     from eas_vo.pipeline import identity
 
-    argv = ["compare", "--dataset", str(short_sequence), "--frontends", "original", "--backends", "chain",
-            "--duration", "1", "--out", str(tmp_path / "cmp"), "--jobs", "1", "--quiet"]
+    argv = [
+        "compare",
+        "--dataset",
+        str(short_sequence),
+        "--frontends",
+        "original",
+        "--backends",
+        "chain",
+        "--duration",
+        "1",
+        "--out",
+        str(tmp_path / "cmp"),
+        "--jobs",
+        "1",
+        "--quiet",
+    ]
     for code, runs in (("A", 1), ("A", 0), ("B", 1)):
         monkeypatch.setattr(identity, "code_identity", lambda packages, code=code: code)
         assert main(argv) == 0
@@ -427,8 +655,20 @@ def test_a_cell_is_run_again_when_its_dataset_changed_at_the_same_path(sequence_
     """Class 3 with the data, not the options, changed: the folder replaced by other content
     under the same path (here the same recording, its frames list cut to 1 s)."""
     out = tmp_path / "cmp"
-    argv = ["compare", "--dataset", str(sequence_copy), "--frontends", "original", "--backends", "chain",
-            "--out", str(out), "--jobs", "1", "--quiet"]
+    argv = [
+        "compare",
+        "--dataset",
+        str(sequence_copy),
+        "--frontends",
+        "original",
+        "--backends",
+        "chain",
+        "--out",
+        str(out),
+        "--jobs",
+        "1",
+        "--quiet",
+    ]
     assert main(argv) == 0
     shutil.rmtree(sequence_copy)
     shutil.copytree(short_sequence, sequence_copy)
@@ -446,16 +686,36 @@ def test_compare_takes_its_default_tracker_and_backend_from_the_config(short_seq
     from eas_vo.config import resolve
 
     out = tmp_path / "cmp"
-    assert main(["compare", "--dataset", str(short_sequence), "--frontends", "eas", "--config", "best", "--duration", "0.5",
-                 "--out", str(out), "--jobs", "1", "--quiet"]) == 0
+    assert (
+        main(
+            [
+                "compare",
+                "--dataset",
+                str(short_sequence),
+                "--frontends",
+                "eas",
+                "--config",
+                "best",
+                "--duration",
+                "0.5",
+                "--out",
+                str(out),
+                "--jobs",
+                "1",
+                "--quiet",
+            ]
+        )
+        == 0
+    )
     (row,) = json.loads((out / "table.json").read_text())
     run = resolve("best", {"dataset": str(short_sequence)}).run
     assert (row["tracker"], row["backend"]) == (run.tracker, run.backend) == ("klt", "gtsam")
 
 
 @pytest.mark.parametrize("executor", ["local", "dask"])
-def test_any_exception_in_a_cell_is_that_cells_failure_and_the_grid_finishes(short_sequence, tmp_path, capsys, monkeypatch,
-                                                                             executor):
+def test_any_exception_in_a_cell_is_that_cells_failure_and_the_grid_finishes(
+    short_sequence, tmp_path, capsys, monkeypatch, executor
+):
     """A frontend that raises a ValueError (a bug, not bad input; with `|` and a newline in its
     message): its cells fail in the table with the type and a request to report it, the
     traceback in the cell's error.txt; every other cell finishes, the table is written, and the
@@ -468,8 +728,22 @@ def test_any_exception_in_a_cell_is_that_cells_failure_and_the_grid_finishes(sho
 
     monkeypatch.setattr(HistEqFrontend, "__call__", broken)
     out = tmp_path / "cmp"
-    argv = ["compare", "--dataset", str(short_sequence), "--frontends", "original,histeq", "--backends", "chain,gtsam",
-            "--duration", "0.5", "--out", str(out), "--quiet", "--jobs", "2"]
+    argv = [
+        "compare",
+        "--dataset",
+        str(short_sequence),
+        "--frontends",
+        "original,histeq",
+        "--backends",
+        "chain,gtsam",
+        "--duration",
+        "0.5",
+        "--out",
+        str(out),
+        "--quiet",
+        "--jobs",
+        "2",
+    ]
     if executor == "dask":
         distributed = pytest.importorskip("distributed", reason="the 'distributed' extra is not installed")
         cluster = distributed.LocalCluster(n_workers=1, threads_per_worker=2, processes=False, dashboard_address=None)

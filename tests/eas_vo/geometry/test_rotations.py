@@ -15,7 +15,9 @@ def test_gyro_rotation_takes_each_reading_as_the_rate_at_its_time():
     t = np.arange(0.0, 1.0, 0.005)
     rate = np.array([0.3, -1.2, 2.0])  # rad/s
     constant = ImuSeries(t, np.zeros((len(t), 3)), np.tile(rate, (len(t), 1)))
-    assert geodesic_angle(gyro_rotation(constant, 0.1012, 0.1512), Rotation.from_rotvec(rate * 0.05).as_matrix()) < 1e-12
+    assert (
+        geodesic_angle(gyro_rotation(constant, 0.1012, 0.1512), Rotation.from_rotvec(rate * 0.05).as_matrix()) < 1e-12
+    )
     ramp = ImuSeries(t, np.zeros((len(t), 3)), 20.0 * t[:, None] * rate)  # 20 rate/s
     t0, t1 = 0.4013, 0.4511
     exact = Rotation.from_rotvec(10.0 * (t1**2 - t0**2) * rate).as_matrix()
@@ -37,7 +39,9 @@ def test_readings_in_the_camera_frame_turn_the_camera_as_seen_from_it(rotvec):
     R_imu_cam = Rotation.from_rotvec(rotvec).as_matrix()
     omega_cam = np.array([0.4, 1.1, -0.7])
     t_imu = np.arange(0.0, 1.0, 0.005)
-    imu = ImuSeries(t_imu, np.tile(R_imu_cam @ [0.0, 9.81, 0.0], (len(t_imu), 1)), np.tile(R_imu_cam @ omega_cam, (len(t_imu), 1)))
+    imu = ImuSeries(
+        t_imu, np.tile(R_imu_cam @ [0.0, 9.81, 0.0], (len(t_imu), 1)), np.tile(R_imu_cam @ omega_cam, (len(t_imu), 1))
+    )
     cam = imu.in_camera_frame(R_imu_cam, time_offset_s=0.02)
     np.testing.assert_allclose(cam.gyro, np.tile(omega_cam, (len(t_imu), 1)), atol=1e-12)
     np.testing.assert_allclose(cam.acc[0], [0.0, 9.81, 0.0], atol=1e-12)
@@ -62,6 +66,6 @@ def test_a_scaled_rotation_turns_about_the_same_axis_by_the_factor(factor):
     from eas_vo.geometry.rotations import scaled_rotation
 
     R = rotvec_to_matrix(np.array([0.2, -0.4, 0.1]))
-    np.testing.assert_allclose(matrix_to_rotvec(scaled_rotation(R, factor)), factor * np.array([0.2, -0.4, 0.1]),
-                               rtol=0, atol=1e-14)
-
+    np.testing.assert_allclose(
+        matrix_to_rotvec(scaled_rotation(R, factor)), factor * np.array([0.2, -0.4, 0.1]), rtol=0, atol=1e-14
+    )

@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from eas_vo.geometry.rotations import geodesic_angle
 from eas_vo.geometry import two_view
+from eas_vo.geometry.rotations import geodesic_angle
 from eas_vo.geometry.two_view import bearings, kabsch, rotation_from_correspondences, rotation_ransac
 
 F_PX = 200.0
@@ -188,7 +188,6 @@ def test_exact_points_never_give_a_nan_rotation():
                 assert np.isfinite(found.R_prev_cur).all()
                 if found.model == "homography":
                     assert geodesic_angle(R.T, found.R_prev_cur) <= 1.0 / F_PX
-
 
 
 def test_a_homography_of_a_pure_rotation_is_its_rotation():

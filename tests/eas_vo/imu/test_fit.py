@@ -1,18 +1,23 @@
 """The gyro's axes and clock fitted against the tracked rotations: known rotations, mirrored axes, clock shifts, and a fit that knows its own uncertainty."""
 
-
 import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from eas_vo.imu.fit import imu_agreement
 from eas_vo.geometry.rotations import geodesic_angle, gyro_rotation
+from eas_vo.imu.fit import imu_agreement
 from eas_vo.types import ImuSeries, RelativeRotation
 
 
 @pytest.mark.parametrize("mirrored", [False, True])
-@pytest.mark.parametrize("R_imu_cam", [np.eye(3), Rotation.from_rotvec([0, 0, np.pi / 2]).as_matrix(),
-                                       Rotation.from_rotvec([0.1, -0.25, 0.05]).as_matrix()])
+@pytest.mark.parametrize(
+    "R_imu_cam",
+    [
+        np.eye(3),
+        Rotation.from_rotvec([0, 0, np.pi / 2]).as_matrix(),
+        Rotation.from_rotvec([0.1, -0.25, 0.05]).as_matrix(),
+    ],
+)
 def test_imu_agreement_finds_how_the_gyro_is_turned(R_imu_cam, mirrored):
     """A 200 Hz gyro mounted as R_imu_cam (white noise, constant bias), its axes mirrored (rates
     negated) or not, read as if mounted at the identity; 20 Hz tracked rotations with 0.2 deg
@@ -20,9 +25,15 @@ def test_imu_agreement_finds_how_the_gyro_is_turned(R_imu_cam, mirrored):
     fit finds R_imu_cam within 1 deg, whether it is mirrored, and tells the failed third apart."""
     rng = np.random.default_rng(4)
     t_imu = np.arange(0.0, 10.0, 0.005)
-    omega_cam = np.stack([np.convolve(rng.normal(0, 2.0, len(t_imu)), np.ones(40) / 40 * 6, mode="same") for _ in range(3)], 1)
+    omega_cam = np.stack(
+        [np.convolve(rng.normal(0, 2.0, len(t_imu)), np.ones(40) / 40 * 6, mode="same") for _ in range(3)], 1
+    )
     sign = -1.0 if mirrored else 1.0
-    gyro = sign * omega_cam @ R_imu_cam.T + np.array([0.01, -0.005, 0.008]) + rng.normal(0, 0.003 * np.sqrt(200), omega_cam.shape)
+    gyro = (
+        sign * omega_cam @ R_imu_cam.T
+        + np.array([0.01, -0.005, 0.008])
+        + rng.normal(0, 0.003 * np.sqrt(200), omega_cam.shape)
+    )
     imu = ImuSeries(t_imu, np.zeros_like(gyro), gyro).in_camera_frame(np.eye(3), 0.0)
     truth = ImuSeries(t_imu, np.zeros_like(omega_cam), omega_cam)
     t = np.arange(0.2, 9.8, 0.05)
@@ -44,8 +55,8 @@ def test_the_axes_fit_knows_its_own_uncertainty():
     of weak images): the fit's angle scatters about the truth as its own sigma says (within
     20 % over 400 draws), that sigma shrinks as 1 / sqrt(pairs), and no draw of a right IMU
     comes out AXES_SIGMAS of it off (the pipeline's test for naming a mount)."""
-    from eas_vo.imu.fit import _fit_sigma_deg
     from eas_vo.geometry.two_view import kabsch
+    from eas_vo.imu.fit import _fit_sigma_deg
     from eas_vo.imu.policy import AXES_SIGMAS
 
     rng = np.random.default_rng(5)
@@ -84,7 +95,10 @@ def test_a_pan_about_one_axis_never_claims_the_imu_is_turned():
         edges = [RelativeRotation(k - 1, k, gyro_rotation(truth, t[k - 1], t[k]) @ noise[k]) for k in range(1, len(t))]
         agreement = imu_agreement(t, edges, imu)
         assert (agreement.spread >= 0.2) == spread_ok, agreement.spread
-        assert disagreements(GyroSetup((0.0, 0.0, 0.0), 0.0, False, "eas", "klt", "chain"), agreement, reclocked=False) == []
+        assert (
+            disagreements(GyroSetup((0.0, 0.0, 0.0), 0.0, False, "eas", "klt", "chain"), agreement, reclocked=False)
+            == []
+        )
 
 
 @pytest.mark.parametrize("late_s", [0.0, 0.012, -0.02, 0.035, -0.07])
@@ -94,7 +108,9 @@ def test_imu_agreement_finds_how_late_the_gyro_is_stamped(late_s):
     clearly better (only when it is off)."""
     rng = np.random.default_rng(5)
     t_true = np.arange(0.0, 10.0, 0.001)
-    omega = np.stack([np.convolve(rng.normal(0, 2.0, len(t_true)), np.ones(200) / 200 * 14, mode="same") for _ in range(3)], 1)
+    omega = np.stack(
+        [np.convolve(rng.normal(0, 2.0, len(t_true)), np.ones(200) / 200 * 14, mode="same") for _ in range(3)], 1
+    )
     truth = ImuSeries(t_true, np.zeros_like(omega), omega)
     gyro = omega + rng.normal(0, 0.003 * np.sqrt(1000), omega.shape)
     imu = ImuSeries(t_true + late_s, np.zeros_like(gyro), gyro).in_camera_frame(np.eye(3), 0.0)

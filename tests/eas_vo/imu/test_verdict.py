@@ -36,19 +36,22 @@ def spiked(imu):
     return changed(imu, rates=rates)
 
 
-@pytest.mark.parametrize("make, said", [
-    (lambda imu: changed(imu, rates=np.degrees(imu.gyro) * 40), "faster than any MEMS gyro"),  # deg/s, fast
-    (spiked, "reading 200 (t=0.900000 s)"),
-    (lambda imu: changed(imu, rates=imu.gyro * 1e6), "rates must be in rad/s"),
-    (lambda imu: changed(imu, rates=np.zeros_like(imu.gyro)), "stuck or not connected"),
-    (lambda imu: changed(imu, rates=np.ones_like(imu.gyro)), "stuck or not connected"),
-    (lambda imu: ImuSeries(imu.t[::200], imu.acc[::200], imu.gyro[::200]), "less often than the frames"),
-    (lambda imu: changed(imu, t=imu.t * 1e6), "timestamps in microseconds"),
-    (lambda imu: changed(imu, t=imu.t * 1e9), "timestamps in nanoseconds"),
-    (lambda imu: ImuSeries(imu.t[30:32], imu.acc[30:32], imu.gyro[30:32]), "measures none of the window's 39"),
-    (lambda imu: changed(imu, t=imu.t - 100.0), "measures none of the window's 39"),
-    (lambda imu: ImuSeries(imu.t[:1], imu.acc[:1], imu.gyro[:1]), "holds 1 reading"),
-])
+@pytest.mark.parametrize(
+    "make, said",
+    [
+        (lambda imu: changed(imu, rates=np.degrees(imu.gyro) * 40), "faster than any MEMS gyro"),  # deg/s, fast
+        (spiked, "reading 200 (t=0.900000 s)"),
+        (lambda imu: changed(imu, rates=imu.gyro * 1e6), "rates must be in rad/s"),
+        (lambda imu: changed(imu, rates=np.zeros_like(imu.gyro)), "stuck or not connected"),
+        (lambda imu: changed(imu, rates=np.ones_like(imu.gyro)), "stuck or not connected"),
+        (lambda imu: ImuSeries(imu.t[::200], imu.acc[::200], imu.gyro[::200]), "less often than the frames"),
+        (lambda imu: changed(imu, t=imu.t * 1e6), "timestamps in microseconds"),
+        (lambda imu: changed(imu, t=imu.t * 1e9), "timestamps in nanoseconds"),
+        (lambda imu: ImuSeries(imu.t[30:32], imu.acc[30:32], imu.gyro[30:32]), "measures none of the window's 39"),
+        (lambda imu: changed(imu, t=imu.t - 100.0), "measures none of the window's 39"),
+        (lambda imu: ImuSeries(imu.t[:1], imu.acc[:1], imu.gyro[:1]), "holds 1 reading"),
+    ],
+)
 def test_readings_that_cannot_be_right_are_refused(make, said):
     with pytest.raises(EasVoError, match="^seq: the IMU") as refused:
         check_readings(make(gyro()), FRAMES, "seq", 0.0)
@@ -86,8 +89,11 @@ def test_covered_follows_the_gaps_and_the_ends():
 
 def edges_from(imu: ImuSeries, inliers=100, skip=()):
     """Exact consecutive rotations between FRAMES as the gyro measures them."""
-    return [RelativeRotation(k - 1, k, gyro_rotation(imu, FRAMES[k - 1], FRAMES[k]), inliers)
-            for k in range(1, len(FRAMES)) if k not in skip]
+    return [
+        RelativeRotation(k - 1, k, gyro_rotation(imu, FRAMES[k - 1], FRAMES[k]), inliers)
+        for k in range(1, len(FRAMES))
+        if k not in skip
+    ]
 
 
 def test_the_images_agree_with_a_right_gyro_and_contradict_wrong_ones():
@@ -118,10 +124,16 @@ def test_the_images_say_when_they_cannot_tell():
     assert "used unchecked" in some.warnings(False, [])[0]
 
 
-@pytest.mark.parametrize("scale, bias, verdict", [
-    (1.0, 0.0, "used"), (1.03, 0.01, "used"),  # within a MEMS gyro's tolerance and the graph's prior
-    (0.7, 0.0, "not used"), (1.3, 0.0, "not used"), (1.0, 0.25, "not used"),
-])
+@pytest.mark.parametrize(
+    "scale, bias, verdict",
+    [
+        (1.0, 0.0, "used"),
+        (1.03, 0.01, "used"),  # within a MEMS gyro's tolerance and the graph's prior
+        (0.7, 0.0, "not used"),
+        (1.3, 0.0, "not used"),
+        (1.0, 0.25, "not used"),
+    ],
+)
 def test_a_gyro_turning_too_far_or_reading_a_constant_bias_is_contradicted(scale, bias, verdict):
     imu = gyro()
     edges = edges_from(imu)
@@ -140,8 +152,12 @@ def test_images_one_scale_off_the_gyro_name_the_focal_length_first_not_the_gyros
     that from a gyro off in scale, so the two are not fused, and the warning names the camera's
     focal length first, not the gyro's units, signs, axes or clock."""
     imu = gyro()
-    edges = [RelativeRotation(e.i, e.j, rotvec_to_matrix(matrix_to_rotvec(e.R_i_j) * [1 / focal_factor, 1 / focal_factor, 1]),
-                              e.inliers) for e in edges_from(imu)]
+    edges = [
+        RelativeRotation(
+            e.i, e.j, rotvec_to_matrix(matrix_to_rotvec(e.R_i_j) * [1 / focal_factor, 1 / focal_factor, 1]), e.inliers
+        )
+        for e in edges_from(imu)
+    ]
     verdict = judge_gyro(FRAMES, edges, imu)
     assert verdict.scaled_alike and verdict.use == "not used"
     (said,) = verdict.warnings(False, [])
@@ -206,11 +222,14 @@ def test_the_noise_model_is_the_simulated_imus_and_the_pose_graphs_and_the_quant
     assert CHI2_3_999 == pytest.approx(chi2.ppf(0.999, 3), abs=1e-3)
 
 
-@pytest.mark.parametrize("omega_deg_s, sigma_deg, flagged", [
-    ((0.0, 12.0, 0.0), 0.05, 39),  # 0.6 deg a pair against sigma 0.05: each pair alone
-    ((0.0, 6.0, 0.0), 0.1, 39),  # 0.3 deg a pair, under 3 sigma each, all in one direction: the stretch
-    ((0.0, 0.0, 0.0), 0.1, 0),  # the events agree with the still gyro
-])
+@pytest.mark.parametrize(
+    "omega_deg_s, sigma_deg, flagged",
+    [
+        ((0.0, 12.0, 0.0), 0.05, 39),  # 0.6 deg a pair against sigma 0.05: each pair alone
+        ((0.0, 6.0, 0.0), 0.1, 39),  # 0.3 deg a pair, under 3 sigma each, all in one direction: the stretch
+        ((0.0, 0.0, 0.0), 0.1, 0),  # the events agree with the still gyro
+    ],
+)
 def test_edges_turning_while_the_gyro_reads_still_are_found_alone_or_over_a_stretch(omega_deg_s, sigma_deg, flagged):
     from eas_vo.imu.verdict import still_gyro_pairs
 

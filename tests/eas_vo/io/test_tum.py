@@ -29,13 +29,16 @@ def test_written_poses_read_back(origin_ns):
     np.testing.assert_allclose(back.q_w_c, Rotation.from_matrix(R).as_quat(), rtol=0, atol=5e-13)
 
 
-@pytest.mark.parametrize("rows, line, says", [
-    (["1 0 0 0 0 0 0 1", "0.5 0 0 0 0 0 0 1"], 2, "timestamp 0.500000000 does not increase"),
-    (["1 0 0 0 0 0 0 1", "# a comment", "1 0 0 0 0 0 0 1"], 3, "repeats the previous row's"),
-    (["1 0 0 0 0 0 0 1", "2 0 0 0 0 0 0.5 0.5"], 2, "quaternion norm 0.707 is not 1"),
-    (["1 0 0 0 0 0 0 1", "2 0 0 0 0 0 1"], 2, "expected 8 columns"),
-    (["1 0 0 0 0 0 0 1", "2 0 0 0 nan 0 0 1"], 2, "NaN or infinite"),
-])
+@pytest.mark.parametrize(
+    "rows, line, says",
+    [
+        (["1 0 0 0 0 0 0 1", "0.5 0 0 0 0 0 0 1"], 2, "timestamp 0.500000000 does not increase"),
+        (["1 0 0 0 0 0 0 1", "# a comment", "1 0 0 0 0 0 0 1"], 3, "repeats the previous row's"),
+        (["1 0 0 0 0 0 0 1", "2 0 0 0 0 0 0.5 0.5"], 2, "quaternion norm 0.707 is not 1"),
+        (["1 0 0 0 0 0 0 1", "2 0 0 0 0 0 1"], 2, "expected 8 columns"),
+        (["1 0 0 0 0 0 0 1", "2 0 0 0 nan 0 0 1"], 2, "NaN or infinite"),
+    ],
+)
 def test_every_use_refuses_a_bad_row_naming_its_file_and_line(tmp_path, rows, line, says):
     path = tmp_path / "poses.tum"
     path.write_text("\n".join(rows) + "\n")

@@ -5,10 +5,9 @@ import hashlib
 import io
 import tarfile
 
-from helpers import one_line_failure
-
 from eas_vo.cli.main import main
 from eas_vo.slam.orbvoc import NAME, fetch_orb_vocabulary
+from helpers import one_line_failure
 
 TEXT = "10 6 0 0\n0 1 " + "7 " * 32 + "0.5"
 
@@ -34,7 +33,9 @@ def test_the_vocabulary_is_fetched_verified_and_once(data_server, tmp_path):
     assert sorted(p.name for p in folder.iterdir()) == [NAME]  # the archive is gone
 
 
-def test_an_archive_that_is_not_the_published_one_is_one_line_and_leaves_nothing(data_server, tmp_path, capsys, monkeypatch):
+def test_an_archive_that_is_not_the_published_one_is_one_line_and_leaves_nothing(
+    data_server, tmp_path, capsys, monkeypatch
+):
     site, url, _, _ = data_server
     publish(site)  # not ORB-SLAM3's archive: its SHA-1 differs from the published one
     monkeypatch.setenv("EAS_VO_ORB_VOCABULARY_URL", f"{url}{NAME}.tar.gz")

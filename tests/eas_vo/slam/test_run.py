@@ -33,8 +33,25 @@ def walk(tmp_path_factory, walk_vocabulary):
     three `eas-vo slam` runs on them (shared by the tests below)."""
     vocabulary = walk_vocabulary
     out = tmp_path_factory.mktemp("slam") / "out"
-    assert main(["slam", "--dataset", WALK, "--frontend", "original", "--vocabulary", str(vocabulary), "--runs", "3",
-                 "--quiet", "--out", str(out)]) == 0
+    assert (
+        main(
+            [
+                "slam",
+                "--dataset",
+                WALK,
+                "--frontend",
+                "original",
+                "--vocabulary",
+                str(vocabulary),
+                "--runs",
+                "3",
+                "--quiet",
+                "--out",
+                str(out),
+            ]
+        )
+        == 0
+    )
     return vocabulary, out
 
 
@@ -90,8 +107,25 @@ def test_a_black_sequence_never_initialises_and_says_so(walk, short_sequence, tm
     """The dim default room's original frames (under 1 DN mean: no ORB corner) give ORB-SLAM3 nothing."""
     vocabulary, _ = walk
     out = tmp_path / "black"
-    assert main(["slam", "--dataset", str(short_sequence), "--frontend", "original", "--vocabulary", str(vocabulary),
-                 "--runs", "1", "--quiet", "--out", str(out)]) == 0
+    assert (
+        main(
+            [
+                "slam",
+                "--dataset",
+                str(short_sequence),
+                "--frontend",
+                "original",
+                "--vocabulary",
+                str(vocabulary),
+                "--runs",
+                "1",
+                "--quiet",
+                "--out",
+                str(out),
+            ]
+        )
+        == 0
+    )
     said = capsys.readouterr().out
     assert "1 never_initialised" in said and "no run tracked: run 1 never_initialised" in said
     metrics = json.loads((out / "run_1" / "metrics.json").read_text())
@@ -101,7 +135,9 @@ def test_a_black_sequence_never_initialises_and_says_so(walk, short_sequence, tm
     assert "keyframe APE" not in said  # reported as such, never as a number
 
 
-def test_orbslam3_killed_from_outside_ends_its_run_in_one_line_keeping_the_frames_done(walk, tmp_path, capsys, monkeypatch):
+def test_orbslam3_killed_from_outside_ends_its_run_in_one_line_keeping_the_frames_done(
+    walk, tmp_path, capsys, monkeypatch
+):
     vocabulary, _ = walk
     track = slam_run.OrbSlam3Process.track
     done = []
@@ -115,8 +151,23 @@ def test_orbslam3_killed_from_outside_ends_its_run_in_one_line_keeping_the_frame
 
     monkeypatch.setattr(slam_run.OrbSlam3Process, "track", track_then_kill_at_frame_5)
     out = tmp_path / "killed"
-    err = one_line_failure(["slam", "--dataset", WALK, "--frontend", "original", "--vocabulary", str(vocabulary),
-                            "--runs", "1", "--quiet", "--out", str(out)], capsys)
+    err = one_line_failure(
+        [
+            "slam",
+            "--dataset",
+            WALK,
+            "--frontend",
+            "original",
+            "--vocabulary",
+            str(vocabulary),
+            "--runs",
+            "1",
+            "--quiet",
+            "--out",
+            str(out),
+        ],
+        capsys,
+    )
     assert "run 1 of 1: ORB-SLAM3's process was killed by signal 9 (SIGKILL) while tracking" in err
     assert "at frame 5 of" in err and str(out / "run_1" / "frames.csv") in err
     assert len(read_frames(out / "run_1" / "frames.csv")) == 5
@@ -130,15 +181,18 @@ def test_a_missing_vocabulary_is_one_line(tmp_path, capsys, monkeypatch):
     monkeypatch.setenv("EAS_VO_DATA_DIR", str(tmp_path / "data"))
     err = one_line_failure(["slam", "--dataset", WALK, "--out", str(tmp_path / "out")], capsys)
     assert "no ORB vocabulary" in err and "eas-vo fetch orb-vocabulary" in err
-    err = one_line_failure(["slam", "--dataset", WALK, "--vocabulary", str(tmp_path / "none.txt"), "--out",
-                            str(tmp_path / "out")], capsys)
+    err = one_line_failure(
+        ["slam", "--dataset", WALK, "--vocabulary", str(tmp_path / "none.txt"), "--out", str(tmp_path / "out")], capsys
+    )
     assert "none.txt: no such vocabulary file" in err
     assert not (tmp_path / "out").exists()
 
 
 def test_a_missing_extra_is_one_line_naming_it(tmp_path, capsys, monkeypatch):
     real = slam_run.importlib.util.find_spec
-    monkeypatch.setattr(slam_run.importlib.util, "find_spec", lambda name, *a: None if name == "pyorbslam3" else real(name, *a))
+    monkeypatch.setattr(
+        slam_run.importlib.util, "find_spec", lambda name, *a: None if name == "pyorbslam3" else real(name, *a)
+    )
     err = one_line_failure(["slam", "--dataset", WALK, "--out", str(tmp_path / "out")], capsys)
     assert "pip install 'eas-vo[slam]'" in err and "GPL-3.0" in err
 
@@ -154,18 +208,23 @@ def test_states_and_counts():
     got = slam_run.counts(_results(states))
     assert got["status"] == "lost" and got["first_lost_frame"] == 2 and got["first_initialised_frame"] == 1
     assert got["time_to_init_s"] == pytest.approx(0.05)
-    assert got["tracked_fraction"] == pytest.approx(3 / 6) and got["tracked_fraction_after_init"] == pytest.approx(3 / 5)
+    assert got["tracked_fraction"] == pytest.approx(3 / 6) and got["tracked_fraction_after_init"] == pytest.approx(
+        3 / 5
+    )
 
 
-@pytest.mark.parametrize(("states", "status"), [
-    # the issue's run: 4 frames tracked after initialising, then recently lost to the end
-    (["not_initialised"] * 66 + ["ok"] * 4 + ["recently_lost"] * 30, "lost"),
-    (["not_initialised"] * 10 + ["ok"] * 89 + ["recently_lost"], "lost"),  # ends lost
-    (["not_initialised"] * 10 + ["ok"] * 80 + ["recently_lost"] * 11 + ["ok"] * 9, "lost"),  # 89 % tracked
-    (["not_initialised"] * 10 + ["ok"] * 88 + ["recently_lost"] * 2 + ["ok"] * 10, "ok"),  # relocalised, 98 %
-    (["not_initialised"] * 10 + ["ok"] * 90, "ok"),
-    (["not_initialised"] * 100, "never_initialised"),
-])
+@pytest.mark.parametrize(
+    ("states", "status"),
+    [
+        # the issue's run: 4 frames tracked after initialising, then recently lost to the end
+        (["not_initialised"] * 66 + ["ok"] * 4 + ["recently_lost"] * 30, "lost"),
+        (["not_initialised"] * 10 + ["ok"] * 89 + ["recently_lost"], "lost"),  # ends lost
+        (["not_initialised"] * 10 + ["ok"] * 80 + ["recently_lost"] * 11 + ["ok"] * 9, "lost"),  # 89 % tracked
+        (["not_initialised"] * 10 + ["ok"] * 88 + ["recently_lost"] * 2 + ["ok"] * 10, "ok"),  # relocalised, 98 %
+        (["not_initialised"] * 10 + ["ok"] * 90, "ok"),
+        (["not_initialised"] * 100, "never_initialised"),
+    ],
+)
 def test_a_run_is_ok_only_when_it_tracked_most_frames_after_initialising_and_the_last(states, status):
     got = slam_run.counts(_results(states))
     assert got["status"] == status, got
@@ -234,10 +293,28 @@ def test_a_run_beside_busy_processes_tracks_as_a_quiet_one(walk_vocabulary, tmp_
     states frame by frame, an `ok` status by the stated rule, and trajectories `evaluate` takes.
     ORB-SLAM3 is not bit-deterministic even so (paced runs' poses differ by up to centimetres,
     docs/slam.md), so the runs are compared state by state, not pose by pose."""
+
     def run(name):
         out = tmp_path / name
-        assert main(["slam", "--dataset", WALK, "--frontend", "eas", "--vocabulary", str(walk_vocabulary), "--runs", "1",
-                     "--quiet", "--out", str(out)]) == 0
+        assert (
+            main(
+                [
+                    "slam",
+                    "--dataset",
+                    WALK,
+                    "--frontend",
+                    "eas",
+                    "--vocabulary",
+                    str(walk_vocabulary),
+                    "--runs",
+                    "1",
+                    "--quiet",
+                    "--out",
+                    str(out),
+                ]
+            )
+            == 0
+        )
         return out / "run_1"
 
     quiet = run("quiet")
@@ -253,8 +330,13 @@ def test_a_run_beside_busy_processes_tracks_as_a_quiet_one(walk_vocabulary, tmp_
     for folder in (quiet, busy):
         metrics = json.loads((folder / "metrics.json").read_text())
         assert metrics["tracked_fraction_after_init"] >= 0.9 and metrics["status"] == "ok", metrics
-        assert main(["evaluate", "--dataset", WALK, "--estimate", str(folder / "trajectory.tum"), "--align", "origin"]) == 0
-        assert len((folder / "trajectory.tum").read_text().splitlines()) == sum(s in slam_run.TRACKED for s in states[0])
+        assert (
+            main(["evaluate", "--dataset", WALK, "--estimate", str(folder / "trajectory.tum"), "--align", "origin"])
+            == 0
+        )
+        assert len((folder / "trajectory.tum").read_text().splitlines()) == sum(
+            s in slam_run.TRACKED for s in states[0]
+        )
 
 
 def test_the_summary_is_over_the_runs_that_tracked():
@@ -294,8 +376,9 @@ def test_a_run_folder_holds_the_recordings_own_times(tmp_path):
     (tmp_path / "keyframes.tum").write_text("# ORB-SLAM3's\n0.250000 1 2 3 0 0 0 1\n")
     (tmp_path / "frames.csv").write_bytes(b"index,t,state\r\n0,0.250000000,ok\r\n")
     on_recording_clock(tmp_path, 1_700_000_000 * 10**9)
-    assert (tmp_path / "trajectory.tum").read_text() == ("1700000000.250000000 1 2 3 0 0 0 1\n"
-                                                         "1700000001.000000001 1 2 3 0 0 0 1\n")
+    assert (tmp_path / "trajectory.tum").read_text() == (
+        "1700000000.250000000 1 2 3 0 0 0 1\n1700000001.000000001 1 2 3 0 0 0 1\n"
+    )
     assert (tmp_path / "keyframes.tum").read_text() == "# ORB-SLAM3's\n1700000000.250000000 1 2 3 0 0 0 1\n"
     assert (tmp_path / "frames.csv").read_bytes() == b"index,t,state\r\n0,1700000000.250000000,ok\r\n"
     on_recording_clock(tmp_path, 0)  # a clock from zero: nothing to do

@@ -16,8 +16,9 @@ from helpers import one_line_failure
 def no_child(monkeypatch):
     """pyorbslam3 reported installed, and ORB-SLAM3's process never started."""
     real = slam_run.importlib.util.find_spec
-    monkeypatch.setattr(slam_run.importlib.util, "find_spec",
-                        lambda name, *a: object() if name == "pyorbslam3" else real(name, *a))
+    monkeypatch.setattr(
+        slam_run.importlib.util, "find_spec", lambda name, *a: object() if name == "pyorbslam3" else real(name, *a)
+    )
 
     def started(*args, **kwargs):
         raise AssertionError("ORB-SLAM3 was started on a broken vocabulary")
@@ -43,8 +44,9 @@ BROKEN = {
 
 @pytest.mark.parametrize("name", BROKEN)
 @pytest.mark.parametrize("where", ["given", "data_folder"])
-def test_a_broken_vocabulary_never_reaches_orbslam3(short_sequence, vocabulary_text, tmp_path, capsys, monkeypatch,
-                                                    no_child, name, where):
+def test_a_broken_vocabulary_never_reaches_orbslam3(
+    short_sequence, vocabulary_text, tmp_path, capsys, monkeypatch, no_child, name, where
+):
     damage, line = BROKEN[name]
     lines = damage(vocabulary_text.split("\n"))
     line = len(lines) if line == "last" else line

@@ -3,9 +3,8 @@ cannot load refused before any image is read."""
 
 import numpy as np
 
-from helpers import one_line_failure, textured_image
-
 from eas_vo.slam import train as train_mod
+from helpers import one_line_failure, textured_image
 
 
 def test_descriptors_are_orbs_32_bytes_and_an_empty_image_gives_none():
@@ -19,5 +18,7 @@ def test_a_tree_dbow2_refuses_is_one_line_before_any_image_is_read(short_sequenc
         raise AssertionError("the dataset was opened")
 
     monkeypatch.setattr("eas_vo.pipeline.open_pipeline", no_reading)
-    err = one_line_failure(["vocabulary", "--dataset", str(short_sequence), "--k", "21", "--out", str(tmp_path / "v.txt")], capsys)
+    err = one_line_failure(
+        ["vocabulary", "--dataset", str(short_sequence), "--k", "21", "--out", str(tmp_path / "v.txt")], capsys
+    )
     assert "DBoW2 takes k in 2..20" in err and not (tmp_path / "v.txt").exists()

@@ -8,8 +8,7 @@ import numpy as np
 import pytest
 
 from eas_vo.errors import DataError, EasVoError
-from eas_vo.slam.vocabulary import (_as_words64, check_vocabulary, hamming, k_majority, majority, read_vocabulary,
-                                    train)
+from eas_vo.slam.vocabulary import _as_words64, check_vocabulary, hamming, k_majority, majority, read_vocabulary, train
 
 
 def random_descriptors(rng, n):
@@ -100,14 +99,17 @@ def test_too_few_descriptors_or_a_k_dbow2_refuses_is_one_line():
         train([np.zeros((30, 32), np.uint8)], k=21, levels=2)
 
 
-@pytest.mark.parametrize("text, line, what", [
-    ("10 4 0\n", 1, "header"),
-    ("10 11 0 0\n0 1 " + "0 " * 32 + "0", 1, "ranges"),
-    ("10 4 0 0\n0 1 " + "0 " * 31 + "0", 2, "fields"),
-    ("10 4 0 0\n3 1 " + "0 " * 32 + "0", 2, "earlier node"),
-    ("10 4 0 0\n0 1 " + "0 " * 32 + "nan", 2, "finite"),
-    ("10 4 0 0\n0 1 " + "256 " * 32 + "0", 2, "0..255"),
-])
+@pytest.mark.parametrize(
+    "text, line, what",
+    [
+        ("10 4 0\n", 1, "header"),
+        ("10 11 0 0\n0 1 " + "0 " * 32 + "0", 1, "ranges"),
+        ("10 4 0 0\n0 1 " + "0 " * 31 + "0", 2, "fields"),
+        ("10 4 0 0\n3 1 " + "0 " * 32 + "0", 2, "earlier node"),
+        ("10 4 0 0\n0 1 " + "0 " * 32 + "nan", 2, "finite"),
+        ("10 4 0 0\n0 1 " + "256 " * 32 + "0", 2, "0..255"),
+    ],
+)
 def test_a_malformed_vocabulary_names_its_line(tmp_path, text, line, what):
     path = tmp_path / "bad.txt"
     path.write_text(text)
