@@ -41,7 +41,7 @@ def eas_vo_seconds(cfg, images, times) -> float:
 
 def orbslam3_seconds(images, times, vocabulary: Path, settings: Path, folder: Path) -> float:
     """Every image through ORB-SLAM3's child process [s] (its start and vocabulary load excluded)."""
-    from eas_vo.slam.run import OrbSlam3Process
+    from eas_vo.slam.process import OrbSlam3Process
 
     slam = OrbSlam3Process(vocabulary, settings, folder / "slam.log")
     try:
@@ -62,7 +62,7 @@ def main() -> None:
     args = parser.parse_args()
 
     from eas_vo.slam.export import settings_yaml
-    from eas_vo.slam.run import find_vocabulary, require_extra
+    from eas_vo.slam.process import find_vocabulary, require_extra
     from eas_vo.slam.train import train_vocabulary
 
     require_extra()

@@ -84,7 +84,7 @@ def run(args) -> int:
     from eas_vo.experiments import grid, results
     from eas_vo.experiments.cells import grid_methods, plan
     from eas_vo.experiments.gallery import PAPER_ORDER
-    from eas_vo.experiments.reproduce import default_methods
+    from eas_vo.experiments.paper import default_methods
     from eas_vo.io.outputs import check_grid_folder, check_writable_folder
 
     out = check_writable_folder(args.out)

@@ -80,7 +80,7 @@ def add_parser(sub) -> None:
 def run(args) -> int:
     """`eas-vo reproduce` on the parsed `args`; returns the exit status."""
     from eas_vo.datasets.ecd_catalogue import data_dir
-    from eas_vo.experiments import reproduce
+    from eas_vo.experiments import paper, table1, table2
     from eas_vo.io.outputs import check_grid_folder, check_writable_folder
 
     estimates = {}
@@ -102,7 +102,7 @@ def run(args) -> int:
     out = check_writable_folder(args.out or f"reproduce/{args.table}")
     refuse_inputs_inside(
         out,
-        [i for spec in reproduce.SPECS.values() for i in dataset_inputs(spec)],
+        [i for spec in paper.SPECS.values() for i in dataset_inputs(spec)],
         ("the --config", args.config),
         ("the --vocabulary", args.vocabulary),
         ("the data folder", str(data_dir())),
@@ -111,16 +111,16 @@ def run(args) -> int:
     check_grid_folder(out)  # before any download
     progress = shows_progress(args)
     if args.table == "table1":
-        rows, n_run, markdown = reproduce.table1(
+        rows, n_run, markdown = table1.table1(
             out,
-            args.duration or reproduce.PAPER_DURATION_S,
+            args.duration or paper.PAPER_DURATION_S,
             name_list("--backends", args.backends),
             args.config,
             args.jobs,
             progress,
         )
     else:
-        rows, n_run, markdown = reproduce.table2(
+        rows, n_run, markdown = table2.table2(
             out,
             estimates,
             args.duration,

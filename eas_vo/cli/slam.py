@@ -71,7 +71,9 @@ def run(args) -> int:
     from eas_vo import config as config_mod
     from eas_vo.io.outputs import check_output_folder
     from eas_vo.io.text import figure_text
-    from eas_vo.slam.run import SUMMARISED, find_vocabulary, require_extra, run_slam
+    from eas_vo.slam.process import find_vocabulary, require_extra
+    from eas_vo.slam.run import run_slam
+    from eas_vo.slam.scores import SUMMARISED
 
     require_extra()
     vocabulary = find_vocabulary(args.vocabulary)

@@ -22,6 +22,7 @@ from helpers import one_line_failure
 pytest.importorskip("pyorbslam3", reason="the slam extra (pyorbslam3) is not installed")
 
 from eas_vo.cli.main import main
+from eas_vo.slam import process, scores  # noqa: E402
 from eas_vo.slam import run as slam_run  # noqa: E402
 
 WALK = "synthetic:walk_short"
@@ -189,23 +190,23 @@ def test_a_missing_vocabulary_is_one_line(tmp_path, capsys, monkeypatch):
 
 
 def test_a_missing_extra_is_one_line_naming_it(tmp_path, capsys, monkeypatch):
-    real = slam_run.importlib.util.find_spec
+    real = process.importlib.util.find_spec
     monkeypatch.setattr(
-        slam_run.importlib.util, "find_spec", lambda name, *a: None if name == "pyorbslam3" else real(name, *a)
+        process.importlib.util, "find_spec", lambda name, *a: None if name == "pyorbslam3" else real(name, *a)
     )
     err = one_line_failure(["slam", "--dataset", WALK, "--out", str(tmp_path / "out")], capsys)
     assert "pip install 'eas-vo[slam]'" in err and "GPL-3.0" in err
 
 
 def _results(states):
-    return [slam_run.FrameResult(k, 0.05 * k, s, 0, None) for k, s in enumerate(slam_run.relabel(states))]
+    return [process.FrameResult(k, 0.05 * k, s, 0, None) for k, s in enumerate(process.relabel(states))]
 
 
 def test_states_and_counts():
     """An ok right after a lost frame is a relocalisation; the fractions count tracked frames."""
     states = ["not_initialised", "ok", "recently_lost", "ok", "lost", "ok"]
-    assert slam_run.relabel(states) == ["not_initialised", "ok", "recently_lost", "relocalised", "lost", "relocalised"]
-    got = slam_run.counts(_results(states))
+    assert process.relabel(states) == ["not_initialised", "ok", "recently_lost", "relocalised", "lost", "relocalised"]
+    got = scores.counts(_results(states))
     assert got["status"] == "lost" and got["first_lost_frame"] == 2 and got["first_initialised_frame"] == 1
     assert got["time_to_init_s"] == pytest.approx(0.05)
     assert got["tracked_fraction"] == pytest.approx(3 / 6) and got["tracked_fraction_after_init"] == pytest.approx(
@@ -226,9 +227,9 @@ def test_states_and_counts():
     ],
 )
 def test_a_run_is_ok_only_when_it_tracked_most_frames_after_initialising_and_the_last(states, status):
-    got = slam_run.counts(_results(states))
+    got = scores.counts(_results(states))
     assert got["status"] == status, got
-    assert got["last_state"] == slam_run.relabel(states)[-1]
+    assert got["last_state"] == process.relabel(states)[-1]
 
 
 class ScriptedOrbSlam3:
@@ -273,7 +274,7 @@ def test_the_trajectory_holds_each_tracked_frame_once(tmp_path, monkeypatch):
     images = [np.zeros((4, 4), np.uint8)] * len(states)
     got = slam_run.track_sequence(images, times, tmp_path / "voc", tmp_path / "settings", tmp_path, False, "test")
     estimate = read_estimate(tmp_path / "trajectory.tum")
-    tracked = [k for k, s in enumerate(slam_run.relabel(states)) if s in slam_run.TRACKED]
+    tracked = [k for k, s in enumerate(process.relabel(states)) if s in scores.TRACKED]
     np.testing.assert_allclose(estimate.t, times[tracked], rtol=0, atol=1e-6)
     np.testing.assert_allclose(estimate.p_w_c[:, 0], 0.01 * np.array(tracked), atol=1e-9)
     rows = read_frames(tmp_path / "frames.csv")
@@ -334,15 +335,13 @@ def test_a_run_beside_busy_processes_tracks_as_a_quiet_one(walk_vocabulary, tmp_
             main(["evaluate", "--dataset", WALK, "--estimate", str(folder / "trajectory.tum"), "--align", "origin"])
             == 0
         )
-        assert len((folder / "trajectory.tum").read_text().splitlines()) == sum(
-            s in slam_run.TRACKED for s in states[0]
-        )
+        assert len((folder / "trajectory.tum").read_text().splitlines()) == sum(s in scores.TRACKED for s in states[0])
 
 
 def test_the_summary_is_over_the_runs_that_tracked():
     runs = [{"status": "ok", "time_to_init_s": 1.0, "ape_keyframes": {"ape_trans_mean_m": v}} for v in (0.3, 0.1, 0.2)]
     runs.append({"status": "lost", "time_to_init_s": 0.5, "ape_keyframes": {"ape_trans_mean_m": 9.0}})
-    summary = slam_run.summarise(runs)
+    summary = scores.summarise(runs)
     assert summary["statuses"] == {"lost": 1, "ok": 3}
     assert summary["ape_keyframes.ape_trans_mean_m"] == {"median": 0.2, "min": 0.1, "max": 0.3, "n": 3}
     assert summary["ape_frames.ape_trans_mean_m"] is None
@@ -362,15 +361,15 @@ def test_the_eq3_rotation_ape_of_a_trajectory_in_another_world_frame_is_zero(sho
     rows = np.arange(10, len(gt.t) - 10, 7)
     path = tmp_path / "trajectory.tum"
     path.write_text(format_tum(gt.t[rows], 3.0 * gt.p_w_c[rows], R_a @ matrices_from_quats(gt.q_w_c[rows])))
-    got = slam_run.rotation_score(gt, path, 0.0)
+    got = scores.rotation_score(gt, path, 0.0)
     assert got["frames"] == len(rows) and got["ape_max_rad"] < 1e-6
-    assert slam_run.rotation_score(gt, tmp_path / "absent.tum", 0.0) is None
+    assert scores.rotation_score(gt, tmp_path / "absent.tum", 0.0) is None
 
 
 def test_a_run_folder_holds_the_recordings_own_times(tmp_path):
     """ORB-SLAM3 is fed times after the dataset's clock origin; the run folder's files end on
     the recording's own clock (a Unix-time bag's), to the nanosecond, other columns untouched."""
-    from eas_vo.slam.run import on_recording_clock
+    from eas_vo.slam.scores import on_recording_clock
 
     (tmp_path / "trajectory.tum").write_text("0.250000000 1 2 3 0 0 0 1\n1.000000001 1 2 3 0 0 0 1\n")
     (tmp_path / "keyframes.tum").write_text("# ORB-SLAM3's\n0.250000 1 2 3 0 0 0 1\n")

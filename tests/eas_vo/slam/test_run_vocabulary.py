@@ -7,6 +7,7 @@ import re
 import numpy as np
 import pytest
 
+from eas_vo.slam import process
 from eas_vo.slam import run as slam_run
 from eas_vo.slam.vocabulary import train
 from helpers import one_line_failure
@@ -15,9 +16,9 @@ from helpers import one_line_failure
 @pytest.fixture
 def no_child(monkeypatch):
     """pyorbslam3 reported installed, and ORB-SLAM3's process never started."""
-    real = slam_run.importlib.util.find_spec
+    real = process.importlib.util.find_spec
     monkeypatch.setattr(
-        slam_run.importlib.util, "find_spec", lambda name, *a: object() if name == "pyorbslam3" else real(name, *a)
+        process.importlib.util, "find_spec", lambda name, *a: object() if name == "pyorbslam3" else real(name, *a)
     )
 
     def started(*args, **kwargs):

@@ -8,7 +8,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from eas_vo.cli.main import main
-from eas_vo.experiments.reproduce import PAPER_TABLE1, PAPER_TABLE2
+from eas_vo.experiments.paper import PAPER_TABLE1, PAPER_TABLE2
 from helpers import publish_sequences
 
 
@@ -84,7 +84,8 @@ def test_table1_in_one_command_beside_the_papers(paper_site, tmp_path, capsys):
 
 def test_table1_marks_a_cell_whose_time_offset_could_not_be_estimated():
     from eas_vo.experiments.gallery import PAPER_ORDER
-    from eas_vo.experiments.reproduce import SEQUENCES, table1_markdown
+    from eas_vo.experiments.paper import SEQUENCES
+    from eas_vo.experiments.table1 import table1_markdown
 
     cells = [(seq, source) for seq in SEQUENCES for source in PAPER_ORDER]
     rows = [
@@ -110,7 +111,7 @@ def test_table1_marks_a_cell_whose_time_offset_could_not_be_estimated():
 
 def test_compares_default_methods_are_the_papers_chain_and_the_smoothed_pose_graph():
     from eas_vo.experiments.cells import Method
-    from eas_vo.experiments.reproduce import PAPER, SMOOTHED, default_methods
+    from eas_vo.experiments.paper import PAPER, SMOOTHED, default_methods
 
     assert default_methods("klt", "chain") == [PAPER, SMOOTHED] and SMOOTHED.settings == (
         ("tracker.klt.keyframe_interval", "3"),
@@ -120,10 +121,11 @@ def test_compares_default_methods_are_the_papers_chain_and_the_smoothed_pose_gra
 
 def test_table1s_grid_is_the_papers_chain_beside_the_smoothed_pose_graph():
     from eas_vo.experiments.gallery import PAPER_ORDER
-    from eas_vo.experiments.reproduce import PAPER, SEQUENCES, SMOOTHED, _cells, table1_markdown, table1_methods
+    from eas_vo.experiments.paper import PAPER, SEQUENCES, SMOOTHED, paper_cells, table1_methods
+    from eas_vo.experiments.table1 import table1_markdown
 
     assert table1_methods(("chain", "gtsam")) == [PAPER, SMOOTHED]
-    cells = _cells(PAPER_ORDER, table1_methods(("chain", "gtsam")))
+    cells = paper_cells(PAPER_ORDER, table1_methods(("chain", "gtsam")))
     assert {(c.dataset_name, c.method) for c in cells} == {(s, m) for s in SEQUENCES for m in (PAPER, SMOOTHED)}
     assert sum(c.folder.endswith("_klt_gtsam_keyframe_interval-3") for c in cells) == 2 * len(PAPER_ORDER)
     rows = [
@@ -396,10 +398,11 @@ def test_table2_runs_orbslam3_on_each_cell_beside_the_papers(walk_site, walk_voc
 
 def test_a_table2_cell_reruns_slam_runs_made_under_another_protocol(tmp_path, monkeypatch):
     """A cell's summary.json is reused only when its runs were paced and judged as slam runs
-    now are (slam.run.PROTOCOL): an older folder, whose statuses followed another rule, reruns."""
-    from eas_vo.experiments import grid, reproduce
+    now are (slam.scores.PROTOCOL): an older folder, whose statuses followed another rule, reruns."""
+    from eas_vo.experiments import grid, table2
     from eas_vo.experiments.cells import Cell
     from eas_vo.slam import run as slam_run
+    from eas_vo.slam import scores
 
     calls = []
 
@@ -408,7 +411,7 @@ def test_a_table2_cell_reruns_slam_runs_made_under_another_protocol(tmp_path, mo
         return {
             "runs": runs,
             "vocabulary": vocabulary,
-            "protocol": slam_run.PROTOCOL,
+            "protocol": scores.PROTOCOL,
             "crashed": [],
             "ape_keyframes.ape_trans_mean_m": {"median": 0.02},
         }
@@ -420,10 +423,10 @@ def test_a_table2_cell_reruns_slam_runs_made_under_another_protocol(tmp_path, mo
     old = {"runs": 2, "vocabulary": "voc.txt", "statuses": {"ok": 2}, "ape_keyframes.ape_trans_mean_m": {"median": 0.5}}
     (folder / "summary.json").write_text(json.dumps(old))
     cell = Cell("ecd:hdr_boxes", "eas", "klt", "chain", (), "hdr_boxes")
-    got = reproduce._slam_cell(cell, "paper", {}, folder, "voc.txt", 2, False)
+    got = table2._slam_cell(cell, "paper", {}, folder, "voc.txt", 2, False)
     assert calls == [folder] and got["ape_trans_mean_m"] == 0.02
-    (folder / "summary.json").write_text(json.dumps({**old, "protocol": slam_run.PROTOCOL}))
-    assert reproduce._slam_cell(cell, "paper", {}, folder, "voc.txt", 2, False)["ape_trans_mean_m"] == 0.5
+    (folder / "summary.json").write_text(json.dumps({**old, "protocol": scores.PROTOCOL}))
+    assert table2._slam_cell(cell, "paper", {}, folder, "voc.txt", 2, False)["ape_trans_mean_m"] == 0.5
     assert calls == [folder]
 
 
@@ -432,7 +435,7 @@ def test_table2s_vocabulary_is_checked_whole_and_a_broken_one_never_replaced(tmp
     """A vocabulary in $PYORBSLAM3_VOCAB or the data folder that is cut short is refused naming
     its line: neither handed to ORB-SLAM3 nor swapped for a download."""
     from eas_vo.errors import DataError
-    from eas_vo.experiments import reproduce
+    from eas_vo.experiments import table2
     from eas_vo.slam import orbvoc
     from eas_vo.slam.vocabulary import train
 
@@ -451,7 +454,7 @@ def test_table2s_vocabulary_is_checked_whole_and_a_broken_one_never_replaced(tmp
     with pytest.raises(
         DataError, match=rf"^{path}:{text[: len(text) // 2].count(chr(10)) + 1}: expected 'parent is_leaf'"
     ):
-        reproduce._vocabulary(False)
+        table2._vocabulary(False)
 
 
 def test_table2s_rows_say_the_configuration_and_method_their_cells_ran(tmp_path, monkeypatch):
@@ -461,7 +464,7 @@ def test_table2s_rows_say_the_configuration_and_method_their_cells_ran(tmp_path,
     import importlib.util
 
     from eas_vo import config
-    from eas_vo.experiments import grid, reproduce
+    from eas_vo.experiments import grid, table2
 
     real = importlib.util.find_spec
     monkeypatch.setattr(
@@ -489,14 +492,14 @@ def test_table2s_rows_say_the_configuration_and_method_their_cells_ran(tmp_path,
         )
 
     monkeypatch.setattr(grid, "run_experiment", run_experiment)
-    monkeypatch.setattr(reproduce, "fetch_sequences", lambda progress: None)
-    monkeypatch.setattr(reproduce, "_check", lambda *a: None)
-    monkeypatch.setattr(reproduce, "_vocabulary", lambda progress: tmp_path / "voc.txt")
-    monkeypatch.setattr(reproduce, "_slam_cell", lambda *a: {"ape_trans_mean_m": None, "statuses": {}})
-    monkeypatch.setattr(reproduce, "_keyframe_figures", lambda *a: None)
+    monkeypatch.setattr(table2, "fetch_sequences", lambda progress: None)
+    monkeypatch.setattr(table2, "check_cells", lambda *a: None)
+    monkeypatch.setattr(table2, "_vocabulary", lambda progress: tmp_path / "voc.txt")
+    monkeypatch.setattr(table2, "_slam_cell", lambda *a: {"ape_trans_mean_m": None, "statuses": {}})
+    monkeypatch.setattr(table2, "_keyframe_figures", lambda *a: None)
     best = config.run_section("best")
     assert (best.tracker, best.backend) == ("klt", "gtsam")  # what `--config best` runs
-    rows, n_run, markdown = reproduce.table2(tmp_path / "out", {}, config="paper")
+    rows, n_run, markdown = table2.table2(tmp_path / "out", {}, config="paper")
     assert grids == [("paper", {("klt", "chain")}), ("best", {("klt", "gtsam")})]
     assert len(rows) == n_run == 8  # every cell run is reported: 2 sequences x 2 sources, in both grids
     assert {r["folder"].split("/")[0] for r in rows if r["method"] == "klt+gtsam"} == {"best"}
