@@ -42,7 +42,7 @@ def add_parser(sub) -> None:
     """`eas-vo slam`: its arguments and help, added to `sub`, the command line's subparsers."""
     parser = sub.add_parser(
         "slam",
-        help="run monocular ORB-SLAM3 on a frontend's images and score it (the paper's Table 2; extra: parser)",
+        help="run monocular ORB-SLAM3 on a frontend's images and score it (the paper's Table 2; extra: slam)",
         description="Feed a frontend's images of the window frame by frame to monocular ORB-SLAM3 (pyorbslam3, "
         "in a child process; settings from the dataset's calibration), --runs times (its threads make each run "
         "differ), and score each run's keyframe and all-frame trajectories against ground truth after Sim(3) "

@@ -10,23 +10,19 @@ from eas_vo.types import ImuSeries
 
 
 def setup_of(cfg, tracker_uses_imu: bool = False, backend_uses_imu: bool | None = None) -> GyroSetup:
-    """The policy's view of a resolved configuration (pipeline.runner.gyro_setup without plugins built)."""
-    rc = cfg.run
-    backend = registry.get("backends", rc.backend)
-    return GyroSetup(
-        rc.imu_rotvec_cam,
-        rc.imu_time_offset_s,
-        rc.imu_time_offset_auto,
-        rc.frontend,
-        rc.tracker,
-        rc.backend,
-        images_lag=registry.get("frontends", rc.frontend).shows_the_past,
-        tracker_reads_images=registry.get("trackers", rc.tracker).reads_images,
-        tracker_uses_imu=tracker_uses_imu,
-        tracker_imu_use=registry.get("trackers", rc.tracker).imu_use,
-        backend_uses_imu=backend(cfg.backend).uses_imu if backend_uses_imu is None else backend_uses_imu,
-        backend_imu_use=backend.imu_use,
+    """The policy's view of a resolved configuration (pipeline.runner.gyro_setup), with stand-ins
+    for the tracker and backend a run would build."""
+    from types import SimpleNamespace
+
+    from eas_vo.pipeline.runner import gyro_setup
+
+    tracker, backend = registry.get("trackers", cfg.run.tracker), registry.get("backends", cfg.run.backend)
+    backend_uses_imu = backend(cfg.backend).uses_imu if backend_uses_imu is None else backend_uses_imu
+    parts = SimpleNamespace(
+        tracker=SimpleNamespace(uses_imu=tracker_uses_imu, imu_use=tracker.imu_use),
+        backend=SimpleNamespace(uses_imu=backend_uses_imu, imu_use=backend.imu_use),
     )
+    return gyro_setup(cfg, parts)
 
 
 @pytest.mark.parametrize(
