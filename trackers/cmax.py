@@ -201,16 +201,17 @@ class CmaxTracker(Tracker):
         if uncovered > MAX_UNCOVERED:
             status, reason = "weak", f"events miss part of the interval ({100 * uncovered:.0f} % without any)"
         elif focus < self.config.weak_focus:
+            # a peak barely above its neighbours: the optimum may be a far one (a noise peak); the
+            # rotation is known to within itself and the peak's width, as below
             status, reason = "weak", f"little in focus ({focus:.3f})"
+            sigma = max(sigma, _within_itself(R, windows))
         elif any(w.still_focus >= self.config.weak_focus for w in windows):
             # two peaks, the optimum and no motion, no farther apart in contrast than the optimum's own
             # width: a motion under about a pixel, not told from none (a noise peak a few px away passes
             # the focus test): the rotation is known to within itself and the peak's width
             still = max(w.still_focus for w in windows)
             status, reason = "weak", f"as sharp at no motion ({still:.3f})"
-            sigma = max(
-                sigma, float(np.hypot(np.linalg.norm(matrix_to_rotvec(R)), _angle(windows, lambda w: FOCUS_STEP_PX)))
-            )
+            sigma = max(sigma, _within_itself(R, windows))
         elif residual > self.config.max_residual_px:
             # the rotation is known no better than the quadrants agree: the sigma is at least their spread
             status, reason = "weak", f"quadrants disagree ({residual:.2f} px)"
@@ -484,6 +485,13 @@ def _positive_definite(H: np.ndarray) -> np.ndarray:
     lam = np.abs(lam)
     lam = np.maximum(lam, max(1e-3 * lam.max(), 1e-12))
     return (V * lam) @ V.T
+
+
+def _within_itself(R: np.ndarray, windows) -> float:
+    """The 1-sigma [rad] of a rotation R known only to within itself and the contrast peak's width
+    (FOCUS_STEP_PX over the windows): what a weak window whose optimum may be no motion, or a
+    far noise peak, states."""
+    return float(np.hypot(np.linalg.norm(matrix_to_rotvec(R)), _angle(windows, lambda w: FOCUS_STEP_PX)))
 
 
 def _curvature_sigma(H: np.ndarray) -> float:
