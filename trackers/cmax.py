@@ -121,7 +121,8 @@ class Window:
     image quadrants' own optima lie (CmaxTracker._quadrant_residual_px) [px], the angular
     velocity [rad/s] that displaces its events 1 px over half the window (rad_s_per_px), and no
     motion's own focus where the gain is below the focus (0 where it is not: the optimum stands
-    clear of no motion)."""
+    clear of no motion), and whether the solver started from the coarse search (no gyro and no
+    previous window: a standing start)."""
 
     omega: np.ndarray
     sigma_rad_s: float
@@ -134,6 +135,7 @@ class Window:
     residual_px: float
     rad_s_per_px: float = 0.0
     still_focus: float = 0.0
+    searched: bool = False
 
 
 class CmaxTracker(Tracker):
@@ -201,10 +203,11 @@ class CmaxTracker(Tracker):
         if uncovered > MAX_UNCOVERED:
             status, reason = "weak", f"events miss part of the interval ({100 * uncovered:.0f} % without any)"
         elif focus < self.config.weak_focus:
-            # a peak barely above its neighbours: the optimum may be a far one (a noise peak); the
-            # rotation is known to within itself and the peak's width, as below
             status, reason = "weak", f"little in focus ({focus:.3f})"
-            sigma = max(sigma, _within_itself(R, windows))
+            if any(w.searched for w in windows):
+                # from a standing start the coarse search may have settled on a far noise peak
+                # (docs/cmax.md): the rotation is known to within itself and the peak's width
+                sigma = max(sigma, _within_itself(R, windows))
         elif any(w.still_focus >= self.config.weak_focus for w in windows):
             # two peaks, the optimum and no motion, no farther apart in contrast than the optimum's own
             # width: a motion under about a pixel, not told from none (a noise peak a few px away passes
@@ -273,7 +276,8 @@ class CmaxTracker(Tracker):
             return -value / v0, -grad / (v0 * scale)
 
         starts = self._starts(t0, t1)
-        if not starts or c.init == "search":
+        searched = not starts or c.init == "search"
+        if searched:
             starts += [self._search(contrast, scale), np.zeros(3)]
         best = None
         for start in starts:
@@ -304,7 +308,18 @@ class CmaxTracker(Tracker):
             )
         self._omega = omega
         return Window(
-            omega, sigma / scale, gain, focus, n, t0, t1, contrast.evaluations, residual, 1.0 / scale, still_focus
+            omega,
+            sigma / scale,
+            gain,
+            focus,
+            n,
+            t0,
+            t1,
+            contrast.evaluations,
+            residual,
+            1.0 / scale,
+            still_focus,
+            searched,
         )
 
     def _quadrant_residual_px(self, contrast: Contrast, p: np.ndarray, scale: float, centre, around, H) -> float:
@@ -489,8 +504,7 @@ def _positive_definite(H: np.ndarray) -> np.ndarray:
 
 def _within_itself(R: np.ndarray, windows) -> float:
     """The 1-sigma [rad] of a rotation R known only to within itself and the contrast peak's width
-    (FOCUS_STEP_PX over the windows): what a weak window whose optimum may be no motion, or a
-    far noise peak, states."""
+    (FOCUS_STEP_PX over the windows)."""
     return float(np.hypot(np.linalg.norm(matrix_to_rotvec(R)), _angle(windows, lambda w: FOCUS_STEP_PX)))
 
 
