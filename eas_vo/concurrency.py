@@ -54,6 +54,12 @@ def submit(work: Callable[..., T], *args) -> Future:
     """work(*args) started on the threads (done at once, in the caller's thread, with one)."""
     if _threads > 1:
         return _shared_pool().submit(work, *args)
+    return done_now(work, *args)
+
+
+def done_now(work: Callable[..., T], *args) -> Future:
+    """work(*args) done at once in the caller's thread, as a Future (for work whose result is
+    waited for at once: a thread would only add its hand-over)."""
     done: Future = Future()
     try:
         done.set_result(work(*args))

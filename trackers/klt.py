@@ -241,9 +241,10 @@ class KltTracker(Tracker):
         predicted = self.predicted_rotation(t_prev, t)
         cur, ok = self.track(image, predicted)
         nc = int(ok.sum())
-        geometry = concurrency.submit(
-            self._measured, k, t, nc, self._prev_pts[ok], cur[ok], self._kf_pts[ok], self._kf_index
-        )
+        # the geometry runs beside the next frame's tracking, unless this frame's result decides
+        # how the next one starts (a fallback may detect corners afresh: _redetects waits for it)
+        start = concurrency.submit if self.config.fallback == "none" else concurrency.done_now
+        geometry = start(self._measured, k, t, nc, self._prev_pts[ok], cur[ok], self._kf_pts[ok], self._kf_index)
         frame = _Frame(k, t, t_prev, image, previous, predicted, nc, geometry)
         self._unfinished.append(frame)
         self._advance(image, self._redetects(frame), cur, ok, k)
