@@ -18,7 +18,8 @@ import numpy as np
 
 from eas_vo import concurrency
 from eas_vo.camera import CameraModel
-from eas_vo.geometry.rotations import exp_so3, geodesic_angle, rotvec_to_matrix, scaled_rotation
+from eas_vo.geometry.compiled import exp_so3
+from eas_vo.geometry.rotations import geodesic_angle, rotvec_to_matrix, scaled_rotation
 
 #: Focal lengths [px] of the resolutions the alignment and the score work at, whatever the
 #: sensor: each view is resized to them, so every figure below in pixels of a resolution is an

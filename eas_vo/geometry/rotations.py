@@ -1,12 +1,11 @@
 """Rotation helpers: the one SO(3) exponential and logarithm (rotvec_to_matrix, matrix_to_rotvec;
-exp_so3 is the compiled exponential numba kernels call), quaternions (x, y, z, w everywhere,
+its compiled twin for numba kernels is geometry.compiled.exp_so3), quaternions (x, y, z, w everywhere,
 converted here only), geodesic angles, slerp and the gyro's integrated rotation."""
 
 from __future__ import annotations
 
 from functools import reduce
 
-import numba
 import numpy as np
 from scipy.spatial.transform import Rotation, Slerp
 
@@ -31,25 +30,6 @@ def rotvec_to_matrix(rotvec: np.ndarray) -> np.ndarray:
 def matrix_to_rotvec(R: np.ndarray) -> np.ndarray:
     """Rotation matrices (..., 3, 3) -> axis-angle vectors [rad] (..., 3)."""
     return Rotation.from_matrix(np.asarray(R, dtype=float)).as_rotvec()
-
-
-@numba.njit(cache=True, nogil=True)
-def exp_so3(d):
-    """The rotation matrix of one rotation vector d [rad] (3,), by Rodrigues' formula: the
-    compiled exponential for numba kernels (rotvec_to_matrix's, one at a time)."""
-    theta = np.sqrt(d[0] ** 2 + d[1] ** 2 + d[2] ** 2)
-    if theta < 1e-300:
-        return np.eye(3)
-    x, y, z = d[0] / theta, d[1] / theta, d[2] / theta
-    c, s = np.cos(theta), np.sin(theta)
-    c1 = 1.0 - c
-    return np.array(
-        [
-            [c + c1 * x * x, c1 * x * y - s * z, c1 * x * z + s * y],
-            [c1 * x * y + s * z, c + c1 * y * y, c1 * y * z - s * x],
-            [c1 * x * z - s * y, c1 * y * z + s * x, c + c1 * z * z],
-        ]
-    )
 
 
 def scaled_rotation(R: np.ndarray, factor: float) -> np.ndarray:

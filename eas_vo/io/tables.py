@@ -98,12 +98,13 @@ def _parse_table_slow(path: str, data: bytes, ncols: int, what: str) -> np.ndarr
     return np.array(rows, dtype=float).reshape(-1, ncols)
 
 
-def _row_number(row: int) -> int:
+def row_number(row: int) -> int:
+    """A table row's number as messages name it when no file line is known: from 1."""
     return row + 1
 
 
 def check_increasing(
-    where: str, t: np.ndarray, line_of=_row_number, warnings: DataWarnings | None = None, row_word: str = "line"
+    where: str, t: np.ndarray, line_of=row_number, warnings: DataWarnings | None = None, row_word: str = "line"
 ) -> np.ndarray:
     """The indices of the rows to keep of a series whose time [s] must increase; `line_of(row)`
     turns a row index into what messages name (a file line; default: the row from 1), and

@@ -13,7 +13,7 @@ import numpy as np
 
 from eas_vo.errors import DataError, DataWarnings
 from eas_vo.geometry.rotations import quats_from_matrices
-from eas_vo.io.tables import _row_number, check_increasing, clock_time, data_line, parse_table
+from eas_vo.io.tables import check_increasing, clock_time, data_line, parse_table, row_number
 from eas_vo.types import PoseSeries
 
 #: What one row holds, for messages.
@@ -25,7 +25,7 @@ TUM_ROW = "t px py pz qx qy qz qw"
 UNIT_NORM_TOLERANCE = 1e-8
 
 
-def pose_series(where: str, table: np.ndarray, line_of=_row_number) -> PoseSeries:
+def pose_series(where: str, table: np.ndarray, line_of=row_number) -> PoseSeries:
     """`t tx ty tz qx qy qz qw` rows -> PoseSeries, checking that quaternions are unit
     (`line_of(row)`: what a message names, as for tables.check_increasing)."""
     q = table[:, 4:8]

@@ -1,4 +1,4 @@
-"""Rotation helpers: the one SO(3) exponential (scipy and compiled) and the gyro's rotation over an interval."""
+"""Rotation helpers: the SO(3) exponential scaled (scaled_rotation) and the gyro's rotation over an interval."""
 
 import numpy as np
 import pytest
@@ -47,18 +47,6 @@ def test_readings_in_the_camera_frame_turn_the_camera_as_seen_from_it(rotvec):
     np.testing.assert_allclose(cam.acc[0], [0.0, 9.81, 0.0], atol=1e-12)
     np.testing.assert_allclose(cam.t, t_imu - 0.02)
     assert geodesic_angle(gyro_rotation(cam, 0.3, 0.35), Rotation.from_rotvec(omega_cam * 0.05).as_matrix()) < 1e-12
-
-
-def test_the_compiled_exponential_is_rodrigues_formula_as_opencv_and_scipy_compute_it():
-    """exp_so3 (for numba kernels) against OpenCV's Rodrigues and scipy (rotvec_to_matrix), from
-    no rotation through tiny ones to beyond a half turn."""
-    import cv2
-
-    from eas_vo.geometry.rotations import exp_so3
-
-    for d in ([0.0, 0.0, 0.0], [1e-12, 0.0, -2e-12], [0.01, -0.02, 0.005], [0.5, 1.0, -2.0], [3.0, -1.0, 0.5]):
-        np.testing.assert_allclose(exp_so3(np.array(d)), cv2.Rodrigues(np.array(d))[0], rtol=0, atol=1e-15)
-        np.testing.assert_allclose(exp_so3(np.array(d)), rotvec_to_matrix(np.array(d)), rtol=0, atol=1e-15)
 
 
 @pytest.mark.parametrize("factor", [0.0, 0.5, 1.0, 2.5])

@@ -19,7 +19,8 @@ def setup_of(cfg, tracker_uses_imu: bool = False, backend_uses_imu: bool | None 
     tracker, backend = registry.get("trackers", cfg.run.tracker), registry.get("backends", cfg.run.backend)
     backend_uses_imu = backend(cfg.backend).uses_imu if backend_uses_imu is None else backend_uses_imu
     parts = SimpleNamespace(
-        tracker=SimpleNamespace(uses_imu=tracker_uses_imu, imu_use=tracker.imu_use),
+        frontend=registry.get("frontends", cfg.run.frontend),
+        tracker=SimpleNamespace(uses_imu=tracker_uses_imu, imu_use=tracker.imu_use, reads_images=tracker.reads_images),
         backend=SimpleNamespace(uses_imu=backend_uses_imu, imu_use=backend.imu_use),
     )
     return gyro_setup(cfg, parts)
