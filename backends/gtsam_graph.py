@@ -21,7 +21,7 @@ from eas_vo.validation import check_choice, check_range
 
 MODES = ("batch", "online")
 ROBUST = ("none", "huber", "cauchy")
-EDGE_NOISE = ("inliers", "residual")
+EDGE_NOISE = ("covariance", "inliers")
 #: A gyro interval a confident edge contradicts is left out only when the two differ by more
 #: than this many times their median difference over the sequence (chosen above what the images'
 #: errors showed beside a right gyro: docs/imu.md, "A gyro that cannot be right is not used").
@@ -33,9 +33,9 @@ CONVERGED_STEP_RAD = 1e-6
 #: factor is relative, so it fixes the graph's one free global rotation; this far below any
 #: edge's noise, frame 0 stays put.
 FIRST_FRAME_SIGMA_RAD = 1e-9
-#: The loosest edge noise [rad]: an edge's own (RelativeRotation.sigma_rad, infinite without
-#: inliers) is capped here, since GTSAM's noise models need a finite sigma; an edge this loose
-#: carries no information.
+#: The loosest edge noise [rad]: an edge's own (RelativeRotation.noise_covariance, infinite
+#: without inliers) is capped here along every axis, since GTSAM's noise models need a finite
+#: sigma; an edge this loose carries no information.
 LOOSEST_EDGE_SIGMA_RAD = 1e3
 #: Levenberg-Marquardt stops when an iteration lowers the graph's error by less than this fraction
 #: of it (relative) or this amount (absolute; the error is half the sum of squared whitened
@@ -58,14 +58,14 @@ class GtsamConfig:
     mode: `batch` (Levenberg-Marquardt over all frames) or `online` (iSAM2, frame by frame:
         BackendResult.causal_R_w_c holds each frame's estimate as it was when that frame
         arrived).
-    edge_noise: how an edge's noise [rad] follows from its quality: `inliers` (the default):
-        sigma_rad * sqrt(reference_inliers / inliers); `residual`: the edge's own inlier
-        noise over sqrt(inliers) divided by the inlier ratio (RelativeRotation.sigma_rad),
-        never below sigma_floor_rad. An edge with its estimator's own sigma
-        (RelativeRotation.estimated_sigma_rad, e.g. cmax's) gets that in either mode.
+    edge_noise: an edge's noise model: `covariance` (the default): its estimator's own
+        covariance (RelativeRotation.noise_covariance: full 3x3; from its quality where the
+        tracker gives none), no axis's sigma below sigma_floor_rad; `inliers`: one isotropic
+        sigma for every edge, sigma_rad * sqrt(reference_inliers / inliers), whatever its
+        covariance (the graph before covariances, for comparison).
     sigma_rad: (`inliers`) noise of an edge measured with `reference_inliers` inliers.
     reference_inliers: see sigma_rad.
-    sigma_floor_rad: (`residual`) the smallest edge noise [rad].
+    sigma_floor_rad: (`covariance`) the smallest noise along any axis [rad].
     gap_sigma_rad: a frame without a measurement is tied to the previous one by an
         identity edge this loose (the chain's "keep the previous rotation").
     robust, robust_k: robust kernel (`none`, `huber`, `cauchy`) and its threshold in sigmas.
@@ -84,7 +84,7 @@ class GtsamConfig:
     """
 
     mode: str = "batch"
-    edge_noise: str = "inliers"
+    edge_noise: str = "covariance"
     sigma_rad: float = 0.005
     reference_inliers: int = 100
     sigma_floor_rad: float = 1e-4
@@ -127,19 +127,23 @@ class GtsamBackend(Backend):
     def uses_imu(self) -> bool:
         return self.config.gyro in (True, "auto")
 
-    def edge_sigma(self, edge: RelativeRotation) -> float:
-        """The isotropic noise [rad] of a measured edge: the estimator's own when it gives one
-        (RelativeRotation.estimated_sigma_rad), else from its quality (see edge_noise)."""
+    def edge_covariance(self, edge: RelativeRotation) -> np.ndarray:
+        """The noise covariance [rad^2] (3, 3) of a measured edge in its factor (see edge_noise;
+        RelativeRotation's convention, which is GTSAM's)."""
         c = self.config
-        if edge.estimated_sigma_rad > 0:
-            return max(edge.estimated_sigma_rad, c.sigma_floor_rad)
         if c.edge_noise == "inliers":
-            return c.sigma_rad * np.sqrt(c.reference_inliers / max(edge.inliers, 1))
-        return max(min(edge.sigma_rad, LOOSEST_EDGE_SIGMA_RAD), c.sigma_floor_rad)
+            return (c.sigma_rad**2 * c.reference_inliers / max(edge.inliers, 1)) * np.eye(3)
+        covariance = np.nan_to_num(edge.noise_covariance(), nan=np.inf)
+        if not np.all(np.isfinite(covariance)):
+            return LOOSEST_EDGE_SIGMA_RAD**2 * np.eye(3)
+        w, V = np.linalg.eigh(0.5 * (covariance + covariance.T))
+        return (V * np.clip(w, c.sigma_floor_rad**2, LOOSEST_EDGE_SIGMA_RAD**2)) @ V.T
 
-    def _noise(self, gtsam, sigma: float):
+    def _noise(self, gtsam, covariance: np.ndarray):
+        """The factor's noise model: Gaussian with `covariance`, under the robust kernel, which then
+        acts on the residual whitened by it (in its sigmas)."""
         c = self.config
-        base = gtsam.noiseModel.Isotropic.Sigma(3, sigma)
+        base = gtsam.noiseModel.Gaussian.Covariance(covariance)
         if c.robust == "none":
             return base
         estimator = gtsam.noiseModel.mEstimator.Huber if c.robust == "huber" else gtsam.noiseModel.mEstimator.Cauchy
@@ -155,9 +159,10 @@ class GtsamBackend(Backend):
         by_frame[0].append(gtsam.PriorFactorRot3(A(0), gtsam.Rot3(), at_identity))
         measured = set()
         for e in edges:
-            sigma = self.edge_sigma(e)
             by_frame[e.j].append(
-                gtsam.BetweenFactorRot3(A(e.i), A(e.j), gtsam.Rot3(e.R_i_j), self._noise(gtsam, sigma))
+                gtsam.BetweenFactorRot3(
+                    A(e.i), A(e.j), gtsam.Rot3(e.R_i_j), self._noise(gtsam, self.edge_covariance(e))
+                )
             )
             measured.add(e.j)
         gap = gtsam.noiseModel.Isotropic.Sigma(3, c.gap_sigma_rad)

@@ -182,9 +182,10 @@ class RelativeRotation:
             the rotation model, the Sampson distance for the essential matrix); 0 when unknown.
         loop: a loop closure (frame i is a keyframe seen again) rather than a measurement of
             the motion since a recent frame.
-        estimated_sigma_rad: the estimator's own 1-sigma uncertainty of R_i_j [rad, per axis]
-            (e.g. from the curvature of its objective); 0: it gives none, the backends then
-            derive one from the inliers.
+        covariance: the estimator's own covariance of R_i_j [rad^2] (3, 3): of the right
+            perturbation in frame j, R_i_j,true = R_i_j Exp(delta), delta ~ N(0, covariance)
+            (GTSAM's convention for a BetweenFactor's noise); None: it gives none, and
+            `noise_covariance` derives an isotropic one from the edge's quality.
     """
 
     i: int
@@ -194,18 +195,29 @@ class RelativeRotation:
     inlier_ratio: float = 1.0
     residual_rad: float = 0.0
     loop: bool = False
-    estimated_sigma_rad: float = 0.0
+    covariance: np.ndarray | None = None
 
     @property
     def sigma_rad(self) -> float:
-        """A rough 1-sigma uncertainty of R_i_j [rad]: the estimator's own when it gives one,
-        else from its quality: the inlier noise over sqrt(inliers), inflated by 1 / inlier_ratio
-        (inf without inliers)."""
-        if self.estimated_sigma_rad > 0:
-            return self.estimated_sigma_rad
+        """The largest 1-sigma uncertainty of R_i_j [rad] (along any axis): from the estimator's
+        covariance when it gives one, else from its quality: the inlier noise over
+        sqrt(inliers), inflated by 1 / inlier_ratio (inf without inliers)."""
+        if self.covariance is not None:
+            return float(np.sqrt(np.linalg.eigvalsh(self.covariance)[-1]))
         if self.inliers <= 0:
             return float("inf")
         return self.residual_rad / np.sqrt(self.inliers) / max(self.inlier_ratio, 1e-3)
+
+    def noise_covariance(self) -> np.ndarray:
+        """The covariance [rad^2] (3, 3) a backend weighs the edge by: the estimator's own, else
+        sigma_rad^2 on every axis (inf without inliers)."""
+        if self.covariance is not None:
+            return self.covariance
+        return self.sigma_rad**2 * np.eye(3)
+
+    def sigmas_rad(self) -> np.ndarray:
+        """The 1-sigma uncertainty about each of frame j's axes x, y, z [rad] (3,)."""
+        return np.sqrt(np.diag(self.noise_covariance()))
 
 
 @dataclass(frozen=True)

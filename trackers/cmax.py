@@ -228,7 +228,7 @@ class CmaxTracker(Tracker):
         )
         confident = n if status == "ok" else 0
         return record, [
-            RelativeRotation(k - 1, k, R, inliers=confident, estimated_sigma_rad=min(sigma, FLAT_SIGMA_RAD))
+            RelativeRotation(k - 1, k, R, inliers=confident, covariance=min(sigma, FLAT_SIGMA_RAD) ** 2 * np.eye(3))
         ]
 
     def _windows(self, events: np.ndarray, t_prev: float, t: float):

@@ -9,6 +9,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from eas_vo.camera import CameraModel
+from eas_vo.geometry.covariance import METHODS as COVARIANCE_METHODS
 from eas_vo.geometry.rotations import matrix_to_rotvec
 from eas_vo.geometry.two_view import ESSENTIAL_METHODS, GEOMETRIES, bearings, explains, rotation_from_correspondences
 from eas_vo.types import FrameRecord, RelativeRotation
@@ -99,6 +100,8 @@ class TwoViewConfig:
             last `ok` step by more than this acceleration allows is doubted (StepBound). The
             default lies above the most abrupt rotations a person's head is put through
             (docs/frame_status.md cites the measurements); raise it for a drone or a vehicle.
+        covariance: how a measurement's covariance is estimated from its inliers:
+            `information` or `bootstrap` (geometry.covariance; docs/uncertainty.md).
     """
 
     geometry: str = "essential"
@@ -109,6 +112,7 @@ class TwoViewConfig:
     min_inlier_ratio: float = 0.55
     max_residual_px: float = 0.6
     max_angular_acceleration_deg_s2: float = 10_000.0
+    covariance: str = "information"
 
     def validate(self) -> None:
         check_choice(self, "geometry", GEOMETRIES)
@@ -119,6 +123,7 @@ class TwoViewConfig:
         check_range(self, "min_inlier_ratio", 0.0, 1.0)
         check_range(self, "max_residual_px", 0.0, 100.0, lo_open=True)
         check_range(self, "max_angular_acceleration_deg_s2", 0.0, 1e9, lo_open=True)
+        check_choice(self, "covariance", COVARIANCE_METHODS)
 
 
 def measure(
@@ -142,12 +147,18 @@ def measure(
     x_from, x_to = camera.undistort(pts_from_px), camera.undistort(pts_to_px)
     threshold = config.ransac_threshold_px / camera.focal_px
     found = rotation_from_correspondences(
-        x_from, x_to, threshold, config.ransac_confidence, config.essential_method, config.geometry
+        x_from, x_to, threshold, config.ransac_confidence, config.essential_method, config.geometry, config.covariance
     )
     if found is None or (found.model == "essential" and found.inliers < config.min_inliers):
         return None
     edge = RelativeRotation(
-        i, j, found.R_prev_cur, found.inliers, found.inliers / max(len(pts_from_px), 1), found.residual
+        i,
+        j,
+        found.R_prev_cur,
+        found.inliers,
+        found.inliers / max(len(pts_from_px), 1),
+        found.residual,
+        covariance=found.covariance,
     )
     if weakness(config, edge, camera.focal_px) and not explains(
         found.R_prev_cur.T, bearings(x_from), bearings(x_to), threshold

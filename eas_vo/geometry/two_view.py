@@ -14,6 +14,7 @@ import cv2
 import numba
 import numpy as np
 
+from eas_vo.geometry.covariance import essential_covariance, rotation_only_covariance
 from eas_vo.geometry.rotations import geodesic_angle
 
 
@@ -283,7 +284,8 @@ class TwoViewRotation(NamedTuple):
     R_prev_cur: np.ndarray  #: maps current-frame vectors into the previous frame
     inliers: int  #: correspondences the model explains
     model: str  #: `essential`, `rotation` or `homography`
-    residual: float  #: robust per-axis noise of the inliers [normalised image units ~ rad], see _result
+    residual: float  #: robust per-axis noise of the inliers [normalised image units ~ rad], see _noise
+    covariance: np.ndarray  #: of R_prev_cur [rad^2] (3, 3): geometry.covariance's convention and methods
 
 
 def rotation_from_correspondences(
@@ -293,6 +295,7 @@ def rotation_from_correspondences(
     confidence: float,
     method: str = "usac",
     geometry: str = "essential",
+    covariance: str = "information",
 ) -> TwoViewRotation | None:
     """The relative rotation of two views from matched normalised image points.
 
@@ -311,47 +314,58 @@ def rotation_from_correspondences(
             the other's rotation does not explain its inliers (`explains`); `essential`, the
             paper's, keeps its rotation (the trackers judge a doubtful one,
             measurement.measure).
+        covariance: how the rotation's covariance is estimated (geometry.covariance.METHODS).
 
     Returns:
-        The rotation, its inlier count, the model used and the inliers' per-axis noise (sigma
-        from their median residual, see _result), or
+        The rotation, its inlier count, the model used, the inliers' per-axis noise (sigma
+        from their median residual, see _noise) and the rotation's covariance, or
         None when no model is found: for `essential`, when the five-point solver finds none
         (or, where rotation-only measures, its RANSAC); for the others, when the
         rotation-only RANSAC finds none.
     """
     f_prev, f_cur = bearings(pts_prev_n), bearings(pts_cur_n)
     still = motionless(f_prev, f_cur, threshold)
+
+    def essential_result(E: np.ndarray, R: np.ndarray, mask: np.ndarray, residuals: np.ndarray) -> TwoViewRotation:
+        sigma = _noise(residuals[mask], dims=1)
+        cov = essential_covariance(E, R, pts_prev_n[mask], pts_cur_n[mask], sigma, covariance)
+        return TwoViewRotation(R.T, int(mask.sum()), "essential", sigma, cov)
+
+    def bearing_result(R: np.ndarray, mask: np.ndarray, model: str, residuals: np.ndarray) -> TwoViewRotation:
+        sigma = _noise(residuals[mask], dims=2)
+        cov = rotation_only_covariance(R, f_prev[mask], f_cur[mask], sigma, covariance)
+        return TwoViewRotation(R.T, int(mask.sum()), model, sigma, cov)
+
     if geometry == "essential" and not still:
         found = essential_rotation(pts_prev_n, pts_cur_n, threshold, confidence, ESSENTIAL_METHODS[method])
         if found is None:
             return None
         E, R_ess, ess_mask = found
-        return _result(R_ess, ess_mask, "essential", sampson_residuals(E, pts_prev_n, pts_cur_n), dims=1)
+        return essential_result(E, R_ess, ess_mask, sampson_residuals(E, pts_prev_n, pts_cur_n))
     rotation = rotation_ransac(f_prev, f_cur, threshold, confidence)
     if rotation is None:
         return None
     R_rot, rot_mask = rotation
     rot_residuals = angular_residuals(R_rot, f_prev, f_cur)
-    rotation_only = _result(R_rot, rot_mask, "rotation", rot_residuals, dims=2)
     if geometry == "rotation" or still:
-        return rotation_only
+        return bearing_result(R_rot, rot_mask, "rotation", rot_residuals)
     if geometry == "homography":
         found = homography_rotation(pts_prev_n, pts_cur_n, threshold, confidence)
         if found is None or not explains(found[0], f_prev[found[1]], f_cur[found[1]], threshold):
-            return rotation_only
+            return bearing_result(R_rot, rot_mask, "rotation", rot_residuals)
         R_hom, hom_mask, hom_residuals = found
-        return _result(R_hom, hom_mask, "homography", hom_residuals, dims=2)
+        return bearing_result(R_hom, hom_mask, "homography", hom_residuals)
     found = essential_rotation(pts_prev_n, pts_cur_n, threshold, confidence, ESSENTIAL_METHODS[method])
     if found is None or not explains(found[1], f_prev[found[2]], f_cur[found[2]], threshold):
-        return rotation_only
+        return bearing_result(R_rot, rot_mask, "rotation", rot_residuals)
     E, R_ess, ess_mask = found
     sigma = threshold / 2.0
     ess_residuals = sampson_residuals(E, pts_prev_n, pts_cur_n)
     gric_rot = gric(rot_residuals, sigma, model_dim=2, params=3)
     gric_ess = gric(ess_residuals, sigma, model_dim=3, params=5)
     if gric_rot <= gric_ess:
-        return rotation_only
-    return _result(R_ess, ess_mask, "essential", ess_residuals, dims=1)
+        return bearing_result(R_rot, rot_mask, "rotation", rot_residuals)
+    return essential_result(E, R_ess, ess_mask, ess_residuals)
 
 
 def motionless(f_prev: np.ndarray, f_cur: np.ndarray, threshold_rad: float) -> bool:
@@ -392,11 +406,9 @@ def explains(R_cur_prev: np.ndarray, f_prev: np.ndarray, f_cur: np.ndarray, thre
 _MEDIAN_NORM = {1: 0.6745, 2: 1.1774}
 
 
-def _result(R_cur_prev: np.ndarray, mask: np.ndarray, model: str, residuals: np.ndarray, dims: int) -> TwoViewRotation:
-    """The model's result; its residual is the robust noise estimate sigma = median / the median
-    of a standard `dims`-dimensional Gaussian's norm, so that the angular residual of the
-    rotation model (a 2-D distance) and the Sampson distance (1-D, to the epipolar line) are
-    on one scale: the per-axis noise of the inlier points."""
-    inlier_residuals = residuals[mask]
-    residual = float(np.median(inlier_residuals)) / _MEDIAN_NORM[dims] if len(inlier_residuals) else 0.0
-    return TwoViewRotation(R_cur_prev.T, int(mask.sum()), model, residual)
+def _noise(inlier_residuals: np.ndarray, dims: int) -> float:
+    """The inliers' robust per-axis noise: sigma = their median residual over the median of a
+    standard `dims`-dimensional Gaussian's norm, so that the angular residual of the rotation
+    model (a 2-D distance) and the Sampson distance (1-D, to the epipolar line) are on one
+    scale (0 without inliers)."""
+    return float(np.median(inlier_residuals)) / _MEDIAN_NORM[dims] if len(inlier_residuals) else 0.0

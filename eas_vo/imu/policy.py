@@ -87,7 +87,7 @@ class GyroDecision:
     ) -> tuple[list[FrameRecord], list[RelativeRotation]]:
         """`records` and `edges` with the `still` frames `weak` (the reason says how far apart)
         and their edges' sigma at least the angle apart per axis (over sqrt(3)), so that a
-        backend weighing edges by it trusts the gyro there."""
+        backend weighing edges by their covariance trusts the gyro there."""
         records = [
             dataclasses.replace(
                 r,
@@ -99,7 +99,7 @@ class GyroDecision:
             for r in records
         ]
         edges = [
-            dataclasses.replace(e, estimated_sigma_rad=max(e.estimated_sigma_rad, self.still[e.j] / np.sqrt(3.0)))
+            dataclasses.replace(e, covariance=_at_least(e.noise_covariance(), self.still[e.j] / np.sqrt(3.0)))
             if e.j == e.i + 1 and not e.loop and e.j in self.still
             else e
             for e in edges
@@ -306,3 +306,9 @@ def _measured_from(setup: GyroSetup) -> str:
     """What the tracker measures its rotations from, for a message: the frontend's images, or
     the events for a tracker that reads no images."""
     return f"the {setup.frontend} images" if setup.tracker_reads_images else "the events"
+
+
+def _at_least(covariance: np.ndarray, sigma_rad: float) -> np.ndarray:
+    """`covariance` [rad^2] (3, 3) with its variance along every axis at least sigma_rad^2."""
+    w, V = np.linalg.eigh(covariance)
+    return (V * np.maximum(w, sigma_rad**2)) @ V.T

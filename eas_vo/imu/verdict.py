@@ -291,7 +291,7 @@ def judge_gyro(t: np.ndarray, edges, imu: ImuSeries) -> GyroVerdict:
 
 def still_gyro_pairs(t: np.ndarray, edges, imu: ImuSeries) -> tuple[int, list[tuple[RelativeRotation, float]]]:
     """The consecutive, non-loop edges over frame times `t` [s] whose estimator states its own
-    sigma (RelativeRotation.estimated_sigma_rad, e.g. cmax's curvature sigma) over intervals the
+    covariance (RelativeRotation.covariance) over intervals the
     gyro measures: how many there are, and those over which the gyro reads still while the
     edge turns, with the angle [rad] between the two rotations.
 
@@ -306,7 +306,7 @@ def still_gyro_pairs(t: np.ndarray, edges, imu: ImuSeries) -> tuple[int, list[tu
     its errors' RMS but not their tails (docs/imu.md measures cmax's on a turning camera),
     while a gyro's noise is what its model says, so only where the gyro says still is an edge
     turning beyond both no error of its own."""
-    steps = [e for e in edges if e.j == e.i + 1 and not e.loop and e.estimated_sigma_rad > 0]
+    steps = [e for e in edges if e.j == e.i + 1 and not e.loop and e.covariance is not None]
     steps = [e for e in steps if t[e.j] > t[e.i] and imu.covered(t[e.i], t[e.j])]
     still = []  # (edge, R_gyro, gyro variance per axis [rad^2], rotation vector apart [rad])
     for e in steps:
@@ -320,11 +320,11 @@ def still_gyro_pairs(t: np.ndarray, edges, imu: ImuSeries) -> tuple[int, list[tu
         first, last = stretch[0][0], stretch[-1][0]
         R_edges = functools.reduce(np.matmul, [e.R_i_j for e, *_ in stretch])
         apart = matrix_to_rotvec(gyro_rotation(imu, t[first.i], t[last.j]).T @ R_edges)
-        variance = _gyro_variance(t[last.j] - t[first.i]) + sum(e.estimated_sigma_rad**2 for e, *_ in stretch)
-        turned = apart @ apart > CHI2_3_999 * variance
+        covariance = _gyro_variance(t[last.j] - t[first.i]) * np.eye(3) + sum(e.covariance for e, *_ in stretch)
+        turned = apart @ np.linalg.solve(covariance, apart) > CHI2_3_999
         for e, _, gyro_var, d in stretch:
-            noise = gyro_var + e.estimated_sigma_rad**2
-            if d @ d > (3.0 if turned else CHI2_3_999) * noise:
+            noise = gyro_var * np.eye(3) + e.covariance
+            if d @ np.linalg.solve(noise, d) > (3.0 if turned else CHI2_3_999):
                 found.append((e, float(np.linalg.norm(d))))
     return len(steps), found
 

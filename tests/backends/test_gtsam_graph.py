@@ -23,8 +23,9 @@ def truth(n=120, seed=0):
 
 
 def measure(R, i, j, rng, noise_rad, inliers=100):
+    """R_i_j with Gaussian noise of `noise_rad` per axis, and that noise as its covariance."""
     noise = Rotation.from_rotvec(rng.normal(0, noise_rad, 3)).as_matrix()
-    return RelativeRotation(i, j, R[i].T @ R[j] @ noise, inliers)
+    return RelativeRotation(i, j, R[i].T @ R[j] @ noise, inliers, covariance=noise_rad**2 * np.eye(3))
 
 
 def edges_for(R, seed=1, noise_rad=0.003, skip=0):
@@ -75,7 +76,9 @@ def test_robust_kernel_resists_outlier_edges():
     edges = edges_for(R, seed=7, skip=4)
     rng = np.random.default_rng(8)
     outliers = [
-        RelativeRotation(k - 4, k, Rotation.from_rotvec(rng.normal(0, 0.5, 3)).as_matrix(), 100)
+        RelativeRotation(
+            k - 4, k, Rotation.from_rotvec(rng.normal(0, 0.5, 3)).as_matrix(), 100, covariance=edges[0].covariance
+        )
         for k in range(20, 110, 15)
     ]
     clean = ape(GtsamBackend(GtsamConfig(robust="huber")).solve(len(R), edges).R_w_c, R)
@@ -90,7 +93,11 @@ def test_edge_noise_follows_inliers():
     """Two contradicting edges: the one with more inliers wins."""
     a = Rotation.from_rotvec([0, 0, 0.1]).as_matrix()
     b = Rotation.from_rotvec([0, 0, 0.2]).as_matrix()
-    out = GtsamBackend().solve(2, [RelativeRotation(0, 1, a, 400), RelativeRotation(0, 1, b, 100)]).R_w_c
+    out = (
+        GtsamBackend(GtsamConfig(edge_noise="inliers"))
+        .solve(2, [RelativeRotation(0, 1, a, 400), RelativeRotation(0, 1, b, 100)])
+        .R_w_c
+    )
     angle = Rotation.from_matrix(out[1]).as_rotvec()[2]
     assert angle == pytest.approx(0.1 + 0.1 * 1 / 5, abs=1e-4)  # weights 4 : 1
 
@@ -154,19 +161,21 @@ def test_the_gyro_alone_turns_the_frames_by_its_exact_integral(mode):
 
 
 def test_edge_quality_sets_the_noise_and_a_weak_edge_yields():
-    """Two contradicting measurements of one step: with `residual` noise the one with the small
-    residual and high inlier ratio wins, whatever their inlier counts."""
+    """Two contradicting measurements of one step without covariances: with `covariance` noise
+    (from their quality) the one with the small residual and high inlier ratio wins, whatever
+    their inlier counts."""
     good, bad = np.eye(3), Rotation.from_rotvec([0.0, 0.05, 0.0]).as_matrix()
     edges = [
         RelativeRotation(0, 1, good, 100, inlier_ratio=0.95, residual_rad=0.001),
         RelativeRotation(0, 1, bad, 300, inlier_ratio=0.4, residual_rad=0.004),
     ]
-    backend = GtsamBackend(GtsamConfig(edge_noise="residual"))
-    assert backend.edge_sigma(edges[0]) < backend.edge_sigma(edges[1]) / 5
+    backend = GtsamBackend(GtsamConfig(edge_noise="covariance"))
+    sigma = [np.sqrt(np.linalg.eigvalsh(backend.edge_covariance(e))[-1]) for e in edges]
+    assert sigma[0] < sigma[1] / 5
     assert_rotations_close(backend.solve(2, edges).R_w_c[1], good, np.radians(0.2))
     by_inliers = (
         GtsamBackend(GtsamConfig(edge_noise="inliers")).solve(2, edges).R_w_c[1]
-    )  # today's default trusts the count
+    )  # one isotropic sigma from the count trusts the count
     assert_rotations_close(by_inliers, bad, np.radians(1.0))
 
 

@@ -107,7 +107,8 @@ def test_a_still_camera_before_a_moving_scene_reads_no_confident_rotation(tmp_pa
     assert all("gyro reads still" in r.reason for r in measured)
     apart_rad = {r.index: np.radians(float(r.reason.split("(")[1].split(" deg")[0])) for r in measured}
     widened = [
-        e.estimated_sigma_rad >= (apart_rad[e.j] - np.radians(0.005)) / np.sqrt(3.0) for e in result.edges
+        np.sqrt(np.linalg.eigvalsh(e.covariance)[0]) >= (apart_rad[e.j] - np.radians(0.005)) / np.sqrt(3.0)
+        for e in result.edges
     ]  # 2 decimals
     assert widened and all(widened)  # a backend weighing edges by their sigma trusts the gyro there
     still = [w for w in m["data_warnings"] if "gyro reads still" in w]

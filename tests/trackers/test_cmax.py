@@ -110,7 +110,7 @@ def test_intervals_are_cut_into_windows_by_count_or_time_and_integrated():
         truth = rotvec_to_matrix(np.radians(omega_deg) * 0.02)
 
         assert geodesic_angle(edge.R_i_j, truth) < 0.02 * np.radians(1000.0) * 0.02
-        assert 0 < edge.estimated_sigma_rad < 0.35  # the rotation itself; SIGMA_SCALE says how it is scaled
+        assert 0 < edge.sigma_rad < 0.35  # the rotation itself; SIGMA_SCALE says how it is scaled
 
 
 def test_bad_settings_are_one_line_errors():

@@ -94,10 +94,10 @@ def test_every_interval_is_ok_within_its_bound_weak_within_its_sigma_or_lost(sce
             assert error <= bound, (scenario, record, np.degrees([error, bound]))
         else:
             assert record.status == "weak", record
-            assert error <= WEAK_SIGMAS * edge.estimated_sigma_rad, (
+            assert error <= WEAK_SIGMAS * edge.sigma_rad, (
                 scenario,
                 record,
-                np.degrees([error, edge.estimated_sigma_rad]),
+                np.degrees([error, edge.sigma_rad]),
             )
         if (
             scenario.get("gap") is not None
@@ -118,4 +118,4 @@ def test_a_rotation_under_a_pixel_per_interval_is_never_ok_far_off():
         if record.status == "ok":
             assert error <= OK_FRACTION * geodesic_angle(np.eye(3), truth) + 1.0 / corner_px, record
         elif record.status == "weak":
-            assert error <= WEAK_SIGMAS * edges[0].estimated_sigma_rad, record
+            assert error <= WEAK_SIGMAS * edges[0].sigma_rad, record

@@ -126,7 +126,7 @@ def test_gric_prefers_the_model_the_data_has():
         x_prev, x_cur, _ = view_pair(rng, noise_px=0.3)
         chosen["pure"].append(rotation_from_correspondences(x_prev, x_cur, 1.0 / F_PX, 0.999, "usac", "auto").model)
         x_prev, x_cur, R = view_pair(rng, baseline_m=0.3, depth=(1.0, 3.0), noise_px=0.3)
-        R_prev_cur, _, model, _ = rotation_from_correspondences(x_prev, x_cur, 1.0 / F_PX, 0.999, "usac", "auto")
+        R_prev_cur, _, model, *_ = rotation_from_correspondences(x_prev, x_cur, 1.0 / F_PX, 0.999, "usac", "auto")
         chosen["parallax"].append(model)
         if model == "essential":
             assert np.degrees(geodesic_angle(R.T, R_prev_cur)) < 0.5

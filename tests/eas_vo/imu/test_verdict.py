@@ -206,7 +206,7 @@ def sigma_edges(imu: ImuSeries, omega, sigma_rad: float, seed=2, noise=0.0) -> l
     for i, (t0, t1) in enumerate(zip(FRAMES[:-1], FRAMES[1:])):
         turn = np.asarray(omega) * (t1 - t0) + rng.normal(0, noise * sigma_rad, 3)
         R = gyro_rotation(imu, t0, t1) @ Rotation.from_rotvec(turn).as_matrix()
-        out.append(RelativeRotation(i, i + 1, R, inliers=40000, estimated_sigma_rad=sigma_rad))
+        out.append(RelativeRotation(i, i + 1, R, inliers=40000, covariance=sigma_rad**2 * np.eye(3)))
     return out
 
 

@@ -1,0 +1,160 @@
+"""The covariance of a relative rotation measured from bearing correspondences.
+
+Convention everywhere: a covariance Sigma [rad^2] (3, 3) of R_i_j (frame j to frame i) is that
+of the right perturbation in frame j, the later view: R_i_j,true = R_i_j Exp(delta),
+delta ~ N(0, Sigma). It is GTSAM's convention for a BetweenFactor's noise, so an edge's
+covariance is its factor's noise model as it is.
+
+Two estimates from the same linearisation about the measured model, both from the inliers only:
+
+- `information`: the inverse of the Fisher information of the rotation given the inlier
+  bearings and the image noise sigma estimated from their residuals (the per-axis noise of
+  TwoViewRotation.residual): for the rotation-only model the 3x3 information
+  sum_k (I - b_k b_k^T) / sigma^2 (b_k the rotated bearing: a rotation about b_k moves it not
+  at all, which is why a narrow field of view measures the turn about its optical axis
+  poorly); for the five-point model the Sampson residuals' 5x5 information in the rotation
+  and the translation's direction, the translation marginalised out (its Schur complement):
+  a turn the translation could also explain is measured no better than the two can be told
+  apart.
+- `bootstrap`: the spread of one Gauss-Newton step from the measured model on each of
+  BOOTSTRAP_DRAWS resamples (with replacement) of the inliers and their residuals: no noise
+  model, so it follows residuals that differ from point to point.
+
+`benchmarks/nees.py` measures both against exact ground truth (docs/uncertainty.md)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+#: The covariance methods (see the module's docstring).
+METHODS = ("information", "bootstrap")
+#: Resamples of the inliers the bootstrap draws (a fixed seed: the same data give the same
+#: covariance). 200 draws put a variance within about 10 % (its relative standard error is
+#: sqrt(2 / draws)).
+BOOTSTRAP_DRAWS = 200
+#: The covariance of a rotation the data do not determine [rad^2 per axis]: a 1 rad sigma,
+#: about which a backend weighing edges by their covariance all but ignores it.
+UNDETERMINED_VARIANCE = 1.0
+#: The smallest variance a covariance keeps along any axis [rad^2]: a microradian, so that
+#: noise-free data still give a covariance a backend can invert.
+MIN_VARIANCE = 1e-12
+#: The step of the central differences of the Sampson residuals [rad, and unit-vector units of
+#: the translation's direction].
+_STEP = 1e-6
+
+
+def skew(v: np.ndarray) -> np.ndarray:
+    """The cross-product matrices [v]x (..., 3, 3) of vectors v (..., 3): [v]x w = v x w."""
+    v = np.asarray(v, float)
+    S = np.zeros(v.shape + (3,))
+    S[..., 0, 1], S[..., 0, 2], S[..., 1, 2] = -v[..., 2], v[..., 1], -v[..., 0]
+    return S - np.swapaxes(S, -1, -2)
+
+
+def rotation_only_covariance(
+    R_cur_prev: np.ndarray, f_prev: np.ndarray, f_cur: np.ndarray, sigma: float, method: str = "information"
+) -> np.ndarray:
+    """The covariance [rad^2] of R_prev_cur (right perturbation, current frame) measured by the
+    rotation-only model from inlier bearings f_prev, f_cur (N, 3) with per-axis noise `sigma`
+    [rad ~ normalised image units]."""
+    b = f_prev @ R_cur_prev.T
+    b /= np.linalg.norm(b, axis=1, keepdims=True)
+    # moving R_cur_prev by Exp(e) on the left moves b by e x b = -[b]x e; R_prev_cur's right
+    # perturbation in the current frame is then -e, whose covariance is the same
+    J = -skew(b)
+    residual = f_cur - b  # tangent to the sphere at b to first order
+    if method == "bootstrap":
+        return _bootstrap(J, residual)
+    information = np.einsum("nki,nkj->ij", J, J) / max(sigma, 1e-12) ** 2
+    return _inverse(information, len(b) >= 2)
+
+
+def essential_covariance(
+    E: np.ndarray,
+    R_cur_prev: np.ndarray,
+    x_prev: np.ndarray,
+    x_cur: np.ndarray,
+    sigma: float,
+    method: str = "information",
+) -> np.ndarray:
+    """The covariance [rad^2] of R_prev_cur (right perturbation, current frame) measured by the
+    five-point model E ~ [t]x R_cur_prev from inlier normalised points x_prev, x_cur (N, 2) with
+    per-axis noise `sigma` [normalised units], the translation's direction marginalised out."""
+    t = np.linalg.svd(E)[0][:, 2]  # E^T t = 0: the epipole of the current view
+    basis = np.linalg.svd(np.eye(3) - np.outer(t, t))[0][:, :2]  # the tangent plane at t
+    a = np.column_stack([x_prev, np.ones(len(x_prev))])
+    b = np.column_stack([x_cur, np.ones(len(x_cur))])
+
+    def residuals(p: np.ndarray) -> np.ndarray:
+        R = _exp(p[:3]) @ R_cur_prev
+        direction = t + basis @ p[3:]
+        return _signed_sampson(skew(direction / np.linalg.norm(direction)) @ R, a, b)
+
+    J = np.column_stack(
+        [(residuals(_STEP * e) - residuals(-_STEP * e)) / (2 * _STEP) for e in np.eye(5)]
+    )  # (N, 5); the rotation's part is -1 times that of R_prev_cur's perturbation: same covariance
+    if method == "bootstrap":
+        return _bootstrap(J[:, None, :], residuals(np.zeros(5))[:, None], keep=3)
+    information = J.T @ J / max(sigma, 1e-12) ** 2
+    if len(J) < 5:
+        return _inverse(information[:3, :3], False)
+    rr, rt, tt = information[:3, :3], information[:3, 3:], information[3:, 3:]
+    try:
+        marginal = rr - rt @ np.linalg.solve(tt, rt.T)
+    except np.linalg.LinAlgError:
+        marginal = rr
+    return _inverse(marginal, True)
+
+
+def _signed_sampson(E: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """The Sampson distance of b^T E a = 0 with its sign (homogeneous points a, b (N, 3))."""
+    Ea, Etb = a @ E.T, b @ E
+    den = np.sqrt(Ea[:, 0] ** 2 + Ea[:, 1] ** 2 + Etb[:, 0] ** 2 + Etb[:, 1] ** 2)
+    return np.sum(b * Ea, axis=1) / np.maximum(den, 1e-300)
+
+
+def _exp(rotvec: np.ndarray) -> np.ndarray:
+    """Exp of a small rotation vector (Rodrigues)."""
+    angle = np.linalg.norm(rotvec)
+    if angle < 1e-12:
+        return np.eye(3) + skew(rotvec)
+    K = skew(rotvec / angle)
+    return np.eye(3) + np.sin(angle) * K + (1 - np.cos(angle)) * K @ K
+
+
+def _bootstrap(J: np.ndarray, residual: np.ndarray, keep: int = 3) -> np.ndarray:
+    """The covariance of the first `keep` parameters of one Gauss-Newton step solve(J^T J, J^T r)
+    over BOOTSTRAP_DRAWS resamples of the points (J (N, m, p), r (N, m)); undetermined where
+    fewer points than parameters, or a resample's normal equations are singular."""
+    n, p = J.shape[0], J.shape[2]
+    if n < max(p, 2):
+        return _inverse(np.zeros((3, 3)), False)
+    draws = np.random.default_rng(0).integers(0, n, (BOOTSTRAP_DRAWS, n))
+    JtJ = np.einsum("nki,nkj->nij", J, J)
+    Jtr = np.einsum("nki,nk->ni", J, residual)
+    normal = np.add.reduceat(JtJ[draws.ravel()], np.arange(0, draws.size, n))
+    rhs = np.add.reduceat(Jtr[draws.ravel()], np.arange(0, draws.size, n))
+    try:
+        steps = np.linalg.solve(normal, rhs[..., None])[..., 0][:, :keep]
+    except np.linalg.LinAlgError:
+        return _inverse(np.zeros((3, 3)), False)
+    return _capped(np.cov(steps, rowvar=False))
+
+
+def _inverse(information: np.ndarray, determined: bool) -> np.ndarray:
+    """The covariance of an information matrix (3, 3); UNDETERMINED_VARIANCE where it is not
+    determined (too few points, a singular or non-finite information)."""
+    if determined and np.all(np.isfinite(information)):
+        w, V = np.linalg.eigh(0.5 * (information + information.T))
+        if w.min() > 0:
+            return _capped((V / w) @ V.T)
+    return UNDETERMINED_VARIANCE * np.eye(3)
+
+
+def _capped(covariance: np.ndarray) -> np.ndarray:
+    """`covariance` (symmetric) with every variance along its axes between MIN_VARIANCE and
+    UNDETERMINED_VARIANCE."""
+    w, V = np.linalg.eigh(0.5 * (covariance + covariance.T))
+    if not np.all(np.isfinite(w)):
+        return UNDETERMINED_VARIANCE * np.eye(3)
+    return (V * np.clip(w, MIN_VARIANCE, UNDETERMINED_VARIANCE)) @ V.T
