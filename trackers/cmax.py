@@ -7,7 +7,8 @@ is found by Newton steps in the metric of the objective's curvature (_newton) fr
 mean rate over the window when the dataset has one, the previous window's estimate, or
 (nothing to start from, or no contrast found) a coarse search.
 The rotation between the samples multiplies each window's Exp(omega dt) over the part of the
-interval the window stands for; its uncertainty comes from the objective's curvature.
+interval the window stands for; its covariance comes from the objective's curvature (each
+window's Hessian, _rotation_covariance).
 """
 
 from __future__ import annotations
@@ -24,13 +25,27 @@ from eas_vo.validation import check_choice, check_range
 
 INITS = ("auto", "previous", "search")
 
-#: The uncertainty of a window's omega is SIGMA_SCALE times the objective's curvature radius
-#: (Window.sigma_rad_s), so that the per-axis errors of the rotations between frames have unit
-#: RMS on the development sequences (docs/cmax.md, "How it works", step 4, has their figures).
+#: The uncertainty of a window's omega is SIGMA_SCALE times the objective's curvature radius:
+#: its covariance SIGMA_SCALE^2 H^-1 [px^2 of displacement over half the window], H the Hessian
+#: of the cost (Window.covariance), whose RMS over the axes, sqrt(trace / 3), is the scalar
+#: Window.sigma_rad_s. The scale was fitted on that scalar, so that the per-axis errors of the
+#: rotations between frames have unit RMS on the development sequences (docs/cmax.md, "How it
+#: works", step 4, has their figures); the full covariance keeps its trace and gives each axis
+#: its own share of it.
 SIGMA_SCALE = 0.034
-#: The 1-sigma [rad] of a rotation whose objective has no curvature (a flat optimum): a
-#: backend weighing it by its sigma all but ignores it.
+#: The 1-sigma [rad] of a rotation whose objective has no curvature (a flat optimum), and the
+#: most any axis of a rotation's covariance states: a backend weighing it by its covariance all
+#: but ignores it.
 FLAT_SIGMA_RAD = 1.0
+#: The pixel count (the DAVIS240's 240 x 180) at which the focus and gain thresholds of
+#: CmaxConfig are stated. On events without motion the focus and gain fluctuate from warp to
+#: warp by an amount that does not depend on the number of events but on the number of
+#: independent blobs of the smoothing kernel in the image: relatively, about
+#: 2 sigma_px sqrt(pi / pixels) for the contrast (the pairs of events within the kernel's reach
+#: of each other); the focus of noise is 1.000 +- 0.002 at 240 x 180 and +- 0.004 at 120 x 90.
+#: A threshold's excess over 1 is scaled by sqrt(REFERENCE_PIXELS / pixels) (CmaxTracker.thresholds),
+#: so that it stands as far above the noise on every sensor.
+REFERENCE_PIXELS = 240 * 180
 #: The focus of a window compares its contrast with that of warps displacing the events this
 #: far [px over half the window]: about the width of the peak a sharp edge makes (sigma_px 1).
 FOCUS_STEP_PX = 1.0
@@ -78,6 +93,9 @@ class CmaxConfig:
         motion in dim light a focus near 1 (the events' latency spread blurs its sharpest
         image beyond a pixel); docs/cmax.md, "Status: ok, weak, lost", has the figures.
     weak_focus: a focus below this makes the frame `weak`.
+        The three are stated for the DAVIS240's 240 x 180 pixels: on another sensor their
+        excess over 1 is scaled by sqrt(REFERENCE_PIXELS / pixels), as the noise of the focus
+        and the gain is (CmaxTracker.thresholds).
     max_residual_px: the frame is `weak` when the image quadrants' own optima lie further
         apart than this [px of displacement over half a window]: one rotation does not
         explain the events (translation before a near scene, independent motion).
@@ -114,15 +132,19 @@ class CmaxConfig:
 
 @dataclass(frozen=True)
 class Window:
-    """One window's estimate: omega [rad/s] (camera frame), its 1-sigma per axis [rad/s] (from
-    the curvature of the objective), the contrast gain (over no motion), the focus (over warps
+    """One window's estimate: omega [rad/s] (camera frame), its RMS 1-sigma over the axes [rad/s]
+    (from the curvature of the objective: sqrt(trace(covariance) / 3)), the contrast gain (over no motion), the focus (over warps
     FOCUS_STEP_PX away), the events read, the span [s] of the
     interval it stands for, how many times the objective was evaluated, how far apart the
     image quadrants' own optima lie (CmaxTracker._quadrant_residual_px) [px], the angular
     velocity [rad/s] that displaces its events 1 px over half the window (rad_s_per_px), and no
     motion's own focus where the gain is below the focus (0 where it is not: the optimum stands
-    clear of no motion), and whether the solver started from the coarse search (no gyro and no
-    previous window: a standing start)."""
+    clear of no motion), whether the solver started uninformed: from the coarse search (no gyro
+    and no previous window: a standing start) or from a previous window's omega that was itself
+    found uninformed and little in focus (a noise peak the search may have settled on is no
+    better a start), and the covariance of omega [(rad/s)^2] (3, 3): SIGMA_SCALE^2 times the
+    inverse of the objective's Hessian, in rad/s (None where the optimum is not a minimum of the
+    cost: no curvature along some axis)."""
 
     omega: np.ndarray
     sigma_rad_s: float
@@ -135,7 +157,8 @@ class Window:
     residual_px: float
     rad_s_per_px: float = 0.0
     still_focus: float = 0.0
-    searched: bool = False
+    uninformed: bool = False
+    covariance: np.ndarray | None = None
 
 
 class CmaxTracker(Tracker):
@@ -151,12 +174,23 @@ class CmaxTracker(Tracker):
     def uses_imu(self) -> bool:
         return self.config.init == "auto"
 
+    @property
+    def thresholds(self) -> tuple[float, float, float]:
+        """(lost_focus, lost_gain, weak_focus) for this camera: the config's, stated for
+        REFERENCE_PIXELS, with their excess over 1 scaled by sqrt(REFERENCE_PIXELS / pixels)."""
+        c, cam = self.config, self.camera
+        factor = float(np.sqrt(REFERENCE_PIXELS / (cam.width * cam.height)))
+        values = (c.lost_focus, c.lost_gain, c.weak_focus)
+        return values if factor == 1.0 else tuple(1.0 + (v - 1.0) * factor for v in values)
+
     def reset(self) -> None:
         cam = self.camera
         self._bearing = cam.pixel_rays[:, :2].reshape(cam.height, cam.width, 2)
         self._grid = WarpGrid.of(cam.K, cam.width, cam.height)
         self._omega: np.ndarray | None = None  # the last window's, None when lost
         self._metric: np.ndarray | None = None  # the curvature at the last window's optimum [per px^2]
+        self._uninformed = False  # whether the last window's omega is an uninformed start (Window.uninformed)
+        self._lost_focus, self._lost_gain, self._weak_focus = self.thresholds
         self._counts = np.zeros(cam.width * cam.height, np.int64)  # events per pixel so far (hot pixels)
         self._prev_t = -np.inf
         self._k = -1
@@ -186,50 +220,44 @@ class CmaxTracker(Tracker):
         if any(w.events < self.config.min_events for w in windows):
             self._omega = None
             return FrameRecord(k, t, 0, 0, "lost", False, reason=f"too few events ({n})", events=n), []
-        if focus <= self.config.lost_focus and gain <= self.config.lost_gain:
+        if focus <= self._lost_focus and gain <= self._lost_gain:
             self._omega = None
             return FrameRecord(
                 k, t, 0, 0, "lost", False, reason=f"nothing in focus ({focus:.3f})", events=n, contrast_gain=gain
             ), []
-        R = np.eye(3)
-        variance = 0.0
-        for w in windows:
-            R = R @ rotvec_to_matrix(w.omega * (w.t1 - w.t0))
-            variance += (w.sigma_rad_s * (w.t1 - w.t0)) ** 2
-        sigma = float(np.sqrt(variance))
+        R, covariance = _integrated(windows)
         residual = max(w.residual_px for w in windows)
         uncovered = _longest_gap(events["t"], t_prev, t) / (t - t_prev)
-        status, reason = "ok", ""
+        uninformed = any(w.uninformed for w in windows)
+        status, reason, floor = "ok", "", 0.0  # floor: the least sigma [rad] any axis of the covariance states
         if uncovered > MAX_UNCOVERED:
             status, reason = "weak", f"events miss part of the interval ({100 * uncovered:.0f} % without any)"
-        elif focus < self.config.weak_focus:
+        elif focus < self._weak_focus:
             status, reason = "weak", f"little in focus ({focus:.3f})"
-            if any(w.searched for w in windows):
-                # from a standing start the coarse search may have settled on a far noise peak
-                # (docs/cmax.md): the rotation is known to within itself and the peak's width
-                sigma = max(sigma, _within_itself(R, windows))
-        elif any(w.still_focus >= self.config.weak_focus for w in windows):
+        elif any(w.still_focus >= self._weak_focus for w in windows):
             # two peaks, the optimum and no motion, no farther apart in contrast than the optimum's own
             # width: a motion under about a pixel, not told from none (a noise peak a few px away passes
             # the focus test): the rotation is known to within itself and the peak's width
             still = max(w.still_focus for w in windows)
             status, reason = "weak", f"as sharp at no motion ({still:.3f})"
-            sigma = max(sigma, _within_itself(R, windows))
+            floor = _within_itself(R, windows)
         elif residual > self.config.max_residual_px:
-            # the rotation is known no better than the quadrants agree: the sigma is at least their spread
+            # the rotation is known no better than the quadrants agree: every axis's sigma is at least their spread
             status, reason = "weak", f"quadrants disagree ({residual:.2f} px)"
-            sigma = max(sigma, _angle(windows, lambda w: w.residual_px))
-        elif not np.isfinite(sigma):
-            status, reason, sigma = "weak", "flat objective", FLAT_SIGMA_RAD
+            floor = _angle(windows, lambda w: w.residual_px)
+        elif covariance is None:
+            status, reason = "weak", "flat objective"
+        if status == "weak" and uninformed:
+            # from an uninformed start (docs/cmax.md) the optimum may be a far noise peak, which a weak
+            # window does not rule out: the rotation is known to within itself and the peak's width
+            floor = max(floor, _within_itself(R, windows))
         # the edge's inliers: the events an ok estimate rests on, none for a weak one (what makes an
         # edge confident for the gyro's check, imu.verdict.CONFIDENT_INLIERS: a weak window is not)
         record = FrameRecord(
             k, t, 0, n, status, False, residual_px=residual, reason=reason, events=n, contrast_gain=gain
         )
         confident = n if status == "ok" else 0
-        return record, [
-            RelativeRotation(k - 1, k, R, inliers=confident, covariance=min(sigma, FLAT_SIGMA_RAD) ** 2 * np.eye(3))
-        ]
+        return record, [RelativeRotation(k - 1, k, R, inliers=confident, covariance=_bounded(covariance, floor))]
 
     def _windows(self, events: np.ndarray, t_prev: float, t: float):
         """(events, t0, t1) per window: its events, all within [t_prev, t), and the part [t0, t1]
@@ -275,7 +303,7 @@ class CmaxTracker(Tracker):
             value, grad = contrast.value_and_gradient(p / scale)
             return -value / v0, -grad / (v0 * scale)
 
-        starts = self._starts(t0, t1)
+        starts, informed = self._starts(t0, t1)
         searched = not starts or c.init == "search"
         if searched:
             starts += [self._search(contrast, scale), np.zeros(3)]
@@ -295,8 +323,8 @@ class CmaxTracker(Tracker):
         H = np.column_stack([around[2 * i][1] - around[2 * i + 1][1] for i in range(3)])
         H /= -2 * FOCUS_STEP_PX * v0 * scale
         H = 0.5 * (H + H.T)
-        sigma = _curvature_sigma(H)
-        self._metric = H if np.isfinite(sigma) else None
+        covariance = _curvature_covariance(H)
+        self._metric = H if covariance is not None else None
         focus = float(centre[0] / np.mean([a[0] for a in around]))
         residual = self._quadrant_residual_px(contrast, p, scale, centre, around, H)
         gain = float(-best[1])
@@ -306,10 +334,11 @@ class CmaxTracker(Tracker):
             still_focus = v0 / np.mean(
                 [contrast.value(sign * FOCUS_STEP_PX * e / scale) for e in np.eye(3) for sign in (1.0, -1.0)]
             )
-        self._omega = omega
+        uninformed = searched or not informed
+        self._omega, self._uninformed = omega, uninformed and focus < self._weak_focus
         return Window(
             omega,
-            sigma / scale,
+            np.inf if covariance is None else float(np.sqrt(np.trace(covariance) / 3.0)) / scale,
             gain,
             focus,
             n,
@@ -319,7 +348,8 @@ class CmaxTracker(Tracker):
             residual,
             1.0 / scale,
             still_focus,
-            searched,
+            uninformed,
+            None if covariance is None else covariance / scale**2,
         )
 
     def _quadrant_residual_px(self, contrast: Contrast, p: np.ndarray, scale: float, centre, around, H) -> float:
@@ -375,12 +405,14 @@ class CmaxTracker(Tracker):
         hot = self._counts > max(HOT_PIXEL_MIN_EVENTS, HOT_PIXEL_FACTOR * self._counts.mean())
         return events[~hot[pixel]]
 
-    def _starts(self, t0: float, t1: float) -> list[np.ndarray]:
-        """Where the solver starts [rad/s]: the gyro's mean rate over [t0, t1], else the previous window's."""
+    def _starts(self, t0: float, t1: float) -> tuple[list[np.ndarray], bool]:
+        """Where the solver starts [rad/s]: the gyro's mean rate over [t0, t1], else the previous
+        window's; and whether that start is informed (the gyro's, or a previous window's that was
+        not itself found uninformed and little in focus)."""
         if self.config.init == "auto" and self.imu is not None and self.imu.covered(t0, t1):
             rates, durations = self.imu.rates_between(t0, t1)
-            return [rates.T @ durations / max(durations.sum(), 1e-12)]
-        return [] if self._omega is None else [self._omega]
+            return [rates.T @ durations / max(durations.sum(), 1e-12)], True
+        return ([], False) if self._omega is None else ([self._omega], not self._uninformed)
 
     def _search(self, contrast: Contrast, scale: float) -> np.ndarray:
         """The best omega [rad/s] of a 7 x 7 x 7 grid up to max_rate_deg_s per axis, the image
@@ -508,10 +540,48 @@ def _within_itself(R: np.ndarray, windows) -> float:
     return float(np.hypot(np.linalg.norm(matrix_to_rotvec(R)), _angle(windows, lambda w: FOCUS_STEP_PX)))
 
 
-def _curvature_sigma(H: np.ndarray) -> float:
+def _curvature_covariance(H: np.ndarray) -> np.ndarray | None:
     """From the Hessian H [per px^2] of the cost (minus the contrast over that at no motion) at
-    its minimum: SIGMA_SCALE times its RMS curvature radius, sqrt(trace(H^-1) / 3) [px] (inf
-    where it is not a minimum)."""
-    if not np.all(np.isfinite(H)) or np.any(np.linalg.eigvalsh(H) <= 0):
-        return float("inf")
-    return SIGMA_SCALE * float(np.sqrt(np.trace(np.linalg.inv(H)) / 3.0))
+    its minimum: the covariance SIGMA_SCALE^2 H^-1 [px^2] of the optimum (None where it is not a
+    minimum). Its RMS sigma over the axes, sqrt(trace / 3), is SIGMA_SCALE times the RMS
+    curvature radius."""
+    if not np.all(np.isfinite(H)):
+        return None
+    lam, V = np.linalg.eigh(0.5 * (H + H.T))
+    if np.any(lam <= 0):
+        return None
+    return SIGMA_SCALE**2 * (V / lam) @ V.T
+
+
+def _integrated(windows) -> tuple[np.ndarray, np.ndarray | None]:
+    """R_{k-1}_{k}, the product of the windows' Exp(omega dt) in time order (dt the span each
+    stands for), and its covariance [rad^2] in the convention of RelativeRotation (the right
+    perturbation in frame k: R_true = R Exp(delta)); None where a window has none.
+
+    To first order, an error e of a window's omega (covariance C [(rad/s)^2]) turns its factor
+    into Exp(omega dt) Exp(dt e) (the right Jacobian of Exp at omega dt taken as the identity:
+    its first-order term is half that angle, a few per cent for a window's few degrees), and
+    carried past the windows after it (A, their product) into R Exp(A^T dt e): the covariance
+    is the sum over the windows of dt^2 A^T C A. Dropping the A (summing the windows' covariances
+    as they are) is the same to first order in the windows' turns, which is as far as
+    independent per-window errors are a model of them anyway."""
+    factors = [rotvec_to_matrix(w.omega * (w.t1 - w.t0)) for w in windows]
+    R = np.eye(3)
+    for factor in factors:
+        R = R @ factor
+    if any(w.covariance is None for w in windows):
+        return R, None
+    covariance, after = np.zeros((3, 3)), np.eye(3)
+    for w, factor in zip(reversed(windows), reversed(factors)):
+        covariance += (w.t1 - w.t0) ** 2 * after.T @ w.covariance @ after
+        after = factor @ after
+    return R, covariance
+
+
+def _bounded(covariance: np.ndarray | None, floor_rad: float) -> np.ndarray:
+    """`covariance` [rad^2] with every axis's sigma at least floor_rad and at most FLAT_SIGMA_RAD
+    (its eigenvalues clipped); FLAT_SIGMA_RAD on every axis where there is none."""
+    if covariance is None or not np.all(np.isfinite(covariance)):
+        return FLAT_SIGMA_RAD**2 * np.eye(3)
+    lam, V = np.linalg.eigh(0.5 * (covariance + covariance.T))
+    return (V * np.clip(lam, min(floor_rad, FLAT_SIGMA_RAD) ** 2, FLAT_SIGMA_RAD**2)) @ V.T

@@ -21,8 +21,8 @@ from eas_vo.datasets.simulator.generate import SENSORS, SimConfig, simulate_even
 from eas_vo.datasets.simulator.motion import ConstantMotion
 from eas_vo.datasets.simulator.sensor import DvsModel
 from eas_vo.errors import ConfigError
-from eas_vo.geometry.rotations import geodesic_angle, rotvec_to_matrix
-from eas_vo.trackers.cmax import CmaxConfig, CmaxTracker, _newton
+from eas_vo.geometry.rotations import geodesic_angle, matrix_to_rotvec, rotvec_to_matrix
+from eas_vo.trackers.cmax import REFERENCE_PIXELS, CmaxConfig, CmaxTracker, Window, _bounded, _integrated, _newton
 from eas_vo.types import Sample
 
 HALF_DISPLACEMENT_PX = 12.0
@@ -173,3 +173,60 @@ def test_a_window_of_any_length_holds_a_bounded_number_of_windows():
     dense = CmaxTracker(CmaxConfig(window_s=0.05, window_events=1000), SENSORS["davis240"].model())
     windows = dense._windows(events, 0.0, 0.05)  # one window of time holding many times window_events
     assert max(len(w) for w, *_ in windows) <= 2 * 1000 and sum(len(w) for w, *_ in windows) == len(events)
+
+
+def window(rotvec_deg, covariance_rad2, t0, t1):
+    """A Window turning by rotvec_deg over [t0, t1] [s] whose rotation over it has covariance_rad2."""
+    dt = t1 - t0
+    return Window(
+        np.radians(rotvec_deg) / dt, 0.0, 1.1, 1.02, 5000, t0, t1, 10, 0.1, covariance=covariance_rad2 / dt**2
+    )
+
+
+def test_an_intervals_covariance_is_its_windows_carried_to_its_end():
+    """Each window's omega error turns its factor, and the windows after it carry that turn into
+    the frame the interval ends in (RelativeRotation's convention): sampled omega errors give
+    errors whose NEES against _integrated's covariance has mean 3; adding the windows'
+    covariances without carrying them does not, once a later window turns by 30 degrees."""
+    windows = [
+        window([0.0, 2.0, 0.0], np.diag([1e-4, 1e-6, 1e-6]), 0.0, 0.01),
+        window([0.0, 0.0, 30.0], 1e-8 * np.eye(3), 0.01, 0.02),
+    ]
+    R, covariance = _integrated(windows)
+    rng = np.random.default_rng(0)
+    nees, naive = [], []
+    summed = sum((w.t1 - w.t0) ** 2 * w.covariance for w in windows)
+    for _ in range(4000):
+        R_drawn = np.eye(3)
+        for w in windows:
+            dt = w.t1 - w.t0
+            R_drawn = R_drawn @ rotvec_to_matrix((w.omega + rng.multivariate_normal(np.zeros(3), w.covariance)) * dt)
+        delta = matrix_to_rotvec(R.T @ R_drawn)  # R_drawn = R Exp(delta)
+        nees.append(delta @ np.linalg.solve(covariance, delta))
+        naive.append(delta @ np.linalg.solve(summed, delta))
+    assert abs(np.mean(nees) - 3.0) < 0.15, np.mean(nees)
+    assert np.mean(naive) > 10.0, np.mean(naive)
+
+
+def test_a_weak_interval_states_at_least_its_sigma_on_every_axis():
+    covariance = np.diag([1e-6, 4e-6, 1e-2])
+    floored = _bounded(covariance, 0.01)
+    np.testing.assert_allclose(np.linalg.eigvalsh(floored), [1e-4, 1e-4, 1e-2])
+    assert np.allclose(_bounded(None, 0.0), np.eye(3)) and np.allclose(_bounded(100 * np.eye(3), 0.0), np.eye(3))
+
+
+def test_the_focus_thresholds_stand_as_far_above_the_noise_on_every_sensor():
+    """Stated for the DAVIS240's pixels; a quarter of them (twice the noise of the focus) doubles
+    their excess over 1."""
+    config = CmaxConfig()
+    assert CmaxTracker(config, SENSORS["davis240"].model()).thresholds == (
+        config.lost_focus,
+        config.lost_gain,
+        config.weak_focus,
+    )
+    small = SENSORS["davis240"].resized(120, 90)
+    assert small.width * small.height * 4 == REFERENCE_PIXELS
+    np.testing.assert_allclose(
+        CmaxTracker(config, small.model()).thresholds,
+        [1 + 2 * (config.lost_focus - 1), 1 + 2 * (config.lost_gain - 1), 1 + 2 * (config.weak_focus - 1)],
+    )
