@@ -19,6 +19,7 @@ import numpy as np
 from eas_vo import concurrency
 from eas_vo.camera import CameraModel
 from eas_vo.geometry.compiled import exp_so3
+from eas_vo.geometry.covariance import MIN_VARIANCE, UNDETERMINED_VARIANCE
 from eas_vo.geometry.rotations import geodesic_angle, rotvec_to_matrix, scaled_rotation
 
 #: Focal lengths [px] of the resolutions the alignment and the score work at, whatever the
@@ -52,6 +53,15 @@ ALIGN_STOP_PX = 0.01
 #: a view wider than that (over 2000 pixels at the coarsest resolution) projects the grid
 #: pixel by pixel for every pair instead, with the same scores.
 GRID_TABLE_MAX_ROWS = 2_000_000
+#: The covariance of an alignment counts the residuals' correlation between pixels up to this
+#: many pixels apart along each axis of its resolution (_correlated_information): what an
+#: interpolation, a resize by a factor other than a power of two or a smoothing frontend
+#: spreads a pixel's noise over.
+CORRELATION_LAGS = 2
+#: The step [px of the finest resolution] of the central differences by which the covariance
+#: of an alignment differentiates its estimating equation (_sensitivity): small beside a pixel,
+#: large beside the rounding of the views' float32 values.
+SENSITIVITY_STEP_PX = 0.01
 #: Rotations scored per thread at the least (the search's hundreds are split across the cores).
 PARALLEL_CANDIDATES = 64
 #: The overlap below which two views share too little to be scored [fraction of the view].
@@ -215,6 +225,104 @@ class PhotometricAlignment:
             ]
         return best if self.explains(source, image, best) else None
 
+    def covariance(self, source: dict, image: dict, R_source_image: np.ndarray) -> np.ndarray:
+        """The covariance [rad^2] (3, 3) of R_source_image found by `align` (its optimum), in
+        RelativeRotation's convention (the right perturbation in the image's frame: a rotation
+        of the image view's bearings), from the photometric cost at the finest resolution, where
+        the refinement stops at the zero of its Gauss-Newton gradient psi = J^T r (J the
+        target's derivative by the rotation's angles, `_Level.jacobian`, r the normalised
+        residuals over the n pixels both views see): the sandwich A^-1 M A^-T, A the derivative
+        of psi by the rotation (_sensitivity) and M the covariance of psi
+        (_correlated_information, times n / (n - 3)). With independent residuals and J the
+        residuals' own derivative it is the textbook's sigma_r^2 (J^T J)^-1, sigma_r^2 =
+        sum r^2 / (n - 3); neither holds here: neighbouring residuals are correlated, and J
+        carries the target's noise (docs/best_config.md, "How the fallback works", has what each
+        form gives). UNDETERMINED_VARIANCE on every axis where it is undetermined (under
+        MIN_OVERLAP shared, a flat view, a singular A); every variance between MIN_VARIANCE and
+        UNDETERMINED_VARIANCE."""
+        f = ALIGN_FOCAL_PX[-1]
+        level = self._levels[f]
+        target = image["pixels"][f]
+        level._check([source[f]], [target])
+        sampled, R = np.asarray(source[f], np.float32), np.asarray(R_source_image, float)
+        h = SENSITIVITY_STEP_PX / level.K[0, 0]
+        turned = [R @ rotvec_to_matrix(sign * h * e) for e in np.eye(3) for sign in (1.0, -1.0)]
+        samples = [_sampled(sampled, level.K @ R_turned, level.bearings, level.seen) for R_turned in [R, *turned]]
+        inside = np.logical_and.reduce([seen for seen, _ in samples])  # at every rotation sampled
+        target = np.asarray(target, float)
+        undetermined = UNDETERMINED_VARIANCE * np.eye(3)
+        n = int(inside.sum())
+        if n < max(level.min_count, 4) or samples[0][1][inside].std() == 0 or target[inside].std() == 0:
+            return undetermined
+        J = level.jacobian(image[f])
+        A = _sensitivity(inside, [values for _, values in samples[1:]], target, J, h)
+        M = _correlated_information(level, inside, samples[0][1], target, J) * n / (n - 3)
+        if not np.all(np.isfinite(A)) or np.linalg.matrix_rank(A) < 3:
+            return undetermined
+        A_inv = np.linalg.inv(A)
+        lam, V = np.linalg.eigh(A_inv @ (0.5 * (M + M.T)) @ A_inv.T)
+        if not np.all(np.isfinite(lam)):
+            return undetermined
+        return (V * np.clip(lam, MIN_VARIANCE, UNDETERMINED_VARIANCE)) @ V.T
+
+
+def _normalised(values: np.ndarray) -> np.ndarray:
+    return (values - values.mean()) / values.std()
+
+
+def _sensitivity(inside: np.ndarray, turned: list, target: np.ndarray, J: np.ndarray, h: float) -> np.ndarray:
+    """The derivative (3, 3) of the refinement's estimating equation psi = sum_k J_k r_k = 0 (its
+    Gauss-Newton gradient, zero at the optimum; J (N, 3) the target's derivative by the
+    rotation's angles over its std, r the normalised residuals over the `inside` pixels) by the
+    right perturbation of the rotation: central differences from the source's values sampled at
+    the rotation turned by +h and -h [rad] about x, y and z in turn (`turned`, six (N,) arrays),
+    through the bilinear sampling. The textbook's J^T J stands for it where the target's
+    gradient is the residual's own; with noise it holds the target's gradient noise twice and
+    overstates the information by as much as the noise's gradients weigh beside the scene's
+    (the source's noise enters the residual's derivative, the target's J)."""
+    t = target[inside]
+    Jn = J[inside] / t.std()
+
+    def psi(values: np.ndarray) -> np.ndarray:
+        return Jn.T @ (_normalised(values[inside]) - _normalised(t))
+
+    return np.column_stack([(psi(turned[2 * i]) - psi(turned[2 * i + 1])) / (2 * h) for i in range(3)])
+
+
+def _correlated_information(
+    level: "_Level", inside: np.ndarray, values: np.ndarray, target: np.ndarray, J: np.ndarray
+) -> np.ndarray:
+    """The covariance (3, 3) of J^T r, the Gauss-Newton gradient, over the view's `inside` pixels
+    at `level`: r the residuals (the normalised `values` of the source sampled there minus the
+    normalised `target`), J (N, 3) the target's derivative by the rotation's angles over the
+    target's std (the normalised target's). Sum over pixel offsets d up to CORRELATION_LAGS
+    along each axis of the residuals' autocovariance at d times sum_k J_k J_{k+d}^T (a
+    heteroscedasticity and autocorrelation consistent estimate: Newey and West, Econometrica
+    55(3), 1987, without their taper). Independent residuals give sigma_r^2 J^T J; the bilinear
+    sampling of the source alone correlates neighbouring residuals (it lowers a pixel's variance,
+    not the noise's power at the scales J varies on), and so do a resize by a factor other than a
+    power of two, an undistortion and a smoothing frontend."""
+    v, t = values[inside], target[inside]
+    r = np.zeros(level.shape)
+    Jn = np.zeros((*level.shape, 3))
+    valid = np.zeros(level.shape, bool)
+    ys, xs = level.ys[inside], level.xs[inside]
+    r[ys, xs] = _normalised(v) - _normalised(t)
+    Jn[ys, xs] = J[inside] / t.std()
+    valid[ys, xs] = True
+    h, w = level.shape
+    L = CORRELATION_LAGS
+    M = np.zeros((3, 3))
+    for dy in range(-L, L + 1):
+        for dx in range(-L, L + 1):
+            a = (slice(max(0, -dy), h - max(0, dy)), slice(max(0, -dx), w - max(0, dx)))
+            b = (slice(max(0, dy), h - max(0, -dy)), slice(max(0, dx), w - max(0, -dx)))
+            both = valid[a] & valid[b]
+            if both.any():
+                gamma = float(np.mean(r[a][both] * r[b][both]))
+                M += gamma * Jn[a][both].T @ Jn[b][both]
+    return M
+
 
 class _Level:
     """One resolution of the undistorted views, `focal_px` [px] of focal length along each axis
@@ -302,6 +410,17 @@ class _Level:
             ]
         )
 
+    def jacobian(self, image: np.ndarray) -> np.ndarray:
+        """The derivative (N, 3) of `image` (this resolution) at the view's pixels by the angles of
+        a rotation of its bearings, d image(pi(K exp([d]x) b)) / d d at d = 0 (Sobel gradients)."""
+        gx = cv2.Sobel(image, cv2.CV_32F, 1, 0, ksize=3)[self.ys, self.xs] / 8
+        gy = cv2.Sobel(image, cv2.CV_32F, 0, 1, ksize=3)[self.ys, self.xs] / 8
+        X, Y = self.bearings[0], self.bearings[1]  # z = 1
+        fx, fy = self.K[0, 0], self.K[1, 1]
+        # d image(pi(K exp([d]x) b)) / d d at d = 0 is r (-[b]x), r = grad . d pi / d b
+        r0, r1, r2 = gx * fx, gy * fy, -(gx * fx * X + gy * fy * Y)
+        return np.ascontiguousarray(np.stack([r2 * Y - r1, r0 - r2 * X, r1 * X - r0 * Y], axis=1))
+
     def refine(self, source: np.ndarray, image: np.ndarray, target: np.ndarray, Rs: np.ndarray) -> np.ndarray:
         """Each R_source_image of Rs (C, 3, 3) refined by inverse-compositional Gauss-Newton on
         the squared difference of the two views (each normalised to zero mean and unit variance
@@ -309,24 +428,17 @@ class _Level:
         moves the view by under ALIGN_STOP_PX at this resolution. `target`: the image's pixels
         of the view (its `pyramid`'s "pixels")."""
         self._check([source], [target])
-        gx = cv2.Sobel(image, cv2.CV_32F, 1, 0, ksize=3)[self.ys, self.xs] / 8
-        gy = cv2.Sobel(image, cv2.CV_32F, 0, 1, ksize=3)[self.ys, self.xs] / 8
-        X, Y = self.bearings[0], self.bearings[1]  # z = 1
-        fx, fy = self.K[0, 0], self.K[1, 1]
-        # d image(pi(K exp([d]x) b)) / d d at d = 0 is r (-[b]x), r = grad . d pi / d b
-        r0, r1, r2 = gx * fx, gy * fy, -(gx * fx * X + gy * fy * Y)
-        J = np.stack([r2 * Y - r1, r0 - r2 * X, r1 * X - r0 * Y], axis=1)  # (N, 3)
         return _refine(
             np.asarray(source, np.float32),
             target,
-            np.ascontiguousarray(J),
+            self.jacobian(image),
             self.K,
             np.array(Rs, float),
             self.bearings,
             self.seen,
             self.min_count,
             ALIGN_ITERATIONS,
-            ALIGN_STOP_PX / fx,
+            ALIGN_STOP_PX / self.K[0, 0],
         )
 
 
@@ -468,6 +580,19 @@ def _gauss_newton_steps(source, target, J, KRs, bearings, seen, min_count):
         H = np.array([[h00, h01, h02], [h01, h11, h12], [h02, h12, h22]]) / (t_std * t_std) + 1e-9 * np.eye(3)
         deltas[c] = np.linalg.solve(H, np.array([g0, g1, g2]) / t_std)
     return deltas
+
+
+@numba.njit(cache=True, nogil=True)
+def _sampled(source, KR, bearings, seen):
+    """`source` (h, w) sampled (bilinear) where the homography K R (3, 3) puts the image view's
+    bearings (3, N): (whether each is inside and its lens saw it (N,), the values (N,))."""
+    N = bearings.shape[1]
+    inside, values = np.zeros(N, np.bool_), np.zeros(N)
+    for k in range(N):
+        ok, u, v = _project(KR, bearings, k, seen)
+        if ok:
+            inside[k], values[k] = True, _bilinear(source, u, v)
+    return inside, values
 
 
 @numba.njit(cache=True, nogil=True)

@@ -389,7 +389,8 @@ class KltTracker(Tracker):
         aligned (from the prediction, if any, and from no motion), LK retried on the previous
         image's corners from that rotation; the retry if it is not weak and agrees with the
         alignment within alignment.FINEST_PIXEL_RAD, else whichever of the alignment alone (an
-        edge without correspondences) and the retry explains the two images best, if better than
+        edge without correspondences, with the photometric cost's covariance,
+        PhotometricAlignment.covariance) and the retry explains the two images best, if better than
         LK's step. (The new step, its correspondence count), or None to keep LK's; (None, 0)
         where neither the alignment nor LK's step explains the two images clearly better than no
         motion (PhotometricAlignment.explains): no measurement."""
@@ -426,6 +427,8 @@ class KltTracker(Tracker):
         best = int(np.argmax(scores))
         if scores[best] <= -1.0 or (step is not None and score(step.R_i_j) >= scores[best]):
             return None
+        if best == 0:  # the alignment alone: the photometric cost's covariance
+            return replace(candidates[0][0], covariance=align.covariance(source, pyramid, R_aligned)), 0
         return candidates[best]
 
     def _start_keyframe(self, image: np.ndarray, pts: np.ndarray) -> None:

@@ -58,8 +58,10 @@ def test_loop_closure_cuts_the_final_drift_fivefold(sweep):
     loops = [e for e in closed if e.loop]
     assert loops == [e for e in closed if e.j - e.i > 1] and len(loops) >= 5
     assert not any(e.j - e.i > 1 or e.loop for e in plain)
-    for e in loops:  # every loop edge is right
+    for e in loops:  # every loop edge is right, with measure()'s covariance: finite, positive definite
         assert np.degrees(geodesic_angle(e.R_i_j, R_w_c[e.i].T @ R_w_c[e.j])) < 0.2
+        assert e.covariance.shape == (3, 3) and np.all(np.isfinite(e.covariance))
+        assert np.linalg.eigvalsh(e.covariance)[0] > 0 and e.sigma_rad < np.radians(1.0)
     graph = GtsamBackend(GtsamConfig(robust="cauchy"))
     drift = errors_deg(R_w_c, graph.solve(N, plain, times=TIMES).R_w_c)[-1]
     final = errors_deg(R_w_c, graph.solve(N, closed, times=TIMES).R_w_c)[-1]
@@ -136,6 +138,7 @@ def test_a_homography_loop_keeps_the_cameras_translation_out_of_the_rotation(for
         detect = matching.features.detect
         edges[geometry], _ = matching.rotation(wall, corners, detect(wall), moved, detect(moved), 0, 25)
     errors_deg = {g: np.degrees(geodesic_angle(e.R_i_j, R_cur_prev.T)) for g, e in edges.items()}
+    assert all(np.all(np.isfinite(e.covariance)) and np.isfinite(e.sigma_rad) for e in edges.values())
     assert errors_deg["rotation"] > 2.0, errors_deg
     if forward_m < 0.02:
         assert errors_deg["homography"] < 0.3, errors_deg
