@@ -14,7 +14,7 @@ import cv2
 import numba
 import numpy as np
 
-from eas_vo.geometry.covariance import essential_covariance, rotation_only_covariance
+from eas_vo.geometry.covariance import essential_covariance, homography_covariance, rotation_only_covariance
 from eas_vo.geometry.rotations import geodesic_angle
 
 
@@ -233,7 +233,7 @@ def homography_rotation(
     x_prev: np.ndarray, x_cur: np.ndarray, threshold: float, confidence: float
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
     """The rotation of a plane's homography H ~ R + t n^T / d: (R_cur_prev, inlier mask,
-    transfer residuals [normalised units]), or None where H determines none: fewer than 4
+    transfer residuals [normalised units], H), or None where H determines none: fewer than 4
     points, no homography, no decomposition putting the inliers in front of both views, or
     two that do and differ by more than `threshold` [normalised units ~ rad].
 
@@ -263,7 +263,7 @@ def homography_rotation(
     if not in_front or any(geodesic_angle(in_front[0], R) > threshold for R in in_front[1:]):
         return None
     transferred = cv2.perspectiveTransform(np.asarray(x_prev, np.float64).reshape(-1, 1, 2), H).reshape(-1, 2)
-    return in_front[0], mask, np.linalg.norm(transferred - x_cur, axis=1)
+    return in_front[0], mask, np.linalg.norm(transferred - x_cur, axis=1), H
 
 
 #: Robust estimators around the five-point solver, by config name.
@@ -353,8 +353,10 @@ def rotation_from_correspondences(
         found = homography_rotation(pts_prev_n, pts_cur_n, threshold, confidence)
         if found is None or not explains(found[0], f_prev[found[1]], f_cur[found[1]], threshold):
             return bearing_result(R_rot, rot_mask, "rotation", rot_residuals)
-        R_hom, hom_mask, hom_residuals = found
-        return bearing_result(R_hom, hom_mask, "homography", hom_residuals)
+        R_hom, hom_mask, hom_residuals, H = found
+        sigma = _noise(hom_residuals[hom_mask], dims=2)
+        cov = homography_covariance(H, R_hom, pts_prev_n[hom_mask], pts_cur_n[hom_mask], sigma, covariance)
+        return TwoViewRotation(R_hom.T, int(hom_mask.sum()), "homography", sigma, cov)
     found = essential_rotation(pts_prev_n, pts_cur_n, threshold, confidence, ESSENTIAL_METHODS[method])
     if found is None or not explains(found[1], f_prev[found[2]], f_cur[found[2]], threshold):
         return bearing_result(R_rot, rot_mask, "rotation", rot_residuals)
