@@ -3,24 +3,31 @@
 Every frame-to-frame measurement R_{k-1}_{k} of a run is compared with the ground truth's
 relative rotation between the two frame times (camera frame, the run's ground-truth time
 offset): `right` where the angle of R_est^T R_gt, times the focal length, is below
-RIGHT_PX, `wrong` above WRONG_PX, between the two neither. Beside it: the measurement's
-inliers, inlier ratio and residual [px], the quantities the status judges
-(trackers/measurement.py, TwoViewConfig).
+RIGHT_PX, `wrong` above WRONG_PX, between the two neither. The signal is the error the
+measurement's own covariance predicts: its largest 1-sigma times the focal length [px of focal
+length] (measurement.predicted_error_px); beside it the status the tracker decided with
+(measurement.weakness and StepBound: inliers, inlier ratio, residual, the motion before),
+which steers its fallbacks and is what runs reported before the status read the covariance.
 
-The thresholds (the tracker's defaults, hence the paper configuration's) are chosen on the
-paper configuration's runs on the choice data (`synthetic:default` and the real excerpt's
-first 20 s): on a grid, among the (min_inlier_ratio, max_residual_px) that call at most 10 %
-of the right measurements weak, the one that calls the fewest wrong ones ok (each share the
-mean over the runs, so that no run outweighs the others by its length). The rates are then
-reported on the held-out data (simulator seeds 41-43, the real excerpt's 20-30 s) for the
-thresholds before (--before) and the ones chosen, and for best.toml with its own.
+The bound (TwoViewConfig.max_predicted_error_px) is chosen on the paper configuration's runs
+on the choice data (`synthetic:default` and the real excerpt's first 20 s): among the bounds of
+GRID that call at most MAX_RIGHT_WEAK of the right measurements weak, the one that calls the
+fewest wrong ones ok (each share the mean over the runs, so that no run outweighs the others by
+its length; ties to the fewest frames weak). A frame is weak under a bound B when its step has
+fewer than min_inliers inliers, predicts an error above B, or was doubted by StepBound (a rate
+the motion before it makes doubtful; --without-bound leaves that reason out). The rates are
+then reported on the held-out data (simulator seeds 41-43, the real excerpt's 20-30 s) beside
+the status decided by the quality thresholds, for the paper's and best.toml's klt and for match.
 
     python benchmarks/status_calibration.py [--real DIR | --real ''] [--seeds 41 42 43]
-                                            [--only LABEL ...] [--rows FILE] [--from FILE ...] [--before I,R,P]
+                                            [--only LABEL ...] [--rows FILE] [--from FILE ...]
+                                            [--cuts RIGHT,WRONG] [--without-bound]
 
 --rows writes every measurement (one CSV line each); --from reads such files instead of
-running (the choice and the tables only); --only runs some of the data (e.g. 'seed 41').
-Seeds are simulated once into $EAS_VO_CACHE_DIR/simulated/seed-N (about 40 s each).
+running (the choice and the tables only); --only runs some of the data (e.g. 'seed 41');
+--cuts sets the right and wrong cuts [px of focal length] (a sensitivity check; the defaults
+are RIGHT_PX, WRONG_PX). Seeds are simulated once into $EAS_VO_CACHE_DIR/simulated/seed-N
+(about 40 s each).
 """
 
 from __future__ import annotations
@@ -30,14 +37,16 @@ import csv
 import itertools
 import sys
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 from select_best import seed_folder
 
-from eas_vo import config, pipeline, registry
+from eas_vo import concurrency, config, pipeline, registry
 from eas_vo.geometry.rotations import geodesic_angle, interpolate_poses
-from eas_vo.trackers.measurement import TwoViewConfig, weakness
-from eas_vo.types import RelativeRotation
+from eas_vo.trackers import klt, match, measurement
+from eas_vo.trackers.measurement import STEP_BOUND_REASON, predicted_error_px
+from eas_vo.types import PoseSeries
 
 #: A measurement is right when its rotation error moves a point by less than this [px] (the
 #: error [rad] times the focal length [px]): 0.7 px, 0.2 deg at the DAVIS240's 199 px, is
@@ -46,37 +55,62 @@ RIGHT_PX = 0.7
 #: ... and wrong above this [px]: 3.5 px, 1 deg at 199 px, over three inlier thresholds: most
 #: correct correspondences would be outliers of the estimated rotation.
 WRONG_PX = 3.5
-#: The configurations (bundled config files) and the frontends each runs with.
-CONFIGS = ("paper", "best")
+#: The runs: (tracker, bundled config file) and the frontends each runs with; `match` (its
+#: defaults) on one frontend per data.
+CONFIGS = (("klt", "paper"), ("klt", "best"))
 SYNTHETIC_FRONTENDS = ("eas", "histeq", "ts")
 REAL_FRONTENDS = ("histeq", "original")  # the real excerpt has events for its first 0.5 s only
+MATCH_FRONTEND = "histeq"  # ORB matches one frame in 200 on the dim simulated eas images
 REAL_OFFSET_S = 0.01  # the excerpt's frames lead its ground truth by 10 ms (its README)
 FIELDS = (
     "data",
     "split",
+    "tracker",
     "config",
     "frontend",
     "index",
     "status",
     "reason",
+    "decided_status",
+    "decided_reason",
     "inliers",
+    "min_inliers",
     "inlier_ratio",
     "residual_px",
+    "predicted_px",
+    "sigma_x_px",
+    "sigma_y_px",
+    "sigma_z_px",
     "focal_px",
     "gt_angle_deg",
     "error_deg",
 )
-#: The share of right measurements the chosen thresholds may call weak (on the choice data).
-MAX_RIGHT_WEAK = 0.10
-#: The grid the thresholds are chosen on. min_inliers stays 15: a count of inliers follows how
-#: many corners the scene and max_corners give (right measurements on the real excerpt's raw
-#: frames have about 50, on its equalised ones 120), so a count chosen on data would judge the
-#: frontend, not the measurement; 15 is three times the five-point minimum.
-GRID = {
-    "min_inliers": (15,),
-    "min_inlier_ratio": tuple(np.round(np.arange(0.0, 0.951, 0.05), 2)),
-    "max_residual_px": tuple(np.round(np.arange(0.3, 1.501, 0.05), 2)),
-}
+#: The share of right measurements the chosen bound may call weak (on the choice data): the
+#: largest the status is allowed to have on any data.
+MAX_RIGHT_WEAK = 0.25
+#: The bounds [px of focal length] the choice is made among: 0.05 px apart from 0.1 to 10 px,
+#: then 0.5 px apart to 20 px.
+GRID = tuple(np.round(np.concatenate([np.arange(0.1, 10.0, 0.05), np.arange(10.0, 20.01, 0.5)]), 2))
+
+
+class GroundTruth(NamedTuple):
+    """The ground truth at each frame of a run (ground_truth): NaN where it does not cover the frame."""
+
+    R_w_c: np.ndarray  # (N, 3, 3): R_w_c[i].T @ R_w_c[j] is the true R_i_j
+    p_w_c: np.ndarray  # (N, 3) [m]
+    focal_px: float  # the camera's focal length [px]
+    poses: PoseSeries  # the dataset's ground truth, as recorded
+    times: np.ndarray  # (N,) the times it was sampled at [s] (frame times plus the offset)
+
+
+def ground_truth(cfg, result) -> GroundTruth:
+    """The ground truth at each frame of a run's `result`, sampled at frame time plus the run's
+    time offset (`run.time_offset_s`: 0 for the simulator, REAL_OFFSET_S for the real excerpt)."""
+    gt = registry.open_dataset(cfg.run.dataset, cfg.dataset)
+    valid, R_w_c_gt, p_w_c_gt = interpolate_poses(gt.ground_truth, result.t + cfg.run.time_offset_s)
+    R_gt, p_gt = np.full((len(result.t), 3, 3), np.nan), np.full((len(result.t), 3), np.nan)
+    R_gt[valid], p_gt[valid] = R_w_c_gt, p_w_c_gt
+    return GroundTruth(R_gt, p_gt, gt.camera.focal_px, gt.ground_truth, result.t + cfg.run.time_offset_s)
 
 
 def columns(real: str, seeds: list[int]) -> dict:
@@ -99,30 +133,57 @@ def columns(real: str, seeds: list[int]) -> dict:
     return found
 
 
-def measurements(label: str, split: str, dataset: str, file: str, frontend: str, extra: dict) -> list[dict]:
+def watch_decisions() -> dict:
+    """{frame index: (status, reason)} as the tracker decided them, before the status it reports
+    (measurement.status) replaced them: filled by every klt and match frame from now on."""
+    decided = {}
+    reported = measurement.status
+
+    def watched(config, record, step, focal_px):
+        decided[record.index] = (record.status, record.reason)
+        return reported(config, record, step, focal_px)
+
+    klt.status = match.status = watched
+    return decided
+
+
+def measurements(
+    decided: dict, label: str, split: str, dataset: str, tracker: str, file: str, frontend: str, extra: dict
+) -> list[dict]:
     """One row per frame after the first of a run: its record and, where a frame-to-frame
     rotation was measured and ground truth covers both frames, its error [deg]."""
-    cfg = config.resolve(file, {"dataset": dataset, "frontend": frontend, **extra})
+    cfg = config.resolve(file, {"dataset": dataset, "frontend": frontend, "tracker": tracker, **extra})
+    decided.clear()
     result = pipeline.run(cfg)
-    gt = registry.open_dataset(cfg.run.dataset, cfg.dataset)
-    focal_px = gt.camera.focal_px
-    steps = {e.j: e.R_i_j for e in result.edges if e.j == e.i + 1 and not e.loop}
-    valid, R_w_c_gt, _ = interpolate_poses(gt.ground_truth, result.t + cfg.run.time_offset_s)
-    R_gt = np.full((len(result.t), 3, 3), np.nan)
-    R_gt[valid] = R_w_c_gt
+    R_gt, _, focal_px, _, _ = ground_truth(cfg, result)
+    valid = np.isfinite(R_gt[:, 0, 0])
+    steps = {e.j: e for e in result.edges if e.j == e.i + 1 and not e.loop}
     rows = []
     for r in result.records[1:]:
+        status, reason = decided.get(r.index, (r.status, r.reason))
+        if r.status == "lost":  # the run's own verdict (e.g. the same image as before) stands
+            status, reason = r.status, r.reason
+        step = steps.get(r.index)
         row = {
             "data": label,
             "split": split,
+            "tracker": tracker,
             "config": file,
             "frontend": frontend,
             "index": r.index,
             "status": r.status,
             "reason": r.reason.split(" (")[0],
+            "decided_status": status,
+            "decided_reason": reason.split(" (")[0],
             "inliers": r.inliers,
+            "min_inliers": cfg.tracker.min_inliers,
             "inlier_ratio": r.inlier_ratio,
             "residual_px": r.residual_px,
+            "predicted_px": predicted_error_px(step, focal_px) if step is not None else np.nan,
+            **{
+                f"sigma_{a}_px": step.sigmas_rad()[n] * focal_px if step is not None else np.nan
+                for n, a in enumerate("xyz")
+            },
             "focal_px": focal_px,
             "gt_angle_deg": np.nan,
             "error_deg": np.nan,
@@ -130,8 +191,8 @@ def measurements(label: str, split: str, dataset: str, file: str, frontend: str,
         if valid[r.index - 1] and valid[r.index]:
             R_gt_ij = R_gt[r.index - 1].T @ R_gt[r.index]
             row["gt_angle_deg"] = float(np.degrees(geodesic_angle(np.eye(3), R_gt_ij)))
-            if r.index in steps:
-                row["error_deg"] = float(np.degrees(geodesic_angle(steps[r.index], R_gt_ij)))
+            if step is not None:
+                row["error_deg"] = float(np.degrees(geodesic_angle(step.R_i_j, R_gt_ij)))
         rows.append(row)
     return rows
 
@@ -140,9 +201,9 @@ def read_rows(path: Path) -> list[dict]:
     with open(path, newline="") as f:
         rows = list(csv.DictReader(f))
     for row in rows:
-        for key in ("inliers", "index"):
+        for key in ("inliers", "index", "min_inliers"):
             row[key] = int(row[key])
-        for key in ("inlier_ratio", "residual_px", "focal_px", "gt_angle_deg", "error_deg"):
+        for key in FIELDS[FIELDS.index("inlier_ratio") :]:
             row[key] = float(row[key])
     return rows
 
@@ -150,32 +211,32 @@ def read_rows(path: Path) -> list[dict]:
 class Table:
     """The measured rows as arrays: their run, class (right / wrong / neither) and quantities."""
 
-    def __init__(self, rows: list[dict]):
+    def __init__(self, rows: list[dict], right_px: float = RIGHT_PX, wrong_px: float = WRONG_PX):
         measured = [r for r in rows if r["status"] in ("ok", "weak") and np.isfinite(r["error_deg"])]
         self.rows = measured
-        self.run = np.array([f"{r['data']}|{r['config']}|{r['frontend']}" for r in measured])
+        self.run = np.array([f"{r['data']}|{r['tracker']}|{r['config']}|{r['frontend']}" for r in measured])
         self.split = np.array([r["split"] for r in measured])
-        self.config = np.array([r["config"] for r in measured])
+        self.config = np.array([f"{r['tracker']} {r['config']}" for r in measured])
         self.real = np.array([r["data"].startswith("real") for r in measured], dtype=bool)
-        error_px = np.radians([r["error_deg"] for r in measured]) * np.array([r["focal_px"] for r in measured])
-        self.right = error_px < RIGHT_PX
-        self.wrong = error_px > WRONG_PX
+        self.error_px = np.radians([r["error_deg"] for r in measured]) * np.array([r["focal_px"] for r in measured])
+        self.right = self.error_px < right_px
+        self.wrong = self.error_px > wrong_px
         self.inliers = np.array([r["inliers"] for r in measured])
+        self.few = self.inliers < np.array([r["min_inliers"] for r in measured])
+        self.predicted = np.array([r["predicted_px"] for r in measured])
+        self.pan_tilt = np.array([max(r.get("sigma_x_px", np.nan), r.get("sigma_y_px", np.nan)) for r in measured])
+        self.reported_weak = np.array([r["status"] == "weak" for r in measured], dtype=bool)
+        self.decided_weak = np.array([r["decided_status"] == "weak" for r in measured], dtype=bool)
+        self.bound = np.array([r["decided_reason"].endswith(STEP_BOUND_REASON) for r in measured], dtype=bool)
         self.ratio = np.array([r["inlier_ratio"] for r in measured])
         self.residual = np.array([r["residual_px"] for r in measured])
-        self.edges = [
-            RelativeRotation(0, 1, np.eye(3), r["inliers"], r["inlier_ratio"], r["residual_px"]) for r in measured
-        ]
 
-    def weak(self, min_inliers: float, min_inlier_ratio: float, max_residual_px: float) -> np.ndarray:
-        """Whether each measurement is weak under these thresholds (measurement.weakness itself,
-        on each measurement's quality as its record gives it: its residual already in px)."""
-        thresholds = TwoViewConfig(
-            min_inliers=int(min_inliers),
-            min_inlier_ratio=float(min_inlier_ratio),
-            max_residual_px=float(max_residual_px),
-        )
-        return np.array([bool(weakness(thresholds, edge, 1.0)) for edge in self.edges], dtype=bool)
+    def weak(self, bound_px: float, step_bound: bool = True, signal: np.ndarray | None = None) -> np.ndarray:
+        """Whether each measurement is weak with this bound on its predicted error [px] (as
+        measurement.status; `step_bound`: also where StepBound doubted it; `signal`: another
+        predicted error than the largest sigma)."""
+        signal = self.predicted if signal is None else signal
+        return self.few | ~(signal <= bound_px) | (self.bound & step_bound)
 
     def rates(self, weak: np.ndarray, use: np.ndarray) -> tuple[float, float]:
         """(right called weak, wrong called ok): each the mean over the runs in `use` that have
@@ -192,54 +253,62 @@ class Table:
         return (float(np.mean(right_weak)) if right_weak else np.nan, float(np.mean(wrong_ok)) if wrong_ok else np.nan)
 
 
-def choose(table: Table, before: tuple) -> tuple[tuple, tuple[float, float]]:
-    """The grid's thresholds for the paper's configuration: on its runs on the choice data,
-    among those calling at most MAX_RIGHT_WEAK of the right measurements weak, the one calling
-    the fewest wrong ones ok; ties to the fewest frames weak, then to the least change from
-    `before` (where the data cannot tell, e.g. no measurement has few inliers)."""
-    use = (table.split == "choice") & (table.config == "paper")
+def choose(
+    table: Table, step_bound: bool, signal: np.ndarray | None = None
+) -> tuple[float, tuple[float, float]] | None:
+    """The bound of GRID for the paper's configuration: on its runs on the choice data, among
+    those calling at most MAX_RIGHT_WEAK of the right measurements weak, the one calling the
+    fewest wrong ones ok; ties to the fewest frames weak. None where no bound qualifies."""
+    use = (table.split == "choice") & (table.config == "klt paper")
     best = None
-    for combo in itertools.product(*GRID.values()):
-        weak = table.weak(*combo)
+    for bound in GRID:
+        weak = table.weak(bound, step_bound, signal)
         rates = table.rates(weak, use)
-        if rates[0] > MAX_RIGHT_WEAK:
+        if not rates[0] <= MAX_RIGHT_WEAK:
             continue
-        change = sum(abs(np.log((c + 1e-3) / (b + 1e-3))) for c, b in zip(combo, before))
-        key = (round(rates[1], 6), int(weak[use].sum()), change)
+        key = (round(rates[1], 6), int(weak[use].sum()))
         if best is None or key < best[0]:
-            best = (key, combo, rates)
-    return best[1], best[2]
+            best = (key, bound, rates)
+    return None if best is None else (best[1], best[2])
 
 
 def percentiles(values: np.ndarray) -> str:
     return " / ".join(f"{v:.2f}" for v in np.percentile(values, (5, 50, 95))) if len(values) else "-"
 
 
-def report(table: Table, before: tuple, after: tuple) -> None:
+def report(table: Table, bound: float, step_bound: bool) -> None:
     print("\n## What the measurements look like (5th / 50th / 95th percentile)\n")
     print(
-        "| data | config | frontend | right | wrong | neither | ratio right | ratio wrong | residual right [px] | residual wrong [px] | inliers right | inliers wrong |"
+        "| data | tracker | config | frontend | right | wrong | neither | predicted right [px] | predicted wrong [px] | inliers right | inliers wrong |"
     )
-    print("|---" * 12 + "|")
+    print("|---" * 11 + "|")
     for u in dict.fromkeys(table.run):
         m = table.run == u
         r, w = m & table.right, m & table.wrong
         print(
             f"| {' | '.join(u.split('|'))} | {r.sum()} | {w.sum()} | {(m & ~table.right & ~table.wrong).sum()} | "
-            f"{percentiles(table.ratio[r])} | {percentiles(table.ratio[w])} | {percentiles(table.residual[r])} | "
-            f"{percentiles(table.residual[w])} | {percentiles(table.inliers[r])} | {percentiles(table.inliers[w])} |"
+            f"{percentiles(table.predicted[r])} | {percentiles(table.predicted[w])} | "
+            f"{percentiles(table.inliers[r])} | {percentiles(table.inliers[w])} |"
         )
     print("\n## Rates (mean over the runs): right measurements called weak, wrong ones called ok\n")
-    print(
-        "| config | thresholds (min_inliers, min_inlier_ratio, max_residual_px) | data | right called weak | wrong called ok | all measurements weak |"
-    )
+    print("| config | status | data | right called weak | wrong called ok | all measurements weak |")
     print("|---|---|---|---|---|---|")
-    best = config.resolve("best").tracker  # it keeps the thresholds it was selected with: they also steer its fallback
-    own = (best.min_inliers, best.min_inlier_ratio, best.max_residual_px)
-    for file, name, combo in (("paper", "before", before), ("paper", "after", after), ("best", "its own", own)):
-        weak = table.weak(*combo)
-        for split, (kind, real) in itertools.product(
-            ("choice", "held-out"), (("all", None), ("synthetic", False), ("real", True))
+    rules = [
+        ("before: quality thresholds and StepBound", table.decided_weak),
+        (
+            f"after: predicted error > {bound:g} px or few inliers" + (", or StepBound" * step_bound),
+            table.weak(bound, step_bound),
+        ),
+        (f"after, {'without' if step_bound else 'with'} StepBound", table.weak(bound, not step_bound)),
+    ]
+    pan_tilt = choose(table, step_bound, table.pan_tilt)  # a signal not adopted: what the roll's sigma hides
+    if pan_tilt is not None:
+        rules.append(
+            (f"pan/tilt sigma > {pan_tilt[0]:g} px or few inliers", table.weak(pan_tilt[0], step_bound, table.pan_tilt))
+        )
+    for file in dict.fromkeys(table.config):
+        for (name, weak), split, (kind, real) in itertools.product(
+            rules, ("choice", "held-out"), (("all", None), ("synthetic", False), ("real", True))
         ):
             keep = (
                 (table.config == file) & (table.split == split) & ((table.real == real) if real is not None else True)
@@ -247,9 +316,16 @@ def report(table: Table, before: tuple, after: tuple) -> None:
             if keep.any():
                 right_weak, wrong_ok = table.rates(weak, keep)
                 print(
-                    f"| {file} | {name} {', '.join(f'{v:g}' for v in combo)} | {split}, {kind} | {right_weak:.1%} | "
-                    f"{wrong_ok:.1%} | {weak[keep].mean():.1%} |"
+                    f"| {file} | {name} | {split}, {kind} | {right_weak:.1%} | {wrong_ok:.1%} | {weak[keep].mean():.1%} |"
                 )
+    print("\n## StepBound's doubted steps (every run)\n")
+    use = table.bound
+    print(
+        f"{use.sum()} doubted: {(use & table.right).sum()} right, {(use & table.wrong).sum()} wrong; "
+        f"{(use & ~table.weak(bound, False)).sum()} of them within the bound"
+    )
+    agree = table.reported_weak == table.weak(bound, step_bound)
+    print(f"the status the runs reported is this rule's for {agree.mean():.2%} of the measurements")
 
 
 def main() -> None:
@@ -269,42 +345,46 @@ def main() -> None:
         nargs="*",
         help="read the measurements from these CSV files instead of running",
     )
+    parser.add_argument("--cuts", default=f"{RIGHT_PX},{WRONG_PX}", help="right,wrong cuts [px of focal length]")
     parser.add_argument(
-        "--before",
-        default="15,0.5,0.5",
-        help="the thresholds to compare with: min_inliers,min_inlier_ratio,max_residual_px",
+        "--without-bound", action="store_true", help="StepBound's doubt is no reason for weak (the chosen rule: it is)"
     )
+    parser.add_argument("--threads", type=int, default=1, help="eas-vo's threads (default 1)")
     args = parser.parse_args()
-    before = tuple(float(v) for v in args.before.split(","))
+    concurrency.set_threads(args.threads)
+    right_px, wrong_px = (float(v) for v in args.cuts.split(","))
     if args.sources:
         rows = [row for source in args.sources for row in read_rows(source)]
     else:
-        rows = []
-        for label, (split, dataset, frontends, extra) in columns(args.real, args.seeds).items():
+        rows, decided = [], watch_decisions()
+        seeds = [n for n in args.seeds if not args.only or f"seed {n}" in args.only]  # simulated only where needed
+        for label, (split, dataset, frontends, extra) in columns(args.real, seeds).items():
             if args.only and label not in args.only:
                 continue
-            for file, frontend in itertools.product(CONFIGS, frontends):
-                rows += measurements(label, split, dataset, file, frontend, extra)
-                print(f"{label} {file} {frontend}: {len(rows)} rows", file=sys.stderr, flush=True)
+            runs = [(tracker, file, frontend) for (tracker, file), frontend in itertools.product(CONFIGS, frontends)]
+            for tracker, file, frontend in runs + [("match", "paper", MATCH_FRONTEND)]:
+                rows += measurements(decided, label, split, dataset, tracker, file, frontend, extra)
+                print(f"{label} {tracker} {file} {frontend}: {len(rows)} rows", file=sys.stderr, flush=True)
         if args.rows:
             with open(args.rows, "w", newline="") as f:
                 writer = csv.DictWriter(f, FIELDS)
                 writer.writeheader()
                 writer.writerows(rows)
-    table = Table(rows)
+    table = Table(rows, right_px, wrong_px)
     print(
-        f"right: error below {RIGHT_PX} px of focal length, wrong: above {WRONG_PX} px; {len(table.rows)} measurements"
+        f"right: error below {right_px} px of focal length, wrong: above {wrong_px} px; {len(table.rows)} measurements"
     )
-    if not ((table.split == "choice") & (table.config == "paper") & table.right).any():
-        print("no right measurement of the paper configuration on the choice data: nothing chosen, --before reported")
-        after = before
+    chosen = choose(table, not args.without_bound)
+    if chosen is None:
+        print(f"no bound calls at most {MAX_RIGHT_WEAK:.0%} of the right measurements weak: the largest reported")
+        bound = GRID[-1]
     else:
-        after, rates = choose(table, before)
+        bound, (right_weak, wrong_ok) = chosen
         print(
-            f"chosen on the choice data: min_inliers {after[0]:g}, min_inlier_ratio {after[1]:g}, max_residual_px {after[2]:g} "
-            f"(right called weak {rates[0]:.1%}, wrong called ok {rates[1]:.1%})"
+            f"chosen on the choice data: max_predicted_error_px {bound:g} "
+            f"(right called weak {right_weak:.1%}, wrong called ok {wrong_ok:.1%})"
         )
-    report(table, before, after)
+    report(table, bound, not args.without_bound)
 
 
 if __name__ == "__main__":

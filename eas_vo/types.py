@@ -229,8 +229,9 @@ class FrameRecord:
         nc: correspondences tracked from the previous frame (the paper's NC).
         inliers: inliers of the frame-to-frame model (0 when no model was estimated); for an
             event tracker (cmax), the events its estimate rests on.
-        status: `first`; `ok`; `weak` (a rotation was measured but its model is weak: too few
-            inliers, a low inlier ratio or a large residual, see `reason`); `lost` (nothing was
+        status: `first`; `ok`; `weak` (a rotation was measured but is less reliable than
+            usual: too few inliers, or its covariance predicts an error above the tracker's
+            bound, or the motion before it makes it doubtful; see `reason`); `lost` (nothing was
             measured, the previous rotation is kept: too few correspondences or no model);
             `same_time` (the frame has the previous frame's timestamp: frame skipped).
         redetected: features were detected again in this frame (klt: < threshold2).

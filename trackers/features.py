@@ -114,6 +114,7 @@ class RefinedMatching:
             max_residual_px=MAX_RESIDUAL_PX,
             min_inliers=min_inliers,
             min_inlier_ratio=COARSE_MIN_INLIER_RATIO,
+            covariance=fine.covariance,
         )
         levels, window = PixelScale.of(camera).pyramid(3, 21)
         self.lk = lk_params(window, levels)

@@ -25,7 +25,15 @@ from eas_vo.plugins import Tracker
 from eas_vo.trackers.alignment import FINEST_PIXEL_RAD, FallbackAudit, PhotometricAlignment
 from eas_vo.trackers.features import DETECTORS, Features, RefinedMatching
 from eas_vo.trackers.loops import LoopCloser, LoopClosureConfig
-from eas_vo.trackers.measurement import PixelScale, StepBound, TwoViewConfig, frame_record, measure, weakness
+from eas_vo.trackers.measurement import (
+    PixelScale,
+    StepBound,
+    TwoViewConfig,
+    frame_record,
+    measure,
+    status,
+    weakness,
+)
 from eas_vo.trackers.motion import lk_params, lk_track
 from eas_vo.types import FrameRecord, ImuSeries, RelativeRotation
 from eas_vo.validation import check_choice, check_range
@@ -303,7 +311,8 @@ class KltTracker(Tracker):
     def _after_geometry(self, frame: _Frame) -> tuple[FrameRecord, list[RelativeRotation]]:
         """Frame's (record, edges) from its two-view geometry: the fallback where LK's measurement
         falls short, the step bound, the fallback's audit, the step a velocity prediction
-        extrapolates, and loop closing."""
+        extrapolates, loop closing, and last the status the run reports (measurement.status:
+        every decision before it reads the record's status by `weakness`)."""
         record, edges, step = frame.geometry.result()
         if self._matching is not None:
             record, edges, step = self._matched(frame, record, edges, step)
@@ -317,7 +326,7 @@ class KltTracker(Tracker):
         self._last_step = (step.R_i_j, frame.t - frame.t_prev) if step is not None else None
         if self._loops is not None:
             edges = edges + self._loops.step(frame.k, frame.image, edges, lost=record.status == "lost")
-        return record, edges
+        return status(self.config, record, step, self.camera.focal_px), edges
 
     def _advance(self, image: np.ndarray, redetected: bool, cur: np.ndarray, ok: np.ndarray, k: int) -> None:
         """This image becomes the previous one: corners detected anew, or those tracked kept."""

@@ -81,7 +81,11 @@ class LoopCloser:
         self.config, self.camera = config, camera
         self.features = Features(config.loop_detector)
         self._min_distance_px, self._block_size = PixelScale.of(camera).corners(7.0, 7)
-        fine = TwoViewConfig(geometry=config.loop_geometry, min_inliers=config.loop_min_inliers)
+        fine = TwoViewConfig(
+            geometry=config.loop_geometry,
+            min_inliers=config.loop_min_inliers,
+            covariance=getattr(config, "covariance", TwoViewConfig.covariance),  # the tracker's method
+        )
         self.matching = RefinedMatching(self.features, camera, fine, config.loop_min_inliers)
         self.keyframes: list[_Keyframe] = []
         self._axes = np.empty((0, 3))  # each keyframe's optical axis in the world frame

@@ -11,7 +11,7 @@ import numpy as np
 from eas_vo.plugins import Tracker
 from eas_vo.trackers.features import DETECTORS, MATCHINGS, MAX_RESIDUAL_PX, MIN_MATCHES, RANSAC_THRESHOLD_PX, Features
 from eas_vo.trackers.loops import LoopCloser, LoopClosureConfig
-from eas_vo.trackers.measurement import StepBound, TwoViewConfig, frame_record
+from eas_vo.trackers.measurement import StepBound, TwoViewConfig, frame_record, status
 from eas_vo.types import FrameRecord, RelativeRotation
 from eas_vo.validation import check_choice, check_range
 
@@ -91,6 +91,7 @@ class MatchTracker(Tracker):
                 [step] if step else [],
             )
             record, edges = self._bound.judge(record, edges, t_prev, t)
+            record = status(c, record, edges[0] if edges else None, self.camera.focal_px)  # the label reported
         if self._loops is not None:
             edges = edges + self._loops.step(k, image, edges, lost=record.status == "lost")
         return record, edges

@@ -73,6 +73,18 @@ class TrackingExtents:
     lk_win_size: int  # the flow's window at each level [px]
 
 
+#: How StepBound's reason ends (after the angle [deg]).
+STEP_BOUND_REASON = "deg from the last ok step's rate"
+#: The predicted error [px of focal length] above which a step is reported `weak`
+#: (TwoViewConfig.max_predicted_error_px). Chosen with paper.toml on the choice data
+#: (synthetic:default with eas, histeq and ts, the real excerpt shapes_rotation's first 20 s with
+#: histeq and original; benchmarks/status_calibration.py): among the bounds calling at most 25 %
+#: of the right steps (error under 0.7 px of focal length) weak, the one calling the fewest
+#: wrong ones (over 3.5 px) ok. The covariances are geometry.covariance.SCALE's; see
+#: docs/frame_status.md for the rates on held-out data.
+MAX_PREDICTED_ERROR_PX = 3.3
+
+
 @dataclass(frozen=True)
 class TwoViewConfig:
     """Geometry and quality settings of a tracker's measurements.
@@ -87,11 +99,12 @@ class TwoViewConfig:
         ransac_confidence: success probability.
         min_inliers, min_inlier_ratio, max_residual_px: a measurement with fewer inliers, a
             lower inlier ratio or a larger inlier noise (per-axis sigma from the median
-            residual [px]) is `weak`: less reliable than a typical one, not necessarily wrong
-            (the frame is marked so; the edge is still used unless `measure` drops it as too
-            doubtful). The ratio and the residual are the thresholds that, with the paper's
-            configuration, call at most 10 % of the right measurements weak and as many wrong
-            ones as possible (benchmarks/status_calibration.py; docs/frame_status.md#protocol).
+            residual [px]) is weak to the tracker (`weakness`): `measure` drops it where its
+            rotation does not explain its correspondences, StepBound holds it to the motion
+            before it, and the fallbacks run on it. The frame's reported status reads the
+            covariance instead (`max_predicted_error_px`), except for `min_inliers`. The ratio
+            and the residual were set, with the paper's configuration, to call at most 10 % of
+            the right measurements weak (docs/frame_status.md#before-the-quality-thresholds).
             The residual is in pixels, not per focal length: LK's localisation noise and the
             1 px inlier threshold it is cut at are properties of image patches in pixels.
             15 inliers is three times the five-point minimum (a count follows the scene's
@@ -102,6 +115,12 @@ class TwoViewConfig:
             (docs/frame_status.md cites the measurements); raise it for a drone or a vehicle.
         covariance: how a measurement's covariance is estimated from its inliers:
             `information` or `bootstrap` (geometry.covariance; docs/uncertainty.md).
+        max_predicted_error_px: the frame status a run reports (`status`): a step whose
+            predicted error, the largest 1-sigma of its covariance times the focal length
+            [px of focal length, so that it means the same on every sensor], is above this is
+            reported `weak`. Chosen with the paper's configuration on the choice data
+            (benchmarks/status_calibration.py; docs/frame_status.md). Only the label: what
+            the tracker decides (measure's drop, StepBound, the fallbacks) reads `weakness`.
     """
 
     geometry: str = "essential"
@@ -113,6 +132,7 @@ class TwoViewConfig:
     max_residual_px: float = 0.6
     max_angular_acceleration_deg_s2: float = 10_000.0
     covariance: str = "information"
+    max_predicted_error_px: float = MAX_PREDICTED_ERROR_PX
 
     def validate(self) -> None:
         check_choice(self, "geometry", GEOMETRIES)
@@ -124,6 +144,7 @@ class TwoViewConfig:
         check_range(self, "max_residual_px", 0.0, 100.0, lo_open=True)
         check_range(self, "max_angular_acceleration_deg_s2", 0.0, 1e9, lo_open=True)
         check_choice(self, "covariance", COVARIANCE_METHODS)
+        check_range(self, "max_predicted_error_px", 0.0, 1000.0, lo_open=True)
 
 
 def measure(
@@ -208,6 +229,36 @@ def frame_record(
     )
 
 
+def predicted_error_px(edge: RelativeRotation, focal_px: float) -> float:
+    """The error a step's own covariance predicts [px of focal length]: its largest 1-sigma
+    (RelativeRotation.sigma_rad) times the focal length."""
+    return edge.sigma_rad * focal_px
+
+
+def status(config: TwoViewConfig, record: FrameRecord, step: RelativeRotation | None, focal_px: float) -> FrameRecord:
+    """The record a run reports for a frame the tracker has finished with (`record` as its
+    decisions left it, `step` its frame-to-frame edge): a measured frame is `weak` with fewer
+    than `min_inliers` inliers, a predicted error (predicted_error_px) above
+    `max_predicted_error_px`, or a step StepBound doubted (STEP_BOUND_REASON), else `ok`;
+    other statuses stay. The label only: every decision (measure's drop of a weak step,
+    StepBound, the fallbacks' triggers) is taken on `weakness` before it, so trajectories do
+    not depend on it."""
+    if record.status not in ("ok", "weak") or step is None:
+        return record
+    if step.inliers < config.min_inliers:  # weakness's first reason: the record says so already
+        return replace(
+            record, status="weak", reason=record.reason or f"few inliers ({step.inliers} < {config.min_inliers})"
+        )
+    predicted = predicted_error_px(step, focal_px)
+    if not predicted <= config.max_predicted_error_px:
+        return replace(
+            record, status="weak", reason=f"predicted error ({predicted:.2f} px > {config.max_predicted_error_px:g} px)"
+        )
+    if STEP_BOUND_REASON in record.reason:  # a confident step the motion before it contradicts
+        return replace(record, status="weak")
+    return replace(record, status="ok", reason="")
+
+
 class StepBound:
     """What a step may say, given the steps before it: the frame-to-frame rotation must lie
     within `a * dt * (t_mid - t_ref)` [rad] (plus three inlier thresholds of measurement noise)
@@ -241,9 +292,7 @@ class StepBound:
             if record.status == "ok":
                 self._rate = (rotvec / dt, mid)
             return record, edges
-        why = (
-            f"{math.degrees(departure):.1f} deg from the last ok step's rate (more than {math.degrees(bound):.1f} deg)"
-        )
+        why = f"{math.degrees(departure):.1f} {STEP_BOUND_REASON} (more than {math.degrees(bound):.1f} deg)"
         if record.status == "ok":
             return replace(record, status="weak", reason=why), edges
         return replace(record, status="lost", inliers=0, reason=f"{record.reason}, and {why}"), []

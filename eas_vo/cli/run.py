@@ -143,7 +143,7 @@ def run(args) -> int:
 
 
 #: What a weak frame is, after the status counts (docs/frame_status.md has the calibration).
-WEAK_MEANS = "weak: less reliable than usual, not necessarily wrong; 2-42 % of frames with the paper's settings"
+WEAK_MEANS = "weak: less reliable than usual, not necessarily wrong; 19-66 % of frames with the paper's settings"
 
 
 def _status_text(counts: dict, reasons: dict) -> str:

@@ -1,6 +1,8 @@
 """What every tracker shares: extents in pixels follow the camera's focal length (PixelScale);
 a measurement's status on correspondences of known motion (a right one is ok, a wrong one weak)."""
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -140,3 +142,52 @@ def test_a_step_that_departs_from_the_recent_rate_more_than_the_motion_allows_is
     assert (record.status, len(edges)) == ("weak", 1) and record.reason.startswith(
         "178.8 deg from the last ok step's rate"
     )
+
+
+def test_the_reported_status_reads_the_predicted_error():
+    """measurement.status: a measured step whose covariance predicts an error (largest sigma
+    times the focal length) above max_predicted_error_px is reported weak, with the figure; one
+    that predicts less is ok, whatever the quality thresholds decided (a low inlier ratio
+    here); under min_inliers inliers it stays weak, and lost or first frames keep their status."""
+    from eas_vo.trackers.measurement import status
+    from eas_vo.types import FrameRecord, RelativeRotation
+
+    config, focal_px = TwoViewConfig(max_predicted_error_px=1.0), 200.0
+
+    def step(sigma_px, inliers=100):
+        covariance = np.diag([0.2, 0.5, 1.0]) * (sigma_px / focal_px) ** 2  # largest sigma: sigma_px
+        return RelativeRotation(0, 1, np.eye(3), inliers, 0.3, 0.001, covariance=covariance)
+
+    decided = FrameRecord(1, 0.05, 150, 100, "weak", False, 0.3, 0.2, "low inlier ratio (0.30 < 0.55)")
+    large = status(config, decided, step(2.5), focal_px)
+    assert (large.status, large.reason) == ("weak", "predicted error (2.50 px > 1 px)")
+    small = status(config, decided, step(0.4), focal_px)
+    assert (small.status, small.reason) == ("ok", "")
+    assert status(config, replace(decided, status="ok", reason=""), step(2.5), focal_px).status == "weak"
+    few = replace(decided, reason="few inliers (9 < 15)")
+    assert status(config, few, step(0.4, inliers=9), focal_px) == few
+    for record in (replace(decided, status="lost", reason="no model"), FrameRecord(0, 0.0, 0, 0, "first", True)):
+        assert status(config, record, None, focal_px) == record
+
+
+@pytest.mark.parametrize("options", [{}, {"keyframe_interval": 3, "fallback": "match", "predict": "velocity"}])
+def test_the_reported_status_changes_no_decision(options):
+    """The status a run reports is a label: with every step reported weak (a bound no
+    covariance meets) klt measures the same edges as with every step ok (a bound every one
+    meets), fallbacks included, and its records differ in status and reason only."""
+    from helpers import CAMERA, textured_image, warp_by_rotation
+
+    base = textured_image(4, shapes=300)
+    turns = [np.radians([0.3, 1.5, 0.2]) * k for k in range(8)] + [np.radians([8.0, -14.0, -6.0])]
+    images = [warp_by_rotation(base, rotvec_to_matrix(turn).T) for turn in turns]
+    runs = []
+    for bound in (1e-9, 1e9):
+        tracker = KltTracker(KltConfig(max_predicted_error_px=bound, **options), CAMERA)
+        runs.append([tracker.process(image, 0.05 * k) for k, image in enumerate(images)])
+    weak_run, ok_run = runs
+    for (weak_record, weak_edges), (ok_record, ok_edges) in zip(weak_run, ok_run):
+        assert replace(weak_record, status=ok_record.status, reason=ok_record.reason) == ok_record
+        assert [(e.i, e.j, e.R_i_j.tobytes()) for e in weak_edges] == [(e.i, e.j, e.R_i_j.tobytes()) for e in ok_edges]
+    measured = [k for k, (record, _) in enumerate(ok_run) if record.status in ("ok", "weak")]
+    assert len(measured) >= 7 and all(weak_run[k][0].status == "weak" for k in measured)
+    assert all(ok_run[k][0].status == "ok" for k in measured if ok_run[k][0].inliers >= 15)

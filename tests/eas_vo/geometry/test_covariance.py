@@ -1,18 +1,29 @@
 """Known answers for the covariance of a two-view rotation: over many draws of Gaussian pixel
 noise of known sigma, the NEES (normalised estimation error squared, delta^T Sigma^-1 delta) of
 the measured rotation has the mean of a chi-square with 3 degrees of freedom, 3, when the
-covariance is right."""
+covariance is right. These are the linearisation's known answers, so they hold with
+covariance.SCALE (the factors fitted on real tracking, whose errors are not independent) set
+to 1; the last test checks the factors are applied."""
 
 import numpy as np
 import pytest
 
-from eas_vo.geometry.covariance import UNDETERMINED_VARIANCE, rotation_only_covariance, skew
+from eas_vo.geometry import covariance
+from eas_vo.geometry.covariance import UNDETERMINED_VARIANCE, essential_covariance, rotation_only_covariance, skew
 from eas_vo.geometry.rotations import matrix_to_rotvec, rotvec_to_matrix
 from eas_vo.geometry.two_view import bearings, rotation_from_correspondences
 
 FOCAL_PX = 200.0
 HALF_FOV = np.tan(np.radians(30.0))  # a 60 degree field of view
 R_CUR_PREV = rotvec_to_matrix([0.02, -0.03, 0.01])
+
+
+@pytest.fixture(autouse=True)
+def unscaled(monkeypatch):
+    """The linearisation as it is: no factor (covariance.SCALE) on any covariance."""
+    factors = dict(covariance.SCALE)
+    monkeypatch.setattr(covariance, "SCALE", {})
+    return factors
 
 
 def pair(rng, n, noise_px, translation):
@@ -100,3 +111,24 @@ def test_skew_is_the_cross_product():
     v, w = np.array([1.0, -2.0, 0.5]), np.array([0.3, 0.1, -4.0])
     np.testing.assert_allclose(skew(v) @ w, np.cross(v, w))
     np.testing.assert_allclose(skew(np.stack([v, w]))[1] @ v, np.cross(w, v))
+
+
+@pytest.mark.parametrize("method", ["information", "bootstrap"])
+def test_every_covariance_is_multiplied_by_its_factor(monkeypatch, unscaled, method):
+    """covariance.SCALE multiplies the rotation-only (and homography) model's covariance by its
+    `rotation` factor and the five-point model's by its `essential` one."""
+    rng = np.random.default_rng(5)
+    x_prev, x_cur = pair(rng, 60, 0.3, np.array([0.3, 0.0, 0.05]))
+    f_prev, f_cur = bearings(x_prev), bearings(x_cur)
+    E = skew(np.array([0.3, 0.0, 0.05]) / np.linalg.norm([0.3, 0.0, 0.05])) @ R_CUR_PREV
+    plain = (
+        rotation_only_covariance(R_CUR_PREV, f_prev, f_cur, 0.001, method),
+        essential_covariance(E, R_CUR_PREV, x_prev, x_cur, 0.001, method),
+    )
+    monkeypatch.setattr(covariance, "SCALE", unscaled)
+    scaled = (
+        rotation_only_covariance(R_CUR_PREV, f_prev, f_cur, 0.001, method),
+        essential_covariance(E, R_CUR_PREV, x_prev, x_cur, 0.001, method),
+    )
+    for got, expected, family in zip(scaled, plain, ("rotation", "essential")):
+        np.testing.assert_allclose(got, unscaled[(method, family)] * expected, rtol=1e-9)
