@@ -40,7 +40,8 @@ METHODS = ("information", "bootstrap")
 #: sqrt(2 / draws)).
 BOOTSTRAP_DRAWS = 200
 #: The factor a covariance is multiplied by, per (method, model family): `essential`, and
-#: `rotation` for the rotation-only and homography models. The linearisation (exact on
+#: `rotation` for the rotation-only and homography models (homography edges, loops only, are
+#: too few to have their own). The linearisation (exact on
 #: synthetic pairs with independent pixel noise: tests/eas_vo/geometry/test_covariance.py)
 #: takes the inliers' errors as independent; LK's tracks of one frame pair are not (they share
 #: the images' blur, noise and frontend), so the error of a step shrinks far less with its
@@ -159,9 +160,10 @@ def homography_covariance(
     J = np.stack(
         [(residuals(_STEP * e) - residuals(-_STEP * e)) / (2 * _STEP) for e in np.eye(8)], axis=-1
     )  # (N, 2, 8); the rotation's part is -1 times that of R_prev_cur's perturbation: same covariance
+    scale = SCALE.get((method, "rotation"), 1.0)
     if method == "bootstrap":
-        return _bootstrap(J, residuals(np.zeros(8)), keep=3)
-    information = np.einsum("nki,nkj->ij", J, J) / max(sigma, 1e-12) ** 2
+        return _bootstrap(J, residuals(np.zeros(8)), keep=3, scale=scale)
+    information = np.einsum("nki,nkj->ij", J, J) / max(sigma, 1e-12) ** 2 / scale
     if len(J) < 4:
         return _inverse(information[:3, :3], False)
     rr, rt, tt = information[:3, :3], information[:3, 3:], information[3:, 3:]

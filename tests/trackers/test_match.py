@@ -28,8 +28,11 @@ def test_match_recovers_a_large_rotation_with_roll(seed, detector, tol_deg):
     first, second, R_c0_c1 = pair(seed)
     record, edges = measure(MatchTracker(MatchConfig(detector=detector), CAMERA), first, second)
     (edge,) = edges
-    assert (edge.i, edge.j, record.status) == (0, 1, "ok")
-    assert np.degrees(geodesic_angle(edge.R_i_j, R_c0_c1)) < tol_deg  # ORB keypoints sit on a coarser grid
+    assert (edge.i, edge.j) == (0, 1)
+    # SIFT's steps are ok; ORB's keypoints sit on a coarser grid, and its covariance (with the
+    # factor fitted on LK's tracks: docs/uncertainty.md) predicts 3-5 px of roll: weak by it
+    assert record.status == "ok" or (detector == "orb" and record.reason.startswith("predicted error")), record
+    assert np.degrees(geodesic_angle(edge.R_i_j, R_c0_c1)) < tol_deg
     assert record.inliers >= 50 and record.inlier_ratio > 0.7
 
 

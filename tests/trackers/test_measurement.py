@@ -12,6 +12,7 @@ from eas_vo.geometry.two_view import bearings, explains, rotation_from_correspon
 from eas_vo.trackers.klt import KltConfig, KltTracker
 from eas_vo.trackers.measurement import (
     REFERENCE_FOCAL_PX,
+    STEP_BOUND_REASON,
     PixelScale,
     TrackingExtents,
     TwoViewConfig,
@@ -190,4 +191,6 @@ def test_the_reported_status_changes_no_decision(options):
         assert [(e.i, e.j, e.R_i_j.tobytes()) for e in weak_edges] == [(e.i, e.j, e.R_i_j.tobytes()) for e in ok_edges]
     measured = [k for k, (record, _) in enumerate(ok_run) if record.status in ("ok", "weak")]
     assert len(measured) >= 7 and all(weak_run[k][0].status == "weak" for k in measured)
-    assert all(ok_run[k][0].status == "ok" for k in measured if ok_run[k][0].inliers >= 15)
+    for k in measured:  # with a bound every covariance meets: ok, unless few inliers or StepBound doubt it
+        record = ok_run[k][0]
+        assert record.status == "ok" or record.inliers < 15 or STEP_BOUND_REASON in record.reason, record
