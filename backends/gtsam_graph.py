@@ -1,5 +1,6 @@
 """Rotation-only pose graph with GTSAM: one Rot3 per frame, a prior on the first,
-a BetweenFactorRot3 per measured relative rotation (consecutive or skip edges).
+a BetweenFactorRot3 per measured relative rotation (consecutive or skip edges); each frame's
+marginal covariance (gtsam.Marginals, or iSAM2's) as BackendResult.covariance.
 
 Keys (gtsam.symbol_shorthand): A(k) frame k's attitude R_w_ck, B(0) the gyro's bias [rad/s].
 Every A key sorts below B(0), as the plain frame numbers did: GTSAM's elimination order depends
@@ -14,6 +15,7 @@ import numpy as np
 
 from eas_vo.errors import ConfigError
 from eas_vo.geometry.rotations import geodesic_angle
+from eas_vo.geometry.uncertainty import chain_covariance
 from eas_vo.imu.verdict import confident_steps, disagreement
 from eas_vo.plugins import Backend, BackendResult
 from eas_vo.types import ImuSeries, RelativeRotation
@@ -244,7 +246,7 @@ class GtsamBackend(Backend):
                 f"the pose graph could not be solved ({self.config.mode}: {reason}): "
                 "the rotations are the chained measurements, unsmoothed"
             )
-            return BackendResult(initial_R, warnings=(*warnings, failed))
+            return BackendResult(initial_R, warnings=(*warnings, failed), covariance=chain_covariance(n_frames, edges))
         return replace(solved, warnings=(*warnings, *solved.warnings))
 
     def _batch(self, gtsam, n_frames: int, by_frame: dict, initial_R: np.ndarray, with_bias: bool) -> BackendResult:
@@ -271,16 +273,18 @@ class GtsamBackend(Backend):
                 f"Levenberg-Marquardt ended at error {optimizer.error():.6g}, above its start {start_error:.6g}"
             )
         R_w_c = np.stack([result.atRot3(A(k)).matrix() for k in range(n_frames)])
-        warnings = ()
+        covariance, warnings = _marginal_covariances(
+            lambda: gtsam.Marginals(graph, result).marginalCovariance, n_frames
+        )
         if optimizer.iterations() >= self.config.iterations:
             moved = self._next_step_rad(optimizer, R_w_c)
             if moved > CONVERGED_STEP_RAD:
-                warnings = (
+                warnings += (
                     f"the pose graph's Levenberg-Marquardt stopped at backend.iterations = {self.config.iterations} before "
                     f"converging (error {start_error:.6g} -> {optimizer.error():.6g}; one more step turns a frame by "
                     f"{np.degrees(moved):.2g} deg): raise it",
                 )
-        return BackendResult(R_w_c, warnings=warnings)
+        return BackendResult(R_w_c, warnings=warnings, covariance=covariance)
 
     @staticmethod
     def _next_step_rad(optimizer, R_w_c: np.ndarray) -> float:
@@ -324,4 +328,26 @@ class GtsamBackend(Backend):
         for _ in range(self.config.iterations):
             isam.update()
         estimate = isam.calculateEstimate()
-        return BackendResult(np.stack([estimate.atRot3(A(k)).matrix() for k in range(n_frames)]), causal_R_w_c=causal)
+        covariance, warnings = _marginal_covariances(lambda: isam.marginalCovariance, n_frames)
+        return BackendResult(
+            np.stack([estimate.atRot3(A(k)).matrix() for k in range(n_frames)]),
+            causal_R_w_c=causal,
+            warnings=warnings,
+            covariance=covariance,
+        )
+
+
+def _marginal_covariances(marginal_of, n_frames: int) -> tuple[np.ndarray | None, tuple[str, ...]]:
+    """Each frame's marginal covariance [rad^2] (n_frames, 3, 3) from `marginal_of()` (key ->
+    covariance: gtsam.Marginals(...).marginalCovariance or ISAM2.marginalCovariance), and no
+    warning; None and a warning when GTSAM cannot compute them. GTSAM's Rot3 covariance is that of
+    the local (right) perturbation R Exp(delta), the camera frame: BackendResult.covariance's
+    convention (tests/backends/test_gtsam_graph.py holds it)."""
+    from gtsam.symbol_shorthand import A
+
+    try:
+        marginal = marginal_of()
+        return np.stack([np.asarray(marginal(A(k)), float) for k in range(n_frames)]), ()
+    except RuntimeError as exc:  # gtsam's own errors (an indeterminate system, ...) are RuntimeErrors
+        reason = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+        return None, (f"the pose graph's marginal covariances could not be computed ({reason}): no covariance",)

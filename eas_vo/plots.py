@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from eas_vo.geometry.rotations import euler_zyx_deg
+from eas_vo.geometry.uncertainty import euler_sigmas_deg
 
 
 def _figure(**kwargs):
@@ -38,25 +39,36 @@ def plot_rotation(path: str | Path, result, title: str = "") -> None:
 
 def rotation_figure(result, title: str = ""):
     """Estimated (aligned to ground truth at the first frame) and true roll/pitch/yaw over time,
-    like the paper's Fig. 3, then the angular velocity per axis (edges against ground truth),
-    over a tracking panel: the rotation error [deg] per frame (with
-    ground truth) and loop closures marked at the frame that closed them; under it a thin
-    status row, one line per status, marking the weak and lost frames. Without ground truth
-    only the estimate is drawn. The title's second line gives the APE, the NC and the ground
-    truth's time offset the errors were measured with, the angular-velocity RMS error and the
-    RPE over 1 s (metrics, where present)."""
+    like the paper's Fig. 3, each estimated angle in a band of +-1 sigma (from the backend's
+    covariance, `result.covariance`, else the chain's, `result.chain_covariance`; none when
+    both are None), then the angular velocity per axis (edges against ground truth), over a
+    tracking panel: the rotation error [deg] per frame (with ground truth) beside the error the
+    covariance predicts (its RMS, sqrt(trace)), and loop closures marked at the frame that closed
+    them; under it a thin status row, one line per status, marking the weak and lost frames.
+    Without ground truth only the estimate is drawn. The title's second line gives the APE, the
+    NC and the ground truth's time offset the errors were measured with, the angular-velocity
+    RMS error and the RPE over 1 s (metrics, where present)."""
     t0 = result.t[0]
     errors = result.errors
+    covariance = result.covariance if result.covariance is not None else result.chain_covariance
     fig = _figure(figsize=(8, 10), layout="constrained")
     axes = fig.subplots(6, 1, sharex=True, height_ratios=(1, 1, 1, 1, 0.8, 0.16))
     _draw_angular_velocity(axes[3], result, t0)
     axes = [*axes[:3], *axes[4:]]  # below: roll, pitch, yaw 0-2, the tracking panel 3, the status row 4
     if errors is not None and errors.valid.any():
-        _draw_euler(axes[:3], result.t[errors.valid] - t0, errors.R_w_c_aligned, errors.R_w_c_gt)
-        axes[3].plot(result.t[errors.valid] - t0, np.degrees(errors.ape_rad), color="k", lw=0.9, label="error")
+        shown = errors.valid
+        R_shown = errors.R_w_c_aligned  # aligned on the left (a world rotation): the covariance is unchanged
+        _draw_euler(
+            axes[:3], result.t[shown] - t0, R_shown, errors.R_w_c_gt, sigma_deg=_sigmas(R_shown, covariance, shown)
+        )
+        axes[3].plot(result.t[shown] - t0, np.degrees(errors.ape_rad), color="k", lw=0.9, label="error")
+        if covariance is not None:
+            predicted = np.degrees(np.sqrt(np.clip(np.trace(covariance[shown], axis1=1, axis2=2), 0, None)))
+            _plot_within(axes[3], result.t[shown] - t0, predicted, np.degrees(errors.ape_rad), label="predicted (RMS)")
         axes[3].set_ylabel("error [deg]")
     else:
-        _draw_euler(axes[:3], result.t - t0, result.R_w_c)
+        shown = np.ones(len(result.t), bool)
+        _draw_euler(axes[:3], result.t - t0, result.R_w_c, sigma_deg=_sigmas(result.R_w_c, covariance, shown))
         axes[3].set_yticks([])
         axes[3].set_ylabel("tracking")
     _status_row(axes[4], result.records, t0)
@@ -126,14 +138,58 @@ def _status_row(ax, records, t0: float) -> None:
     ax.grid(axis="x", alpha=0.3)
 
 
-def _draw_euler(column, t: np.ndarray, R_est: np.ndarray, R_gt: np.ndarray | None = None, labels: bool = True) -> None:
-    """Roll, pitch, yaw [deg] over t [s] into three axes: the estimate over the ground truth (if any)."""
+def _sigmas(R_w_c: np.ndarray, covariance: np.ndarray | None, shown: np.ndarray) -> np.ndarray | None:
+    """The 1-sigma [deg] (N, 3) of the roll, pitch and yaw of the shown frames' R_w_c, from the
+    covariance of every frame (None without one)."""
+    return None if covariance is None else euler_sigmas_deg(R_w_c, np.asarray(covariance)[shown])
+
+
+#: How far [in spans of the curves' own range, at least BAND_MIN_DEG] a band may widen a
+#: panel beyond its curves: a frame whose sigma is huge (a frame the graph ties loosely) fills
+#: the panel rather than flattening every curve in it.
+BAND_REACH, BAND_MIN_DEG = 0.5, 5.0
+
+
+def _plot_within(ax, t: np.ndarray, values: np.ndarray, curves: np.ndarray, label: str) -> None:
+    """A dashed grey line of `values` over `t`, the axis limited to what `curves` need (and the
+    line within BAND_REACH of them), as the Euler bands are."""
+    ax.plot(t, values, color="0.45", lw=0.9, ls="--", label=label)
+    _limit(ax, curves, values, values)
+
+
+def _limit(ax, curves: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> None:
+    """The y-axis of `ax` around the finite `curves` and, within BAND_REACH of them, the band lo..hi."""
+    finite = curves[np.isfinite(curves)]
+    if not len(finite):
+        return
+    bottom, top = float(finite.min()), float(finite.max())
+    reach = BAND_REACH * max(top - bottom, BAND_MIN_DEG)
+    band_lo, band_hi = np.nanmin(np.append(lo, bottom)), np.nanmax(np.append(hi, top))
+    bottom, top = max(min(bottom, band_lo), bottom - reach), min(max(top, band_hi), top + reach)
+    margin = 0.05 * max(top - bottom, 1e-6)
+    ax.set_ylim(bottom - margin, top + margin)
+
+
+def _draw_euler(
+    column,
+    t: np.ndarray,
+    R_est: np.ndarray,
+    R_gt: np.ndarray | None = None,
+    labels: bool = True,
+    sigma_deg: np.ndarray | None = None,
+) -> None:
+    """Roll, pitch, yaw [deg] over t [s] into three axes: the estimate over the ground truth (if
+    any), with a band of +-sigma_deg (N, 3) about the estimate when given."""
     est = np.unwrap(euler_zyx_deg(R_est), period=360, axis=0)
     gt = None if R_gt is None else np.unwrap(euler_zyx_deg(R_gt), period=360, axis=0)
     for k, (ax, name) in enumerate(zip(column, ("roll", "pitch", "yaw"))):
         if gt is not None:
             ax.plot(t, gt[:, k], color="0.2", lw=1.4, label="ground truth")
         ax.plot(t, est[:, k], color="tab:red", lw=1.0, label="estimate")
+        if sigma_deg is not None:
+            lo, hi = est[:, k] - sigma_deg[:, k], est[:, k] + sigma_deg[:, k]
+            ax.fill_between(t, lo, hi, color="tab:red", alpha=0.2, lw=0, label="estimate ± 1 sigma")
+            _limit(ax, est[:, k] if gt is None else np.concatenate([est[:, k], gt[:, k]]), lo, hi)
         ax.grid(alpha=0.3)
         if labels:
             ax.set_ylabel(f"{name} [deg]")

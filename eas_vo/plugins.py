@@ -282,11 +282,18 @@ class BackendResult:
             when that frame arrived (written as trajectory_causal.tum); None for a batch solve.
         warnings: one line per way the solution falls short (a solver that failed or did not
             converge, measurements it left out), which the run prints as warnings.
+        covariance: (n_frames, 3, 3) the covariance [rad^2] of each R_w_c: of its right
+            perturbation in the camera frame, R_w_c,true = R_w_c Exp(delta), delta ~ N(0,
+            covariance) (RelativeRotation.covariance's convention, GTSAM's); frame 0's about 0 (it
+            defines the world). Written per axis to orientation_sigma.csv and drawn as a band in
+            rotation.png; None when the backend does not estimate it (the run then draws the
+            chain's, eas_vo.geometry.uncertainty.chain_covariance).
     """
 
     R_w_c: np.ndarray
     causal_R_w_c: np.ndarray | None = None
     warnings: tuple[str, ...] = ()
+    covariance: np.ndarray | None = None
 
 
 class Backend:

@@ -30,9 +30,12 @@ outputs (in --out):
   groundtruth.tum  ground truth at the same timestamps (when the dataset has it)
   metrics.json     average APE (Eq. 3, rad), RMSE, max, average NC, frames, timing
   frames.csv       per frame: index, t, NC, inliers, status (first, ok, weak, lost, same_time), redetected,
-                   inlier ratio, residual [px], why the frame is weak or lost
+                   inlier ratio, residual [px], why the frame is weak or lost, its step's sigmas [deg]
+  orientation_sigma.csv
+                   per frame: its orientation's 1-sigma [deg] about each camera axis, the chain's
+                   propagated and the backend's
   config.toml      the resolved configuration (re-run with --config config.toml)
-  rotation.png     estimated and true roll/pitch/yaw over time
+  rotation.png     estimated (+-1 sigma) and true roll/pitch/yaw over time
 
 examples:
   eas-vo run --frontend eas --backend chain

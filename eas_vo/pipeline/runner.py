@@ -13,6 +13,7 @@ import numpy as np
 from eas_vo import registry
 from eas_vo.config import ResolvedConfig
 from eas_vo.errors import EasVoError, Interrupted
+from eas_vo.geometry.uncertainty import chain_covariance, consecutive_steps
 from eas_vo.imu.policy import GyroDecision, GyroSetup, assess
 from eas_vo.io.atomic import atomic_path, json_text, write_text_atomic
 from eas_vo.io.outputs import output_folder
@@ -67,6 +68,7 @@ def _run_into(
                 "an eas_vo.plugins.BackendResult (docs/plugins.md)"
             )
         R_w_c = solved.R_w_c
+        covariance = _checked_covariance(solved.covariance, len(t), config.run.backend)
         evaluation = evaluate(config, parts.dataset, t, R_w_c, tracked.edges)
         metrics = summarise(config, parts.dataset, tracked, evaluation, time.perf_counter() - started, load_s, gyro)
         metrics["data_warnings"] = (
@@ -82,6 +84,8 @@ def _run_into(
             metrics,
             solved.causal_R_w_c,
             parts.dataset.clock_origin_ns,
+            covariance,
+            chain_covariance(len(t), tracked.edges),
         )
         if out is not None:
             write_outputs(out, result, parts.dataset.label, config.origin)
@@ -92,6 +96,20 @@ def _run_into(
         kept = f"the {len(t)} frames processed so far were written to {final} (metrics.json: partial)" if final else ""
         raise Interrupted.keeping(tracked.interrupted, kept) from None
     return result
+
+
+def _checked_covariance(covariance, n_frames: int, backend: str) -> np.ndarray | None:
+    """A backend's covariance as BackendResult promises it, (n_frames, 3, 3) [rad^2], or None;
+    anything else is a one-line error naming the backend."""
+    if covariance is None:
+        return None
+    covariance = np.asarray(covariance, dtype=float)
+    if covariance.shape != (n_frames, 3, 3):
+        raise EasVoError(
+            f"backend {backend!r} returned a covariance of shape {covariance.shape}: BackendResult.covariance is "
+            f"({n_frames}, 3, 3), a 3x3 covariance [rad^2] per frame, or None (docs/plugins.md)"
+        )
+    return covariance
 
 
 def gyro_setup(config: ResolvedConfig, parts: Pipeline) -> GyroSetup:
@@ -145,9 +163,10 @@ def _track_and_assess_gyro(
     if gyro.still:
         tracked.records, tracked.edges = gyro.weakened(tracked.records, tracked.edges)
         if frames_csv is not None:
+            steps = consecutive_steps(tracked.edges)
             with atomic_path(frames_csv) as tmp, FrameLog(tmp, parts.dataset.clock_origin_ns) as log:
                 for r in tracked.records:
-                    log.write(r)
+                    log.write(r, steps.get(r.index))
     return tracked, gyro
 
 

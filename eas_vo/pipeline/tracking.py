@@ -12,6 +12,7 @@ import numpy as np
 from eas_vo import concurrency
 from eas_vo.config import ResolvedConfig
 from eas_vo.errors import EasVoError
+from eas_vo.geometry.uncertainty import axis_sigmas, consecutive_steps, largest_sigma, step_covariance
 from eas_vo.io.tables import clock_time
 from eas_vo.orb import OrbStats
 from eas_vo.pipeline.parts import Pipeline, check_frame
@@ -29,6 +30,10 @@ FRAMES_CSV_FIELDS = (
     "reason",
     "events",
     "contrast_gain",
+    "sigma_deg",
+    "sigma_x_deg",
+    "sigma_y_deg",
+    "sigma_z_deg",
 )
 
 
@@ -71,7 +76,7 @@ def track(parts: Pipeline, config: ResolvedConfig, frames_csv: Path | None = Non
             )
         tracked.records.append(record)
         tracked.edges.extend(edges)
-        log.write(record)
+        log.write(record, consecutive_steps(edges).get(record.index))
         bar.update(1)
         if record.index % 10 == 0:
             bar.set_postfix(nc=record.nc, refresh=False)
@@ -123,7 +128,10 @@ def check_image(image, camera, frontend: str, sample) -> None:
 
 
 class FrameLog:
-    """frames.csv, one row per frame, flushed as it goes so an interrupted run keeps its rows."""
+    """frames.csv, one row per frame, flushed as it goes so an interrupted run keeps its rows:
+    the frame's record and the uncertainty of its consecutive step (the edge from the frame
+    before: the square root of its covariance's largest eigenvalue and of its diagonal, in
+    degrees; empty without one)."""
 
     def __init__(self, path: Path | None, origin_ns: int = 0):
         self.path = path
@@ -136,8 +144,10 @@ class FrameLog:
             self._writer.writerow(FRAMES_CSV_FIELDS)
         return self
 
-    def write(self, r: FrameRecord) -> None:
+    def write(self, r: FrameRecord, step: RelativeRotation | None = None) -> None:
+        """The row of record `r` and of `step`, the edge r.index - 1 -> r.index (None: none measured)."""
         if self._fh:
+            sigmas = [""] * 4 if step is None else _sigmas_deg(step)
             self._writer.writerow(
                 [
                     r.index,
@@ -151,6 +161,7 @@ class FrameLog:
                     r.reason,
                     r.events,
                     f"{r.contrast_gain:.4f}",
+                    *sigmas,
                 ]
             )
             self._fh.flush()
@@ -159,6 +170,16 @@ class FrameLog:
         if self._fh:
             self._fh.close()
         return False
+
+
+def _sigmas_deg(step: RelativeRotation) -> list[str]:
+    """frames.csv's sigma columns of a measured step [deg]: along its worst axis, about x, y, z
+    ("inf" where its estimator gives no finite covariance: no inliers)."""
+    covariance = step_covariance(step)
+    if covariance is None:
+        return ["inf"] * 4
+    sigmas = np.degrees([largest_sigma(covariance), *axis_sigmas(covariance)])
+    return [f"{v:.6f}" for v in sigmas]
 
 
 def _progress(total: int, enabled: bool, rc):

@@ -8,6 +8,7 @@ from eas_vo.backends.chain import ChainBackend
 from eas_vo.backends.gtsam_graph import GtsamBackend, GtsamConfig
 from eas_vo.errors import ConfigError
 from eas_vo.geometry.rotations import geodesic_angle, gyro_rotation
+from eas_vo.geometry.uncertainty import chain_covariance
 from eas_vo.types import RelativeRotation
 from helpers import assert_rotations_close
 
@@ -262,6 +263,7 @@ def test_a_solver_that_fails_is_a_warning_and_the_chain(mode, monkeypatch):
         "while working near variable 7): the rotations are the chained measurements, unsmoothed",
     )
     assert out.causal_R_w_c is None
+    np.testing.assert_array_equal(out.covariance, chain_covariance(len(R), edges))  # the chain's, as its rotations
 
 
 def test_levenberg_marquardt_stopped_early_is_said():
@@ -327,3 +329,66 @@ def test_a_reused_backend_returns_nothing_of_its_previous_solve(mode, monkeypatc
     monkeypatch.setattr(backend, f"_{mode}", fails)
     failed = backend.solve(n, short, times=times[:n], imu=imu)
     assert failed.causal_R_w_c is None and len(failed.warnings) == 1 and "could not be solved" in failed.warnings[0]
+
+
+def test_gtsams_rot3_marginal_is_the_right_perturbation_in_the_body_frame():
+    """BackendResult.covariance is of R_w_c,true = R_w_c Exp(delta), delta in the camera frame:
+    GTSAM's marginal of a Rot3 reached through a turned BetweenFactor from an anisotropic prior is
+    R_step^T Sigma_0 R_step + Sigma_step (the right perturbation's propagation), not
+    Sigma_0 + R_step Sigma_step R_step^T (a left one, in the world frame)."""
+    import gtsam
+
+    R_0 = Rotation.from_rotvec([0.3, -0.5, 0.8]).as_matrix()
+    R_step = Rotation.from_rotvec([0.9, 0.2, -0.4]).as_matrix()
+    S_0, S_step = np.diag([1.0, 4.0, 9.0]) * 1e-4, np.diag([16.0, 1.0, 2.0]) * 1e-4
+    graph = gtsam.NonlinearFactorGraph()
+    graph.add(gtsam.PriorFactorRot3(0, gtsam.Rot3(R_0), gtsam.noiseModel.Gaussian.Covariance(S_0)))
+    graph.add(gtsam.BetweenFactorRot3(0, 1, gtsam.Rot3(R_step), gtsam.noiseModel.Gaussian.Covariance(S_step)))
+    values = gtsam.Values()
+    values.insert(0, gtsam.Rot3(R_0))
+    values.insert(1, gtsam.Rot3(R_0 @ R_step))
+    marginal = gtsam.Marginals(graph, values).marginalCovariance(1)
+    right, left = R_step.T @ S_0 @ R_step + S_step, S_0 + R_step @ S_step @ R_step.T
+    np.testing.assert_allclose(marginal, right, atol=1e-15)
+    assert np.abs(marginal - left).max() > 1e-4
+
+
+def anisotropic_chain(n=60, seed=10):
+    """Consecutive edges of exact steps (a few degrees each), each with its own anisotropic covariance
+    (sigmas 0.02-0.3 deg, above the backend's sigma_floor_rad)."""
+    rng = np.random.default_rng(seed)
+    R = truth(n, seed)
+    edges = []
+    for k in range(1, n):
+        Q = Rotation.from_rotvec(rng.normal(0, 1.0, 3)).as_matrix()
+        cov = Q @ np.diag(rng.uniform(0.0004, 0.005, 3) ** 2) @ Q.T
+        edges.append(RelativeRotation(k - 1, k, R[k - 1].T @ R[k], 100, covariance=cov))
+    return R, edges
+
+
+@pytest.mark.parametrize("mode", ["batch", "online"])
+def test_the_marginals_of_a_chain_only_graph_are_the_chains_propagation(mode):
+    R, edges = anisotropic_chain()
+    graph = GtsamBackend(GtsamConfig(mode=mode)).solve(len(R), edges)
+    chain = ChainBackend().solve(len(R), edges)
+    np.testing.assert_array_equal(chain.covariance, chain_covariance(len(R), edges))
+    assert graph.covariance.shape == (len(R), 3, 3) and graph.warnings == ()
+    scale = np.linalg.norm(chain.covariance, axis=(1, 2))
+    relative = np.linalg.norm(graph.covariance - chain.covariance, axis=(1, 2))[1:] / scale[1:]
+    assert relative.max() < 1e-6, relative.max()
+    assert np.abs(graph.covariance[0]).max() < 1e-15  # frame 0 held at the identity
+
+
+@pytest.mark.parametrize("mode", ["batch", "online"])
+def test_keyframe_edges_shrink_the_marginals_below_the_chains(mode):
+    """Edges from every third frame to the next three (klt's keyframe edges) measure the same motion
+    again: every frame's marginal is at most the chain's (in the positive semi-definite order),
+    the last frame's well below it."""
+    R, edges = anisotropic_chain(seed=11)
+    rng = np.random.default_rng(12)
+    keyframe = [measure(R, i, j, rng, 0.002) for i in range(0, len(R), 3) for j in range(i + 2, min(i + 4, len(R)))]
+    chain = chain_covariance(len(R), edges)
+    graph = GtsamBackend(GtsamConfig(mode=mode)).solve(len(R), edges + keyframe).covariance
+    smallest = [np.linalg.eigvalsh(chain[k] - graph[k])[0] for k in range(1, len(R))]
+    assert min(smallest) > -1e-12
+    assert np.trace(graph[-1]) < 0.7 * np.trace(chain[-1])

@@ -15,7 +15,15 @@ import pytest
 from eas_vo.cli.main import main
 from helpers import one_line_failure, run_eas_vo
 
-OUTPUTS = ("trajectory.tum", "groundtruth.tum", "metrics.json", "frames.csv", "config.toml", "rotation.png")
+OUTPUTS = (
+    "trajectory.tum",
+    "groundtruth.tum",
+    "orientation_sigma.csv",
+    "metrics.json",
+    "frames.csv",
+    "config.toml",
+    "rotation.png",
+)
 
 
 @pytest.fixture(scope="module")

@@ -2,6 +2,7 @@
 
 import matplotlib
 import numpy as np
+import pytest
 
 from eas_vo import plots
 
@@ -146,9 +147,18 @@ def test_the_rotation_plot_shows_where_tracking_was_weak_or_lost_and_where_loops
     t_gt = np.linspace(0.15, 0.95, 9)  # ground truth from frame 2 on
     gt = PoseSeries(t_gt, np.zeros((9, 3)), np.tile([0.0, 0.0, 0.0, 1.0], (9, 1)))
     for errors in (None, rotation_errors(t, R_w_c, gt)):
-        result = SimpleNamespace(t=t, R_w_c=R_w_c, errors=errors, records=records, edges=edges, metrics={})
+        result = SimpleNamespace(
+            t=t,
+            R_w_c=R_w_c,
+            errors=errors,
+            records=records,
+            edges=edges,
+            metrics={},
+            covariance=None,
+            chain_covariance=None,
+        )
         axes = plots.rotation_figure(result).axes
-        assert all(not ax.collections for ax in axes[:5])  # the panels themselves are not shaded
+        assert all(not ax.collections for ax in axes[:5])  # the panels themselves are not shaded (no covariance)
         strip = axes[5]  # the status row: the runs of weak frames (2-3, 7) and the lost frame (5), each on its line
         spans = {}
         for collection in strip.collections:
@@ -179,6 +189,58 @@ def test_the_rotation_plot_shows_where_tracking_was_weak_or_lost_and_where_loops
             np.testing.assert_allclose(curve.get_ydata(), np.degrees(0.01 * np.arange(8)), atol=1e-9)
 
 
+def test_the_rotation_plot_draws_a_band_of_one_sigma_about_each_estimated_angle():
+    """The backend's covariance, else the chain's, as a band of +-1 sigma of roll, pitch and yaw
+    about the estimate (at the identity: the sigmas about x, y, z), and the error it predicts
+    (sqrt(trace)) beside the error; a frame whose sigma is huge (a frame the graph ties
+    loosely) does not flatten the panel's curves."""
+    from types import SimpleNamespace
+
+    from eas_vo.evaluation.ape import rotation_errors
+    from eas_vo.types import FrameRecord, PoseSeries
+
+    n = 6
+    t = 0.1 * np.arange(n)
+    records = [FrameRecord(k, t[k], 0, 0, "ok", False) for k in range(n)]
+    R_w_c = np.tile(np.eye(3), (n, 1, 1))
+    sigmas_rad = np.outer(np.arange(n), [0.001, 0.002, 0.003])  # growing along the chain
+    chain = np.stack([np.diag(s**2) for s in sigmas_rad])
+    graph = chain / 4  # half the sigmas
+    gt = PoseSeries(t, np.zeros((n, 3)), np.tile([0.0, 0.0, 0.0, 1.0], (n, 1)))
+    for backend, expected in ((None, sigmas_rad), (graph, sigmas_rad / 2)):
+        for errors in (None, rotation_errors(t, R_w_c, gt)):
+            result = SimpleNamespace(
+                t=t,
+                R_w_c=R_w_c,
+                errors=errors,
+                records=records,
+                edges=[],
+                metrics={},
+                covariance=backend,
+                chain_covariance=chain,
+            )
+            axes = plots.rotation_figure(result).axes
+            for k in range(3):
+                (band,) = axes[k].collections
+                assert band.get_label() == "estimate ± 1 sigma"
+                upper = band.get_paths()[0].vertices[:, 1].max()
+                assert upper == pytest.approx(np.degrees(expected[-1, k]), rel=1e-6)
+            predicted = [line for line in axes[4].lines if line.get_label() == "predicted (RMS)"]
+            if errors is None:
+                assert predicted == []
+            else:
+                np.testing.assert_allclose(
+                    predicted[0].get_ydata(), np.degrees(np.linalg.norm(expected, axis=1)), rtol=1e-9
+                )
+    huge = chain.copy()
+    huge[3] = np.eye(3)  # 1 rad: 57 deg about a curve that spans 0.3 deg
+    result = SimpleNamespace(
+        t=t, R_w_c=R_w_c, errors=None, records=records, edges=[], metrics={}, covariance=huge, chain_covariance=chain
+    )
+    low, high = plots.rotation_figure(result).axes[0].get_ylim()
+    assert high - low < 20
+
+
 def test_the_rotation_plot_title_gives_the_ground_truth_time_offset_it_was_measured_with():
     from types import SimpleNamespace
 
@@ -195,7 +257,14 @@ def test_the_rotation_plot_title_gives_the_ground_truth_time_offset_it_was_measu
     ):
         metrics = {"ape_mean_rad": 0.0, "nc_mean": 5.0, "time_offset_s": 0.01, "time_offset_estimated": estimated}
         result = SimpleNamespace(
-            t=t, R_w_c=R_w_c, errors=rotation_errors(t, R_w_c, gt), records=records, edges=[], metrics=metrics
+            t=t,
+            R_w_c=R_w_c,
+            errors=rotation_errors(t, R_w_c, gt),
+            records=records,
+            edges=[],
+            metrics=metrics,
+            covariance=None,
+            chain_covariance=None,
         )
         title = plots.rotation_figure(result, "eas + klt + chain (paper): a sequence").get_suptitle()
         assert title == f"eas + klt + chain (paper): a sequence\naverage APE 0.0000 rad, average NC 5.0, {words}"
