@@ -70,7 +70,12 @@ class GtsamConfig:
     sigma_floor_rad: (`covariance`) the smallest noise along any axis [rad].
     gap_sigma_rad: a frame without a measurement is tied to the previous one by an
         identity edge this loose (the chain's "keep the previous rotation").
-    robust, robust_k: robust kernel (`none`, `huber`, `cauchy`) and its threshold in sigmas.
+    robust, robust_k: robust kernel (`none`, `huber`, `cauchy`) and its threshold in sigmas of
+        each edge's noise model. `cauchy` (2 sigmas): of the kernels, the one that on the choice
+        data (synthetic:default and the real excerpt's first 20 s, paper.toml with keyframe
+        edges, every frontend) made the graph worse than the chain on the fewest runs and
+        better by the largest geometric mean (benchmarks/graph_vs_chain.py;
+        docs/uncertainty.md reports it on other data).
     iterations: Levenberg-Marquardt iterations (batch) or extra iSAM2 updates at the end.
     gyro: fuse the dataset's gyro: `true` (a dataset without an IMU is refused), `false`,
         or `auto` (when the dataset has an IMU): readings preintegrated between frames
@@ -91,7 +96,7 @@ class GtsamConfig:
     reference_inliers: int = 100
     sigma_floor_rad: float = 1e-4
     gap_sigma_rad: float = 1.0
-    robust: str = "none"
+    robust: str = "cauchy"
     robust_k: float = 2.0
     iterations: int = 50
     gyro: bool | str = False

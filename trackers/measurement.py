@@ -104,7 +104,7 @@ class TwoViewConfig:
             before it, and the fallbacks run on it. The frame's reported status reads the
             covariance instead (`max_predicted_error_px`), except for `min_inliers`. The ratio
             and the residual were set, with the paper's configuration, to call at most 10 % of
-            the right measurements weak (docs/frame_status.md#before-the-quality-thresholds).
+            the right measurements weak (docs/frame_status.md, "Rates": before).
             The residual is in pixels, not per focal length: LK's localisation noise and the
             1 px inlier threshold it is cut at are properties of image patches in pixels.
             15 inliers is three times the five-point minimum (a count follows the scene's

@@ -150,7 +150,7 @@ WEAK_MEANS = "weak: less reliable than usual, not necessarily wrong; 19-66 % of 
 
 
 def _status_text(counts: dict, reasons: dict) -> str:
-    """'1 first, 54 ok, 172 weak: 160 low inlier ratio, 12 few inliers' (most frequent reason first)."""
+    """'1 first, 54 ok, 172 weak: 160 predicted error, 12 few inliers' (most frequent reason first)."""
     parts = []
     for status in ("first", "ok", "weak", "lost", "same_time"):
         if counts.get(status):

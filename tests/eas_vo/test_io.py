@@ -243,11 +243,11 @@ def run_into(folder: Path, dataset: Path, duration: str) -> subprocess.Popen:
     )
 
 
-def test_twenty_races_of_two_runs_into_one_folder_leave_one_whole_run(short_sequence, tmp_path):
-    """Two runs of different lengths into one folder at once, 20 times: each folder then holds
+def test_ten_races_of_two_runs_into_one_folder_leave_one_whole_run(short_sequence, tmp_path):
+    """Two runs of different lengths into one folder at once, 10 times: each folder then holds
     exactly one of them, every file agreeing (config, identity, metrics, frames.csv)."""
     env_ok = {0, 2}  # done, or refused because the other one held the folder
-    for round_ in range(20):
+    for round_ in range(10):
         folder = tmp_path / f"race{round_}"
         runs = [run_into(folder, short_sequence, d) for d in ("0.5", "1.0")]
         codes = [p.wait(timeout=120) for p in runs]
