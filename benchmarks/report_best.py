@@ -30,6 +30,7 @@ V01_BEST = [
     "tracker.threshold2=300",
     "tracker.keyframe_interval=3",
     "backend.robust=huber",
+    "backend.edge_noise=inliers",  # its edges' one sigma from their inlier count
 ]
 CONFIGS = {"paper.toml": ("paper", []), "v0.1's best.toml": (None, V01_BEST), "best.toml": ("best", [])}
 REAL_WINDOWS = {"real 20-30 s": (20.0, 10.0), "real 25-30 s": (25.0, 5.0), "real 0-30 s": (0.0, 30.0)}

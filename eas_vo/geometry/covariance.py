@@ -117,18 +117,7 @@ def essential_covariance(
     J = np.column_stack(
         [(residuals(_STEP * e) - residuals(-_STEP * e)) / (2 * _STEP) for e in np.eye(5)]
     )  # (N, 5); the rotation's part is -1 times that of R_prev_cur's perturbation: same covariance
-    scale = SCALE.get((method, "essential"), 1.0)
-    if method == "bootstrap":
-        return _bootstrap(J[:, None, :], residuals(np.zeros(5))[:, None], keep=3, scale=scale)
-    information = J.T @ J / max(sigma, 1e-12) ** 2 / scale
-    if len(J) < 5:
-        return _inverse(information[:3, :3], False)
-    rr, rt, tt = information[:3, :3], information[:3, 3:], information[3:, 3:]
-    try:
-        marginal = rr - rt @ np.linalg.solve(tt, rt.T)
-    except np.linalg.LinAlgError:
-        marginal = rr
-    return _inverse(marginal, True)
+    return _rotation_marginal(J[:, None, :], residuals(np.zeros(5))[:, None], sigma, method, "essential", 5)
 
 
 def homography_covariance(
@@ -160,11 +149,21 @@ def homography_covariance(
     J = np.stack(
         [(residuals(_STEP * e) - residuals(-_STEP * e)) / (2 * _STEP) for e in np.eye(8)], axis=-1
     )  # (N, 2, 8); the rotation's part is -1 times that of R_prev_cur's perturbation: same covariance
-    scale = SCALE.get((method, "rotation"), 1.0)
+    return _rotation_marginal(J, residuals(np.zeros(8)), sigma, method, "rotation", 4)
+
+
+def _rotation_marginal(
+    J: np.ndarray, residual: np.ndarray, sigma: float, method: str, family: str, minimum: int
+) -> np.ndarray:
+    """The covariance [rad^2] of the first three parameters (the rotation) of a model whose
+    residuals `residual` (N, m) have the Jacobian J (N, m, p) and per-axis noise `sigma`, the
+    other parameters marginalised out (a pseudo-inverse: directions the data do not determine
+    carry no information), times SCALE[(method, family)]; undetermined below `minimum` points."""
+    scale = SCALE.get((method, family), 1.0)
     if method == "bootstrap":
-        return _bootstrap(J, residuals(np.zeros(8)), keep=3, scale=scale)
+        return _bootstrap(J, residual, keep=3, scale=scale)
     information = np.einsum("nki,nkj->ij", J, J) / max(sigma, 1e-12) ** 2 / scale
-    if len(J) < 4:
+    if len(J) < minimum:
         return _inverse(information[:3, :3], False)
     rr, rt, tt = information[:3, :3], information[:3, 3:], information[3:, 3:]
     return _inverse(rr - rt @ np.linalg.pinv(tt, hermitian=True) @ rt.T, True)
