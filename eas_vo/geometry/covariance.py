@@ -33,6 +33,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from eas_vo.geometry.rotations import rotvec_to_matrix
+
 #: The covariance methods (see the module's docstring).
 METHODS = ("information", "bootstrap")
 #: Resamples of the inliers the bootstrap draws (a fixed seed: the same data give the same
@@ -109,15 +111,13 @@ def essential_covariance(
     a = np.column_stack([x_prev, np.ones(len(x_prev))])
     b = np.column_stack([x_cur, np.ones(len(x_cur))])
 
-    def residuals(p: np.ndarray) -> np.ndarray:
-        R = _exp(p[:3]) @ R_cur_prev
-        direction = t + basis @ p[3:]
-        return _signed_sampson(skew(direction / np.linalg.norm(direction)) @ R, a, b)
-
-    J = np.column_stack(
-        [(residuals(_STEP * e) - residuals(-_STEP * e)) / (2 * _STEP) for e in np.eye(5)]
-    )  # (N, 5); the rotation's part is -1 times that of R_prev_cur's perturbation: same covariance
-    return _rotation_marginal(J[:, None, :], residuals(np.zeros(5))[:, None], sigma, method, "essential", 5)
+    steps = np.vstack([_STEP * np.eye(5), -_STEP * np.eye(5), np.zeros((1, 5))])  # (11, 5), all at once
+    directions = t + steps[:, 3:] @ basis.T
+    directions /= np.linalg.norm(directions, axis=1, keepdims=True)
+    r = _signed_sampson(skew(directions) @ rotvec_to_matrix(steps[:, :3]) @ R_cur_prev, a, b)  # (11, N)
+    J = ((r[:5] - r[5:10]) / (2 * _STEP)).T
+    # (N, 5); the rotation's part is -1 times that of R_prev_cur's perturbation: same covariance
+    return _rotation_marginal(J[:, None, :], r[10][:, None], sigma, method, "essential", 5)
 
 
 def homography_covariance(
@@ -143,7 +143,7 @@ def homography_covariance(
 
     def residuals(p: np.ndarray) -> np.ndarray:
         n = n0 + basis @ p[6:]
-        y = a @ (_exp(p[:3]) @ R_cur_prev + np.outer(u0 + p[3:6], n / np.linalg.norm(n))).T
+        y = a @ (rotvec_to_matrix(p[:3]) @ R_cur_prev + np.outer(u0 + p[3:6], n / np.linalg.norm(n))).T
         return y[:, :2] / y[:, 2:] - x_cur  # (N, 2)
 
     J = np.stack(
@@ -170,19 +170,11 @@ def _rotation_marginal(
 
 
 def _signed_sampson(E: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """The Sampson distance of b^T E a = 0 with its sign (homogeneous points a, b (N, 3))."""
-    Ea, Etb = a @ E.T, b @ E
-    den = np.sqrt(Ea[:, 0] ** 2 + Ea[:, 1] ** 2 + Etb[:, 0] ** 2 + Etb[:, 1] ** 2)
-    return np.sum(b * Ea, axis=1) / np.maximum(den, 1e-300)
-
-
-def _exp(rotvec: np.ndarray) -> np.ndarray:
-    """Exp of a small rotation vector (Rodrigues)."""
-    angle = np.linalg.norm(rotvec)
-    if angle < 1e-12:
-        return np.eye(3) + skew(rotvec)
-    K = skew(rotvec / angle)
-    return np.eye(3) + np.sin(angle) * K + (1 - np.cos(angle)) * K @ K
+    """The Sampson distance of b^T E a = 0 with its sign (homogeneous points a, b (N, 3)), for
+    each essential matrix of E (..., 3, 3): (..., N)."""
+    Ea, Etb = a @ np.swapaxes(E, -1, -2), b @ E
+    den = np.sqrt(Ea[..., 0] ** 2 + Ea[..., 1] ** 2 + Etb[..., 0] ** 2 + Etb[..., 1] ** 2)
+    return np.sum(b * Ea, axis=-1) / np.maximum(den, 1e-300)
 
 
 def _bootstrap(J: np.ndarray, residual: np.ndarray, keep: int = 3, scale: float = 1.0) -> np.ndarray:
