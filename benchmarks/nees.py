@@ -12,12 +12,19 @@ Data as benchmarks/status_calibration.py: choice data `synthetic:default` and th
 first 20 s, report data simulator seeds 41-43 and the real excerpt's 20-30 s; klt with
 configs/paper.toml (five-point) and configs/best.toml (rotation-only, loops by homography), each
 with the backend `chain` (the edges do not depend on it) on every frontend, and the `match`
-tracker (its defaults) on one frontend per data; each with both covariance methods.
+tracker (its defaults) on one frontend per data; each with both covariance methods. The `cmax`
+tracker (events only, its defaults; its covariance is its own, from the contrast objective's
+curvature: method `curvature`, model `cmax`) on the simulated data and on the real excerpt's
+first 0.5 s, the only part with events (`real 0-0.5 s`, within the choice data's time).
 
-On the choice data, per method, one scale factor per model family (`essential`; `rotation`,
-which takes the homography's too) is fitted: the factor k (covariance times k) that brings the
-choice data's median NEES to chi-square(3)'s median (SCALE_RULE). The method is chosen by
-METHOD_RULE. The tables: per run, and per split and method with and without the factors.
+The factors and the method are chosen on the FITTED run set only (klt on the frontends of
+status_calibration, `match` on MATCH_FRONTEND): the other runs (klt on the simulator's
+`original`, `slice` and `sits`, cmax) are report-only, on the choice data too, so that adding
+them changes no factor. On the fitted choice runs, per method, one scale factor per model family
+(`essential`; `rotation`, which takes the homography's too) is fitted: the factor k (covariance
+times k) that brings the choice data's median NEES to chi-square(3)'s median (SCALE_RULE). The
+method is chosen by METHOD_RULE. The tables: per run; per split and method with and without the
+factors, over the fitted runs and over every run; the report-only runs per source.
 
     python benchmarks/nees.py [--rows FILE] [--from FILE ...] [--only LABEL ...] [--methods M ...]
 
@@ -38,7 +45,7 @@ from pathlib import Path
 
 import numpy as np
 from scipy.spatial.transform import Rotation
-from status_calibration import columns, ground_truth
+from status_calibration import REAL_FRONTENDS, REAL_OFFSET_S, SYNTHETIC_FRONTENDS, columns, ground_truth
 
 from eas_vo import concurrency, config, pipeline
 from eas_vo.geometry import covariance as cov_module
@@ -64,6 +71,14 @@ MATCH_FRONTEND = {
     "real": "histeq",
 }  # on the dim simulated eas images ORB matches one frame in 200
 FAMILY = {"essential": "essential", "rotation": "rotation", "homography": "rotation"}
+#: klt's report-only frontends on the simulated data (not in the fitted run set).
+EXTRA_SYNTHETIC_FRONTENDS = ("original", "slice", "sits")
+#: cmax reads no images (the `no_image` frontend whatever run.frontend says); its covariance is
+#: its own (each window's Hessian of the contrast), without a method to choose or a factor.
+CMAX_METHOD = "curvature"
+#: The real excerpt has events for its first 0.5 s only: cmax runs there (label, split, start
+#: [s], duration [s]); the time lies within the choice data's 0-20 s, though cmax fits nothing.
+REAL_EVENTS = ("real 0-0.5 s", "choice", 0.0, 0.5)
 #: The upper triangle of a 3x3 matrix, row by row, as the rows store it.
 UPPER = ("xx", "xy", "xz", "yy", "yz", "zz")
 _IU = np.triu_indices(3)
@@ -110,8 +125,20 @@ def tagging() -> dict:
     return models
 
 
+def fitted(data: str, tracker: str, frontend: str) -> bool:
+    """Whether a run belongs to the run set the factors and the method are chosen on (klt on
+    status_calibration's frontends, `match` on MATCH_FRONTEND); the others are report-only."""
+    real = data.startswith("real")
+    if tracker == "klt":
+        return frontend in (REAL_FRONTENDS if real else SYNTHETIC_FRONTENDS)
+    if tracker == "match":
+        return frontend == MATCH_FRONTEND["real" if real else "synthetic"]
+    return False
+
+
 def runs(real: str, seeds: list[int], only: list[str] | None) -> list[tuple]:
-    """(label, split, dataset, tracker, config file, frontend, run settings) for every run."""
+    """(label, split, dataset, tracker, config file, frontend, run settings) for every run: the
+    fitted ones first for each data, then the report-only ones."""
     found = []
     seeds = [n for n in seeds if not only or f"seed {n}" in only]  # simulated (once) only where needed
     for label, (split, dataset, frontends, extra) in columns(real, seeds).items():
@@ -121,7 +148,20 @@ def runs(real: str, seeds: list[int], only: list[str] | None) -> list[tuple]:
         for file, frontend in itertools.product(("paper", "best"), frontends):
             found.append((label, split, dataset, "klt", file, frontend, extra))
         found.append((label, split, dataset, "match", "paper", MATCH_FRONTEND[kind], extra))
+        if kind == "synthetic":
+            for file, frontend in itertools.product(("paper", "best"), EXTRA_SYNTHETIC_FRONTENDS):
+                found.append((label, split, dataset, "klt", file, frontend, extra))
+            found.append((label, split, dataset, "cmax", "paper", "no_image", extra))
+    label, split, start, duration = REAL_EVENTS
+    if real and Path(real).is_dir() and (not only or label in only):
+        extra = {"start_s": start, "duration_s": duration, "time_offset_s": REAL_OFFSET_S}
+        found.append((label, split, real, "cmax", "paper", "no_image", extra))
     return found
+
+
+def methods_of(tracker: str, methods: list[str]) -> list[str]:
+    """The covariance methods a tracker runs with: cmax has its own only."""
+    return [CMAX_METHOD] if tracker == "cmax" else methods
 
 
 def reference_sigma_rad(poses: PoseSeries, t0: float, t1: float) -> np.ndarray:
@@ -162,7 +202,7 @@ def reference_covariance(gt, sigma_rad: np.ndarray, i: int, j: int, R_gt_ij: np.
 
 def edge_rows(models: dict, label, split, dataset, tracker, file, frontend, extra, method) -> list[dict]:
     """One row per edge of the run with ground truth at both ends."""
-    assignments = [f"tracker.covariance={method}"]
+    assignments = [f"tracker.covariance={method}"] if method in cov_module.METHODS else []
     if tracker == "klt":
         assignments.append("tracker.klt.keyframe_interval=3")
     cfg = config.resolve(
@@ -179,7 +219,8 @@ def edge_rows(models: dict, label, split, dataset, tracker, file, frontend, extr
         R_gt = R_i.T @ R_j
         delta = matrix_to_rotvec(e.R_i_j.T @ R_gt)
         sigma = e.noise_covariance()
-        model = models.get(np.asarray(e.covariance).tobytes(), "other") if e.covariance is not None else "quality"
+        untagged = "cmax" if tracker == "cmax" else "other"  # cmax's edges are not two-view measurements
+        model = models.get(np.asarray(e.covariance).tobytes(), untagged) if e.covariance is not None else "quality"
         with np.errstate(all="ignore"):
             value = float(delta @ np.linalg.solve(sigma, delta)) if np.all(np.isfinite(sigma)) else math.nan
         rows.append(
@@ -256,6 +297,7 @@ class Edges:
         self.run = np.array(
             [f"{r['data']}|{r['tracker']}|{r['config']}|{r['frontend']}|{r['method']}" for r in rows], dtype=object
         )
+        self.fitted = np.array([fitted(r["data"], r["tracker"], r["frontend"]) for r in rows], bool)
 
     def nees(self, factors: dict | None = None, reference: bool = False, use: np.ndarray | None = None) -> np.ndarray:
         """The NEES with the covariance of each (method, family) times its factor (none: 1), and
@@ -269,10 +311,11 @@ class Edges:
 
 
 def fit(edges: Edges, reference: bool) -> dict:
-    """{(method, family): k} by SCALE_RULE on the choice data (bisection: each NEES falls as k grows)."""
+    """{(method, family): k} by SCALE_RULE on the fitted runs' choice data (bisection: each NEES
+    falls as k grows)."""
     factors = {}
-    for method, family in itertools.product(np.unique(edges.method), ("essential", "rotation")):
-        use = (edges.split == "choice") & (edges.method == method) & (edges.family == family)
+    for method, family in itertools.product(np.unique(edges.method[edges.fitted]), ("essential", "rotation")):
+        use = edges.fitted & (edges.split == "choice") & (edges.method == method) & (edges.family == family)
         if use.sum() < 10:
             continue
         lo, hi = -10.0, 20.0  # ln k
@@ -305,11 +348,11 @@ def run_scores(edges: Edges, nees: np.ndarray, use: np.ndarray) -> tuple[float, 
 
 
 def choose_method(edges: Edges, factors: dict, reference: bool) -> str:
-    """METHOD_RULE."""
+    """METHOD_RULE, on the fitted runs."""
     nees = edges.nees(factors, reference)
     scores = {}
-    for method in np.unique(edges.method):
-        use = (edges.split == "choice") & (edges.method == method)
+    for method in np.unique(edges.method[edges.fitted]):
+        use = edges.fitted & (edges.split == "choice") & (edges.method == method)
         log, tail, _ = run_scores(edges, nees, use)
         scores[method] = (log, tail)
         print(f"  {method}: choice runs' mean |ln(mean NEES / 3)| {log:.3f}, mean tail {tail:.1%}")
@@ -326,38 +369,74 @@ def report(edges: Edges, exact: dict, adopted: dict) -> None:
         "no factor": edges.nees(),
         "factor (exact reference)": edges.nees(exact),
         "factor, reference noise added": edges.nees(adopted, reference=True),
+        "the code's factors (SCALE), reference noise added": edges.nees(
+            dict(getattr(cov_module, "SCALE", {})), reference=True
+        ),
     }
     print("\n## Per run (mean | median | above 11.345 | edges)\n")
-    print(f"| data | tracker | config | frontend | method | {' | '.join(variants)} |")
-    print("|---" * (5 + len(variants)) + "|")
+    print(f"| data | tracker | config | frontend | method | fitted | {' | '.join(variants)} |")
+    print("|---" * (6 + len(variants)) + "|")
     for u in dict.fromkeys(edges.run):
         m = edges.run == u
-        print(f"| {' | '.join(u.split('|'))} | {' | '.join(summary(v[m]) for v in variants.values())} |")
-    print("\n## By split (edges pooled; runs: mean |ln(mean/3)|, mean tail, share of runs on target)\n")
+        fit = "yes" if edges.fitted[m][0] else "report only"
+        print(f"| {' | '.join(u.split('|'))} | {fit} | {' | '.join(summary(v[m]) for v in variants.values())} |")
     print(
-        "| split | data | method | NEES | mean | median | above 11.345 | edges | runs: log ratio | runs: tail | runs on target |"
+        "\n## By split (edges pooled; runs: mean |ln(mean/3)|, mean tail, share of runs on target); runs: `fitted`"
+        " the run set the factors were chosen on, `every` every tracker and frontend (cmax, whose covariance has"
+        " no method, with each method)\n"
     )
-    print("|---|---|---|---|---|---|---|---|---|---|---|")
+    print(
+        "| runs | split | data | method | NEES | mean | median | above 11.345 | edges | runs: log ratio | runs: tail"
+        " | runs on target |"
+    )
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|")
     variants["no factor, reference noise added"] = edges.nees(reference=True)
+    applied = variants["the code's factors (SCALE), reference noise added"]
     real = np.char.startswith(edges.data.astype(str), "real")
-    for split, kind, method in itertools.product(
-        ("choice", "held-out"), ("all", "synthetic", "real"), np.unique(edges.method)
+    own = ~np.isin(edges.method, cov_module.METHODS)  # a tracker's own covariance (cmax), no method to choose
+    for runs_, split, kind, method in itertools.product(
+        ("fitted", "every"), ("choice", "held-out"), ("all", "synthetic", "real"), np.unique(edges.method)
     ):
-        use = (
-            (edges.split == split) & (edges.method == method) & ((real == (kind == "real")) if kind != "all" else True)
-        )
+        if runs_ == "fitted":
+            use = edges.fitted & (edges.method == method)
+        elif method in cov_module.METHODS:
+            use = (edges.method == method) | own
+        else:
+            continue
+        use = use & (edges.split == split) & ((real == (kind == "real")) if kind != "all" else True)
         if not use.any():
             continue
         for name, values in variants.items():
             log, tail, good = run_scores(edges, values, use)
             print(
-                f"| {split} | {kind} | {method} | {name} | {summary(values[use])} | {log:.2f} | {tail:.1%} | {good:.0%} |"
+                f"| {runs_} | {split} | {kind} | {method} | {name} | {summary(values[use])} | {log:.2f} | {tail:.1%}"
+                f" | {good:.0%} |"
             )
     scaled = variants["factor, reference noise added"]
-    print("\n## By kind and model, factor and reference noise (report data)\n")
+    print(
+        "\n## Report-only runs per source (seeds pooled), reference noise added, with the factors fitted here and"
+        " with the code's (SCALE); cmax: no factor\n"
+    )
+    print(
+        "| split | data | tracker | config | frontend | method | fitted factors: mean | median | above 11.345 | edges"
+        " | the code's factors: mean | median | above 11.345 | edges |"
+    )
+    print("|---" * 14 + "|")
+    extra = ~edges.fitted
+    source = np.array(
+        [
+            f"{s}|{'real' if r else 'synthetic'}|{t}|{c}|{f}|{m}"
+            for s, r, t, c, f, m in zip(edges.split, real, edges.tracker, edges.config, edges.frontend, edges.method)
+        ],
+        dtype=object,
+    )
+    for u in sorted(set(source[extra]), key=lambda u: (u.split("|")[0] != "held-out", u)):
+        m = extra & (source == u)
+        print(f"| {' | '.join(u.split('|'))} | {summary(scaled[m])} | {summary(applied[m])} |")
+    print("\n## By kind and model, factor and reference noise (report data, fitted runs; cmax: every run)\n")
     print("| method | tracker | kind | model | mean | median | above 11.345 | edges |")
     print("|---|---|---|---|---|---|---|---|")
-    held = edges.split == "held-out"
+    held = (edges.split == "held-out") & (edges.fitted | own)
     for method, tracker, kind, model in itertools.product(
         np.unique(edges.method), np.unique(edges.tracker), np.unique(edges.kind), np.unique(edges.model)
     ):
@@ -368,9 +447,12 @@ def report(edges: Edges, exact: dict, adopted: dict) -> None:
 
 
 def tails(edges: Edges, scaled: np.ndarray, factors: dict) -> None:
-    """What the edges above the 99 % bound are made of (report data, with the factors)."""
-    held = edges.split == "held-out"
-    print("\n## The tail (report data, with the factors): share above 11.345 per bin, and its share of the tail\n")
+    """What the edges above the 99 % bound are made of (report data, fitted runs, with the factors)."""
+    held = (edges.split == "held-out") & edges.fitted
+    print(
+        "\n## The tail (report data, fitted runs, with the factors): share above 11.345 per bin, and its share of"
+        " the tail\n"
+    )
     print("| method | quantity | bin | above 11.345 in the bin | share of the tail | edges |")
     print("|---|---|---|---|---|---|")
     bins = {
@@ -383,7 +465,7 @@ def tails(edges: Edges, scaled: np.ndarray, factors: dict) -> None:
         ),
         "inliers": (edges.inliers, (0, 15, 30, 60, 120, 1e9)),
     }
-    for method in np.unique(edges.method):
+    for method in np.unique(edges.method[held]):
         base = held & (edges.method == method)
         tail = base & (scaled > CHI2_P99)
         for name, (values, cuts) in bins.items():
@@ -423,20 +505,25 @@ def main() -> None:
         rows = [row for source in args.sources for row in read_rows(source)]
     else:
         models, rows = tagging(), []
-        for spec, method in itertools.product(runs(args.real, args.seeds, args.only), args.methods):
-            rows += edge_rows(models, *spec, method)
+        for spec in runs(args.real, args.seeds, args.only):
             label, split, _, tracker, file, frontend, _ = spec
-            print(
-                f"{label} ({split}) {tracker} {file} {frontend} {method}: {len(rows)} edges",
-                file=sys.stderr,
-                flush=True,
-            )
-            if args.rows:
-                with open(args.rows, "w", newline="") as f:
-                    writer = csv.DictWriter(f, FIELDS)
-                    writer.writeheader()
-                    writer.writerows(rows)
+            for method in methods_of(tracker, args.methods):
+                rows += edge_rows(models, *spec, method)
+                print(
+                    f"{label} ({split}) {tracker} {file} {frontend} {method}: {len(rows)} edges",
+                    file=sys.stderr,
+                    flush=True,
+                )
+                if args.rows:
+                    with open(args.rows, "w", newline="") as f:
+                        writer = csv.DictWriter(f, FIELDS)
+                        writer.writeheader()
+                        writer.writerows(rows)
     edges = Edges(rows)
+    if not edges.fitted.any():
+        print("no fitted run: no factor fitted, no method chosen")
+        report(edges, {}, {})
+        return
     exact, adopted = fit(edges, reference=False), fit(edges, reference=True)
     print(f"factor rule: {SCALE_RULE}; kept outside [{1 / KEEP_WITHIN:.2f}, {KEEP_WITHIN}]")
     for key in sorted(adopted):
