@@ -207,18 +207,27 @@ def publish_sequences(site: Path, sequences: dict[str, Path], registry: Path) ->
     """Zip each ECD folder as `site/NAME.zip` (files at the root, as the dataset publishes
     them) and write `registry` (`name md5` lines); returns {name: md5}."""
     import hashlib
+    import io
     import zipfile
 
     md5s = {}
     for name, folder in sequences.items():
-        archive = site / f"{name}.zip"
-        with zipfile.ZipFile(archive, "w", zipfile.ZIP_DEFLATED) as z:
-            for path in sorted(folder.rglob("*")):
-                if path.is_file():
+        files = sorted(p for p in folder.rglob("*") if p.is_file())
+        key = (str(folder), tuple((str(p), p.stat().st_size, p.stat().st_mtime_ns) for p in files))
+        if key not in _ZIPPED:  # compressing takes seconds; a folder as it was zipped before is not again
+            buffer = io.BytesIO()
+            with zipfile.ZipFile(buffer, "w", zipfile.ZIP_DEFLATED) as z:
+                for path in files:
                     z.write(path, path.relative_to(folder).as_posix())
-        md5s[name] = hashlib.md5(archive.read_bytes()).hexdigest()
+            _ZIPPED[key] = buffer.getvalue()
+        (site / f"{name}.zip").write_bytes(_ZIPPED[key])
+        md5s[name] = hashlib.md5(_ZIPPED[key]).hexdigest()
     registry.write_text("".join(f"{n} {m}\n" for n, m in md5s.items()))
     return md5s
+
+
+#: publish_sequences' archives: {(folder, its files' names, sizes and times): the zip's bytes}.
+_ZIPPED: dict[tuple, bytes] = {}
 
 
 def mark_as_eas_vo_output(folder: Path) -> None:
