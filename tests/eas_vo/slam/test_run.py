@@ -287,41 +287,20 @@ def _burners(n):
     return [subprocess.Popen([sys.executable, "-c", "while True: pass"]) for _ in range(n)]
 
 
-def test_a_run_beside_busy_processes_tracks_as_a_quiet_one(walk_vocabulary, tmp_path):
+def test_a_run_beside_busy_processes_tracks_as_a_quiet_one(walk, tmp_path):
     """ORB-SLAM3 gets each frame once its mapping threads are idle, so CPU-burning processes
     beside it (two, as many as this machine's cores, on top of whatever else runs) change no
-    frame's tracking state: the issue's EAS images of the walk, quiet and busy, give the same
-    states frame by frame, an `ok` status by the stated rule, and trajectories `evaluate` takes.
-    ORB-SLAM3 is not bit-deterministic even so (paced runs' poses differ by up to centimetres,
-    docs/slam.md), so the runs are compared state by state, not pose by pose."""
-
-    def run(name):
-        out = tmp_path / name
-        assert (
-            main(
-                [
-                    "slam",
-                    "--dataset",
-                    WALK,
-                    "--frontend",
-                    "eas",
-                    "--vocabulary",
-                    str(walk_vocabulary),
-                    "--runs",
-                    "1",
-                    "--quiet",
-                    "--out",
-                    str(out),
-                ]
-            )
-            == 0
-        )
-        return out / "run_1"
-
-    quiet = run("quiet")
+    frame's tracking state: the walk's frames, quiet (the module's first run) and busy, give the
+    same states frame by frame, an `ok` status by the stated rule, and trajectories `evaluate`
+    takes. ORB-SLAM3 is not bit-deterministic even so (paced runs' poses differ by up to
+    centimetres, docs/slam.md), so the runs are compared state by state, not pose by pose."""
+    vocabulary, out = walk
+    quiet = out / "run_1"
     burners = _burners(2)
     try:
-        busy = run("busy")
+        argv = ["slam", "--dataset", WALK, "--frontend", "original", "--vocabulary", str(vocabulary)]
+        assert main([*argv, "--runs", "1", "--quiet", "--out", str(tmp_path / "busy")]) == 0
+        busy = tmp_path / "busy" / "run_1"
     finally:
         for p in burners:
             p.kill()
