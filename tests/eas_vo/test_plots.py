@@ -126,9 +126,23 @@ def test_ape_over_time_has_a_panel_per_method_and_draws_an_equal_one_once():
     assert [[line.get_label() for line in ax.lines] for ax in drawn] == [["original", "eas"]] * 2
 
 
-def test_the_rotation_plot_shows_where_tracking_was_weak_or_lost_and_where_loops_closed():
+def run_result(t, R_w_c, records, *, errors=None, edges=(), metrics=None, covariance=None, chain_covariance=None):
+    """What plots.rotation_figure reads of a run: a RunResult's fields, given or empty."""
     from types import SimpleNamespace
 
+    return SimpleNamespace(
+        t=t,
+        R_w_c=R_w_c,
+        errors=errors,
+        records=records,
+        edges=list(edges),
+        metrics=metrics or {},
+        covariance=covariance,
+        chain_covariance=chain_covariance,
+    )
+
+
+def test_the_rotation_plot_shows_where_tracking_was_weak_or_lost_and_where_loops_closed():
     from eas_vo.evaluation.ape import rotation_errors
     from eas_vo.geometry.rotations import rotvec_to_matrix
     from eas_vo.types import FrameRecord, PoseSeries, RelativeRotation
@@ -147,16 +161,7 @@ def test_the_rotation_plot_shows_where_tracking_was_weak_or_lost_and_where_loops
     t_gt = np.linspace(0.15, 0.95, 9)  # ground truth from frame 2 on
     gt = PoseSeries(t_gt, np.zeros((9, 3)), np.tile([0.0, 0.0, 0.0, 1.0], (9, 1)))
     for errors in (None, rotation_errors(t, R_w_c, gt)):
-        result = SimpleNamespace(
-            t=t,
-            R_w_c=R_w_c,
-            errors=errors,
-            records=records,
-            edges=edges,
-            metrics={},
-            covariance=None,
-            chain_covariance=None,
-        )
+        result = run_result(t, R_w_c, records, errors=errors, edges=edges)
         axes = plots.rotation_figure(result).axes
         assert all(not ax.collections for ax in axes[:5])  # the panels themselves are not shaded (no covariance)
         strip = axes[5]  # the status row: the runs of weak frames (2-3, 7) and the lost frame (5), each on its line
@@ -194,8 +199,6 @@ def test_the_rotation_plot_draws_a_band_of_one_sigma_about_each_estimated_angle(
     about the estimate (at the identity: the sigmas about x, y, z), and the error it predicts
     (sqrt(trace)) beside the error; a frame whose sigma is huge (a frame the graph ties
     loosely) does not flatten the panel's curves."""
-    from types import SimpleNamespace
-
     from eas_vo.evaluation.ape import rotation_errors
     from eas_vo.types import FrameRecord, PoseSeries
 
@@ -209,16 +212,7 @@ def test_the_rotation_plot_draws_a_band_of_one_sigma_about_each_estimated_angle(
     gt = PoseSeries(t, np.zeros((n, 3)), np.tile([0.0, 0.0, 0.0, 1.0], (n, 1)))
     for backend, expected in ((None, sigmas_rad), (graph, sigmas_rad / 2)):
         for errors in (None, rotation_errors(t, R_w_c, gt)):
-            result = SimpleNamespace(
-                t=t,
-                R_w_c=R_w_c,
-                errors=errors,
-                records=records,
-                edges=[],
-                metrics={},
-                covariance=backend,
-                chain_covariance=chain,
-            )
+            result = run_result(t, R_w_c, records, errors=errors, covariance=backend, chain_covariance=chain)
             axes = plots.rotation_figure(result).axes
             for k in range(3):
                 (band,) = axes[k].collections
@@ -234,16 +228,12 @@ def test_the_rotation_plot_draws_a_band_of_one_sigma_about_each_estimated_angle(
                 )
     huge = chain.copy()
     huge[3] = np.eye(3)  # 1 rad: 57 deg about a curve that spans 0.3 deg
-    result = SimpleNamespace(
-        t=t, R_w_c=R_w_c, errors=None, records=records, edges=[], metrics={}, covariance=huge, chain_covariance=chain
-    )
+    result = run_result(t, R_w_c, records, covariance=huge, chain_covariance=chain)
     low, high = plots.rotation_figure(result).axes[0].get_ylim()
     assert high - low < 20
 
 
 def test_the_rotation_plot_title_gives_the_ground_truth_time_offset_it_was_measured_with():
-    from types import SimpleNamespace
-
     from eas_vo.evaluation.ape import rotation_errors
     from eas_vo.types import FrameRecord, PoseSeries
 
@@ -256,16 +246,7 @@ def test_the_rotation_plot_title_gives_the_ground_truth_time_offset_it_was_measu
         (True, "ground truth time offset +10.0 ms (estimated)"),
     ):
         metrics = {"ape_mean_rad": 0.0, "nc_mean": 5.0, "time_offset_s": 0.01, "time_offset_estimated": estimated}
-        result = SimpleNamespace(
-            t=t,
-            R_w_c=R_w_c,
-            errors=rotation_errors(t, R_w_c, gt),
-            records=records,
-            edges=[],
-            metrics=metrics,
-            covariance=None,
-            chain_covariance=None,
-        )
+        result = run_result(t, R_w_c, records, errors=rotation_errors(t, R_w_c, gt), metrics=metrics)
         title = plots.rotation_figure(result, "eas + klt + chain (paper): a sequence").get_suptitle()
         assert title == f"eas + klt + chain (paper): a sequence\naverage APE 0.0000 rad, average NC 5.0, {words}"
 
