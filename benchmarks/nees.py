@@ -292,7 +292,8 @@ class Edges:
         self.cov = symmetric(np.array([[r[f"cov_{a}"] for a in UPPER] for r in rows]).reshape(-1, 6))
         self.cov /= self.scale[:, None, None]
         self.ref = symmetric(np.array([[r[f"ref_{a}"] for a in UPPER] for r in rows]).reshape(-1, 6))
-        self.error_px = np.radians(self.error_deg) * np.array([r["focal_px"] for r in rows])
+        self.focal_px = np.array([r["focal_px"] for r in rows], float)
+        self.error_px = np.radians(self.error_deg) * self.focal_px
         self.sigma_px /= np.sqrt(self.scale)
         self.run = np.array(
             [f"{r['data']}|{r['tracker']}|{r['config']}|{r['frontend']}|{r['method']}" for r in rows], dtype=object
@@ -308,6 +309,43 @@ class Edges:
         total = k[:, None, None] * self.cov[use] + (self.ref[use] if reference else 0.0)
         d = self.delta[use]
         return np.einsum("ni,ni->n", d, np.linalg.solve(total, d[..., None])[..., 0])
+
+
+def misses(edges: Edges) -> None:
+    """The NEES with an error the inliers' spread cannot show added to the code's covariance
+    (its factors, `information`, the fitted runs, the reference's noise): a floor in pan and
+    tilt [px of focal length], or a sigma on every axis proportional to the step's turn (the
+    ground truth's, standing in for the measured one); the covariance times one multiplier `a`
+    refitted so that the choice data's median NEES stays CHI2_MEDIAN (docs/uncertainty.md,
+    "What the covariance misses")."""
+    use = edges.fitted & (edges.method == "information") & (edges.family != "other")
+    code = edges.cov[use] * edges.scale[use][:, None, None]
+    d, choice = edges.delta[use], edges.split[use] == "choice"
+    real = np.char.startswith(edges.data[use].astype(str), "real")
+    pan_tilt = np.diag([1.0, 1.0, 0.0]) / edges.focal_px[use][:, None, None] ** 2
+    turn = np.radians(edges.gt_angle_deg[use])[:, None, None] ** 2 * np.eye(3)
+    terms = {"nothing": 0.0}
+    terms.update({f"a floor in pan and tilt, {f:g} px": f**2 * pan_tilt for f in (0.5, 1.0)})
+    terms.update({f"{100 * k:g} % of the turn, every axis": k**2 * turn for k in (0.01, 0.02, 0.03, 0.05)})
+    print("\n## What the covariance misses\n")
+    print("| added to the covariance | a | choice | report | report, simulated | report, real |")
+    print("|---|---|---|---|---|---|")
+    for name, extra in terms.items():
+
+        def nees(a: float) -> np.ndarray:
+            total = a * code + extra + edges.ref[use]
+            return np.einsum("ni,ni->n", d, np.linalg.solve(total, d[..., None])[..., 0])
+
+        lo, hi = -10.0, 10.0  # ln a
+        for _ in range(60):
+            mid = 0.5 * (lo + hi)
+            lo, hi = (mid, hi) if np.median(nees(math.exp(mid))[choice]) > CHI2_MEDIAN else (lo, mid)
+        value = nees(math.exp(lo))
+        cells = [
+            f"{np.mean(value[m]):.2f} / {np.median(value[m]):.2f} / {np.mean(value[m] > CHI2_P99):.1%}"
+            for m in (choice, ~choice, ~choice & ~real, ~choice & real)
+        ]
+        print(f"| {name} | {math.exp(lo):.2f} | " + " | ".join(cells) + " |")
 
 
 def fit(edges: Edges, reference: bool) -> dict:
@@ -532,6 +570,7 @@ def main() -> None:
     for name, factors, reference in (("reference noise added", adopted, True), ("exact reference", exact, False)):
         print(f"chosen ({name}): {choose_method(edges, factors, reference)}")
     report(edges, exact, adopted)
+    misses(edges)
 
 
 if __name__ == "__main__":
