@@ -54,7 +54,7 @@ def chain_covariance(n_frames: int, edges: Sequence[RelativeRotation]) -> np.nda
     for k in range(1, n_frames):
         edge = steps.get(k)
         R_step = np.eye(3) if edge is None else np.asarray(edge.R_i_j, float)
-        step_cov = None if edge is None else step_covariance(edge)
+        step_cov = None if edge is None else _step_covariance(edge)
         if step_cov is None:
             step_cov = unmeasured[k] * np.eye(3)
         current = R_step.T @ current @ R_step + step_cov
@@ -63,7 +63,7 @@ def chain_covariance(n_frames: int, edges: Sequence[RelativeRotation]) -> np.nda
     return out
 
 
-def step_covariance(edge: RelativeRotation) -> np.ndarray | None:
+def _step_covariance(edge: RelativeRotation) -> np.ndarray | None:
     """The edge's covariance [rad^2] (3, 3) (RelativeRotation.noise_covariance), or None where
     its estimator gives none that is finite (no inliers)."""
     if edge.covariance is None and not np.isfinite(edge.sigma_rad):

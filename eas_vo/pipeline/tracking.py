@@ -12,7 +12,7 @@ import numpy as np
 from eas_vo import concurrency
 from eas_vo.config import ResolvedConfig
 from eas_vo.errors import EasVoError
-from eas_vo.geometry.uncertainty import axis_sigmas, consecutive_steps, largest_sigma, step_covariance
+from eas_vo.geometry.uncertainty import consecutive_steps
 from eas_vo.io.tables import clock_time
 from eas_vo.orb import OrbStats
 from eas_vo.pipeline.parts import Pipeline, check_frame
@@ -175,11 +175,8 @@ class FrameLog:
 def _sigmas_deg(step: RelativeRotation) -> list[str]:
     """frames.csv's sigma columns of a measured step [deg]: along its worst axis, about x, y, z
     ("inf" where its estimator gives no finite covariance: no inliers)."""
-    covariance = step_covariance(step)
-    if covariance is None:
-        return ["inf"] * 4
-    sigmas = np.degrees([largest_sigma(covariance), *axis_sigmas(covariance)])
-    return [f"{v:.6f}" for v in sigmas]
+    sigmas = np.degrees([step.sigma_rad, *step.sigmas_rad()])
+    return [f"{v:.6f}" for v in sigmas] if np.all(np.isfinite(sigmas)) else ["inf"] * 4
 
 
 def _progress(total: int, enabled: bool, rc):
