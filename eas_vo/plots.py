@@ -375,6 +375,26 @@ def ape_time_figure(series: dict, equal: dict | None = None, colours: dict | Non
     return fig
 
 
+def plot_protocol_errors(path: str | Path, series: dict, title: str = "") -> None:
+    """The rotation protocol's errors over time, one line per method: {label: (t [s], absolute
+    error [deg], relative span starts [s], relative error [deg/s], absolute RMS [deg])}; the
+    absolute error on a log axis (a gyro's drift and a tracker's degrees on one figure)."""
+    fig = _figure(figsize=(11, 7.0), layout="constrained")
+    top, bottom = fig.subplots(2, 1, sharex=True)
+    for label, (t, error, relative_t, relative, rms) in series.items():
+        (line,) = top.plot(t, np.maximum(error, 1e-2), lw=1.0, label=f"{label} (RMS {rms:.2f} deg)")
+        bottom.plot(relative_t, relative, lw=1.0, color=line.get_color())
+    top.set_yscale("log")
+    top.set_ylabel("absolute error [deg]")
+    bottom.set_ylabel("error over the next 1 s [deg/s]")
+    bottom.set_xlabel("time from the sequence's start [s]")
+    for ax in (top, bottom):
+        ax.grid(alpha=0.3, which="both")
+    fig.legend(*top.get_legend_handles_labels(), loc="outside lower center", fontsize="small", ncols=3)
+    fig.suptitle(title, fontsize="medium")
+    fig.savefig(path, dpi=110, format="png")
+
+
 def plot_sweep(path: str | Path, key: str, curves: dict, colours: dict | None = None) -> None:
     """Average APE and NC against a swept value: {(dataset, method, frontend): (n, 3) array of
     (value, NC, APE)}, a line per frontend coloured by it (frontend_colours), styled per method

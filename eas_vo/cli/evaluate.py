@@ -12,14 +12,25 @@ def add_parser(sub) -> None:
     parser = sub.add_parser(
         "evaluate",
         help="score an external TUM trajectory (e.g. ORB-SLAM2's KeyFrameTrajectory.txt) against ground truth",
-        description="Associate the estimate's poses with the dataset's ground truth (nearest time within "
-        "--max-diff), align them (sim3: Umeyama with scale, for monocular SLAM; se3; origin) and report the "
-        "translation APE [m] and rotation APE [rad], as evo_ape tum GT EST -as / -a / --align_origin does. "
-        "With --out: metrics.json, table2_row.md, groundtruth.tum, estimate_aligned.tum.",
+        description="--protocol evo (default): associate the estimate's poses with the dataset's ground truth "
+        "(nearest time within --max-diff), align them (sim3: Umeyama with scale, for monocular SLAM; se3; origin) "
+        "and report the translation APE [m] and rotation APE [rad], as evo_ape tum GT EST -as / -a / "
+        "--align_origin does; with --out: metrics.json, table2_row.md, groundtruth.tum, estimate_aligned.tum. "
+        "--protocol cmax-slam: the event-rotation benchmark's scoring (the first 30 s, ground truth smoothed over "
+        "50 ms, aligned at 1 s; absolute RMS [deg] and 1 s relative RMS [deg/s]: docs/rotation_benchmark.md), "
+        "as `eas-vo reproduce rotation` scores its own; with --out: metrics.json, rotation_errors.png.",
     )
     add_dataset(parser, help="the dataset the estimate was made on", required=True)
     parser.add_argument("--estimate", required=True, metavar="FILE", help="TUM trajectory: t tx ty tz qx qy qz qw")
-    parser.add_argument("--align", choices=("sim3", "se3", "origin"), default="sim3", help="default sim3 (evo_ape -as)")
+    parser.add_argument(
+        "--protocol",
+        choices=("evo", "cmax-slam"),
+        default="evo",
+        help="how to score (default evo: evo_ape's APE; cmax-slam: the rotation benchmark's)",
+    )
+    parser.add_argument(
+        "--align", choices=("sim3", "se3", "origin"), default="sim3", help="evo: default sim3 (evo_ape -as)"
+    )
     parser.add_argument(
         "--max-diff",
         type=seconds(allow_zero=True),
@@ -34,13 +45,22 @@ def add_parser(sub) -> None:
 
 def run(args) -> int:
     """`eas-vo evaluate` on the parsed `args`; returns the exit status."""
-    from eas_vo.experiments.external import evaluate_estimate
+    from eas_vo.experiments.external import evaluate_estimate, evaluate_protocol
     from eas_vo.io.outputs import check_output_folder
     from eas_vo.io.text import figure_text
 
     if args.out:
         out = check_output_folder(args.out, replace=args.overwrite)
         refuse_inputs_inside(out, dataset_inputs(args.dataset), ("the --estimate", args.estimate))
+    if args.protocol == "cmax-slam":
+        m = evaluate_protocol(args.dataset, args.estimate, args.out, replace=args.overwrite)
+        print(
+            f"{args.estimate} vs {m['dataset']} (cmax-slam protocol, {m['poses_scored']} of {m['estimate_poses']} "
+            f"poses scored): absolute RMS {figure_text(m['absolute_rms_deg'], 4)} deg, relative over 1 s RMS "
+            f"{figure_text(m['relative_rms_deg_s'], 4)} deg/s ({m['spans_scored']} spans)"
+            + (f" -> {args.out}" if args.out else "")
+        )
+        return 0
     m = evaluate_estimate(
         args.dataset, args.estimate, args.align, args.max_diff, args.out, args.label, replace=args.overwrite
     )

@@ -1,4 +1,4 @@
-"""`eas-vo reproduce`: the paper's Table 1 or Table 2 on its own data."""
+"""`eas-vo reproduce`: the paper's Table 1 or Table 2 on its own data, or the event-rotation benchmark."""
 
 from __future__ import annotations
 
@@ -20,26 +20,40 @@ def add_parser(sub) -> None:
     """`eas-vo reproduce`: its arguments and help, added to `sub`, the command line's subparsers."""
     parser = sub.add_parser(
         "reproduce",
-        help="the paper's Table 1 or Table 2 on its own data (hdr_boxes, hdr_poster), beside its figures",
+        help="the paper's Table 1 or Table 2 on its own data (hdr_boxes, hdr_poster), beside its figures; "
+        "or the event-rotation benchmark (ECD's four rotation sequences, CMax-SLAM's protocol)",
         description="table1: fetch hdr_boxes and hdr_poster, run the six sources with --config paper on the first "
         "25 s (time offset estimated) with both backends, and write table1.md (ours beside the paper's, ratios, "
         "orderings), compare's tables and figures, and Fig. 3-style Euler plots. table2: ORB features and matches "
         "of original and EAS images (or --frontends) and the keyframe APE after Sim(3) alignment of monocular SLAM "
         "on them: with the slam extra, --runs runs of ORB-SLAM3 per cell (eas-vo slam; ORBvoc.txt fetched unless "
         "--vocabulary), and for ORB-SLAM2 keyframe trajectories given with --estimate (run it on `eas-vo export` "
-        "output), those; table2.md beside the paper's and Fig. 4-style keyframe plots. Resumable: the same command "
-        "runs only what is missing.",
+        "output), those; table2.md beside the paper's and Fig. 4-style keyframe plots. rotation: fetch "
+        "shapes_rotation, poster_rotation, boxes_rotation and dynamic_rotation, run paper.toml, best.toml without "
+        "and with the gyro, cmax + chain, cmax + gtsam with the gyro and the gyro alone on the first 30 s, score "
+        "them under --protocol and write rotation.md beside CMax-SLAM's published Table III, with a figure per "
+        "sequence. Resumable: the same command runs only what is missing.",
     )
-    parser.add_argument("table", choices=("table1", "table2"))
+    parser.add_argument("table", choices=("table1", "table2", "rotation"))
     parser.add_argument("--out", metavar="DIR", help="output folder (default: reproduce/TABLE)")
     parser.add_argument(
         "--duration",
         type=seconds(allow_zero=False),
         metavar="S",
         help="seconds of each sequence (default: the paper's, table1 the first 25 s, table2 the whole "
-        "sequences: §4.3 names no window and Fig. 4 shows the whole trajectories)",
+        "sequences: §4.3 names no window and Fig. 4 shows the whole trajectories; rotation the protocol's 30 s)",
     )
-    parser.add_argument("--config", default="paper", metavar="FILE", help="configuration (default paper, the paper's)")
+    parser.add_argument(
+        "--config",
+        metavar="FILE",
+        help="table1 and table2: configuration (default paper, the paper's); rotation's methods carry their own",
+    )
+    parser.add_argument(
+        "--protocol",
+        choices=("cmax-slam",),
+        default="cmax-slam",
+        help="rotation: how its trajectories are scored (default cmax-slam: docs/rotation_benchmark.md)",
+    )
     parser.add_argument(
         "--backends",
         default="chain,gtsam",
@@ -80,7 +94,7 @@ def add_parser(sub) -> None:
 def run(args) -> int:
     """`eas-vo reproduce` on the parsed `args`; returns the exit status."""
     from eas_vo.datasets.ecd_catalogue import data_dir
-    from eas_vo.experiments import paper, table1, table2
+    from eas_vo.experiments import paper, rotation, table1, table2
     from eas_vo.io.outputs import check_grid_folder, check_writable_folder
 
     estimates = {}
@@ -99,11 +113,17 @@ def run(args) -> int:
         raise EasVoError("--estimate belongs to table2 (ORB-SLAM2 trajectories)")
     if args.vocabulary and args.table != "table2":
         raise EasVoError("--vocabulary belongs to table2 (ORB-SLAM3 runs)")
+    if args.config and args.table == "rotation":
+        raise EasVoError(
+            "--config belongs to table1 and table2: rotation's methods carry their own (paper.toml, best.toml)"
+        )
+    config = args.config or "paper"
+    specs = rotation.SPECS if args.table == "rotation" else paper.SPECS
     out = check_writable_folder(args.out or f"reproduce/{args.table}")
     refuse_inputs_inside(
         out,
-        [i for spec in paper.SPECS.values() for i in dataset_inputs(spec)],
-        ("the --config", args.config),
+        [i for spec in specs.values() for i in dataset_inputs(spec)],
+        ("the --config", config),
         ("the --vocabulary", args.vocabulary),
         ("the data folder", str(data_dir())),
         *(("the --estimate", path) for path in estimates.values()),
@@ -115,16 +135,20 @@ def run(args) -> int:
             out,
             args.duration or paper.PAPER_DURATION_S,
             name_list("--backends", args.backends),
-            args.config,
+            config,
             args.jobs,
             progress,
+        )
+    elif args.table == "rotation":
+        rows, n_run, markdown = rotation.rotation_benchmark(
+            out, args.duration or rotation.DURATION_S, args.jobs, progress
         )
     else:
         rows, n_run, markdown = table2.table2(
             out,
             estimates,
             args.duration,
-            args.config,
+            config,
             args.jobs,
             progress,
             name_list("--frontends", args.frontends),

@@ -26,27 +26,14 @@ def evaluate_estimate(
     """Score an external trajectory against a dataset's ground truth (evaluation.trajectory_ape);
     with `out`, write metrics.json, table2_row.md, groundtruth.tum (what it was compared with)
     and estimate_aligned.tum. Returns the metrics."""
-    from eas_vo.datasets.recording import clock_unit_problems, time_source
     from eas_vo.evaluation.trajectory import ALIGNMENTS, trajectory_ape
     from eas_vo.geometry.rotations import matrices_from_quats
-    from eas_vo.io.tum import format_tum, read_tum
-    from eas_vo.registry import open_dataset
+    from eas_vo.io.tum import format_tum
 
     if align not in ALIGNMENTS:
         raise EasVoError(f"--align {align!r}: choose one of {', '.join(ALIGNMENTS)}")
-    read = read_tum(estimate_path)
-    dataset = open_dataset(dataset_spec)
-    gt = dataset.ground_truth
-    if gt is None:
-        raise EasVoError(f"{dataset.label}: has no ground truth to evaluate against")
-    origin_ns = dataset.clock_origin_ns  # the estimate holds the recording's own times, the ground truth is after it
-    estimate = PoseSeries(read.t - origin_ns / 1e9, read.p_w_c, read.q_w_c)
-    spans = {"estimate": float(np.ptp(estimate.t)), "ground-truth": float(np.ptp(gt.t))}
-    clocks = clock_unit_problems(
-        spans, {"estimate": str(estimate_path), "ground-truth": time_source(dataset, "ground-truth")}
-    )
-    if clocks:
-        raise EasVoError(next(iter(clocks.values())))
+    dataset, estimate, gt = _estimate_and_truth(dataset_spec, estimate_path)
+    origin_ns = dataset.clock_origin_ns
     try:
         ape = trajectory_ape(gt, estimate, align, max_diff_s)
     except ValueError as exc:
@@ -70,6 +57,69 @@ def evaluate_estimate(
             )
             aligned = ape.aligned(estimate.p_w_c, matrices_from_quats(estimate.q_w_c))
             write_text_atomic(staging / "estimate_aligned.tum", format_tum(estimate.t, *aligned, origin_ns))
+    return metrics
+
+
+def _estimate_and_truth(dataset_spec: str, estimate_path: str | Path):
+    """(dataset, the estimate on the dataset's clock [s], its ground truth): the TUM file holds
+    the recording's own times, the ground truth is read after its clock origin. Raises EasVoError
+    for a dataset without ground truth or an estimate in another clock unit."""
+    from eas_vo.datasets.recording import clock_unit_problems, time_source
+    from eas_vo.io.tum import read_tum
+    from eas_vo.registry import open_dataset
+
+    read = read_tum(estimate_path)
+    dataset = open_dataset(dataset_spec)
+    gt = dataset.ground_truth
+    if gt is None:
+        raise EasVoError(f"{dataset.label}: has no ground truth to evaluate against")
+    estimate = PoseSeries(read.t - dataset.clock_origin_ns / 1e9, read.p_w_c, read.q_w_c)
+    spans = {"estimate": float(np.ptp(estimate.t)), "ground-truth": float(np.ptp(gt.t))}
+    clocks = clock_unit_problems(
+        spans, {"estimate": str(estimate_path), "ground-truth": time_source(dataset, "ground-truth")}
+    )
+    if clocks:
+        raise EasVoError(next(iter(clocks.values())))
+    return dataset, estimate, gt
+
+
+def evaluate_protocol(
+    dataset_spec: str, estimate_path: str | Path, out: str | Path | None = None, replace: bool = False
+) -> dict:
+    """Score an external trajectory under the event-rotation benchmark's protocol
+    (evaluation.rotation_protocol: the first 30 s from the recording's start as eas-vo reads
+    it); with `out`, write metrics.json and rotation_errors.png. Returns the metrics."""
+    from eas_vo.evaluation import rotation_protocol
+    from eas_vo.plots import plot_protocol_errors
+
+    dataset, estimate, gt = _estimate_and_truth(dataset_spec, estimate_path)
+    try:
+        scored = rotation_protocol.score(estimate, gt, 0.0)
+    except ValueError as exc:
+        raise EasVoError(f"{estimate_path}: {exc}") from None
+    if not len(scored.t):
+        raise EasVoError(f"{estimate_path}: the ground truth scores none of its poses in the first 30 s")
+    metrics = {
+        "estimate": str(estimate_path),
+        "dataset": dataset.label,
+        "protocol": rotation_protocol.NAME,
+        "estimate_poses": len(estimate.t),
+        **scored.summary(),
+    }
+    if out is not None:
+        with output_folder(out, replace) as staging:
+            write_text_atomic(staging / "metrics.json", json_text(metrics))
+            label = Path(estimate_path).name
+            series = {
+                label: (
+                    scored.t,
+                    scored.error_deg,
+                    scored.relative_t,
+                    scored.relative_deg_s,
+                    metrics["absolute_rms_deg"],
+                )
+            }
+            plot_protocol_errors(staging / "rotation_errors.png", series, title=f"{dataset.label}: {label}")
     return metrics
 
 

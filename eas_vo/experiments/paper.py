@@ -61,11 +61,11 @@ PAPER_TABLE2_DURATION_S = None
 SPECS = {name: f"ecd:{name}" for name in SEQUENCES}
 
 
-def fetch_sequences(progress: bool) -> None:
-    """Fetch both sequences unless present and verified."""
+def fetch_sequences(progress: bool, specs=None) -> None:
+    """Fetch the sequences `specs` (default: the paper's two) unless present and verified."""
     from eas_vo.registry import fetchable
 
-    for spec in SPECS.values():
+    for spec in SPECS.values() if specs is None else specs:
         plugin, name = fetchable(spec)
         plugin.fetch(name, progress=progress)
 
