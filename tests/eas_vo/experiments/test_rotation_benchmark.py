@@ -117,13 +117,13 @@ def test_rotation_takes_no_configuration_of_its_own(stand_ins, tmp_path, capsys)
 
 
 def test_the_gyro_alone_is_its_integration(short_sequence):
-    """The `none` tracker's graph holds the gyro alone: its trajectory is the gyro integrated."""
+    """The `blind` tracker's graph holds the gyro alone: its trajectory is the gyro integrated."""
     from eas_vo import config, pipeline
     from eas_vo.geometry.rotations import gyro_rotation
 
     cfg = config.resolve(
         None,
-        {"dataset": str(short_sequence), "tracker": "none", "backend": "gtsam", "duration_s": 1.5},
+        {"dataset": str(short_sequence), "tracker": "blind", "backend": "gtsam", "duration_s": 1.5},
         ["backend.gtsam.gyro=true"],
     )
     result = pipeline.run(cfg, None)

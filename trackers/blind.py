@@ -1,4 +1,4 @@
-"""`none`: measures no rotation, so that the backend's other inputs stand alone: with the gtsam
+"""`blind`: sees no image and no event, so measures no rotation, so that the backend's other inputs stand alone: with the gtsam
 backend and its gyro, the gyro's dead reckoning through the same graph the trackers feed."""
 
 from __future__ import annotations
@@ -9,11 +9,11 @@ from eas_vo.plugins import Tracker
 from eas_vo.types import FrameRecord, RelativeRotation
 
 
-class NoTracker(Tracker):
+class BlindTracker(Tracker):
     """Reads neither images nor events; every frame after the first is `lost` ("no tracker")."""
 
-    name = "none"
-    description = "measures nothing: the backend's other inputs alone (gtsam with gyro=true: the gyro's dead reckoning)"
+    name = "blind"
+    description = "sees nothing, measures nothing: the backend's other inputs alone (gtsam with gyro=true: the gyro's dead reckoning)"
     reads_images = False
 
     def reset(self) -> None:
@@ -23,5 +23,5 @@ class NoTracker(Tracker):
         self, image: np.ndarray | None, t: float, **kwargs
     ) -> tuple[FrameRecord, list[RelativeRotation]]:
         index, self._frames = self._frames, self._frames + 1
-        status, reason = ("first", "") if index == 0 else ("lost", "the none tracker measures nothing")
+        status, reason = ("first", "") if index == 0 else ("lost", "the blind tracker measures nothing")
         return FrameRecord(index, t, 0, 0, status, False, reason=reason), []
