@@ -19,9 +19,7 @@ class BlindTracker(Tracker):
     def reset(self) -> None:
         self._frames = 0
 
-    def process(
-        self, image: np.ndarray | None, t: float, **kwargs
-    ) -> tuple[FrameRecord, list[RelativeRotation]]:
+    def process(self, image: np.ndarray | None, t: float, **kwargs) -> tuple[FrameRecord, list[RelativeRotation]]:
         index, self._frames = self._frames, self._frames + 1
         status, reason = ("first", "") if index == 0 else ("lost", "the blind tracker measures nothing")
         return FrameRecord(index, t, 0, 0, status, False, reason=reason), []

@@ -87,7 +87,10 @@ METHODS = (
         "cmax + gtsam with gyro", "paper", "eas", Method("cmax", "gtsam", (("backend.gtsam.gyro", "true"),))
     ),
     RotationMethod(
-        "gyro alone (gtsam, dead reckoning)", "paper", "eas", Method("blind", "gtsam", (("backend.gtsam.gyro", "true"),))
+        "gyro alone (gtsam, dead reckoning)",
+        "paper",
+        "eas",
+        Method("blind", "gtsam", (("backend.gtsam.gyro", "true"),)),
     ),
 )
 
