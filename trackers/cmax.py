@@ -416,15 +416,24 @@ class CmaxTracker(Tracker):
 
     def _search(self, contrast: Contrast, scale: float) -> np.ndarray:
         """The best omega [rad/s] of a 7 x 7 x 7 grid up to max_rate_deg_s per axis, the image
-        smoothed to half the grid's spacing (so the optimum's basin is not stepped over)."""
+        smoothed to half the grid's spacing (so the optimum's basin is not stepped over), from a
+        quarter of the events. The image is made at the resolution of that smoothing (pixels
+        `shrink` times the sensor's, smoothed by the same sigma in sensor pixels): the same
+        objective at a fraction of the cost of blurring the sensor-sized image by a wide kernel."""
         steps = np.radians(self.config.max_rate_deg_s) * np.linspace(-1, 1, 7)
         spacing_px = (steps[1] - steps[0]) * scale
-        coarse = Contrast(
-            np.column_stack([contrast.x, contrast.y])[::4],
-            contrast.dt[::4],
-            contrast.grid,
-            max(contrast.sigma_px, 0.5 * spacing_px),
+        sigma_px = max(contrast.sigma_px, 0.5 * spacing_px)
+        shrink = max(1, int(sigma_px / max(contrast.sigma_px, 1.0)))
+        g = contrast.grid
+        small = WarpGrid(
+            -(-g.width // shrink),
+            -(-g.height // shrink),
+            g.fx / shrink,
+            g.fy / shrink,
+            (g.cx + 0.5) / shrink - 0.5,
+            (g.cy + 0.5) / shrink - 0.5,
         )
+        coarse = Contrast(np.column_stack([contrast.x, contrast.y])[::4], contrast.dt[::4], small, sigma_px / shrink)
         grid = np.stack(np.meshgrid(steps, steps, steps, indexing="ij"), -1).reshape(-1, 3)
         values = [coarse.value(w) for w in grid]
         contrast.evaluations += coarse.evaluations
