@@ -94,6 +94,7 @@ def add_parser(sub) -> None:
 def run(args) -> int:
     """`eas-vo reproduce` on the parsed `args`; returns the exit status."""
     from eas_vo.datasets.ecd_catalogue import data_dir
+    from eas_vo.evaluation.rotation_protocol import DURATION_S
     from eas_vo.experiments import paper, rotation, table1, table2
     from eas_vo.io.outputs import check_grid_folder, check_writable_folder
 
@@ -140,9 +141,7 @@ def run(args) -> int:
             progress,
         )
     elif args.table == "rotation":
-        rows, n_run, markdown = rotation.rotation_benchmark(
-            out, args.duration or rotation.DURATION_S, args.jobs, progress
-        )
+        rows, n_run, markdown = rotation.rotation_benchmark(out, args.duration or DURATION_S, args.jobs, progress)
     else:
         rows, n_run, markdown = table2.table2(
             out,
