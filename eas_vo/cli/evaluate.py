@@ -5,6 +5,7 @@ from __future__ import annotations
 import sys
 
 from eas_vo.cli.options import add_dataset, add_output_options, dataset_inputs, refuse_inputs_inside, seconds
+from eas_vo.errors import EasVoError
 
 
 def add_parser(sub) -> None:
@@ -28,17 +29,16 @@ def add_parser(sub) -> None:
         default="evo",
         help="how to score (default evo: evo_ape's APE; cmax-slam: the rotation benchmark's)",
     )
-    parser.add_argument(
-        "--align", choices=("sim3", "se3", "origin"), default="sim3", help="evo: default sim3 (evo_ape -as)"
-    )
+    parser.add_argument("--align", choices=("sim3", "se3", "origin"), help="evo: default sim3 (evo_ape -as)")
     parser.add_argument(
         "--max-diff",
         type=seconds(allow_zero=True),
-        default=0.01,
         metavar="S",
-        help="largest time difference of an associated pose pair (default 0.01 s, evo's)",
+        help="evo: largest time difference of an associated pose pair (default 0.01 s, evo's)",
     )
-    parser.add_argument("--label", metavar="TEXT", help="the row's name in table2_row.md (default: the file's name)")
+    parser.add_argument(
+        "--label", metavar="TEXT", help="evo: the row's name in table2_row.md (default: the file's name)"
+    )
     add_output_options(parser, required=False)
     parser.set_defaults(func=run)
 
@@ -53,16 +53,31 @@ def run(args) -> int:
         out = check_output_folder(args.out, replace=args.overwrite)
         refuse_inputs_inside(out, dataset_inputs(args.dataset), ("the --estimate", args.estimate))
     if args.protocol == "cmax-slam":
+        given = [f"--{k.replace('_', '-')}" for k in ("align", "max_diff", "label") if getattr(args, k) is not None]
+        if given:
+            raise EasVoError(
+                f"{', '.join(given)}: evo's options; --protocol cmax-slam aligns and scores by its own rules"
+            )
         m = evaluate_protocol(args.dataset, args.estimate, args.out, replace=args.overwrite)
-        print(
-            f"{args.estimate} vs {m['dataset']} (cmax-slam protocol, {m['poses_scored']} of {m['estimate_poses']} "
-            f"poses scored): absolute RMS {figure_text(m['absolute_rms_deg'], 4)} deg, relative over 1 s RMS "
+        relative = (
             f"{figure_text(m['relative_rms_deg_s'], 4)} deg/s ({m['spans_scored']} spans)"
+            if m["relative_rms_deg_s"] is not None
+            else "none (the estimate covers no whole 1 s span)"
+        )
+        print(
+            f"{args.estimate} vs {m['dataset']} (cmax-slam protocol, {m['poses_scored']} poses scored): absolute "
+            f"RMS {figure_text(m['absolute_rms_deg'], 4)} deg, relative over 1 s RMS {relative}"
             + (f" -> {args.out}" if args.out else "")
         )
         return 0
     m = evaluate_estimate(
-        args.dataset, args.estimate, args.align, args.max_diff, args.out, args.label, replace=args.overwrite
+        args.dataset,
+        args.estimate,
+        args.align or "sim3",
+        0.01 if args.max_diff is None else args.max_diff,
+        args.out,
+        args.label,
+        replace=args.overwrite,
     )
     for line in m["warnings"]:
         print(f"eas-vo: warning: {line}", file=sys.stderr)

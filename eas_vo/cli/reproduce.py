@@ -51,12 +51,10 @@ def add_parser(sub) -> None:
     parser.add_argument(
         "--protocol",
         choices=("cmax-slam",),
-        default="cmax-slam",
-        help="rotation: how its trajectories are scored (default cmax-slam: docs/rotation_benchmark.md)",
+        help="rotation: how its trajectories are scored (default cmax-slam, the only one: docs/rotation_benchmark.md)",
     )
     parser.add_argument(
         "--backends",
-        default="chain,gtsam",
         metavar="A,B",
         help="table1's backends (default chain,gtsam): chain on klt's consecutive edges (the paper), "
         "any other fed also its keyframe edges (tracker.klt.keyframe_interval=3, as configs/best.toml)",
@@ -71,14 +69,12 @@ def add_parser(sub) -> None:
     )
     parser.add_argument(
         "--frontends",
-        default="original,eas",
         metavar="A,B",
         help="table2's sources (default original,eas, the paper's); any frontend, e.g. original,histeq,eas,sits",
     )
     parser.add_argument(
         "--runs",
         type=positive_int,
-        default=5,
         help="table2 with the slam extra: ORB-SLAM3 runs per cell (default 5; the median is reported)",
     )
     parser.add_argument(
@@ -94,7 +90,7 @@ def add_parser(sub) -> None:
 def run(args) -> int:
     """`eas-vo reproduce` on the parsed `args`; returns the exit status."""
     from eas_vo.datasets.ecd_catalogue import data_dir
-    from eas_vo.evaluation.rotation_protocol import DURATION_S
+    from eas_vo.evaluation.rotation_protocol import ALIGN_AT_S, DURATION_S
     from eas_vo.experiments import paper, rotation, table1, table2
     from eas_vo.io.outputs import check_grid_folder, check_writable_folder
 
@@ -118,6 +114,12 @@ def run(args) -> int:
         raise EasVoError(
             "--config belongs to table1 and table2: rotation's methods carry their own (paper.toml, best.toml)"
         )
+    owners = {"backends": "table1", "frontends": "table2", "runs": "table2", "protocol": "rotation"}
+    for key, table in owners.items():
+        if getattr(args, key) is not None and args.table != table:
+            raise EasVoError(f"--{key} belongs to {table}")
+    if args.table == "rotation" and args.duration is not None and args.duration <= ALIGN_AT_S:
+        raise EasVoError(f"--duration {args.duration:g}: the protocol aligns at {ALIGN_AT_S:g} s; give more than that")
     config = args.config or "paper"
     specs = rotation.SPECS if args.table == "rotation" else paper.SPECS
     out = check_writable_folder(args.out or f"reproduce/{args.table}")
@@ -135,7 +137,7 @@ def run(args) -> int:
         rows, n_run, markdown = table1.table1(
             out,
             args.duration or paper.PAPER_DURATION_S,
-            name_list("--backends", args.backends),
+            name_list("--backends", args.backends or "chain,gtsam"),
             config,
             args.jobs,
             progress,
@@ -150,8 +152,8 @@ def run(args) -> int:
             config,
             args.jobs,
             progress,
-            name_list("--frontends", args.frontends),
-            args.runs,
+            name_list("--frontends", args.frontends or "original,eas"),
+            args.runs or 5,
             args.vocabulary,
         )
     return report_cells(rows, n_run, out / f"{args.table}.md", markdown)

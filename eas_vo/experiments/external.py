@@ -32,7 +32,10 @@ def evaluate_estimate(
 
     if align not in ALIGNMENTS:
         raise EasVoError(f"--align {align!r}: choose one of {', '.join(ALIGNMENTS)}")
-    dataset, estimate, gt = _estimate_and_truth(dataset_spec, estimate_path)
+    from eas_vo.registry import open_dataset
+
+    dataset = open_dataset(dataset_spec)
+    estimate, gt = _estimate_and_truth(dataset, estimate_path)
     origin_ns = dataset.clock_origin_ns
     try:
         ape = trajectory_ape(gt, estimate, align, max_diff_s)
@@ -60,50 +63,67 @@ def evaluate_estimate(
     return metrics
 
 
-def _estimate_and_truth(dataset_spec: str, estimate_path: str | Path):
-    """(dataset, the estimate on the dataset's clock [s], its ground truth): the TUM file holds
-    the recording's own times, the ground truth is read after its clock origin. Raises EasVoError
-    for a dataset without ground truth or an estimate in another clock unit."""
+def _estimate_and_truth(dataset, estimate_path: str | Path, ordered: bool = True):
+    """(the estimate on the dataset's clock [s], its ground truth): the TUM file holds the
+    recording's own times, the ground truth is read after its clock origin. `ordered` False
+    takes the poses sorted by time, the first of any repeated time (a frame skipped as the
+    same image as the previous keeps its pose). Raises EasVoError for a dataset without ground
+    truth or an estimate in another clock unit."""
     from eas_vo.datasets.recording import clock_unit_problems, time_source
     from eas_vo.io.tum import read_tum
-    from eas_vo.registry import open_dataset
 
-    read = read_tum(estimate_path)
-    dataset = open_dataset(dataset_spec)
     gt = dataset.ground_truth
     if gt is None:
         raise EasVoError(f"{dataset.label}: has no ground truth to evaluate against")
-    estimate = PoseSeries(read.t - dataset.clock_origin_ns / 1e9, read.p_w_c, read.q_w_c)
+    read = read_tum(estimate_path, ordered=ordered)
+    order = np.argsort(read.t, kind="stable")
+    first = np.concatenate([[True], np.diff(read.t[order]) > 0])
+    keep = order[first]
+    estimate = PoseSeries(read.t[keep] - dataset.clock_origin_ns / 1e9, read.p_w_c[keep], read.q_w_c[keep])
     spans = {"estimate": float(np.ptp(estimate.t)), "ground-truth": float(np.ptp(gt.t))}
     clocks = clock_unit_problems(
         spans, {"estimate": str(estimate_path), "ground-truth": time_source(dataset, "ground-truth")}
     )
     if clocks:
         raise EasVoError(next(iter(clocks.values())))
-    return dataset, estimate, gt
+    return estimate, gt
+
+
+def protocol_score(dataset, estimate_path: str | Path, duration_s: float | None = None):
+    """The rotation benchmark's score (evaluation.rotation_protocol.score) of the TUM file
+    `estimate_path` on the opened `dataset`, over `duration_s` [s] (default the protocol's 30)
+    from the recording's start as a run counts it: its first frame (Dataset.window). Raises
+    EasVoError, naming the file, for what the protocol cannot score."""
+    from eas_vo.evaluation import rotation_protocol
+
+    estimate, gt = _estimate_and_truth(dataset, estimate_path, ordered=False)
+    times = dataset.frame_times()
+    start = float(times[0]) if len(times) else float(gt.t[0])
+    try:
+        scored = rotation_protocol.score(estimate, gt, start, duration_s or rotation_protocol.DURATION_S)
+    except ValueError as exc:
+        raise EasVoError(f"{estimate_path}: {exc}") from None
+    if not len(scored.t):
+        raise EasVoError(f"{estimate_path}: the ground truth scores none of its poses in the window")
+    return scored
 
 
 def evaluate_protocol(
     dataset_spec: str, estimate_path: str | Path, out: str | Path | None = None, replace: bool = False
 ) -> dict:
     """Score an external trajectory under the event-rotation benchmark's protocol
-    (evaluation.rotation_protocol: the first 30 s from the recording's start as eas-vo reads
-    it); with `out`, write metrics.json and rotation_errors.png. Returns the metrics."""
+    (protocol_score: the first 30 s from the recording's first frame); with `out`, write
+    metrics.json and rotation_errors.png. Returns the metrics."""
     from eas_vo.evaluation import rotation_protocol
     from eas_vo.plots import plot_protocol_errors
+    from eas_vo.registry import open_dataset
 
-    dataset, estimate, gt = _estimate_and_truth(dataset_spec, estimate_path)
-    try:
-        scored = rotation_protocol.score(estimate, gt, 0.0)
-    except ValueError as exc:
-        raise EasVoError(f"{estimate_path}: {exc}") from None
-    if not len(scored.t):
-        raise EasVoError(f"{estimate_path}: the ground truth scores none of its poses in the first 30 s")
+    dataset = open_dataset(dataset_spec)
+    scored = protocol_score(dataset, estimate_path)
     metrics = {
         "estimate": str(estimate_path),
         "dataset": dataset.label,
         "protocol": rotation_protocol.NAME,
-        "estimate_poses": len(estimate.t),
         **scored.summary(),
     }
     if out is not None:

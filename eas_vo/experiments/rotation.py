@@ -162,28 +162,24 @@ def rotation_benchmark(out: Path, duration_s: float, jobs: int = 1, progress: bo
 
 
 def _score_cells(out: Path, pairs, rows: list[dict], duration_s: float) -> list:
-    """Each finished cell's ProtocolScore (None for a failed one, or one the protocol cannot score)."""
-    from eas_vo.evaluation.rotation_protocol import score
-    from eas_vo.io.tum import read_tum
+    """Each finished cell's ProtocolScore; None for a failed cell, and for one the protocol
+    cannot score, which becomes a failed cell saying why."""
+    from eas_vo.errors import EasVoError
+    from eas_vo.experiments.external import protocol_score
     from eas_vo.registry import open_dataset
-    from eas_vo.types import PoseSeries
 
     datasets: dict = {}
     scores = []
     for (_, cell), row in zip(pairs, rows):
+        scores.append(None)
         if row["status"] != "ok":
-            scores.append(None)
             continue
-        if cell.dataset not in datasets:
-            datasets[cell.dataset] = open_dataset(cell.dataset)
-        dataset = datasets[cell.dataset]
-        read = read_tum(out / cell.folder / "trajectory.tum")
-        estimate = PoseSeries(read.t - dataset.clock_origin_ns / 1e9, read.p_w_c, read.q_w_c)
         try:
-            scores.append(score(estimate, dataset.ground_truth, 0.0, duration_s))
-        except ValueError as exc:
+            if cell.dataset not in datasets:
+                datasets[cell.dataset] = open_dataset(cell.dataset)
+            scores[-1] = protocol_score(datasets[cell.dataset], out / cell.folder / "trajectory.tum", duration_s)
+        except EasVoError as exc:
             row["status"], row["error"] = "failed", f"the protocol cannot score it: {exc}"
-            scores.append(None)
     return scores
 
 

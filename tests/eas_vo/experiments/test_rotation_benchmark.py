@@ -63,8 +63,9 @@ def test_the_rotation_benchmark_in_one_command_beside_the_published_rows(stand_i
         cells = [c.strip() for c in line.strip("|").split("|")[1:]]
         assert cells[SEQUENCES.index(r["dataset_name"])] == f"{r['absolute_rms_deg']:.3f}"
         tum = read_tum(out / r["folder"] / "trajectory.tum")
-        gt = open_dataset(f"ecd:{r['dataset_name']}").ground_truth
-        again = score(PoseSeries(tum.t, tum.p_w_c, tum.q_w_c), gt, 0.0, DURATION_S).summary()
+        dataset = open_dataset(f"ecd:{r['dataset_name']}")
+        start = dataset.frame_times()[0]  # the run's start: its first frame
+        again = score(PoseSeries(tum.t, tum.p_w_c, tum.q_w_c), dataset.ground_truth, start, DURATION_S).summary()
         assert again["absolute_rms_deg"] == pytest.approx(r["absolute_rms_deg"], rel=1e-9)
         assert again["relative_rms_deg_s"] == pytest.approx(r["relative_rms_deg_s"], rel=1e-9)
         assert 8 <= r["spans_scored"] <= 11 and r["realtime_factor"] > 0  # spans the last pose covers
@@ -135,3 +136,90 @@ def test_the_gyro_alone_is_its_integration(short_sequence):
         by_gyro = gyro_rotation(imu, t[0], t[k])
         assert np.degrees(np.arccos(np.clip((np.trace(R.T @ by_gyro) - 1) / 2, -1, 1))) < 0.05
     assert matrices_from_quats(np.array([[0, 0, 0, 1.0]])).shape == (1, 3, 3)
+
+
+def drifting_estimate(sequence, path, shift_s: int = 0, step: int = 4, span_s=(-np.inf, np.inf)) -> None:
+    """A TUM file of `sequence`'s ground truth every `step`-th pose within `span_s`, drifting at
+    3 deg/s about the world's z axis, on the clock shifted by `shift_s`; one pose repeated and
+    two swapped, as files other tools write."""
+    from eas_vo.geometry.rotations import rotvec_to_matrix
+    from eas_vo.io.tum import format_tum
+
+    gt = open_dataset(str(sequence)).ground_truth
+    keep = np.flatnonzero((gt.t >= span_s[0]) & (gt.t <= span_s[1]))[::step]
+    t = gt.t[keep]
+    R = rotvec_to_matrix(np.outer(np.radians(3.0) * t, [0, 0, 1.0])) @ matrices_from_quats(gt.q_w_c[keep])
+    lines = format_tum(t + shift_s, gt.p_w_c[keep], R).splitlines(keepends=True)
+    lines.insert(5, lines[5])  # a repeated time
+    lines[10], lines[11] = lines[11], lines[10]  # out of order
+    path.write_text("".join(lines))
+
+
+def test_evaluate_scores_a_file_as_other_tools_write_it_on_any_clock(short_sequence, tmp_path, capsys):
+    from helpers import retimed
+
+    estimate = tmp_path / "est.tum"
+    drifting_estimate(short_sequence, estimate)
+    assert (
+        main(["evaluate", "--dataset", str(short_sequence), "--estimate", str(estimate), "--protocol", "cmax-slam"])
+        == 0
+    )
+    said = capsys.readouterr().out
+    # over any 1 s the drift adds 3 degrees (against the ground truth smoothed over 50 ms: to 0.01)
+    assert relative_deg_s(said) == pytest.approx(3.0, abs=0.01)
+    unix = tmp_path / "unix"
+    import shutil
+
+    shutil.copytree(short_sequence, unix)
+    for name in ("events.txt", "images.txt", "groundtruth.txt", "imu.txt"):
+        retimed(unix / name, shift_s=1_700_000_000)
+    moved = tmp_path / "unix.tum"
+    drifting_estimate(short_sequence, moved, shift_s=1_700_000_000)
+    assert main(["evaluate", "--dataset", str(unix), "--estimate", str(moved), "--protocol", "cmax-slam"]) == 0
+    again = capsys.readouterr().out
+    absolute = [x.split("absolute RMS ")[1].split(" deg")[0] for x in (said, again)]
+    assert absolute[0] == absolute[1] and relative_deg_s(again) == relative_deg_s(said)
+
+
+def relative_deg_s(said: str) -> float:
+    return float(said.split("relative over 1 s RMS ")[1].split(" deg/s")[0])
+
+
+def test_evaluate_says_in_one_line_what_the_protocol_cannot_score(short_sequence, tmp_path, capsys):
+    short = tmp_path / "short.tum"
+    drifting_estimate(short_sequence, short, span_s=(0.5, 1.4))  # covers t0 = 1 s, no whole 1 s span of the grid
+    assert (
+        main(["evaluate", "--dataset", str(short_sequence), "--estimate", str(short), "--protocol", "cmax-slam"]) == 0
+    )
+    assert "relative over 1 s RMS none (the estimate covers no whole 1 s span)" in capsys.readouterr().out
+    early = tmp_path / "early.tum"
+    drifting_estimate(short_sequence, early, span_s=(-1.0, 0.6))
+    import shutil
+
+    no_truth = tmp_path / "no_truth"
+    shutil.copytree(short_sequence, no_truth)
+    (no_truth / "groundtruth.txt").unlink()
+    cases = [
+        (short_sequence, ["--estimate", str(early)], "does not cover the alignment time, 1 s after the start"),
+        (short_sequence, ["--estimate", str(short), "--align", "se3"], "--align: evo's options"),
+        (no_truth, ["--estimate", str(short)], "has no ground truth to evaluate against"),
+    ]
+    for dataset, extra, says in cases:
+        argv = ["evaluate", "--dataset", str(dataset), "--protocol", "cmax-slam", *extra]
+        assert main(argv) != 0
+        err = capsys.readouterr().err.strip()
+        assert says in err and len(err.splitlines()) == 1, err
+
+
+@pytest.mark.parametrize(
+    "argv, says",
+    [
+        (["--duration", "0.5"], "--duration 0.5: the protocol aligns at 1 s"),
+        (["--backends", "chain"], "--backends belongs to table1"),
+        (["--runs", "3"], "--runs belongs to table2"),
+    ],
+)
+def test_rotation_refuses_what_it_cannot_use_before_any_download(stand_ins, tmp_path, capsys, argv, says):
+    assert main(["reproduce", "rotation", "--out", str(tmp_path / "r"), *argv]) != 0
+    assert says in capsys.readouterr().err
+    assert not any(stand_ins.values())
