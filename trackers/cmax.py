@@ -49,6 +49,10 @@ REFERENCE_PIXELS = 240 * 180
 #: The focus of a window compares its contrast with that of warps displacing the events this
 #: far [px over half the window]: about the width of the peak a sharp edge makes (sigma_px 1).
 FOCUS_STEP_PX = 1.0
+#: The coarse search's image (CmaxTracker._search) is built from about this many of a window's
+#: events: at its resolution (a cell of about half the grid's spacing, 11 px of the DAVIS240 in
+#: a 40,000-event window of hand-held motion) some ten events fall in each cell.
+SEARCH_EVENTS = 4000
 #: A hot pixel has fired this many times the mean pixel's count (CmaxTracker._without_hot_pixels):
 #: more than an edge-rich pixel in fast motion fires within a window, less than a hot pixel's
 #: rate over a signal pixel's (docs/cmax.md, "Status: ok, weak, lost", has the rates measured).
@@ -416,8 +420,8 @@ class CmaxTracker(Tracker):
 
     def _search(self, contrast: Contrast, scale: float) -> np.ndarray:
         """The best omega [rad/s] of a 7 x 7 x 7 grid up to max_rate_deg_s per axis, the image
-        smoothed to half the grid's spacing (so the optimum's basin is not stepped over), from a
-        quarter of the events. The image is made at the resolution of that smoothing (pixels
+        smoothed to half the grid's spacing (so the optimum's basin is not stepped over), from
+        about SEARCH_EVENTS of the events, evenly spread. The image is made at the resolution of that smoothing (pixels
         `shrink` times the sensor's, smoothed by the same sigma in sensor pixels): the same
         objective at a fraction of the cost of blurring the sensor-sized image by a wide kernel."""
         steps = np.radians(self.config.max_rate_deg_s) * np.linspace(-1, 1, 7)
@@ -433,7 +437,10 @@ class CmaxTracker(Tracker):
             (g.cx + 0.5) / shrink - 0.5,
             (g.cy + 0.5) / shrink - 0.5,
         )
-        coarse = Contrast(np.column_stack([contrast.x, contrast.y])[::4], contrast.dt[::4], small, sigma_px / shrink)
+        every = max(1, len(contrast.dt) // SEARCH_EVENTS)
+        coarse = Contrast(
+            np.column_stack([contrast.x, contrast.y])[::every], contrast.dt[::every], small, sigma_px / shrink
+        )
         grid = np.stack(np.meshgrid(steps, steps, steps, indexing="ij"), -1).reshape(-1, 3)
         values = [coarse.value(w) for w in grid]
         contrast.evaluations += coarse.evaluations
