@@ -189,7 +189,17 @@ def main() -> None:
     if stages["tracker_events"]:
         print(
             f"  tracker: {stages['tracker_events'] / max(stages['tracker'], 1e-9) / 1e6:.2f} M events/s "
-            f"({stages['tracker_events']:,} events)"
+            f"({stages['tracker_events']:,} events); the whole run: "
+            + ", ".join(
+                f"{stages['tracker_events'] / m['elapsed_s'] / 1e6:.2f} M events/s {'serial' if t == 1 else 'concurrent'}"
+                for t, m in fastest.items()
+            )
+        )
+    unaccounted = fastest[cores]["elapsed_s"] - total
+    if unaccounted > 0.25 * fastest[cores]["elapsed_s"]:
+        print(
+            f"  the stages time one tracking; the run took {unaccounted:.2f} s more: the frames tracked again "
+            "without the gyro, which the images could not check (eas_vo.imu.policy.assess)"
         )
     print(f"  APE {best.get('ape_mean_rad', np.nan):.4f} rad, NC {best['nc_mean']:.1f}")
     if rc.tracker == "cmax":
