@@ -375,15 +375,16 @@ def ape_time_figure(series: dict, equal: dict | None = None, colours: dict | Non
     return fig
 
 
-def plot_protocol_errors(path: str | Path, series: dict, title: str = "") -> None:
-    """The rotation protocol's errors over time, one line per method: {label: (t [s], absolute
-    error [deg], relative span starts [s], relative error [deg/s], absolute RMS [deg])}; the
-    absolute error on a log axis (a gyro's drift and a tracker's degrees on one figure)."""
+def plot_protocol_errors(path: str | Path, scores: dict, title: str = "") -> None:
+    """The rotation protocol's errors over time, one line per method: {label: ProtocolScore
+    (evaluation.rotation_protocol)}; the absolute error [deg] on a log axis (a gyro's drift and
+    a tracker's degrees on one figure), the 1 s relative error [deg/s] below it."""
     fig = _figure(figsize=(11, 7.0), layout="constrained")
     top, bottom = fig.subplots(2, 1, sharex=True)
-    for label, (t, error, relative_t, relative, rms) in series.items():
-        (line,) = top.plot(t, np.maximum(error, 1e-2), lw=1.0, label=f"{label} (RMS {rms:.2f} deg)")
-        bottom.plot(relative_t, relative, lw=1.0, color=line.get_color())
+    for label, s in scores.items():
+        rms = s.summary()["absolute_rms_deg"]
+        (line,) = top.plot(s.t, np.maximum(s.error_deg, 1e-2), lw=1.0, label=f"{label} (RMS {rms:.2f} deg)")
+        bottom.plot(s.relative_t, s.relative_deg_s, lw=1.0, color=line.get_color())
     top.set_yscale("log")
     top.set_ylabel("absolute error [deg]")
     bottom.set_ylabel("error over the next 1 s [deg/s]")

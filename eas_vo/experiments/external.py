@@ -29,11 +29,10 @@ def evaluate_estimate(
     from eas_vo.evaluation.trajectory import ALIGNMENTS, trajectory_ape
     from eas_vo.geometry.rotations import matrices_from_quats
     from eas_vo.io.tum import format_tum
+    from eas_vo.registry import open_dataset
 
     if align not in ALIGNMENTS:
         raise EasVoError(f"--align {align!r}: choose one of {', '.join(ALIGNMENTS)}")
-    from eas_vo.registry import open_dataset
-
     dataset = open_dataset(dataset_spec)
     estimate, gt = _estimate_and_truth(dataset, estimate_path)
     origin_ns = dataset.clock_origin_ns
@@ -130,16 +129,7 @@ def evaluate_protocol(
         with output_folder(out, replace) as staging:
             write_text_atomic(staging / "metrics.json", json_text(metrics))
             label = Path(estimate_path).name
-            series = {
-                label: (
-                    scored.t,
-                    scored.error_deg,
-                    scored.relative_t,
-                    scored.relative_deg_s,
-                    metrics["absolute_rms_deg"],
-                )
-            }
-            plot_protocol_errors(staging / "rotation_errors.png", series, title=f"{dataset.label}: {label}")
+            plot_protocol_errors(staging / "rotation_errors.png", {label: scored}, title=f"{dataset.label}: {label}")
     return metrics
 
 

@@ -192,6 +192,24 @@ def _stop(pool: ProcessPoolExecutor, futures: dict, results: dict) -> None:
         process.join(timeout=30)
 
 
+def open_datasets(cells: list[Cell], config_file, assignments, overrides: dict) -> None:
+    """Open each dataset of `cells` once, as they will (simulated, fetched or its events cached
+    here, not once per worker process); one that cannot be opened is left to its cells to report."""
+    from eas_vo import config as config_mod
+    from eas_vo.registry import open_dataset
+
+    for dataset, dataset_sweep in dict.fromkeys(
+        (c.dataset, tuple(f"{k}={v}" for k, v in c.sweep if k.startswith("dataset."))) for c in cells
+    ):
+        try:
+            resolved = config_mod.resolve(
+                config_file, {**overrides, "dataset": dataset}, list(assignments) + list(dataset_sweep)
+            )
+            open_dataset(dataset, resolved.dataset).events()
+        except EasVoError:
+            pass  # its cells will report the error
+
+
 def run_experiment(
     cells: list[Cell],
     out: Path,
@@ -206,23 +224,11 @@ def run_experiment(
     an error before any work), open each dataset once (simulated, fetched or cached here, not
     once per process), run the cells not yet complete, and write the tables and figures, also
     when interrupted (then Interrupted is raised, saying what was kept). Returns (rows, cells run)."""
-    from eas_vo import config as config_mod
-    from eas_vo.registry import open_dataset
-
     for cell in cells:
         cell_config(cell, config_file, assignments, overrides)
     claim_grid_folder(out)  # new, empty or compare's own: never someone's table.md
     remove_stale_temporaries(out, OUTPUT_FILES)  # of a compare killed while writing them
-    for dataset, dataset_sweep in dict.fromkeys(
-        (c.dataset, tuple(f"{k}={v}" for k, v in c.sweep if k.startswith("dataset."))) for c in cells
-    ):
-        try:
-            resolved = config_mod.resolve(
-                config_file, {**overrides, "dataset": dataset}, list(assignments) + list(dataset_sweep)
-            )
-            open_dataset(dataset, resolved.dataset).events()
-        except EasVoError:
-            pass  # its cells will report the error
+    open_datasets(cells, config_file, assignments, overrides)
     results: dict = {}
     interrupted = None
     try:

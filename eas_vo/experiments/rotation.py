@@ -22,42 +22,15 @@ SPECS = {name: f"ecd:{name}" for name in SEQUENCES}
 #: The published rows of CMax-SLAM's Table III on these sequences: {method: {sequence:
 #: (absolute RMS [deg], relative RMS [deg/s]) or None where the method failed}}.
 PUBLISHED = {
-    "CMax-omega front end": {
-        "shapes_rotation": (7.164, 6.536),
-        "poster_rotation": (7.263, 5.985),
-        "boxes_rotation": (9.241, 6.846),
-        "dynamic_rotation": (5.535, 3.696),
-    },
-    "CMax-SLAM (linear spline)": {
-        "shapes_rotation": (4.953, 6.712),
-        "poster_rotation": (5.653, 6.357),
-        "boxes_rotation": (5.418, 6.751),
-        "dynamic_rotation": (3.380, 3.586),
-    },
-    "CMax-SLAM (cubic spline)": {
-        "shapes_rotation": (4.974, 6.821),
-        "poster_rotation": (5.674, 6.497),
-        "boxes_rotation": (5.391, 6.761),
-        "dynamic_rotation": (3.374, 3.618),
-    },
-    "RTPT": {
-        "shapes_rotation": (3.224, 3.167),
-        "poster_rotation": (8.135, 9.423),
-        "boxes_rotation": (2.973, 2.375),
-        "dynamic_rotation": (1.873, 1.991),
-    },
-    "CMax-GAE": {
-        "shapes_rotation": (3.961, 2.777),
-        "poster_rotation": (4.010, 3.612),
-        "boxes_rotation": None,
-        "dynamic_rotation": (4.840, 1.755),
-    },
-    "IMU dead reckoning": {
-        "shapes_rotation": (46.803, 6.470),
-        "poster_rotation": (45.743, 5.746),
-        "boxes_rotation": (46.979, 6.911),
-        "dynamic_rotation": (44.531, 4.183),
-    },
+    method: dict(zip(SEQUENCES, rows))
+    for method, rows in {  # in the order of SEQUENCES
+        "CMax-omega front end": ((7.164, 6.536), (7.263, 5.985), (9.241, 6.846), (5.535, 3.696)),
+        "CMax-SLAM (linear spline)": ((4.953, 6.712), (5.653, 6.357), (5.418, 6.751), (3.380, 3.586)),
+        "CMax-SLAM (cubic spline)": ((4.974, 6.821), (5.674, 6.497), (5.391, 6.761), (3.374, 3.618)),
+        "RTPT": ((3.224, 3.167), (8.135, 9.423), (2.973, 2.375), (1.873, 1.991)),
+        "CMax-GAE": ((3.961, 2.777), (4.010, 3.612), None, (4.840, 1.755)),
+        "IMU dead reckoning": ((46.803, 6.470), (45.743, 5.746), (46.979, 6.911), (44.531, 4.183)),
+    }.items()
 }
 
 CITATION = (
@@ -116,13 +89,13 @@ def plan_cells(methods=METHODS) -> list[tuple[RotationMethod, Cell]]:
     return pairs
 
 
-def rotation_benchmark(out: Path, duration_s: float, jobs: int = 1, progress: bool = False, methods=METHODS):
+def rotation_benchmark(out: Path, duration_s: float, jobs: int = 1, progress: bool = False):
     """Fetch the four sequences, run every method on each one's first `duration_s` seconds
     (cells already complete are kept), score them under the protocol, and write rotation.md,
     rotation.json, a figure per sequence and compare's tables. Returns (rows, cells run, markdown)."""
     from eas_vo.experiments.paper import fetch_sequences
 
-    pairs = plan_cells(methods)
+    pairs = plan_cells()
     overrides = run_overrides(duration_s)
     for m, cell in pairs:
         grid.cell_config(cell, m.config, [], overrides)  # a bad configuration fails before any download
@@ -133,6 +106,7 @@ def rotation_benchmark(out: Path, duration_s: float, jobs: int = 1, progress: bo
     n_run = 0
     for config in dict.fromkeys(m.config for m, _ in pairs):
         cells = [c for m, c in pairs if m.config == config]
+        grid.open_datasets(cells, config, [], overrides)
         done, ran = grid.run_grid(cells, out, config, [], overrides, jobs, progress)
         results.update(done)
         n_run += ran
@@ -157,7 +131,7 @@ def rotation_benchmark(out: Path, duration_s: float, jobs: int = 1, progress: bo
             }
         ),
     )
-    _figures(out, pairs, rows, scores)
+    _figures(out, pairs, scores)
     return rows, n_run, markdown
 
 
@@ -183,16 +157,12 @@ def _score_cells(out: Path, pairs, rows: list[dict], duration_s: float) -> list:
     return scores
 
 
-def _figures(out: Path, pairs, rows: list[dict], scores: list) -> None:
+def _figures(out: Path, pairs, scores: list) -> None:
     """rotation_SEQUENCE.png: each method's absolute and 1 s relative error over time."""
     from eas_vo.plots import plot_protocol_errors
 
     for name in SEQUENCES:
-        series = {
-            m.label: (s.t, s.error_deg, s.relative_t, s.relative_deg_s, r["absolute_rms_deg"])
-            for (m, cell), r, s in zip(pairs, rows, scores)
-            if cell.dataset_name == name and s is not None and len(s.t)
-        }
+        series = {m.label: s for (m, cell), s in zip(pairs, scores) if cell.dataset_name == name and s is not None}
         if series:
             with atomic_path(out / f"rotation_{name}.png") as tmp:
                 plot_protocol_errors(tmp, series, title=f"{name}: error against the smoothed ground truth")
