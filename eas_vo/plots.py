@@ -396,21 +396,40 @@ def plot_protocol_errors(path: str | Path, scores: dict, title: str = "") -> Non
     fig.savefig(path, dpi=110, format="png")
 
 
+#: The value axis of a sweep over a known key: (what the value is, its unit) for the label
+#: and the title; another key is named as it was swept.
+SWEEP_AXES = {
+    "dataset.illumination": ("illumination", "x the scene's own light"),
+    "dataset.speed": ("camera speed", "x the path's own; synthetic:default 44 deg/s mean"),
+    "dataset.translation_scale": ("camera translation", "x the path's own"),
+}
+
+
 def plot_sweep(path: str | Path, key: str, curves: dict, colours: dict | None = None) -> None:
+    """sweep_figure, saved as PNG."""
+    sweep_figure(key, curves, colours).savefig(path, dpi=110, format="png")
+
+
+def sweep_figure(key: str, curves: dict, colours: dict | None = None):
     """Average APE and NC against a swept value: {(dataset, method, frontend): (n, 3) array of
     (value, NC, APE)}, a line per frontend coloured by it (frontend_colours), styled per method
-    and labelled with the method and dataset when there are several; a logarithmic value axis
-    when the values span more than a decade."""
+    and labelled with the method and dataset when there are several; the value axis labelled
+    with its unit (SWEEP_AXES), logarithmic when the values span 4x or more (base 2 when they
+    are powers of 2 of the smallest), ticked at the swept values; a title naming the dataset
+    and the method when there is one."""
+    from matplotlib.ticker import FuncFormatter
+
     colours = colours or frontend_colours(f for _, _, f in curves)
     methods = list(dict.fromkeys(m for _, m, _ in curves))
-    fig = _figure(figsize=(13, 4), layout="constrained")
+    datasets = list(dict.fromkeys(d for d, _, _ in curves))
+    fig = _figure(figsize=(13, 4.4), layout="constrained")
     ape_ax, nc_ax = fig.subplots(1, 2)
-    several = {part: len({k[i] for k in curves}) > 1 for i, part in enumerate(("dataset", "method", "frontend"))}
+    several = {"dataset": len(datasets) > 1, "method": len(methods) > 1}
     for (dataset, method, frontend), xy in curves.items():
         label = " ".join(
             [frontend]
             + ([method] if several["method"] else [])
-            + ([Path(dataset).name or dataset] if several["dataset"] else [])
+            + ([_panel_name(dataset)] if several["dataset"] else [])
         )
         style = {
             "color": colours[frontend],
@@ -420,16 +439,39 @@ def plot_sweep(path: str | Path, key: str, curves: dict, colours: dict | None = 
         }
         ape_ax.plot(xy[:, 0], xy[:, 2], "o", label=label, **style)
         nc_ax.plot(xy[:, 0], xy[:, 1], "o", label=label, **style)
-    values = np.concatenate([xy[:, 0] for xy in curves.values()]) if curves else np.array([1.0])
-    for ax, what in ((ape_ax, "average APE [rad]"), (nc_ax, "average NC")):
-        if values.min() > 0 and values.max() > 10 * values.min():
-            ax.set_xscale("log")
-        ax.set_xlabel(key)
-        ax.set_ylabel(what)
-        ax.grid(alpha=0.3, which="both")
+    values = np.unique(np.concatenate([xy[:, 0] for xy in curves.values()])) if curves else np.array([1.0])
+    what, unit = SWEEP_AXES.get(key, (key, ""))
+    for ax, figure in ((ape_ax, "average APE [rad]"), (nc_ax, "average NC (corners tracked per frame)")):
+        _sweep_axis(ax, values)
+        ax.set_xlabel(f"{what} [{unit}]" if unit else what)
+        ax.set_ylabel(figure)
+        ax.grid(alpha=0.3, which="major")
     ape_ax.set_yscale("log")
-    fig.legend(*ape_ax.get_legend_handles_labels(), loc="outside right upper", fontsize="small")
-    fig.savefig(path, dpi=110, format="png")
+    ape_ax.yaxis.set_major_formatter(FuncFormatter(lambda v, _: f"{v:g}"))  # 0.1, not 10^-1
+    ape_ax.yaxis.set_minor_formatter(  # and 0.2, 0.5 between
+        FuncFormatter(lambda v, _: f"{v:g}" if round(v / 10 ** np.floor(np.log10(v))) in (2, 5) else "")
+    )
+    fig.legend(*ape_ax.get_legend_handles_labels(), loc="outside right upper", fontsize="small", title="source")
+    title = f"Average APE and NC against {what}"
+    named = [_panel_name(datasets[0])] if len(datasets) == 1 else []
+    named += [methods[0]] if len(methods) == 1 else []
+    fig.suptitle(title + (f": {', '.join(named)}" if named else ""), fontsize="medium")
+    return fig
+
+
+def _sweep_axis(ax, values: np.ndarray) -> None:
+    """A sweep's value axis: logarithmic where the values are positive and span 4x or more
+    (base 2 where each is a power of 2 of the smallest, else base 10), ticked and labelled at
+    the values themselves (up to 12 of them)."""
+    from matplotlib.ticker import FixedLocator, FuncFormatter, NullLocator
+
+    if values.min() > 0 and values.max() >= 4 * values.min():
+        octaves = np.log2(values / values.min())
+        ax.set_xscale("log", base=2 if np.allclose(octaves, np.round(octaves)) else 10)
+    if len(values) <= 12:
+        ax.xaxis.set_major_locator(FixedLocator(values))
+        ax.xaxis.set_minor_locator(NullLocator())
+        ax.xaxis.set_major_formatter(FuncFormatter(lambda v, _: f"{v:g}"))
 
 
 def plot_euler_grid(

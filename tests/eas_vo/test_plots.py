@@ -265,3 +265,41 @@ def test_a_gallery_shows_each_sensor_pixel_up_to_its_widest(tmp_path):
         shown = min(width, plots.GALLERY_MAX_PX)
         assert len(names) * shown <= fig_w <= len(names) * (shown + plots.GALLERY_MARGIN_PX), (width, fig_w)
         assert 2 * shown * height / width <= fig_h, (height, fig_h)
+
+
+def test_a_sweep_is_drawn_against_its_values_in_their_units():
+    """compare's sweep figure: a title naming the dataset and method, the value axis labelled
+    with what the value is and its unit (not the config key), a speed sweep on a log-2 axis
+    ticked at the speeds themselves, an illumination sweep ticked at its lights; each frontend
+    in the colour compare gives it."""
+    from eas_vo.experiments.gallery import PAPER_COLOURS
+
+    to_rgb = matplotlib.colors.to_rgb
+    frontends = ["original", "eas"]
+    colours = plots.frontend_colours(frontends, PAPER_COLOURS)
+    speeds = {
+        ("synthetic:default", "klt+chain", f): np.array([[1, 200, 0.1], [2, 190, 0.2], [4, 180, 0.4]])
+        for f in frontends
+    }
+    fig = plots.sweep_figure("dataset.speed", speeds, colours)
+    ape_ax, nc_ax = fig.axes[:2]
+    assert fig.get_suptitle() == "Average APE and NC against camera speed: synthetic:default, klt+chain"
+    for ax in (ape_ax, nc_ax):
+        assert ax.get_xscale() == "log" and ax.xaxis.get_transform().base == 2
+        assert list(ax.get_xticks()) == [1, 2, 4]
+        assert [t.get_text() for t in ax.get_xticklabels()] == ["1", "2", "4"]
+        assert ax.get_xlabel().startswith("camera speed [x ") and "dataset.speed" not in ax.get_xlabel()
+    assert {line.get_label(): to_rgb(line.get_color()) for line in ape_ax.lines} == {
+        f: to_rgb(colours[f]) for f in frontends
+    }
+    lights = {
+        k: np.array([[0.05, 0, 0.2], [0.1, 3, 0.2], [0.2, 14, 0.9], [0.5, 20, 0.5], [1, 28, 0.4]]) for k in speeds
+    }
+    ax = plots.sweep_figure("dataset.illumination", lights, colours).axes[0]
+    assert ax.get_xscale() == "log" and ax.xaxis.get_transform().base == 10
+    assert [t.get_text() for t in ax.get_xticklabels()] == ["0.05", "0.1", "0.2", "0.5", "1"]
+    assert ax.get_xlabel() == "illumination [x the scene's own light]"
+    ax = plots.sweep_figure("tracker.max_corners", {("d", "m", "eas"): np.array([[100, 1, 0.2], [200, 2, 0.1]])}).axes[
+        0
+    ]
+    assert ax.get_xscale() == "linear" and ax.get_xlabel() == "tracker.max_corners"  # an unknown key: named as swept
