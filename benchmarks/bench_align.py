@@ -21,6 +21,7 @@ from pathlib import Path
 
 import numpy as np
 from faster_real import thinned
+from study import add_real, real_folder
 
 from eas_vo import config, pipeline
 from eas_vo.trackers import alignment, klt
@@ -75,19 +76,18 @@ def angle_deg(A: np.ndarray, B: np.ndarray) -> float:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--real", type=Path, default=Path("../shared/data/ecd/shapes_rotation_0-30s"))
+    add_real(parser)
     parser.add_argument("--every", type=int, nargs="+", default=[1, 2, 3], help="keep every N-th frame")
     parser.add_argument("--save", type=Path, help="write each fallback's rotation to this .npz")
     parser.add_argument("--compare", type=Path, help="compare each fallback's rotation with this saved .npz")
     args = parser.parse_args()
-    if not (args.real / "images.txt").is_file():
-        raise SystemExit(f"{args.real}: no images.txt (give the real excerpt's folder with --real)")
+    real = real_folder(args.real)
     saved, reference = {}, dict(np.load(args.compare)) if args.compare else None
     print("| frames | fallback frames | per fallback frame, median / mean [ms] | run frames/s | APE [rad] |")
     print("|---|---|---|---|---|")
     with tempfile.TemporaryDirectory() as tmp:
         for every in args.every:
-            metrics, seconds, found = instrumented_run(thinned(args.real, Path(tmp) / f"every-{every}", every))
+            metrics, seconds, found = instrumented_run(thinned(real, Path(tmp) / f"every-{every}", every))
             ms = 1e3 * np.array(seconds)
             print(
                 f"| every {every} | {len(ms)} | {np.median(ms):.1f} / {ms.mean():.1f} | {metrics['frames_per_s']:.0f} "

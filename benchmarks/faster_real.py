@@ -16,6 +16,7 @@ import tempfile
 from pathlib import Path
 
 from gyro_clock import with_gyro_from_ground_truth
+from study import add_real, add_smoke, first, real_folder, window
 
 from eas_vo import config, pipeline
 
@@ -41,7 +42,7 @@ def thinned(folder: Path, out: Path, every: int) -> Path:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--real", type=Path, default=Path("../shared/data/ecd/shapes_rotation_0-30s"))
+    add_real(parser)
     parser.add_argument("--every", type=int, nargs="+", default=[1, 2, 3], help="keep every N-th frame")
     parser.add_argument("--trackers", nargs="+", default=list(TRACKERS), choices=list(TRACKERS))
     parser.add_argument(
@@ -51,21 +52,22 @@ def main() -> None:
         metavar="SECTION.KEY=VALUE",
         help="change best.toml for every tracker's runs (repeatable; a key a tracker lacks is an error)",
     )
+    add_smoke(parser)
     args = parser.parse_args()
-    if not (args.real / "images.txt").is_file():
-        raise SystemExit(f"{args.real}: no images.txt (give the real excerpt's folder with --real)")
+    real = real_folder(args.real)
+    windows = {label: window(*span, args.smoke) for label, span in first(WINDOWS.items(), args.smoke)}
     with tempfile.TemporaryDirectory() as tmp:
-        rig = with_gyro_from_ground_truth(args.real, Path(tmp) / "rig", seed=0)
-        print("| frames | IMU | tracker | " + " | ".join(WINDOWS) + " |")
-        print("|---" * (len(WINDOWS) + 3) + "|")
-        for every in args.every:
-            for imu, source in (("-", args.real), ("gyro", rig)):
+        rig = with_gyro_from_ground_truth(real, Path(tmp) / "rig", seed=0)
+        print("| frames | IMU | tracker | " + " | ".join(windows) + " |")
+        print("|---" * (len(windows) + 3) + "|")
+        for every in first(args.every, args.smoke):
+            for imu, source in (("-", real), ("gyro", rig)):
                 folder = thinned(source, Path(tmp) / f"every-{every}-{imu}", every)
-                for name in args.trackers:
+                for name in first(args.trackers, args.smoke):
                     tracker, changes = TRACKERS[name]
                     clock = [f"run.imu_time_offset_s={GYRO_CLOCK_S}"] if source is rig else []
                     cells = []
-                    for start, duration in WINDOWS.values():
+                    for start, duration in windows.values():
                         cfg = config.resolve(
                             "best",
                             {

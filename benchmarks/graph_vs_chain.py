@@ -28,6 +28,7 @@ from pathlib import Path
 
 import numpy as np
 from select_best import seed_folder
+from study import add_real, real_folder
 
 from eas_vo import config, pipeline, registry
 from eas_vo.backends.gtsam_graph import GtsamBackend
@@ -101,9 +102,7 @@ def summary(rows: list[dict], variants: list[str]) -> None:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument(
-        "--real", default="../shared/data/ecd/shapes_rotation_0-30s", help="the real excerpt ('' to leave it out)"
-    )
+    add_real(parser, "the real recording ('' to leave it out)")
     parser.add_argument("--seeds", type=int, nargs="*", default=[51, 52, 53], help="report simulator seeds")
     parser.add_argument("--only", nargs="*", metavar="LABEL", help="run only these data (e.g. 'seed 51')")
     parser.add_argument("--configs", nargs="*", default=list(CONFIGS), choices=list(CONFIGS))
@@ -111,9 +110,10 @@ def main() -> None:
     parser.add_argument("--noise", nargs="*", default=["covariance", "inliers"], choices=["covariance", "inliers"])
     parser.add_argument("--rows", type=Path, help="write every run's APEs to this CSV file")
     args = parser.parse_args()
+    real = str(real_folder(args.real)) if args.real else ""
     rows = []
     variants = [f"{noise}/{kernel}" for noise in args.noise for kernel in args.kernels]
-    for label, (split, dataset, frontends, extra) in data(args.real, args.seeds).items():
+    for label, (split, dataset, frontends, extra) in data(real, args.seeds).items():
         if args.only and label not in args.only:
             continue
         for name in args.configs:

@@ -17,6 +17,7 @@ from pathlib import Path
 
 import numpy as np
 from scipy.spatial.transform import Rotation, Slerp
+from study import add_real, real_folder
 
 from eas_vo import config, pipeline
 
@@ -41,7 +42,7 @@ def with_gyro_from_ground_truth(real: Path, out: Path, seed: int, bias_rad_s: fl
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--real", type=Path, default=Path("../shared/data/ecd/shapes_rotation_0-30s"))
+    add_real(parser)
     parser.add_argument("--offsets", type=float, nargs="+", default=[0.0, 0.008, 0.009, 0.01, 0.011])
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument(
@@ -52,7 +53,7 @@ def main() -> None:
     )
     args = parser.parse_args()
     with tempfile.TemporaryDirectory() as tmp:
-        rig = with_gyro_from_ground_truth(args.real, Path(tmp) / "rig", args.seed, args.bias)
+        rig = with_gyro_from_ground_truth(real_folder(args.real), Path(tmp) / "rig", args.seed, args.bias)
         print("| run.imu_time_offset_s | " + " | ".join(WINDOWS) + " | warning |")
         print("|---" * (len(WINDOWS) + 2) + "|")
         rows = [(f"{offset:g}", [f"run.imu_time_offset_s={offset}"]) for offset in args.offsets]

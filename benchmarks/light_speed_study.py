@@ -25,6 +25,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+from study import SMOKE_S, add_smoke
+
 from eas_vo.experiments import grid
 from eas_vo.experiments.cells import Cell, Method, dataset_names
 from eas_vo.experiments.gallery import PAPER_COLOURS, PAPER_ORDER
@@ -251,7 +253,11 @@ def main() -> None:
     parser.add_argument("--out", type=Path, default=Path("results/light_speed"))
     parser.add_argument("--jobs", type=int, default=1, help="parallel processes per grid (default 1)")
     parser.add_argument("--report-only", action="store_true", help="rewrite table and figure from study.json")
+    add_smoke(parser)
     args = parser.parse_args()
+    if args.smoke:
+        args.seeds, args.illumination, args.speed = args.seeds[:1], args.illumination[:1], args.speed[:1]
+        args.duration = SMOKE_S
     if set(args.seeds) & USED_SEEDS:
         raise SystemExit(
             f"seeds {sorted(set(args.seeds) & USED_SEEDS)} chose something or were looked at before: use others"

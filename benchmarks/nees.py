@@ -46,6 +46,7 @@ from pathlib import Path
 import numpy as np
 from scipy.spatial.transform import Rotation
 from status_calibration import REAL_FRONTENDS, REAL_OFFSET_S, SYNTHETIC_FRONTENDS, columns, ground_truth
+from study import add_real, real_folder
 
 from eas_vo import concurrency, config, pipeline
 from eas_vo.geometry import covariance as cov_module
@@ -526,11 +527,7 @@ def tails(edges: Edges, scaled: np.ndarray, factors: dict) -> None:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument(
-        "--real",
-        default="../shared/data/ecd/shapes_rotation_0-30s",
-        help="the real excerpt's folder ('' to leave it out)",
-    )
+    add_real(parser, "the real recording ('' to leave it out)")
     parser.add_argument("--seeds", type=int, nargs="*", default=[41, 42, 43], help="report simulator seeds")
     parser.add_argument("--only", nargs="*", metavar="LABEL", help="run only these data (e.g. 'seed 41')")
     parser.add_argument("--methods", nargs="*", default=list(cov_module.METHODS), help="covariance methods")
@@ -538,12 +535,13 @@ def main() -> None:
     parser.add_argument("--from", dest="sources", type=Path, nargs="*", help="read the edges from these CSV files")
     parser.add_argument("--threads", type=int, default=1, help="eas-vo's threads (default 1)")
     args = parser.parse_args()
+    real = str(real_folder(args.real)) if args.real else ""
     concurrency.set_threads(args.threads)
     if args.sources:
         rows = [row for source in args.sources for row in read_rows(source)]
     else:
         models, rows = tagging(), []
-        for spec in runs(args.real, args.seeds, args.only):
+        for spec in runs(real, args.seeds, args.only):
             label, split, _, tracker, file, frontend, _ = spec
             for method in methods_of(tracker, args.methods):
                 rows += edge_rows(models, *spec, method)

@@ -18,6 +18,7 @@ import sys
 from pathlib import Path
 
 from select_best import DEVELOPMENT_FAST_SEEDS, SELECTION_SEEDS, seed_folder
+from study import SMOKE_S, add_real, add_smoke, first, real_folder, window
 
 from eas_vo import config, pipeline
 
@@ -46,11 +47,7 @@ def run(name: str, dataset: str, frontend: str, extra: dict, best_sets: list[str
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument(
-        "--real",
-        default="../shared/data/ecd/shapes_rotation_0-30s",
-        help="the real excerpt's folder ('' to leave it out)",
-    )
+    add_real(parser, "the real recording ('' to leave it out)")
     parser.add_argument("--seeds", type=int, nargs="*", default=[41, 42, 43], help="simulator seeds not used to choose")
     parser.add_argument(
         "--fast-seeds",
@@ -76,7 +73,11 @@ def main() -> None:
         metavar="SECTION.KEY=VALUE",
         help="report best.toml with this value changed (repeatable)",
     )
+    add_smoke(parser)
     args = parser.parse_args()
+    real = str(real_folder(args.real)) if args.real else ""
+    smoke = args.smoke
+    cut = {"duration_s": SMOKE_S} if smoke else {}
     if set(args.seeds) & set(SELECTION_SEEDS):
         raise SystemExit(
             f"seeds {sorted(set(args.seeds) & set(SELECTION_SEEDS))} took part in a selection (select_best.py): report on others"
@@ -86,24 +87,28 @@ def main() -> None:
             f"seeds {sorted(set(args.fast_seeds) & set(DEVELOPMENT_FAST_SEEDS))} at speed 4 were developed on: report on others"
         )
     columns = {}
-    if args.real and Path(args.real).is_dir():
+    if real and Path(real).is_dir():
         columns.update(
             {
-                label: (args.real, "histeq", {"start_s": s, "duration_s": d, "time_offset_s": 0.01})
-                for label, (s, d) in REAL_WINDOWS.items()
+                label: (
+                    real,
+                    "histeq",
+                    {**dict(zip(("start_s", "duration_s"), window(s, d, smoke))), "time_offset_s": 0.01},
+                )
+                for label, (s, d) in first(REAL_WINDOWS.items(), smoke)
             }
         )
-    elif args.real:
-        print(f"{args.real}: not found, real columns skipped", file=sys.stderr)
-    columns.update({f"seed {n}": (str(seed_folder(n)), "eas", {}) for n in args.seeds})
+    elif real:
+        print(f"{real}: not found, real columns skipped", file=sys.stderr)
+    columns.update({f"seed {n}": (str(seed_folder(n, smoke=smoke)), "eas", {}) for n in first(args.seeds, smoke)})
     columns.update(
         {
-            f"seed {n} (speed {args.fast_speed:g})": (str(seed_folder(n, args.fast_speed)), "eas", {})
-            for n in args.fast_seeds
+            f"seed {n} (speed {args.fast_speed:g})": (str(seed_folder(n, args.fast_speed, smoke)), "eas", {})
+            for n in first(args.fast_seeds, smoke)
         }
     )
     names = [Path(d).name for d in args.sequence]
-    columns.update({(name if names.count(name) == 1 else d): (d, "eas", {}) for name, d in zip(names, args.sequence)})
+    columns.update({(name if names.count(name) == 1 else d): (d, "eas", cut) for name, d in zip(names, args.sequence)})
     print("| | " + " | ".join(columns) + " |")
     print("|---" * (len(columns) + 1) + "|")
     for name in CONFIGS:
@@ -111,11 +116,12 @@ def main() -> None:
         print(f"| {name} | " + " | ".join(cells) + " |", flush=True)
     if args.no_speed:
         return
-    speed = {"synthetic:default": ("synthetic:default", "eas", {})}
+    speed = {"synthetic:default": ("synthetic:default", "eas", cut)}
     if "real 0-30 s" in columns:
         speed["real 0-30 s"] = columns["real 0-30 s"]
     for label, column in speed.items():
-        m = max((run("best.toml", *column, args.set) for _ in range(3)), key=lambda m: m["realtime_factor"])
+        runs = 1 if smoke else 3
+        m = max((run("best.toml", *column, args.set) for _ in range(runs)), key=lambda m: m["realtime_factor"])
         print(
             f"best.toml on {label} (best of 3): {m['frames_per_s']:.0f} frames/s, {m['realtime_factor']:.1f}x real time"
         )

@@ -26,6 +26,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+from study import SMOKE_S, add_real, add_smoke, first, real_folder, window
+
 from eas_vo import config, pipeline
 from eas_vo.config import parse_set
 from eas_vo.io.cache import cache_folder
@@ -46,9 +48,11 @@ REAL_TIME_BAR = 10.0
 WITHIN = 0.02
 
 
-def seed_folder(seed: int, speed: float = 1.0) -> Path:
-    """The default sequence simulated with `seed`, at `speed` (simulated once)."""
+def seed_folder(seed: int, speed: float = 1.0, smoke: bool = False) -> Path:
+    """The default sequence simulated with `seed`, at `speed` (simulated once; under --smoke
+    its first SMOKE_S seconds)."""
     name = f"seed-{seed}" if speed == 1.0 else f"seed-{seed}-speed-{speed:g}"
+    name += f"-{SMOKE_S:g}s" if smoke else ""
     folder = cache_folder("simulated", "simulator seeds of benchmarks/select_best.py and report_best.py") / name
     if not (folder / "images.txt").exists():
         subprocess.run(
@@ -61,6 +65,7 @@ def seed_folder(seed: int, speed: float = 1.0) -> Path:
                 str(seed),
                 "--speed",
                 str(speed),
+                *(["--duration", str(SMOKE_S)] if smoke else []),
                 "--out",
                 str(folder),
                 "--overwrite",
@@ -95,7 +100,7 @@ def geometric_mean(values) -> float:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--real", default="../shared/data/ecd/shapes_rotation_0-30s", help="the real excerpt's folder")
+    add_real(parser)
     parser.add_argument(
         "--selection-seeds",
         type=int,
@@ -111,16 +116,19 @@ def main() -> None:
         metavar="KEY=V1,V2",
         help="the values tried, replacing the default candidates (repeatable)",
     )
+    add_smoke(parser)
     args = parser.parse_args()
     candidates = varied(args.vary) if args.vary else CANDIDATES
-    if not Path(args.real).is_dir():
-        raise SystemExit(f"{args.real}: the real excerpt is needed (see ../shared/data/README.md)")
-    seeds = [str(seed_folder(n)) for n in args.selection_seeds]
+    real = str(real_folder(args.real))
+    seeds = [str(seed_folder(n, smoke=args.smoke)) for n in first(args.selection_seeds, args.smoke)]
+    runs = 1 if args.smoke else 3
+    real_window = dict(zip(("start_s", "duration_s"), window(0.0, 20.0, args.smoke)))
+    default_window = {"duration_s": SMOKE_S} if args.smoke else {}
     rows = []
-    for values in itertools.product(*candidates.values()):
+    for values in first(itertools.product(*candidates.values()), args.smoke):
         assignments = [f"{k}={v}" for k, v in zip(candidates, values)]
-        ape_real, rtf_real = measure(args.real, "histeq", {"duration_s": 20.0, "time_offset_s": 0.01}, assignments)
-        ape_default, rtf_syn = measure("synthetic:default", "eas", {}, assignments)
+        ape_real, rtf_real = measure(real, "histeq", {**real_window, "time_offset_s": 0.01}, assignments, runs)
+        ape_default, rtf_syn = measure("synthetic:default", "eas", default_window, assignments, runs)
         apes_syn = [ape_default] + [measure(folder, "eas", {}, assignments, runs=1)[0] for folder in seeds]
         ape_syn = geometric_mean(apes_syn)
         rows.append(

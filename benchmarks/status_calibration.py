@@ -41,6 +41,7 @@ from typing import NamedTuple
 
 import numpy as np
 from select_best import seed_folder
+from study import add_real, real_folder
 
 from eas_vo import concurrency, config, pipeline, registry
 from eas_vo.geometry.rotations import geodesic_angle, interpolate_poses
@@ -330,11 +331,7 @@ def report(table: Table, bound: float, step_bound: bool) -> None:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument(
-        "--real",
-        default="../shared/data/ecd/shapes_rotation_0-30s",
-        help="the real excerpt's folder ('' to leave it out)",
-    )
+    add_real(parser, "the real recording ('' to leave it out)")
     parser.add_argument("--seeds", type=int, nargs="*", default=[41, 42, 43], help="held-out simulator seeds")
     parser.add_argument("--only", nargs="*", metavar="LABEL", help="run only these data (e.g. 'seed 41' 'real 0-20 s')")
     parser.add_argument("--rows", type=Path, help="write every measurement to this CSV file")
@@ -351,6 +348,7 @@ def main() -> None:
     )
     parser.add_argument("--threads", type=int, default=1, help="eas-vo's threads (default 1)")
     args = parser.parse_args()
+    real = str(real_folder(args.real)) if args.real else ""
     concurrency.set_threads(args.threads)
     right_px, wrong_px = (float(v) for v in args.cuts.split(","))
     if args.sources:
@@ -358,7 +356,7 @@ def main() -> None:
     else:
         rows, decided = [], watch_decisions()
         seeds = [n for n in args.seeds if not args.only or f"seed {n}" in args.only]  # simulated only where needed
-        for label, (split, dataset, frontends, extra) in columns(args.real, seeds).items():
+        for label, (split, dataset, frontends, extra) in columns(real, seeds).items():
             if args.only and label not in args.only:
                 continue
             runs = [(tracker, file, frontend) for (tracker, file), frontend in itertools.product(CONFIGS, frontends)]

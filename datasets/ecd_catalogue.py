@@ -23,6 +23,7 @@ from urllib.parse import unquote, urlsplit
 from eas_vo.errors import DataError, EasVoError
 from eas_vo.io.atomic import atomic_path, current_umask
 from eas_vo.io.cache import cache_folder
+from eas_vo.io.download import download_error
 from eas_vo.io.tables import text_bytes
 
 logger = logging.getLogger(__name__)
@@ -80,7 +81,6 @@ def fetch(name: str, folder: str | Path | None = None, progress: bool = False) -
     name in either case).
     """
     import pooch
-    import requests
 
     md5s = registry()
     if name not in md5s:
@@ -88,35 +88,51 @@ def fetch(name: str, folder: str | Path | None = None, progress: bool = False) -
     target = local_path(name, folder)
     if target.parent.exists() and not target.parent.is_dir():
         raise EasVoError(f"{target.parent}: the data folder (--dir or EAS_VO_DATA_DIR) is a file")
-    known = f"md5:{md5s[name]}"
-    if target.is_file() and pooch.file_hash(str(target), alg="md5") == md5s[name]:
+    found = pooch.file_hash(str(target), alg="md5") if target.is_file() else None
+    if found == md5s[name]:
         return target
     url = os.environ.get("EAS_VO_DATA_URL", BASE_URL).rstrip("/") + "/"
+    try:
+        return _fetch_into(target, url, md5s[name], progress)
+    except EasVoError as exc:
+        if found is None:
+            raise
+        raise EasVoError(
+            f"{target}: does not match its MD5 {md5s[name]} (found {found}: a partial or another file) "
+            f"and was not fetched again: {exc}"
+        ) from None
+
+
+def _fetch_into(target: Path, url: str, md5: str, progress: bool) -> Path:
+    """`target` fetched from `url` (a server or a local mirror folder) and checked against `md5`."""
+    import pooch
+    import requests
+
     mirror = _local_mirror(url)
     if mirror is not None:
-        return _copy_verified(mirror / target.name, target, md5s[name])
+        return _copy_verified(mirror / target.name, target, md5)
     if urlsplit(url).scheme not in ("http", "https", "ftp"):
         raise EasVoError(
             f"EAS_VO_DATA_URL={url!r}: expected an http://, https:// or ftp:// address, "
             "or a local folder (a path or a file:// URL)"
         )
-    logger.info(f"fetching {name}.zip ({_size_text(url + target.name)}) from {url} into {target.parent}")
+    logger.info(f"fetching {target.name} ({_size_text(url + target.name)}) from {url} into {target.parent}")
     pooch.get_logger().setLevel(logging.WARNING)  # our notice above replaces its own
-    store = pooch.create(path=target.parent, base_url=url, registry={target.name: known}, retry_if_failed=2)
+    store = pooch.create(path=target.parent, base_url=url, registry={target.name: f"md5:{md5}"}, retry_if_failed=2)
     try:
         store.fetch(target.name, progressbar=progress)
     except (ValueError, requests.RequestException, OSError) as exc:  # hash, connection, HTTP status, disk
-        detail = str(exc).splitlines()[0] if str(exc) else "no detail"
-        if isinstance(exc, ValueError) and "hash" in detail.lower():
-            raise EasVoError(
-                f"{url}{target.name}: downloaded file does not match its MD5 {md5s[name]} "
-                f"(tried 3 times; nothing was kept)"
-            ) from None
-        raise EasVoError(
-            f"{url}{target.name}: download failed, nothing was kept ({type(exc).__name__}: {detail})"
-        ) from None
+        raise download_error(exc, url + target.name, f"MD5 {md5} (tried 3 times)", offline_route(target)) from None
     os.chmod(target, 0o666 & ~current_umask())  # pooch's temporary file was private
     return target
+
+
+def offline_route(target: Path) -> str:
+    """What to do without the server, for the zip `target`."""
+    return (
+        f"copy {target.name} into {target.parent} (or set EAS_VO_DATA_DIR to the folder holding it), "
+        "or set EAS_VO_DATA_URL to a folder of the zips"
+    )
 
 
 def _local_mirror(url: str) -> Path | None:
@@ -161,7 +177,7 @@ def _size_text(url: str) -> str:
     try:
         answer = requests.head(url, allow_redirects=True, timeout=10)
     except requests.ConnectionError as exc:  # refused, unknown host, or no answer to connect (not a slow one)
-        raise EasVoError(f"{url}: cannot reach the server, nothing was downloaded ({type(exc).__name__})") from None
+        raise download_error(exc, url, "MD5", offline_route(data_dir() / Path(urlsplit(url).path).name)) from None
     except requests.RequestException:
         return "size unknown"
     if answer.status_code in (404, 410):

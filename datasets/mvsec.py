@@ -1,5 +1,6 @@
 """MVSEC recordings (Zhu et al., "The Multivehicle Stereo Event Camera Dataset", RA-L 2018) in
-their HDF5 layout, read with h5py (and hdf5plugin's filters for compressed datasets):
+their HDF5 layout, read with h5py (and, when installed, hdf5plugin's filters for datasets
+compressed with blosc, zstd, lz4 or bitshuffle, which HDF5 itself lacks):
 
     NAME_data.hdf5   davis/{left,right}/
         events         (N, 4) float64   x y t p   (x, y [px], t [s], p in {-1, 1})
@@ -113,8 +114,11 @@ class MvsecDataset(RecordingReader):
 
     def __init__(self, location: str | Path, config: MvsecConfig | None = None):
         import h5py
-        import hdf5plugin  # noqa: F401  (registers the filters of compressed datasets: blosc, zstd, lz4...)
 
+        try:
+            import hdf5plugin  # noqa: F401  (registers the filters of compressed datasets: blosc, zstd, lz4...)
+        except ImportError:  # optional: _dataset names a filter HDF5 lacks
+            pass
         self.config = c = config or MvsecConfig()
         self.path = Path(location)
         self.label = str(self.path)
@@ -220,6 +224,15 @@ class MvsecDataset(RecordingReader):
             raise DataError(where, f"has shape {shape}, expected {expected}")
         if dset.dtype.newbyteorder("=") != wanted:  # either byte order: HDF5 converts on reading
             raise DataError(where, f"holds {dset.dtype}, expected {wanted}")
+        plist = dset.id.get_create_plist()
+        for k in range(plist.get_nfilters()):
+            code, _, _, name = plist.get_filter(k)
+            if not h5py.h5z.filter_avail(code):
+                raise DataError(
+                    where,
+                    f"is compressed with HDF5 filter {code} ({name.decode(errors='replace') or 'unnamed'}), which this "
+                    'HDF5 lacks: pip install hdf5plugin (or eas-vo\'s "[hdf5]" extra) adds blosc, zstd, lz4 and bitshuffle',
+                )
         return dset
 
     def _read(self, dset, where: str) -> np.ndarray:

@@ -58,6 +58,8 @@ class SyntheticConfig(DvsModel):
         focal_px: the focal length [px] (0: the preset's, scaled to the size).
         lens: `radtan` or `equidistant` ("": the preset's); dist: its coefficients in that model's
             order (empty: the preset's for its own lens, none for the other).
+        duration_s: the length simulated [s] (0: the preset's; a shorter sequence for a quick
+            check, simulated and cached on its own).
     """
 
     illumination: float = 1.0
@@ -69,6 +71,7 @@ class SyntheticConfig(DvsModel):
     focal_px: float = 0.0
     lens: str = ""
     dist: tuple = ()
+    duration_s: float = 0.0
 
     def camera(self) -> SimCamera:
         """The simulated camera these values give."""
@@ -87,6 +90,7 @@ class SyntheticConfig(DvsModel):
         check_range(self, "illumination", 0.0, 1e6, lo_open=True)
         check_range(self, "speed", 0.0, 20.0, lo_open=True)
         check_range(self, "translation_scale", 0.0, 100.0)
+        check_range(self, "duration_s", 0.0, 3600.0)
         check_choice(self, "sensor", SENSORS)
         check_range(self, "width", 0, MAX_SENSOR_PX)
         check_range(self, "height", 0, MAX_SENSOR_PX)
@@ -125,6 +129,7 @@ class SyntheticConfig(DvsModel):
         dvs = DvsModel(**{f.name: getattr(self, f.name) for f in dataclasses.fields(DvsModel)})
         return dataclasses.replace(
             preset,
+            duration_s=self.duration_s or preset.duration_s,
             illumination=preset.illumination * self.illumination,
             speed=preset.speed * self.speed,
             translation_scale=preset.translation_scale * self.translation_scale,

@@ -180,6 +180,12 @@ def parse_set(assignment: str) -> tuple[list[str], Any]:
     return keys, value
 
 
+def assignment(key: str, value) -> str:
+    """The `--set` assignment `KEY=VALUE` giving `key` (`section.key`) the Python `value` (bool,
+    int, float, str or a sequence of them), written as TOML so that parse_set reads it back as given."""
+    return f"{key}={_toml_value(value)}"
+
+
 def bundled_configs() -> dict[str, Path]:
     """Configs shipped with the package (`configs/*.toml`), by stem."""
     root = resources.files("eas_vo.configs")

@@ -28,6 +28,11 @@ class ConfigError(EasVoError):
     """An invalid configuration key or value."""
 
 
+class UsageError(EasVoError):
+    """Command-line options that cannot go together or cannot be read (exit status 2, as for
+    argparse's own usage errors; data and configuration errors exit with 1)."""
+
+
 @dataclass
 class DataWarnings:
     """Problems tolerated under `--lenient`, counted per file and kind, with the first place."""

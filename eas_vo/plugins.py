@@ -191,7 +191,7 @@ class Tracker:
 
     Required: `process(image, t)`. Optional: `reset()`, which `__init__` calls last, so a
     tracker sets up its per-sequence state there, `submit` (overlap with the next image),
-    `needs_imu`, `uses_imu`, `imu_use`, `closes_loops`, `tracker_warnings`,
+    `needs_imu`, `uses_imu`, `imu_use`, `closes_loops`, `tracker_warnings`, `tracked_points`,
     `needs_events` (default False) and `reads_images` (default True). It never knows which
     frontend made the images. Frame indices count the images given since construction (or reset), from 0.
     """
@@ -270,6 +270,13 @@ class Tracker:
         identical to `process`'s (the run calls `process` with `--threads 1`)."""
         result = self.process(image, t, **kwargs)
         return lambda: result
+
+    def tracked_points(self) -> tuple[np.ndarray, np.ndarray] | None:
+        """The points behind the frame last given to `process`, for a viewer (`eas-vo view`
+        replays the tracking to draw them; a run reads none): their positions in its image
+        (N, 2) [px] and which of them its rotation's model counts as inliers (N,) bool. None (the
+        default), at any time, for a tracker that tracks no points."""
+        return None
 
 
 @dataclass(frozen=True)

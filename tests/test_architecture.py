@@ -47,12 +47,18 @@ LAYERS = {
         "eas_vo.experiments",
         "eas_vo.sequence",
         "eas_vo.slam",
+        "eas_vo.api",
         "eas_vo.cli",
         "eas_vo.__main__",
     ),
     "plugins": ("eas_vo.frontends", "eas_vo.trackers", "eas_vo.backends", "eas_vo.datasets"),
 }
 PLUGIN_KINDS = set(LAYERS["plugins"])
+#: Imports made on first use of a name, never at import time (PEP 562's module `__getattr__`):
+#: the root exports the Python API so, and `import eas_vo` (every command's) stays light. They
+#: are no edges of the graph, neither down the layers nor in a cycle;
+#: test_the_root_imports_the_api_only_when_asked checks that they stay lazy.
+LAZY_EXPORTS = {"eas_vo": {"eas_vo.api"}}
 
 
 def modules() -> dict[str, ast.Module]:
@@ -107,7 +113,7 @@ ALLOWED = {
 @pytest.fixture(scope="module")
 def graph():
     trees = modules()
-    return {name: imports(name, tree, set(trees)) for name, tree in trees.items()}
+    return {name: imports(name, tree, set(trees)) - LAZY_EXPORTS.get(name, set()) for name, tree in trees.items()}
 
 
 def test_every_module_has_a_layer(graph):
@@ -149,6 +155,21 @@ def test_no_import_cycle(graph):
     for m in sorted(graph):
         if m not in state:
             visit(m, [])
+
+
+def test_the_root_imports_the_api_only_when_asked():
+    """`import eas_vo` imports no module of the package (its lazy exports wait for their names);
+    each name of its `__all__` is then eas_vo.api's."""
+    import subprocess
+    import sys
+
+    code = (
+        "import sys, eas_vo; loaded = sorted(m for m in sys.modules if m.startswith('eas_vo.')); "
+        "exported = [getattr(eas_vo, name) is getattr(eas_vo.api, name) for name in eas_vo.__all__]; "
+        "print(loaded, all(exported), len(exported))"
+    )
+    said = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=REPOSITORY.parent)
+    assert said.stdout.split() == ["[]", "True", "5"], said.stderr
 
 
 def test_core_code_names_no_plugin():

@@ -11,7 +11,7 @@ from pathlib import Path
 import pytest
 
 from eas_vo.cli.main import build_parser, main
-from helpers import REPOSITORY
+from helpers import REPOSITORY, code_blocks, shell_commands
 
 PAGES = [REPOSITORY / "README.md", *sorted((REPOSITORY / "docs").glob("*.md"))]
 PLUGIN_PACKAGE = REPOSITORY / "tests" / "plugin_example"
@@ -21,15 +21,6 @@ FIRST_RUN = "eas+klt+chain on synthetic:default:"
 
 def page_id(path: Path) -> str:
     return str(path.relative_to(REPOSITORY))
-
-
-def code_blocks(text: str, language: str | None = None) -> list[str]:
-    """The fenced code blocks of a Markdown text (of one language, if given)."""
-    return [
-        body
-        for lang, body in re.findall(r"^```(\w*)\n(.*?)^```", text, re.S | re.M)
-        if language is None or lang == language
-    ]
 
 
 def prose(text: str) -> str:
@@ -89,24 +80,8 @@ def test_the_link_check_sees_broken_files_and_anchors(tmp_path):
 
 
 def command_lines(text: str) -> list[list[str]]:
-    """Every `eas-vo ...` command in the text's code blocks, as argv after `eas-vo` (lines
-    joined at a trailing backslash; `&&`, `|` and `;` separate commands; comments dropped)."""
-    commands = []
-    for block in code_blocks(text):
-        for line in block.replace("\\\n", " ").splitlines():
-            try:
-                words = shlex.split(line, comments=True)
-            except ValueError:
-                continue
-            command: list[str] = []
-            for word in [*words, "&&"]:
-                if word in ("&&", "||", "|", ";"):
-                    if command and Path(command[0]).name == "eas-vo":
-                        commands.append(command[1:])
-                    command = []
-                else:
-                    command.append(word)
-    return commands
+    """Every `eas-vo ...` command in the text's code blocks, as argv after `eas-vo`."""
+    return [words[1:] for _, words in shell_commands(text) if Path(words[0]).name == "eas-vo"]
 
 
 DOCUMENTED_COMMANDS = [(page_id(path), argv) for path in PAGES for argv in command_lines(path.read_text())]

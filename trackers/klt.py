@@ -31,6 +31,7 @@ from eas_vo.trackers.measurement import (
     TwoViewConfig,
     frame_record,
     measure,
+    measure_with_inliers,
     status,
     weakness,
 )
@@ -40,6 +41,8 @@ from eas_vo.validation import check_choice, check_range
 
 PREDICTIONS = ("none", "gyro", "velocity", "auto")
 FALLBACKS = ("none", "match", "align")
+#: No correspondences: (where they were, where LK tracked them), each (0, 2) [px].
+_NO_PAIRS = (np.empty((0, 2), np.float32), np.empty((0, 2), np.float32))
 
 
 @dataclass(frozen=True)
@@ -188,6 +191,7 @@ class KltTracker(Tracker):
         self._kf_index = 0
         self._k = -1
         self._last_step: tuple[np.ndarray, float] | None = None  # (R_{k-2}_{k-1}, its interval [s]) for velocity
+        self._last_pairs = _NO_PAIRS  # the corners tracked into the frame last given (tracked_points)
         self._unfinished: deque[_Frame] = deque()  # frames submitted whose steps after the geometry have not run
         self._loops = LoopCloser(self.config, self.camera) if self.config.loop_closure else None
         self._audit = FallbackAudit("align") if self.config.fallback == "align" else None
@@ -244,11 +248,13 @@ class KltTracker(Tracker):
         geometry; returns the function that gives the frame's (record, edges)."""
         k, t_prev, done = self._begins(image, t)
         if done is not None:
+            self._last_pairs = _NO_PAIRS
             return lambda: done
         previous = _View(self._prev_image, self._prev_pts, self._prev_corners)
         predicted = self.predicted_rotation(t_prev, t)
         cur, ok = self.track(image, predicted)
         nc = int(ok.sum())
+        self._last_pairs = (self._prev_pts[ok], cur[ok])
         # the geometry runs beside the next frame's tracking, unless this frame's result decides
         # how the next one starts (a fallback may detect corners afresh: _redetects waits for it)
         start = concurrency.submit if self.config.fallback == "none" else concurrency.done_now
@@ -257,6 +263,17 @@ class KltTracker(Tracker):
         self._unfinished.append(frame)
         self._advance(image, self._redetects(frame), cur, ok, k)
         return lambda: self._finish(frame)
+
+    def tracked_points(self) -> tuple[np.ndarray, np.ndarray]:
+        """The corners LK tracked into the frame last given, (N, 2) [px], and which of them the
+        two-view model fitted to them counts as inliers, (N,) bool: measured again
+        (measurement.measure_with_inliers; the estimate is deterministic), all False below
+        threshold1, where none is fitted. No corners for a first frame or a repeated time; a
+        fallback's own correspondences are not shown."""
+        pts_prev, pts_cur = self._last_pairs
+        if len(pts_cur) < self.config.threshold1:
+            return pts_cur, np.zeros(len(pts_cur), bool)
+        return pts_cur, measure_with_inliers(self.config, self.camera, pts_prev, pts_cur, self._k - 1, self._k)[1]
 
     def _begins(self, image: np.ndarray, t: float) -> tuple[int, float, tuple | None]:
         """The frame's start: (its index, the previous frame's time [s], and for a first frame or

@@ -165,13 +165,22 @@ def measure(
     A weak step that is kept turns the bearings by at most about three times their median
     motion; a step that is not weak has its model's own support (the paper's estimate).
     """
+    return measure_with_inliers(config, camera, pts_from_px, pts_to_px, i, j)[0]
+
+
+def measure_with_inliers(
+    config: TwoViewConfig, camera: CameraModel, pts_from_px: np.ndarray, pts_to_px: np.ndarray, i: int, j: int
+) -> tuple[RelativeRotation | None, np.ndarray]:
+    """`measure`'s rotation and which of the N correspondences its model counts as inliers,
+    (N,) bool (all False when it returns None)."""
+    none = np.zeros(len(pts_from_px), bool)
     x_from, x_to = camera.undistort(pts_from_px), camera.undistort(pts_to_px)
     threshold = config.ransac_threshold_px / camera.focal_px
     found = rotation_from_correspondences(
         x_from, x_to, threshold, config.ransac_confidence, config.essential_method, config.geometry, config.covariance
     )
     if found is None or (found.model == "essential" and found.inliers < config.min_inliers):
-        return None
+        return None, none
     edge = RelativeRotation(
         i,
         j,
@@ -184,8 +193,8 @@ def measure(
     if weakness(config, edge, camera.focal_px) and not explains(
         found.R_prev_cur.T, bearings(x_from), bearings(x_to), threshold
     ):
-        return None
-    return edge
+        return None, none
+    return edge, found.inlier_mask
 
 
 def weakness(config: TwoViewConfig, edge: RelativeRotation, focal_px: float) -> str:

@@ -16,7 +16,7 @@ from eas_vo.cli.options import (
     shared_overrides,
     shows_progress,
 )
-from eas_vo.errors import EasVoError
+from eas_vo.errors import UsageError
 
 
 def add_parser(sub) -> None:
@@ -85,7 +85,7 @@ def run(args) -> int:
     from eas_vo.experiments.cells import grid_methods, plan
     from eas_vo.experiments.gallery import PAPER_ORDER
     from eas_vo.experiments.paper import default_methods
-    from eas_vo.io.outputs import check_grid_folder, check_writable_folder
+    from eas_vo.io.outputs import check_grid_folder, check_writable_folder, removed_if_failed
 
     out = check_writable_folder(args.out)
     run_defaults = config_mod.run_section(args.config, args.assignments)  # e.g. best.toml's tracker and backend
@@ -105,16 +105,17 @@ def run(args) -> int:
         methods = default_methods(run_defaults.tracker, run_defaults.backend)
     cells = plan(datasets, name_list("--frontends", args.frontends or ",".join(PAPER_ORDER)), methods, args.sweeps)
     if args.executor == "dask" and not args.scheduler:
-        raise EasVoError("--executor dask needs --scheduler ADDRESS")
+        raise UsageError("--executor dask needs --scheduler ADDRESS")
     overrides = {**shared_overrides(args), "orb_stats": True if args.orb else None}
-    rows, n_run = grid.run_experiment(
-        cells,
-        out,
-        args.config,
-        args.assignments,
-        overrides,
-        args.jobs,
-        progress=shows_progress(args),
-        scheduler=args.scheduler if args.executor == "dask" else None,
-    )
+    with removed_if_failed(out):
+        rows, n_run = grid.run_experiment(
+            cells,
+            out,
+            args.config,
+            args.assignments,
+            overrides,
+            args.jobs,
+            progress=shows_progress(args),
+            scheduler=args.scheduler if args.executor == "dask" else None,
+        )
     return report_cells(rows, n_run, out / "table.md", results.table_markdown(rows))

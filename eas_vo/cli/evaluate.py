@@ -5,7 +5,7 @@ from __future__ import annotations
 import sys
 
 from eas_vo.cli.options import add_dataset, add_output_options, dataset_inputs, refuse_inputs_inside, seconds
-from eas_vo.errors import EasVoError
+from eas_vo.errors import UsageError
 
 
 def add_parser(sub) -> None:
@@ -55,7 +55,7 @@ def run(args) -> int:
     if args.protocol == "cmax-slam":
         given = [f"--{k.replace('_', '-')}" for k in ("align", "max_diff", "label") if getattr(args, k) is not None]
         if given:
-            raise EasVoError(
+            raise UsageError(
                 f"{', '.join(given)}: evo's options; --protocol cmax-slam aligns and scores by its own rules"
             )
         m = evaluate_protocol(args.dataset, args.estimate, args.out, replace=args.overwrite)

@@ -12,7 +12,8 @@ import importlib
 import os
 import sys
 
-from eas_vo.errors import EasVoError, Interrupted, sigterm_as_interrupt
+from eas_vo import __version__
+from eas_vo.errors import EasVoError, Interrupted, UsageError, sigterm_as_interrupt
 from eas_vo.logs import to_stderr
 
 #: The commands, in the order `eas-vo --help` lists them: each a module of this package.
@@ -27,6 +28,7 @@ COMMANDS = (
     "vocabulary",
     "convert",
     "evaluate",
+    "view",
     "reproduce",
     "fetch",
     "cache",
@@ -35,8 +37,10 @@ COMMANDS = (
 
 
 def main(argv: list[str] | None = None) -> int:
-    """The `eas-vo` command on `argv` (default: the process's); returns the exit status: 0, 2 for a
-    user error (one line on stderr), 130 / 143 for Ctrl-C / SIGTERM, 141 for a closed pipe."""
+    """The `eas-vo` command on `argv` (default: the process's); returns the exit status: 0, 1 for
+    an error in the data, the configuration or the machine's answer (one line on stderr), 2 for a
+    usage error (options that cannot be read or go together), 130 / 143 for Ctrl-C / SIGTERM,
+    141 for a closed pipe."""
     to_stderr()  # the library's log records reach stderr here, and only here
     args = build_parser().parse_args(argv)
     try:
@@ -44,14 +48,14 @@ def main(argv: list[str] | None = None) -> int:
             return args.func(args)
     except EasVoError as exc:
         print(f"eas-vo: error: {exc}", file=sys.stderr)
-        return 2
+        return 2 if isinstance(exc, UsageError) else 1
     except BrokenPipeError:  # `eas-vo list | head`: the reader left; say nothing more
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return 141
     except OSError as exc:  # the machine's answer to a user's request (a full disk, a path in the way)
         where = f" ({exc.filename})" if exc.filename else ""
         print(f"eas-vo: error: {exc.strerror or exc}{where}", file=sys.stderr)
-        return 2
+        return 1
     except KeyboardInterrupt as exc:  # the one place: a command says what it kept in Interrupted
         kept = exc.kept if isinstance(exc, Interrupted) and exc.kept else "nothing was written"
         print(f"eas-vo {args.command}: interrupted; {kept}", file=sys.stderr)
@@ -71,6 +75,7 @@ def build_parser() -> argparse.ArgumentParser:
         prog="eas-vo",
         description="3-DoF rotation estimation from event cameras fused with frames (EAS and peers).",
     )
+    parser.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND", parser_class=_OneLineParser)
     for name in COMMANDS:
         importlib.import_module(f"eas_vo.cli.{name}").add_parser(sub)

@@ -8,7 +8,7 @@ import os
 import sys
 from pathlib import Path
 
-from eas_vo.errors import EasVoError
+from eas_vo.errors import EasVoError, UsageError
 
 
 def installed_names(kind: str) -> str:
@@ -157,7 +157,7 @@ def parse_time_offset(text: str | None) -> tuple[float | None, bool | None]:
     try:
         return float(text), False
     except ValueError:
-        raise EasVoError(f"--time-offset takes seconds or 'auto', got {text!r}") from None
+        raise UsageError(f"--time-offset takes seconds or 'auto', got {text!r}") from None
 
 
 def shows_progress(args) -> bool:
@@ -169,7 +169,7 @@ def name_list(option: str, text: str) -> list[str]:
     """A comma-separated list of names; one naming nothing is an error."""
     listed = [v.strip() for v in text.split(",") if v.strip()]
     if not listed:
-        raise EasVoError(f"{option} {text!r} names nothing; give comma-separated names")
+        raise UsageError(f"{option} {text!r} names nothing; give comma-separated names")
     return listed
 
 

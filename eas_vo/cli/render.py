@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from eas_vo.cli.options import add_config, add_dataset, dataset_inputs, refuse_inputs_inside
-from eas_vo.errors import EasVoError
+from eas_vo.errors import UsageError
 
 
 def add_parser(sub) -> None:
@@ -45,9 +45,9 @@ def run(args) -> int:
     try:
         frames = [int(v) for v in args.frames.split(",") if v.strip()]
     except ValueError:
-        raise EasVoError(f"--frames takes comma-separated frame indices, got {args.frames!r}") from None
+        raise UsageError(f"--frames takes comma-separated frame indices, got {args.frames!r}") from None
     if not frames:
-        raise EasVoError("--frames names no frame")
+        raise UsageError("--frames names no frame")
     config = config_mod.resolve(args.config, {"dataset": args.dataset}, args.assignments)
     dataset = config.run.dataset
     refuse_inputs_inside(out, dataset_inputs(dataset, config.dataset), ("the --config", args.config), out_is_file=True)

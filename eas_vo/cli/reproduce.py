@@ -13,7 +13,7 @@ from eas_vo.cli.options import (
     seconds,
     shows_progress,
 )
-from eas_vo.errors import EasVoError
+from eas_vo.errors import UsageError
 
 
 def add_parser(sub) -> None:
@@ -90,36 +90,36 @@ def add_parser(sub) -> None:
 def run(args) -> int:
     """`eas-vo reproduce` on the parsed `args`; returns the exit status."""
     from eas_vo.datasets.ecd_catalogue import data_dir
-    from eas_vo.evaluation.rotation_protocol import ALIGN_AT_S, DURATION_S
-    from eas_vo.experiments import paper, rotation, table1, table2
-    from eas_vo.io.outputs import check_grid_folder, check_writable_folder
+    from eas_vo.evaluation.rotation_protocol import ALIGN_AT_S
+    from eas_vo.experiments import paper, rotation
+    from eas_vo.io.outputs import check_grid_folder, check_writable_folder, removed_if_failed
 
     estimates = {}
     for text in args.estimates:
         key, sep, path = text.partition("=")
         seq, colon, source = key.partition(":")
         if not (sep and colon and path):
-            raise EasVoError(
+            raise UsageError(
                 f"--estimate {text!r}: expected SEQUENCE:SOURCE=FILE, e.g. hdr_boxes:eas=KeyFrameTrajectory.txt"
             )
         key = (seq.strip(), source.strip())
         if key in estimates:
-            raise EasVoError(f"--estimate {key[0]}:{key[1]} given twice ({estimates[key]} and {path}): give one")
+            raise UsageError(f"--estimate {key[0]}:{key[1]} given twice ({estimates[key]} and {path}): give one")
         estimates[key] = path
     if estimates and args.table != "table2":
-        raise EasVoError("--estimate belongs to table2 (ORB-SLAM2 trajectories)")
+        raise UsageError("--estimate belongs to table2 (ORB-SLAM2 trajectories)")
     if args.vocabulary and args.table != "table2":
-        raise EasVoError("--vocabulary belongs to table2 (ORB-SLAM3 runs)")
+        raise UsageError("--vocabulary belongs to table2 (ORB-SLAM3 runs)")
     if args.config and args.table == "rotation":
-        raise EasVoError(
+        raise UsageError(
             "--config belongs to table1 and table2: rotation's methods carry their own (paper.toml, best.toml)"
         )
     owners = {"backends": "table1", "frontends": "table2", "runs": "table2", "protocol": "rotation"}
     for key, table in owners.items():
         if getattr(args, key) is not None and args.table != table:
-            raise EasVoError(f"--{key} belongs to {table}")
+            raise UsageError(f"--{key} belongs to {table}")
     if args.table == "rotation" and args.duration is not None and args.duration <= ALIGN_AT_S:
-        raise EasVoError(f"--duration {args.duration:g}: the protocol aligns at {ALIGN_AT_S:g} s; give more than that")
+        raise UsageError(f"--duration {args.duration:g}: the protocol aligns at {ALIGN_AT_S:g} s; give more than that")
     config = args.config or "paper"
     specs = rotation.SPECS if args.table == "rotation" else paper.SPECS
     out = check_writable_folder(args.out or f"reproduce/{args.table}")
@@ -132,9 +132,19 @@ def run(args) -> int:
         *(("the --estimate", path) for path in estimates.values()),
     )
     check_grid_folder(out)  # before any download
+    with removed_if_failed(out):
+        rows, n_run, markdown = _reproduce(args, out, config, estimates)
+    return report_cells(rows, n_run, out / f"{args.table}.md", markdown)
+
+
+def _reproduce(args, out, config: str, estimates: dict) -> tuple[list[dict], int, str]:
+    """The table `args.table` written into `out`: (rows, cells run, its markdown)."""
+    from eas_vo.evaluation.rotation_protocol import DURATION_S
+    from eas_vo.experiments import paper, rotation, table1, table2
+
     progress = shows_progress(args)
     if args.table == "table1":
-        rows, n_run, markdown = table1.table1(
+        return table1.table1(
             out,
             args.duration or paper.PAPER_DURATION_S,
             name_list("--backends", args.backends or "chain,gtsam"),
@@ -142,18 +152,16 @@ def run(args) -> int:
             args.jobs,
             progress,
         )
-    elif args.table == "rotation":
-        rows, n_run, markdown = rotation.rotation_benchmark(out, args.duration or DURATION_S, args.jobs, progress)
-    else:
-        rows, n_run, markdown = table2.table2(
-            out,
-            estimates,
-            args.duration,
-            config,
-            args.jobs,
-            progress,
-            name_list("--frontends", args.frontends or "original,eas"),
-            args.runs or 5,
-            args.vocabulary,
-        )
-    return report_cells(rows, n_run, out / f"{args.table}.md", markdown)
+    if args.table == "rotation":
+        return rotation.rotation_benchmark(out, args.duration or DURATION_S, args.jobs, progress)
+    return table2.table2(
+        out,
+        estimates,
+        args.duration,
+        config,
+        args.jobs,
+        progress,
+        name_list("--frontends", args.frontends or "original,eas"),
+        args.runs or 5,
+        args.vocabulary,
+    )

@@ -23,6 +23,7 @@ from eas_vo.cli.options import (
     shared_overrides,
     shows_progress,
 )
+from eas_vo.cli.view import add_spawn, write_and_say
 
 EPILOG_RUN = """\
 outputs (in --out):
@@ -36,6 +37,7 @@ outputs (in --out):
                    propagated and the backend's
   config.toml      the resolved configuration (re-run with --config config.toml)
   rotation.png     estimated (+-1 sigma) and true roll/pitch/yaw over time
+  run.rrd          with --view: the run's Rerun recording (eas-vo view)
 
 examples:
   eas-vo run --frontend eas --backend chain
@@ -85,6 +87,10 @@ def add_parser(sub) -> None:
     add_lenient(parser)
     add_threads(parser)
     add_output_options(parser, required=False, default="runs/DATASET_FRONTEND_TRACKER_BACKEND_TIME")
+    parser.add_argument(
+        "--view", action="store_true", help="after the run, write its Rerun recording run.rrd into --out (eas-vo view)"
+    )
+    add_spawn(parser)
     parser.set_defaults(func=run)
 
 
@@ -96,6 +102,11 @@ def run(args) -> int:
     from eas_vo.io.text import slug
 
     apply_threads(args)
+    viewed = args.view or args.spawn
+    if viewed:
+        from eas_vo.io.rerun_log import rerun_sdk
+
+        rerun_sdk()  # before the run: one line if it is missing
     config = config_mod.resolve(
         args.config,
         {
@@ -119,41 +130,40 @@ def run(args) -> int:
     m = result.metrics
     for line in m["data_warnings"]:
         print(f"eas-vo: warning: {line}", file=sys.stderr)
-    ape = m.get("ape_mean_rad")
-    ape_text = "no ground truth"
-    if "frames_scored_fraction" in m:  # scored: over how many frames and what span of the run
-        start, end = m["ground_truth_span_s"]
-        scored = f"{m['frames_evaluated']} of {m['frames']} frames scored, ground truth from {start:.3f} to {end:.3f} s of the run's 0 to {m['sequence_s']:.3f} s"
-        ape_text = (
-            f"average APE {ape:.4f} rad ({ape * 57.29577951:.2f} deg; {scored})"
-            if m["frames_evaluated"]
-            else f"no frame scored ({scored})"
-        )
-    if m["time_offset_estimated"]:
-        ape_text += (
-            f" (time offset {m['time_offset_s'] * 1e3:+.1f} ms, estimated on the ground truth it scores against)"
-        )
-    statuses = _status_text(m["status_counts"], m["status_reasons"])
-    meaning = f" [{WEAK_MEANS}]" if m["status_counts"].get("weak") else ""
-    loops = f"{m['loop_count']} loop(s) closed, " if m["loop_count"] is not None else ""
-    gyro = f"gyro {' '.join(filter(None, (m['gyro'], m['gyro_use'])))}, " if m["gyro"] else ""
-    print(
-        f"{rc.frontend}+{rc.tracker}+{rc.backend} on {rc.dataset}: {m['frames']} frames ({statuses}){meaning}, "
-        f"average NC {m['nc_mean']:.1f}, {loops}{gyro}"
-        f"{ape_text}, {m['frames_per_s']:.1f} frames/s -> {out}"
-    )
+    print(f"{summary_line(rc, m)} -> {out}")
+    if viewed:
+        write_and_say(out, args.spawn)
     return 0
 
 
-#: What a weak frame is, after the status counts (docs/frame_status.md has the calibration).
-WEAK_MEANS = "weak: less reliable than usual, not necessarily wrong; 19-66 % of frames with the paper's settings"
+def summary_line(rc, m: dict) -> str:
+    """The run's one line (about 160 characters): plugins and dataset, frames by status, the
+    average number of correspondences (NC; for trackers that read images), the average APE, and
+    what applies to this run only (frames the ground truth missed, an estimated time offset,
+    loops closed, the gyro's verdict where something read it); `m` is metrics.json's content, `rc` the [run] section."""
+    from eas_vo import registry
 
-
-def _status_text(counts: dict, reasons: dict) -> str:
-    """'1 first, 54 ok, 172 weak: 160 predicted error, 12 few inliers' (most frequent reason first)."""
-    parts = []
-    for status in ("first", "ok", "weak", "lost", "same_time"):
-        if counts.get(status):
-            why = sorted(reasons.get(status, {}).items(), key=lambda kv: (-kv[1], kv[0]))
-            parts.append(f"{counts[status]} {status}" + (": " + ", ".join(f"{n} {r}" for r, n in why) if why else ""))
-    return "; ".join(parts) if any(": " in p for p in parts) else ", ".join(parts)
+    counts = m["status_counts"]
+    parts = [
+        f"{rc.frontend}+{rc.tracker}+{rc.backend} on {rc.dataset}: {m['frames']} frames ("
+        + ", ".join(f"{counts[s]} {s}" for s in ("ok", "weak", "lost", "same_time") if counts.get(s))
+        + ")"
+    ]
+    if registry.get("trackers", rc.tracker).reads_images:
+        parts.append(f"average NC {m['nc_mean']:.1f}")
+    ape = m.get("ape_mean_rad")
+    if "frames_scored_fraction" not in m:
+        parts.append("no ground truth")
+    elif not m["frames_evaluated"]:
+        parts.append("no frame scored")
+    else:
+        scored = "" if m["frames_evaluated"] == m["frames"] else f"; {m['frames_evaluated']} of {m['frames']} frames"
+        parts.append(f"average APE {ape:.4f} rad ({ape * 57.29577951:.2f} deg{scored})")
+    if m["time_offset_estimated"]:
+        parts.append(f"time offset {m['time_offset_s'] * 1e3:+.1f} ms (estimated)")
+    if m["loop_count"]:
+        parts.append(f"{m['loop_count']} loop(s) closed")
+    if m["gyro_use"]:  # something read the gyro: the images' verdict on it
+        parts.append(f"gyro {m['gyro']}")
+    parts.append(f"{m['frames_per_s']:.1f} frames/s")
+    return ", ".join(parts)

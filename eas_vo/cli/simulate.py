@@ -5,7 +5,7 @@ from __future__ import annotations
 import sys
 
 from eas_vo.cli.options import add_output_options
-from eas_vo.errors import EasVoError
+from eas_vo.errors import UsageError
 
 
 def add_parser(sub) -> None:
@@ -62,13 +62,15 @@ def run(args) -> int:
     for assignment in args.assignments:
         keys, value = parse_set(assignment)
         if keys[0] != "dataset" or len(keys) != 2:
-            raise EasVoError(f"--set {assignment!r}: simulate takes dataset.KEY=VALUE (the synthetic dataset's keys)")
+            raise UsageError(f"--set {assignment!r}: simulate takes dataset.KEY=VALUE (the synthetic dataset's keys)")
         pixel[keys[1]] = value
     flags = {
         key: value for key, value in (("illumination", args.illumination), ("speed", args.speed)) if value is not None
     }
     for key in sorted(flags.keys() & pixel.keys()):
-        raise EasVoError(f"--{key} and --set dataset.{key} both given: give one")
+        raise UsageError(f"--{key} and --set dataset.{key} both given: give one")
+    if "duration_s" in pixel:
+        raise UsageError("--set dataset.duration_s: simulate's length is --duration")
     sensor = build(SyntheticConfig, {**pixel, **flags}, "dataset")
     config = sensor.applied_to(build(SimConfig, {"seed": args.seed, "duration_s": args.duration}, "simulate"))
     check_output_folder(args.out, replace=args.overwrite)

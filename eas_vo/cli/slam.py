@@ -103,4 +103,4 @@ def run(args) -> int:
         print("  no run tracked: " + "; ".join(f"run {m['run']} {m['status']}" for m in done["per_run"]))
     for line in done["crashed"]:
         print(f"eas-vo: error: {line}", file=sys.stderr)
-    return 2 if done["crashed"] else 0
+    return 1 if done["crashed"] else 0

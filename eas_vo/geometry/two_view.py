@@ -286,6 +286,7 @@ class TwoViewRotation(NamedTuple):
     model: str  #: `essential`, `rotation` or `homography`
     residual: float  #: robust per-axis noise of the inliers [normalised image units ~ rad], see _noise
     covariance: np.ndarray  #: of R_prev_cur [rad^2] (3, 3): geometry.covariance's convention and methods
+    inlier_mask: np.ndarray  #: (N,) bool: which of the correspondences the model explains
 
 
 def rotation_from_correspondences(
@@ -329,12 +330,12 @@ def rotation_from_correspondences(
     def essential_result(E: np.ndarray, R: np.ndarray, mask: np.ndarray, residuals: np.ndarray) -> TwoViewRotation:
         sigma = _noise(residuals[mask], dims=1)
         cov = essential_covariance(E, R, pts_prev_n[mask], pts_cur_n[mask], sigma, covariance)
-        return TwoViewRotation(R.T, int(mask.sum()), "essential", sigma, cov)
+        return TwoViewRotation(R.T, int(mask.sum()), "essential", sigma, cov, mask)
 
     def bearing_result(R: np.ndarray, mask: np.ndarray, model: str, residuals: np.ndarray) -> TwoViewRotation:
         sigma = _noise(residuals[mask], dims=2)
         cov = rotation_only_covariance(R, f_prev[mask], f_cur[mask], sigma, covariance)
-        return TwoViewRotation(R.T, int(mask.sum()), model, sigma, cov)
+        return TwoViewRotation(R.T, int(mask.sum()), model, sigma, cov, mask)
 
     if geometry == "essential" and not still:
         found = essential_rotation(pts_prev_n, pts_cur_n, threshold, confidence, ESSENTIAL_METHODS[method])
@@ -356,7 +357,7 @@ def rotation_from_correspondences(
         R_hom, hom_mask, hom_residuals, H = found
         sigma = _noise(hom_residuals[hom_mask], dims=2)
         cov = homography_covariance(H, R_hom, pts_prev_n[hom_mask], pts_cur_n[hom_mask], sigma, covariance)
-        return TwoViewRotation(R_hom.T, int(hom_mask.sum()), "homography", sigma, cov)
+        return TwoViewRotation(R_hom.T, int(hom_mask.sum()), "homography", sigma, cov, hom_mask)
     found = essential_rotation(pts_prev_n, pts_cur_n, threshold, confidence, ESSENTIAL_METHODS[method])
     if found is None or not explains(found[1], f_prev[found[2]], f_cur[found[2]], threshold):
         return bearing_result(R_rot, rot_mask, "rotation", rot_residuals)

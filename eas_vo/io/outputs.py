@@ -10,7 +10,7 @@ from contextlib import contextmanager
 from pathlib import Path
 
 from eas_vo.errors import EasVoError
-from eas_vo.io.atomic import name_the_written, write_text_atomic
+from eas_vo.io.atomic import atomic_path, name_the_written, remove_stale_temporaries, write_text_atomic
 from eas_vo.io.locks import acquire_lock
 
 #: The file that marks a folder as an eas-vo output (a run, an export, an evaluation) and lists
@@ -207,6 +207,20 @@ def claim_grid_folder(out: str | Path) -> Path:
     return out
 
 
+@contextmanager
+def removed_if_failed(out: Path):
+    """Around a command's work into folder `out`: if `out` did not exist before and the work
+    fails (an error or an interrupt) before writing anything there but the marker, `out` is
+    removed, so a failed command leaves behind no folder it made."""
+    made = not out.exists()
+    try:
+        yield out
+    except BaseException:
+        if made and out.is_dir() and {p.name for p in out.iterdir()} <= {OUTPUT_MARKER}:
+            shutil.rmtree(out, ignore_errors=True)
+        raise
+
+
 def _is_grid_folder(folder: Path) -> bool:
     try:
         return (folder / OUTPUT_MARKER).read_text(encoding="utf-8").splitlines()[:1] == [GRID_MARKER]
@@ -259,3 +273,24 @@ def _move_into_place(staging: Path, out: Path) -> None:
         os.replace(out, old)
     os.replace(staging, out)
     shutil.rmtree(old, ignore_errors=True)
+
+
+@contextmanager
+def added_file(folder: Path, name: str):
+    """A temporary path (atomic_path) for the file `name` added to the finished output folder
+    `folder`, written under the folder's writer's lock (output_folder's) and then listed in its
+    marker, so that a later --overwrite replaces it as eas-vo's own (a folder without a marker
+    is left without one). The temporary a killed writer left there is removed first."""
+    lock = folder.with_name(f".{folder.name}.lock")
+    acquire_lock(lock, folder)
+    try:
+        remove_stale_temporaries(folder, (name,))
+        with atomic_path(folder / name) as tmp:
+            yield tmp
+        marker = folder / OUTPUT_MARKER
+        if marker.is_file():
+            lines = marker.read_text(encoding="utf-8").splitlines()
+            if name not in lines[1:]:
+                write_text_atomic(marker, "".join(f"{line}\n" for line in [*lines, name]))
+    finally:
+        lock.unlink(missing_ok=True)

@@ -18,23 +18,25 @@ from eas_vo.orb import OrbStats
 from eas_vo.pipeline.parts import Pipeline, check_frame
 from eas_vo.types import FrameRecord, RelativeRotation
 
-FRAMES_CSV_FIELDS = (
-    "index",
-    "t",
-    "nc",
-    "inliers",
-    "status",
-    "redetected",
-    "inlier_ratio",
-    "residual_px",
-    "reason",
-    "events",
-    "contrast_gain",
-    "sigma_deg",
-    "sigma_x_deg",
-    "sigma_y_deg",
-    "sigma_z_deg",
+#: frames.csv's columns and their types in memory (frame_table; "U": text as wide as the longest).
+FRAMES_COLUMNS = (
+    ("index", "i8"),
+    ("t", "f8"),
+    ("nc", "i8"),
+    ("inliers", "i8"),
+    ("status", "U"),
+    ("redetected", "?"),
+    ("inlier_ratio", "f8"),
+    ("residual_px", "f8"),
+    ("reason", "U"),
+    ("events", "i8"),
+    ("contrast_gain", "f8"),
+    ("sigma_deg", "f8"),
+    ("sigma_x_deg", "f8"),
+    ("sigma_y_deg", "f8"),
+    ("sigma_z_deg", "f8"),
 )
+FRAMES_CSV_FIELDS = tuple(name for name, _ in FRAMES_COLUMNS)
 
 
 @dataclass
@@ -147,21 +149,23 @@ class FrameLog:
     def write(self, r: FrameRecord, step: RelativeRotation | None = None) -> None:
         """The row of record `r` and of `step`, the edge r.index - 1 -> r.index (None: none measured)."""
         if self._fh:
-            sigmas = [""] * 4 if step is None else _sigmas_deg(step)
+            index, t, nc, inliers, status, redetected, ratio, residual, reason, events, gain, *sigmas = frame_values(
+                r, step
+            )
             self._writer.writerow(
                 [
-                    r.index,
-                    clock_time(r.t, self.origin_ns),
-                    r.nc,
-                    r.inliers,
-                    r.status,
-                    int(r.redetected),
-                    f"{r.inlier_ratio:.4f}",
-                    f"{r.residual_px:.4f}",
-                    r.reason,
-                    r.events,
-                    f"{r.contrast_gain:.4f}",
-                    *sigmas,
+                    index,
+                    clock_time(t, self.origin_ns),
+                    nc,
+                    inliers,
+                    status,
+                    int(redetected),
+                    f"{ratio:.4f}",
+                    f"{residual:.4f}",
+                    reason,
+                    events,
+                    f"{gain:.4f}",
+                    *("" if np.isnan(s) else f"{s:.6f}" for s in sigmas),
                 ]
             )
             self._fh.flush()
@@ -172,11 +176,30 @@ class FrameLog:
         return False
 
 
-def _sigmas_deg(step: RelativeRotation) -> list[str]:
-    """frames.csv's sigma columns of a measured step [deg]: along its worst axis, about x, y, z
-    ("inf" where its estimator gives no finite covariance: no inliers)."""
-    sigmas = np.degrees([step.sigma_rad, *step.sigmas_rad()])
-    return [f"{v:.6f}" for v in sigmas] if np.all(np.isfinite(sigmas)) else ["inf"] * 4
+def frame_values(r: FrameRecord, step: RelativeRotation | None) -> tuple:
+    """The values of frames.csv's row (FRAMES_COLUMNS) of record `r` and its consecutive `step`
+    (None: none measured): the time [s] on the run's clock, the step's sigmas [deg] along its worst
+    axis and about x, y, z (NaN without a step; inf where its estimator gives no finite
+    covariance: no inliers)."""
+    sigmas = np.full(4, np.nan)
+    if step is not None:
+        sigmas = np.degrees([step.sigma_rad, *step.sigmas_rad()])
+        sigmas = sigmas if np.all(np.isfinite(sigmas)) else np.full(4, np.inf)
+    record = (r.index, r.t, r.nc, r.inliers, r.status, r.redetected, r.inlier_ratio, r.residual_px, r.reason)
+    return record + (r.events, r.contrast_gain, *map(float, sigmas))
+
+
+def frame_table(records: list[FrameRecord], edges: list[RelativeRotation]) -> np.ndarray:
+    """frames.csv as a numpy record array, one row a record (columns FRAMES_COLUMNS): times [s]
+    on the run's clock (the file adds the recording's clock origin), `redetected` a bool, the
+    sigmas [deg] NaN where the file's are empty."""
+    steps = consecutive_steps(edges)
+    rows = [frame_values(r, steps.get(r.index)) for r in records]
+    dtype = [
+        (name, f"U{max([1, *(len(row[k]) for row in rows)])}" if kind == "U" else kind)
+        for k, (name, kind) in enumerate(FRAMES_COLUMNS)
+    ]
+    return np.array(rows, dtype=dtype).view(np.recarray)
 
 
 def _progress(total: int, enabled: bool, rc):

@@ -10,6 +10,7 @@ from pathlib import Path
 
 from eas_vo.errors import EasVoError
 from eas_vo.io.atomic import atomic_file
+from eas_vo.io.download import download_error
 
 logger = logging.getLogger(__name__)
 
@@ -43,12 +44,11 @@ def fetch_orb_vocabulary(
             pooch.retrieve(url, known_hash=f"sha1:{sha1}", fname=f"{NAME}.tar.gz", path=folder, progressbar=progress)
         )
     except (ValueError, requests.RequestException, OSError) as exc:
-        detail = str(exc).splitlines()[0] if str(exc) else "no detail"
-        if isinstance(exc, ValueError) and "hash" in detail.lower():
-            raise EasVoError(
-                f"{url}: the download does not match its published SHA-1 {sha1}; nothing was kept"
-            ) from None
-        raise EasVoError(f"{url}: download failed, nothing was kept ({type(exc).__name__}: {detail})") from None
+        offline = (
+            f"copy {NAME} into {folder}, set EAS_VO_ORB_VOCABULARY_URL to a copy of the archive, "
+            "or train one with `eas-vo vocabulary` and give it as --vocabulary FILE"
+        )
+        raise download_error(exc, url, f"published SHA-1 {sha1}", offline) from None
     try:
         with tarfile.open(archive, "r:gz") as tar:
             member = next((m for m in tar.getmembers() if m.isfile() and m.name.endswith(NAME)), None)

@@ -274,7 +274,7 @@ def test_event_only_and_frame_only_recordings(tmp_path):
         str(tmp_path / "out"),
         "--quiet",
     )
-    assert done.returncode == 2 and done.stderr.count("\n") == 1, done.stderr
+    assert done.returncode == 1 and done.stderr.count("\n") == 1, done.stderr
     assert "needs APS frames" in done.stderr and "has no frames stream (an event-only recording)" in done.stderr
 
     frames_only = tmp_path / "frames.aedat4"

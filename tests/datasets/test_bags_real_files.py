@@ -56,7 +56,7 @@ def test_without_a_calibration_a_run_is_one_line_with_one_a_run_goes_through(nam
     path = require(EVENT_CAMERA_PY / name)
     sensor = RECORDINGS[name][0]
     refused = run_eas_vo("run", "--dataset", str(path), "--tracker", "cmax", "--out", str(tmp_path / "no"), "--quiet")
-    assert refused.returncode == 2 and refused.stderr.count("\n") == 1, refused.stderr
+    assert refused.returncode == 1 and refused.stderr.count("\n") == 1, refused.stderr
     assert "--set dataset.calibration=FILE" in refused.stderr and not (tmp_path / "no").exists()
     calib = pinhole_calib(tmp_path, *sensor)
     done = run_eas_vo(

@@ -15,7 +15,7 @@ from eas_vo.datasets.calibration import (
     read_kalibr_camchain,
 )
 from eas_vo.errors import DataError
-from helpers import ECD_DAVIS240, MVSEC_LEFT
+from helpers import ECD_DAVIS240, MVSEC_LEFT, K_of, write_dv_xml
 
 # A DAVIS346 with a fisheye lens (values of the size MVSEC's kalibr calibrations have) and one
 # with radial-tangential distortion.
@@ -37,11 +37,6 @@ RADTAN = dict(
 )
 
 
-def K_of(cam) -> np.ndarray:
-    (fx, fy), (cx, cy) = cam["f"], cam["c"]
-    return np.array([[fx, 0.0, cx], [0.0, fy, cy], [0.0, 0.0, 1.0]])
-
-
 def assert_camera(model, cam) -> None:
     assert (model.width, model.height, model.model) == (cam["width"], cam["height"], cam["model"])
     np.testing.assert_array_equal(model.K, K_of(cam))
@@ -49,27 +44,6 @@ def assert_camera(model, cam) -> None:
 
 
 # -- writers, as each tool writes its file ---------------------------------------------------
-
-
-def write_dv_xml(path, cam, node="DAVIS346_00000499"):
-    """As DV's camera(-IMU) calibration module writes it: the camera's node, then the lens model."""
-    fs = cv2.FileStorage(str(path), cv2.FILE_STORAGE_WRITE)
-    fs.startWriteStruct(node, cv2.FILE_NODE_MAP)
-    fs.write("camera_matrix", K_of(cam))
-    fs.write("distortion_coefficients", np.array([cam["dist"]]))
-    fs.write("image_width", cam["width"])
-    fs.write("image_height", cam["height"])
-    fs.endWriteStruct()
-    fs.write("use_fisheye_model", 0)  # the module writes false whatever the model
-    fs.write("type", "camera")
-    fs.write("pattern_width", 8)
-    fs.write("pattern_height", 6)
-    fs.write("distortion_model", "Equidistant" if cam["model"] == "equidistant" else "RadialTangential")
-    fs.write("pattern_type", "chessboard")
-    fs.write("calibration_error", "N/A")
-    fs.write("time_offset_cam_imu__t_imu_equals_t_cam_plus_shift", 0.0021)
-    fs.write("transformation_cam_imu", np.eye(4))
-    fs.release()
 
 
 def write_dv_legacy_xml(path, cam):

@@ -282,5 +282,5 @@ def test_a_damaged_png_is_one_line_on_stderr_not_libpngs_too(sequence_copy, tmp_
         str(tmp_path / "out"),
         "--quiet",
     )
-    assert done.returncode == 2 and done.stderr.count("\n") == 1, done.stderr
+    assert done.returncode == 1 and done.stderr.count("\n") == 1, done.stderr
     assert "frame_00000003.png: cannot decode frame 3" in done.stderr

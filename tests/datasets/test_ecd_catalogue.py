@@ -88,7 +88,7 @@ def test_an_interrupted_download_leaves_nothing_and_succeeds_on_retry(site):
     data, md5s, faults, hits = site
     faults["seq_a.zip"] = ["drop"] * 3  # more than pooch's retries
     failed = run_eas_vo("fetch", "seq_a", env=dict(os.environ))
-    assert failed.returncode == 2 and failed.stderr.count("\n") == 2, failed.stderr  # the notice, then one error line
+    assert failed.returncode == 1 and failed.stderr.count("\n") == 2, failed.stderr  # the notice, then one error line
     assert "download failed, nothing was kept" in failed.stderr and "Traceback" not in failed.stderr
     assert _leftovers(data) == []  # no half file under the final name, and no temporary either
     assert run_eas_vo("fetch", "seq_a", env=dict(os.environ)).returncode == 0
@@ -108,7 +108,7 @@ def test_unknown_names_are_refused_before_any_download(site):
 
     _, _, _, hits = site
     done = run_eas_vo("fetch", "seq_a", "hdr_boxez", env=dict(os.environ))
-    assert done.returncode == 2 and "hdr_boxez: no dataset plugin can fetch it (known: seq_a)" in done.stderr
+    assert done.returncode == 1 and "hdr_boxez: no dataset plugin can fetch it (known: seq_a)" in done.stderr
     assert hits["seq_a.zip"] == 0
 
 
@@ -170,16 +170,36 @@ def test_a_file_the_server_lacks_or_a_server_down_is_one_line_before_any_notice(
     registry.write_text(f"seq_a {md5s['seq_a']}\nseq_gone 0123456789abcdef0123456789abcdef\n")
     monkeypatch.setenv("EAS_VO_DATA_REGISTRY", str(registry))
     missing = run_eas_vo("fetch", "seq_gone", env=dict(os.environ))
-    assert missing.returncode == 2 and missing.stderr.count("\n") == 1, missing.stderr
+    assert missing.returncode == 1 and missing.stderr.count("\n") == 1, missing.stderr
     assert "seq_gone.zip: the server has no such file (HTTP 404), nothing was downloaded" in missing.stderr
     with socket.socket() as probe:  # a port nothing listens on
         probe.bind(("127.0.0.1", 0))
         port = probe.getsockname()[1]
     monkeypatch.setenv("EAS_VO_DATA_URL", f"http://127.0.0.1:{port}/")
     down = run_eas_vo("fetch", "seq_a", env=dict(os.environ))
-    assert down.returncode == 2 and down.stderr.count("\n") == 1, down.stderr
-    assert "cannot reach the server, nothing was downloaded (ConnectionError)" in down.stderr
+    assert down.returncode == 1 and down.stderr.count("\n") == 1, down.stderr
+    assert "cannot reach the server, nothing was downloaded; offline: copy seq_a.zip into " in down.stderr
+    assert "EAS_VO_DATA_DIR" in down.stderr and "EAS_VO_DATA_URL" in down.stderr  # the ways out
     assert _leftovers(data) == [] and hits["seq_a.zip"] == 0
+
+
+def test_offline_a_local_zip_that_is_not_the_published_one_says_so_and_is_kept(site, tmp_path, monkeypatch):
+    """A zip in the data folder whose MD5 differs, and no server: the error names that file,
+    both MD5s and the ways out, not only the server; the file is left as it was."""
+    import os
+
+    data, md5s, _, _ = site
+    data.mkdir()
+    (data / "seq_a.zip").write_bytes(b"a partial download")
+    with socket.socket() as probe:
+        probe.bind(("127.0.0.1", 0))
+        port = probe.getsockname()[1]
+    monkeypatch.setenv("EAS_VO_DATA_URL", f"http://127.0.0.1:{port}/")
+    done = run_eas_vo("fetch", "seq_a", env=dict(os.environ))
+    assert done.returncode == 1 and done.stderr.count("\n") == 1, done.stderr
+    assert f"{data / 'seq_a.zip'}: does not match its MD5 {md5s['seq_a']} (found " in done.stderr
+    assert "cannot reach the server" in done.stderr and "EAS_VO_DATA_DIR" in done.stderr
+    assert (data / "seq_a.zip").read_bytes() == b"a partial download"
 
 
 def test_a_fetched_file_gets_the_users_umask(site):

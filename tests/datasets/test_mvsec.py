@@ -3,6 +3,8 @@ file's own writer) reads back equal to its ECD folder and runs to the same traje
 files are one-line errors naming the file, the HDF5 dataset and the row, or read exactly."""
 
 import json
+import subprocess
+import sys
 from pathlib import Path
 
 import h5py
@@ -118,6 +120,33 @@ def test_compressed_events_read_through_hdf5plugin(ecd, ecd_folder, tmp_path):
     path = write_mvsec(tmp_path, ecd, **hdf5plugin.Blosc(cname="zstd"), chunks=(4096, 4))
     ds = opened(path, ecd_folder)
     assert np.asarray(ds.events()).tobytes() == np.asarray(ecd.events()).tobytes()
+
+
+def test_without_hdf5plugin_a_file_that_needs_its_filter_names_it_in_one_line(ecd, ecd_folder, tmp_path):
+    """hdf5plugin is an extra: where it is not installed (hidden from a child process here), a
+    blosc-compressed events dataset is one line naming the filter and how to add it."""
+    import hdf5plugin
+
+    path = write_mvsec(tmp_path, ecd, **hdf5plugin.Blosc(cname="zstd"), chunks=(4096, 4))
+    hidden = "import sys; sys.modules['hdf5plugin'] = None; from eas_vo.cli.main import main; sys.exit(main())"
+    done = subprocess.run(
+        [
+            sys.executable,
+            "-c",
+            hidden,
+            "info",
+            "--dataset",
+            str(path),
+            "--set",
+            f"dataset.calibration={ecd_folder / 'calib.txt'}",
+        ],
+        capture_output=True,
+        text=True,
+        cwd=tmp_path,
+    )
+    assert done.returncode == 1 and done.stderr.count("\n") == 1, done.stderr
+    assert "davis/left/events: is compressed with HDF5 filter 32001 (blosc" in done.stderr
+    assert "pip install hdf5plugin" in done.stderr
 
 
 def test_side_selects_the_right_davis_and_its_kalibr_camera(ecd, tmp_path):

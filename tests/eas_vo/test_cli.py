@@ -65,7 +65,7 @@ def test_cache_lists_clears_and_a_run_rebuilds_what_was_cleared(short_sequence, 
     assert main(["cache"]) == 0
     listed = capsys.readouterr().out
     assert re.search(r"events +1 entries +[0-9.]+ MB +binary event caches", listed), listed
-    assert main(["cache", "--clear", "events", "--clear", "nothing_here"]) == 2  # every name checked first
+    assert main(["cache", "--clear", "events", "--clear", "nothing_here"]) == 1  # every name checked first
     assert (
         "cache 'nothing_here': not in" in capsys.readouterr().err
         and len(list((tmp_path / "cache" / "events").glob("*.ev"))) == 1
@@ -164,7 +164,7 @@ def test_start_and_duration_select_the_window(short_sequence, tmp_path):
 def user_error(argv, capsys):
     code = main(argv)
     err = capsys.readouterr().err
-    assert code == 2
+    assert code == 1
     lines = err.strip().splitlines()
     assert len(lines) == 1 and "Traceback" not in err, err
     return lines[0]
@@ -203,7 +203,7 @@ def test_subprocess_entry_point_help_and_error():
     help_text = run_eas_vo("run", "--help")
     assert help_text.returncode == 0 and "metrics.json" in help_text.stdout
     bad = run_eas_vo("run", "--dataset", "/nonexistent/folder")
-    assert bad.returncode == 2 and bad.stderr.count("\n") == 1 and "dataset not found" in bad.stderr
+    assert bad.returncode == 1 and bad.stderr.count("\n") == 1 and "dataset not found" in bad.stderr
 
 
 def test_run_help_lists_the_installed_plugins_of_every_kind(monkeypatch, capsys):
@@ -305,7 +305,7 @@ def test_lenient_flag_counts_and_reports(sequence_copy, tmp_path, capsys):
     lines[100] = b"0.5 9999 3 1"  # out of the sensor
     lines[200] = b"garbage"
     path.write_bytes(b"\n".join(lines))
-    assert main(["run", "--dataset", str(sequence_copy), "--out", str(tmp_path / "strict"), "--quiet"]) == 2
+    assert main(["run", "--dataset", str(sequence_copy), "--out", str(tmp_path / "strict"), "--quiet"]) == 1
     assert "events.txt:101: " in capsys.readouterr().err
     assert (
         main(["run", "--dataset", str(sequence_copy), "--out", str(tmp_path / "lenient"), "--quiet", "--lenient"]) == 0
@@ -337,7 +337,7 @@ def test_json_text_writes_null_for_what_json_cannot_hold(tmp_path):
 
 def test_a_time_offset_that_misses_the_ground_truth_is_one_line_before_any_work(sequence_copy, tmp_path, capsys):
     out = tmp_path / "off"
-    assert main(["run", "--dataset", str(sequence_copy), "--time-offset", "-9", "--out", str(out), "--quiet"]) == 2
+    assert main(["run", "--dataset", str(sequence_copy), "--time-offset", "-9", "--out", str(out), "--quiet"]) == 1
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "covers none of the" in err and "time offset -9 s" in err
     assert not out.exists()
@@ -369,10 +369,10 @@ def test_results_are_strict_json_with_or_without_ground_truth(sequence_copy, tmp
 
 
 @pytest.mark.parametrize(
-    "argv, says",
+    "argv, says, usage",
     [
-        (["run", "--set", "run.imu_time_offset_s=nan"], "imu_time_offset_s = nan is out of range"),
-        (["run", "--set", "run.imu_rotvec_cam=[0.0, nan, 0.0]"], "imu_rotvec_cam"),
+        (["run", "--set", "run.imu_time_offset_s=nan"], "imu_time_offset_s = nan is out of range", False),
+        (["run", "--set", "run.imu_rotvec_cam=[0.0, nan, 0.0]"], "imu_rotvec_cam", False),
         (
             [
                 "run",
@@ -384,26 +384,42 @@ def test_results_are_strict_json_with_or_without_ground_truth(sequence_copy, tmp
                 "gtsam",
             ],
             "tracker.imu_rotvec_cam = [0, 0, 0], backend.imu_rotvec_cam = [0.0, 0.1, 0.0]: the rig has one IMU; set run.imu_rotvec_cam only",
+            False,
         ),
-        (["simulate", "--seed", "-1", "--out", "{tmp}/sim"], "seed = -1 is out of range"),
-        (["compare", "--jobs", "0", "--out", "{tmp}/cmp"], "--jobs: must be at least 1"),
-        (["run", "--duration", "0", "--out", "{tmp}/run"], "argument --duration: must be more than 0 seconds, got 0"),
-        (["compare", "--start", "-1", "--out", "{tmp}/cmp"], "argument --start: must be at least 0 seconds, got -1"),
-        (["run", "--start", "inf", "--out", "{tmp}/run"], "argument --start: must be at least 0 seconds, got inf"),
+        (["simulate", "--seed", "-1", "--out", "{tmp}/sim"], "seed = -1 is out of range", False),
+        (["compare", "--jobs", "0", "--out", "{tmp}/cmp"], "--jobs: must be at least 1", True),
+        (
+            ["run", "--duration", "0", "--out", "{tmp}/run"],
+            "argument --duration: must be more than 0 seconds, got 0",
+            True,
+        ),
+        (
+            ["compare", "--start", "-1", "--out", "{tmp}/cmp"],
+            "argument --start: must be at least 0 seconds, got -1",
+            True,
+        ),
+        (
+            ["run", "--start", "inf", "--out", "{tmp}/run"],
+            "argument --start: must be at least 0 seconds, got inf",
+            True,
+        ),
         (
             ["reproduce", "table1", "--duration", "nan", "--out", "{tmp}/rep"],
             "argument --duration: must be more than 0 seconds",
+            True,
         ),
         (
             ["evaluate", "--dataset", "{tmp}", "--estimate", "{tmp}/e.txt", "--max-diff", "-0.1"],
             "argument --max-diff: must be at least 0",
+            True,
         ),
-        (["run", "--frobnicate"], "unrecognized arguments: --frobnicate"),
-        (["rn"], "invalid choice: 'rn'"),
+        (["run", "--frobnicate"], "unrecognized arguments: --frobnicate", True),
+        (["rn"], "invalid choice: 'rn'", True),
     ],
 )
-def test_nonsense_values_and_usage_errors_are_one_line(argv, says, tmp_path, capsys):
-    err = one_line_failure([a.replace("{tmp}", str(tmp_path)) for a in argv], capsys)
+def test_nonsense_values_and_usage_errors_are_one_line(argv, says, usage, tmp_path, capsys):
+    """A configuration's value exits with 1, an option's (argparse's usage error) with 2."""
+    err = one_line_failure([a.replace("{tmp}", str(tmp_path)) for a in argv], capsys, usage=usage)
     assert says in err
     assert not any(tmp_path.iterdir())
 
@@ -504,7 +520,8 @@ def test_damaged_datasets_are_one_line_before_any_work(sequence_copy, tmp_path, 
 )
 def test_paths_in_the_way_are_one_line(tmp_path, capsys, argv, says):
     (tmp_path / "a_file").write_text("mine\n")
-    err = one_line_failure([a.replace("{tmp}", str(tmp_path)) for a in argv], capsys)
+    usage = says == "names nothing"  # an option's value, not a path: a usage error
+    err = one_line_failure([a.replace("{tmp}", str(tmp_path)) for a in argv], capsys, usage=usage)
     assert says in err and (tmp_path / "a_file").read_text() == "mine\n"
 
 
@@ -611,3 +628,11 @@ def test_an_output_folder_that_is_or_holds_the_dataset_is_refused(short_sequence
     )
     assert f"holds the dataset {dataset}" in err
     assert sorted(p.relative_to(tmp_path) for p in tmp_path.rglob("*")) == before
+
+
+def test_version_is_the_installed_distributions(capsys):
+    from importlib.metadata import version
+
+    with pytest.raises(SystemExit) as stop:
+        main(["--version"])
+    assert stop.value.code == 0 and capsys.readouterr().out == f"eas-vo {version('eas-vo')}\n"

@@ -46,7 +46,7 @@ def test_existing_results_need_overwrite(short_sequence, tmp_path, capsys):
     out = tmp_path / "run"
     argv = ["run", "--dataset", str(short_sequence), "--frontend", "original", "--out", str(out), "--quiet"]
     assert main(argv) == 0
-    assert main(argv) == 2
+    assert main(argv) == 1
     assert "is not empty; choose another folder or add --overwrite" in capsys.readouterr().err
     assert main(argv + ["--overwrite"]) == 0
 

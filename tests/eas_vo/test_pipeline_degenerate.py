@@ -10,7 +10,6 @@ import numpy as np
 import pytest
 
 from eas_vo.cli.main import main
-from eas_vo.cli.run import WEAK_MEANS
 from eas_vo.trackers.measurement import TwoViewConfig
 
 FRONTENDS = ("original", "histeq", "slice", "ts", "sits", "eas")
@@ -119,7 +118,7 @@ def test_frame_timestamps_going_back(sequence_copy, tmp_path, capsys):
     lines = path.read_text().splitlines()
     lines[5] = "0.0 " + lines[5].split()[1]
     path.write_text("\n".join(lines) + "\n")
-    assert main(["run", "--dataset", str(sequence_copy), "--out", str(tmp_path / "strict"), "--quiet"]) == 2
+    assert main(["run", "--dataset", str(sequence_copy), "--out", str(tmp_path / "strict"), "--quiet"]) == 1
     assert "images.txt:6: timestamp 0.000000000 goes back" in capsys.readouterr().err
     assert (
         main(["run", "--dataset", str(sequence_copy), "--out", str(tmp_path / "lenient"), "--quiet", "--lenient"]) == 0
@@ -153,15 +152,10 @@ def test_a_run_made_to_fail_says_so_frame_by_frame(sequence_copy, tmp_path, caps
     reasons = {s: Counter(r["reason"].split(" (")[0] for r in rows if r["status"] == s) for s in ("weak", "lost")}
     assert json.loads((out / "metrics.json").read_text())["status_reasons"] == reasons
     line = capsys.readouterr().out
-    assert f") [{WEAK_MEANS}], average NC" in line  # what weak means, once, after the counts
-    said = line.split(" frames (", 1)[1].split(") [")[0].split("; ")
-    assert said[0] == "1 first" and len(said) == 1 + sum(1 for c in reasons.values() if c)
-    for part in said[1:]:  # e.g. "40 weak: 31 low inlier ratio, 9 few inliers"
-        head, why = part.split(": ")
-        n, status = head.split(" ")
-        assert int(n) == sum(reasons[status].values()) and sorted(why.split(", ")) == sorted(
-            f"{k} {r}" for r, k in reasons[status].items()
-        )
+    counts = Counter(r["status"] for r in rows)
+    said = ", ".join(f"{counts[s]} {s}" for s in ("weak", "lost") if counts[s])
+    assert f" frames ({said}), average NC " in line  # counted by status; the reasons are in frames.csv
+    assert len(line.split(" -> ")[0]) <= 160, line
 
 
 def test_event_frontends_say_when_the_events_end_or_there_are_none(sequence_copy, tmp_path, capsys):

@@ -114,7 +114,7 @@ def test_the_readme_example_plugins_run_through_the_cli(short_sequence, tmp_path
 
     bad = run_eas_vo("run", "--dataset", str(recording), "--frontend", "sobel", "--set", "frontend.nope=1", env=env)
     assert (
-        bad.returncode == 2
+        bad.returncode == 1
         and bad.stderr.strip() == "eas-vo: error: unknown key frontend.sobel.nope; allowed keys: blur_px"
     )
 

@@ -3,6 +3,8 @@ where the real data lives, skipping without it, and manifold-aware asserts."""
 
 from __future__ import annotations
 
+import re
+import shlex
 from pathlib import Path
 
 import cv2
@@ -34,6 +36,41 @@ def assert_rotations_close(R_a, R_b, tol_rad: float) -> None:
 
     angles = np.atleast_1d(geodesic_angle(np.asarray(R_a), np.asarray(R_b)))
     assert angles.max() <= tol_rad, f"largest rotation difference {angles.max():.3g} rad > {tol_rad:.3g} rad"
+
+
+def code_blocks(text: str, language: str | None = None) -> list[str]:
+    """The fenced code blocks of a Markdown text (of one language, if given)."""
+    return [
+        body
+        for lang, body in re.findall(r"^```(\w*)\n(.*?)^```", text, re.S | re.M)
+        if language is None or lang == language
+    ]
+
+
+def shell_commands(text: str) -> list[tuple[dict[str, str], list[str]]]:
+    """Every command in the text's code blocks as (environment assignments, words): lines
+    joined at a trailing backslash; `&&`, `|` and `;` separate commands; comments dropped;
+    leading `NAME=value` words taken as the command's environment."""
+    commands = []
+    for block in code_blocks(text):
+        for line in block.replace("\\\n", " ").splitlines():
+            try:
+                words = shlex.split(line, comments=True)
+            except ValueError:
+                continue
+            command: list[str] = []
+            for word in [*words, "&&"]:
+                if word not in ("&&", "||", "|", ";"):
+                    command.append(word)
+                    continue
+                env = {}
+                while command and re.fullmatch(r"[A-Z_][A-Z0-9_]*=\S*", command[0]):
+                    name, _, value = command.pop(0).partition("=")
+                    env[name] = value
+                if command:
+                    commands.append((env, command))
+                command = []
+    return commands
 
 
 def random_events(n: int, seed: int = 0):
@@ -106,8 +143,9 @@ def run_eas_vo(*argv: str, env: dict | None = None):
         )
 
 
-def one_line_failure(argv, capsys) -> str:
-    """Run the CLI in-process; it must fail with status 2 and exactly one line on stderr."""
+def one_line_failure(argv, capsys, usage: bool = False) -> str:
+    """Run the CLI in-process; it must fail with exactly one line on stderr and status 1 (an
+    error in the data or the configuration) or, for a `usage` error in the options, 2."""
     from eas_vo.cli.main import main
 
     try:
@@ -115,7 +153,7 @@ def one_line_failure(argv, capsys) -> str:
     except SystemExit as exit_:  # argparse's usage errors
         status = exit_.code
     err = capsys.readouterr().err
-    assert status == 2 and err.count("\n") == 1 and "Traceback" not in err, (status, err)
+    assert status == (2 if usage else 1) and err.count("\n") == 1 and "Traceback" not in err, (status, err)
     return err
 
 
@@ -341,29 +379,33 @@ def mvsec_rows(events: np.ndarray) -> np.ndarray:
     return np.column_stack([events["x"], events["y"], events["t"], np.where(events["p"] > 0, 1.0, -1.0)])
 
 
-def write_mvsec(folder: Path, seq, name: str = "seq", side: str = "left", **events_options) -> Path:
-    """Write `seq` (a Dataset) as MVSEC's NAME_data.hdf5 and NAME_gt.hdf5 with plain h5py."""
+def write_mvsec(folder: Path, seq, name: str = "seq", side: str | tuple[str, ...] = "left", **events_options) -> Path:
+    """Write `seq` (a Dataset) as MVSEC's NAME_data.hdf5 and NAME_gt.hdf5 with plain h5py, as the
+    camera `side` (or each of several sides, the same data)."""
     import h5py
     from scipy.spatial.transform import Rotation
 
     folder.mkdir(parents=True, exist_ok=True)
     frames = np.stack([seq.load_frame(k) for k in range(len(seq.frame_times()))])
     data = folder / f"{name}_data.hdf5"
+    sides = (side,) if isinstance(side, str) else side
     with h5py.File(data, "w") as f:
-        g = f.create_group(f"davis/{side}")
-        g.create_dataset("events", data=mvsec_rows(np.asarray(seq.events())), **events_options)
-        g.create_dataset("image_raw", data=frames, compression="lzf", chunks=(1, *frames.shape[1:]))
-        g["image_raw_ts"] = seq.frame_times()
-        g["imu"] = np.column_stack([seq.imu.acc, seq.imu.gyro])
-        g["imu_ts"] = seq.imu.t
+        for side in sides:
+            g = f.create_group(f"davis/{side}")
+            g.create_dataset("events", data=mvsec_rows(np.asarray(seq.events())), **events_options)
+            g.create_dataset("image_raw", data=frames, compression="lzf", chunks=(1, *frames.shape[1:]))
+            g["image_raw_ts"] = seq.frame_times()
+            g["imu"] = np.column_stack([seq.imu.acc, seq.imu.gyro])
+            g["imu_ts"] = seq.imu.t
     gt = seq.ground_truth
     T = np.tile(np.eye(4), (len(gt.t), 1, 1))
     T[:, :3, :3] = Rotation.from_quat(gt.q_w_c).as_matrix()
     T[:, :3, 3] = gt.p_w_c
     with h5py.File(folder / f"{name}_gt.hdf5", "w") as f:
-        g = f.create_group(f"davis/{side}")
-        g["pose"] = T
-        g["pose_ts"] = gt.t
+        for side in sides:
+            g = f.create_group(f"davis/{side}")
+            g["pose"] = T
+            g["pose_ts"] = gt.t
     return data
 
 
@@ -472,3 +514,30 @@ def write_aedat4(path, *, size, events=None, frames=(), imu=None, kind="davis", 
         t_us, ax, ay, az, gx, gy, gz = row
         writer.writeImu(dv.IMU(int(t_us), 25.0, ax, ay, az, gx, gy, gz, 0.0, 0.0, 0.0))
     del writer  # closing writes the file's index
+
+
+def K_of(cam) -> np.ndarray:
+    """The intrinsic matrix of a camera dict (f, c: focal lengths and principal point [px])."""
+    (fx, fy), (cx, cy) = cam["f"], cam["c"]
+    return np.array([[fx, 0.0, cx], [0.0, fy, cy], [0.0, 0.0, 1.0]])
+
+
+def write_dv_xml(path, cam, node="DAVIS346_00000499"):
+    """As DV's camera(-IMU) calibration module writes it: the camera's node, then the lens model."""
+    fs = cv2.FileStorage(str(path), cv2.FILE_STORAGE_WRITE)
+    fs.startWriteStruct(node, cv2.FILE_NODE_MAP)
+    fs.write("camera_matrix", K_of(cam))
+    fs.write("distortion_coefficients", np.array([cam["dist"]]))
+    fs.write("image_width", cam["width"])
+    fs.write("image_height", cam["height"])
+    fs.endWriteStruct()
+    fs.write("use_fisheye_model", 0)  # the module writes false whatever the model
+    fs.write("type", "camera")
+    fs.write("pattern_width", 8)
+    fs.write("pattern_height", 6)
+    fs.write("distortion_model", "Equidistant" if cam["model"] == "equidistant" else "RadialTangential")
+    fs.write("pattern_type", "chessboard")
+    fs.write("calibration_error", "N/A")
+    fs.write("time_offset_cam_imu__t_imu_equals_t_cam_plus_shift", 0.0021)
+    fs.write("transformation_cam_imu", np.eye(4))
+    fs.release()

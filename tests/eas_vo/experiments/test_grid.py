@@ -158,7 +158,7 @@ def test_a_configuration_error_stops_compare_before_any_work(short_sequence, tmp
         str(out),
         "--quiet",
     ]
-    assert main(argv) == 2
+    assert main(argv) == 1
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "n = 0 is out of range" in err
     assert not out.exists()
@@ -799,7 +799,7 @@ def test_compare_writes_only_into_a_new_empty_or_its_own_folder(one_cell, tmp_pa
     mark_as_eas_vo_output(other)
     for folder, holds in ((mine, "table.md"), (other, ".eas-vo-output")):
         before = {p.name: p.read_bytes() for p in folder.iterdir()}
-        assert main(argv[:-4] + [str(folder), "--jobs", "1", "--quiet"]) == 2
+        assert main(argv[:-4] + [str(folder), "--jobs", "1", "--quiet"]) == 1
         assert f"--out {folder} holds {holds} and is not an earlier compare's" in capsys.readouterr().err
         assert {p.name: p.read_bytes() for p in folder.iterdir()} == before
     copy = tmp_path / "copy"
@@ -807,5 +807,5 @@ def test_compare_writes_only_into_a_new_empty_or_its_own_folder(one_cell, tmp_pa
     assert main(argv[:-4] + [str(copy), "--jobs", "1", "--quiet"]) == 0
     assert "1 cells (0 run, 1 already complete, 0 failed)" in capsys.readouterr().out
     dataset = argv[argv.index("--dataset") + 1]
-    assert main(["run", "--dataset", dataset, "--duration", "0.2", "--out", str(copy), "--overwrite", "--quiet"]) == 2
+    assert main(["run", "--dataset", dataset, "--duration", "0.2", "--out", str(copy), "--overwrite", "--quiet"]) == 1
     assert "which eas-vo did not write" in capsys.readouterr().err and (copy / "table.md").exists()

@@ -225,7 +225,7 @@ def test_table2_orb_statistics_and_a_slam_trajectorys_ape(paper_site, short_sequ
 def test_a_bad_estimate_is_refused_before_any_work(paper_site, tmp_path, capsys, estimate, says):
     (tmp_path / "empty.txt").write_text("# nothing\n")
     out = tmp_path / "t2"
-    assert main(["reproduce", "table2", "--out", str(out), "--estimate", estimate.replace("{tmp}", str(tmp_path))]) == 2
+    assert main(["reproduce", "table2", "--out", str(out), "--estimate", estimate.replace("{tmp}", str(tmp_path))]) == 1
     assert says in capsys.readouterr().err
     assert paper_site["hdr_boxes.zip"] == 0 and not out.exists()
 
@@ -240,7 +240,7 @@ def test_a_bad_estimate_is_refused_before_any_work(paper_site, tmp_path, capsys,
 )
 def test_a_bad_configuration_is_refused_before_any_download(paper_site, tmp_path, capsys, argv, says):
     out = tmp_path / "out"
-    assert main(["reproduce", *argv, "--out", str(out), "--quiet"]) == 2
+    assert main(["reproduce", *argv, "--out", str(out), "--quiet"]) == 1
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and says in err
     assert paper_site["hdr_boxes.zip"] == 0 and paper_site["hdr_poster.zip"] == 0 and not out.exists()
@@ -285,7 +285,7 @@ def test_an_estimate_the_ground_truth_cannot_score_is_refused_before_the_cells_r
                 f"hdr_boxes:eas={estimate}",
             ]
         )
-        == 2
+        == 1
     )
     (error,) = [line for line in capsys.readouterr().err.splitlines() if "error" in line]  # after the fetch's lines
     assert "KeyFrameTrajectory.txt" in error and "sim3 alignment needs at least 3" in error
@@ -315,7 +315,7 @@ def test_an_out_that_is_not_reproduces_own_is_refused_before_any_download(
         monkeypatch.setenv("EAS_VO_DATA_DIR", str(out / "data"))
     before = {p: p.read_bytes() if p.is_file() else None for p in out.rglob("*")}
     argv = ["reproduce", "table2", "--duration", "0.3", "--out", str(out), "--jobs", "1", "--quiet"]
-    assert main(argv + (["--config", str(config)] if held == "config" else [])) == 2
+    assert main(argv + (["--config", str(config)] if held == "config" else [])) == 1
     err = capsys.readouterr().err
     says = {
         "config": f"holds the --config {config}",
@@ -510,3 +510,14 @@ def test_table2s_rows_say_the_configuration_and_method_their_cells_ran(tmp_path,
     ]
     assert [row.split("|")[2].strip() for row in rows] == ["0.100", "0.200"]
     assert markdown.startswith("# Table 2: ours (`--config paper`, whole sequences)")
+
+
+def test_offline_reproduce_names_the_offline_route_and_leaves_no_folder(tmp_path, capsys, monkeypatch):
+    """No server (the suite's EAS_VO_DATA_URL points at a closed loopback port): one line naming
+    EAS_VO_DATA_DIR and EAS_VO_DATA_URL, exit status 1, and no --out folder left behind."""
+    monkeypatch.setenv("EAS_VO_DATA_DIR", str(tmp_path / "data"))
+    out = tmp_path / "results" / "table1"
+    assert main(["reproduce", "table1", "--out", str(out), "--quiet"]) == 1
+    (err,) = capsys.readouterr().err.splitlines()
+    assert "cannot reach the server" in err and "EAS_VO_DATA_DIR" in err and "EAS_VO_DATA_URL" in err
+    assert not out.exists()

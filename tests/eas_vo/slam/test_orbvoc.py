@@ -40,7 +40,7 @@ def test_an_archive_that_is_not_the_published_one_is_one_line_and_leaves_nothing
     publish(site)  # not ORB-SLAM3's archive: its SHA-1 differs from the published one
     monkeypatch.setenv("EAS_VO_ORB_VOCABULARY_URL", f"{url}{NAME}.tar.gz")
     folder = tmp_path / "data"
-    assert main(["fetch", "orb-vocabulary", "--dir", str(folder)]) == 2
+    assert main(["fetch", "orb-vocabulary", "--dir", str(folder)]) == 1
     notice, err = capsys.readouterr().err.splitlines()  # the download's notice, then the error
     assert notice.startswith("eas-vo: fetching ") and err.startswith("eas-vo: error: ")
     assert "does not match its published SHA-1 ad82cc2a05da116bf211192e4748024a19b7606e" in err
@@ -53,3 +53,19 @@ def test_fetch_names_the_vocabulary_beside_sequences(data_server, tmp_path, caps
     monkeypatch.setenv("EAS_VO_ORB_VOCABULARY_URL", f"{url}{NAME}.tar.gz")
     err = one_line_failure(["fetch", "orb-vocabulary", "no_such_sequence", "--dir", str(tmp_path)], capsys)
     assert "no_such_sequence" in err and not (tmp_path / NAME).exists()  # every name checked before any download
+
+
+def test_offline_the_error_names_the_ways_out(tmp_path, capsys, monkeypatch):
+    """No server: one line naming where to copy ORBvoc.txt, the mirror variable and --vocabulary."""
+    import socket
+
+    with socket.socket() as probe:
+        probe.bind(("127.0.0.1", 0))
+        port = probe.getsockname()[1]
+    monkeypatch.setenv("EAS_VO_ORB_VOCABULARY_URL", f"http://127.0.0.1:{port}/{NAME}.tar.gz")
+    folder = tmp_path / "data"
+    assert main(["fetch", "orb-vocabulary", "--dir", str(folder)]) == 1
+    err = capsys.readouterr().err.splitlines()[-1]
+    assert "cannot reach the server, nothing was downloaded; offline: copy ORBvoc.txt into " in err
+    assert "EAS_VO_ORB_VOCABULARY_URL" in err and "--vocabulary FILE" in err and "eas-vo vocabulary" in err
+    assert not folder.exists() or not any(folder.iterdir())
