@@ -161,7 +161,7 @@ def summary_line(rc, m: dict) -> str:
         parts.append(f"average APE {ape:.4f} rad ({ape * 57.29577951:.2f} deg{scored})")
     if m["time_offset_estimated"]:
         parts.append(f"time offset {m['time_offset_s'] * 1e3:+.1f} ms (estimated)")
-    if m["loop_count"]:
+    if m["loop_count"] is not None:  # the tracker looks for loops
         parts.append(f"{m['loop_count']} loop(s) closed")
     if m["gyro_use"]:  # something read the gyro: the images' verdict on it
         parts.append(f"gyro {m['gyro']}")

@@ -161,10 +161,11 @@ def test_start_and_duration_select_the_window(short_sequence, tmp_path):
     assert json.loads((out / "metrics.json").read_text())["frames"] == 10
 
 
-def user_error(argv, capsys):
+def user_error(argv, capsys, usage: bool = False):
+    """The one line of a failed command, which exits with 1 (2 for a `usage` error)."""
     code = main(argv)
     err = capsys.readouterr().err
-    assert code == 1
+    assert code == (2 if usage else 1)
     lines = err.strip().splitlines()
     assert len(lines) == 1 and "Traceback" not in err, err
     return lines[0]
@@ -263,7 +264,9 @@ def test_simulate_command(tmp_path, capsys):
     )
     assert "(seed 0, illumination 0.5, speed 2, 346x260 equidistant)" in capsys.readouterr().out
     assert (tmp_path / "set" / "camchain.yaml").exists() and not (tmp_path / "set" / "calib.txt").exists()
-    line = user_error(["simulate", "--out", str(tmp_path / "both"), "--speed", "2", "--set", "dataset.speed=3"], capsys)
+    line = user_error(
+        ["simulate", "--out", str(tmp_path / "both"), "--speed", "2", "--set", "dataset.speed=3"], capsys, usage=True
+    )
     assert line == "eas-vo: error: --speed and --set dataset.speed both given: give one"
 
 
