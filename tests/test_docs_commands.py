@@ -9,8 +9,8 @@ wait for is stood in for, the same way for every line:
   sequence (under their names, with a registry of their MD5s) and an ORB vocabulary, so
   `fetch` and `reproduce` find them there, as they do offline (docs/datasets.md);
 - long work: the embedded synthetic sequences are simulated for 1 s (`--set
-  dataset.duration_s=1`), `--duration` is at most 1.5 s, `--runs` 1 (`slam`, `reproduce
-  table2`), a `--sweep` takes its first two values, a viewer is not spawned (`--spawn`
+  dataset.duration_s=1`), `--duration` is at most 1.5 s (`reproduce` included), `--runs`
+  1 (`slam`, `reproduce table2`), a benchmark's `--repeat` 1, a `--sweep` takes its first two values, a viewer is not spawned (`--spawn`
   dropped), and the research benchmarks get `--smoke` (their protocol on 1 s of each sequence
   and the first item of each list: a check that the command runs, its figures mean nothing).
 
@@ -67,14 +67,16 @@ def stood_in(words: list[str]) -> list[str]:
     folder holds the stand-ins under the names the page uses)."""
     words = [w for w in words if w != "--spawn"]
     command = words[1] if Path(words[0]).name == "eas-vo" else None
-    for option, cap in (("--duration", MAX_DURATION_S), ("--runs", 1)):
+    for option, cap in (("--duration", MAX_DURATION_S), ("--runs", 1), ("--repeat", 1)):
         if option in words:
             k = words.index(option) + 1
-            words[k] = str(min(float(words[k]), cap))
+            words[k] = str(type(cap)(min(float(words[k]), cap)))
         elif option == "--runs" and (command == "slam" or words[1:3] == ["reproduce", "table2"]):
             words += ["--runs", "1"]
-        elif option == "--duration" and command == "simulate":
-            words += ["--duration", str(SIMULATED_S)]
+        elif option == "--duration" and command in ("simulate", "reproduce"):
+            words += ["--duration", str(SIMULATED_S if command == "simulate" else MAX_DURATION_S)]
+        elif option == "--repeat" and command is None and Path(words[1]).name in ("bench_slam.py", "bench_pipeline.py"):
+            words += ["--repeat", "1"]
     if "--sweep" in words:
         k = words.index("--sweep") + 1
         key, _, values = words[k].partition("=")
