@@ -160,7 +160,9 @@ def summary_line(rc, m: dict) -> str:
         scored = "" if m["frames_evaluated"] == m["frames"] else f"; {m['frames_evaluated']} of {m['frames']} frames"
         parts.append(f"average APE {ape:.4f} rad ({ape * 57.29577951:.2f} deg{scored})")
     if m["time_offset_estimated"]:
-        parts.append(f"time offset {m['time_offset_s'] * 1e3:+.1f} ms (estimated)")
+        parts.append(
+            f"time offset {m['time_offset_s'] * 1e3:+.1f} ms (estimated on the ground truth it scores against)"
+        )
     if m["loop_count"] is not None:  # the tracker looks for loops
         parts.append(f"{m['loop_count']} loop(s) closed")
     if m["gyro_use"]:  # something read the gyro: the images' verdict on it

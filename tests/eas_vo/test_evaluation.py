@@ -189,7 +189,7 @@ def test_auto_time_offset_on_the_real_excerpt(tmp_path, capsys):
     assert metrics["time_offset_estimated"] and 0.005 < metrics["time_offset_s"] < 0.015
     said = capsys.readouterr().out
     assert (
-        f"(time offset {metrics['time_offset_s'] * 1e3:+.1f} ms, estimated on the ground truth it scores against)"
+        f", time offset {metrics['time_offset_s'] * 1e3:+.1f} ms (estimated on the ground truth it scores against), "
         in said
     )
 
