@@ -195,12 +195,12 @@ def _camchain(cam, path: Path) -> None:
 
 
 def _tum(seq, path: Path) -> None:
+    """The sequence's ground truth as a TUM file (another tool's trajectory, a poses file)."""
+    from eas_vo.geometry.rotations import matrices_from_quats
+    from eas_vo.io.tum import format_tum
+
     gt = seq.ground_truth
-    path.write_text(
-        "".join(
-            f"{t:.6f} {p[0]} {p[1]} {p[2]} {q[0]} {q[1]} {q[2]} {q[3]}\n" for t, p, q in zip(gt.t, gt.p_w_c, gt.q_w_c)
-        )
-    )
+    path.write_text(format_tum(gt.t, gt.p_w_c, matrices_from_quats(gt.q_w_c)))
 
 
 @pytest.mark.slow

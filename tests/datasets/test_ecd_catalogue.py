@@ -8,7 +8,7 @@ import pytest
 
 from eas_vo.datasets import ecd_catalogue
 from eas_vo.errors import DataError, EasVoError
-from helpers import publish_sequences, run_eas_vo
+from helpers import closed_port_url, publish_sequences, run_eas_vo
 
 
 @pytest.fixture
@@ -172,10 +172,7 @@ def test_a_file_the_server_lacks_or_a_server_down_is_one_line_before_any_notice(
     missing = run_eas_vo("fetch", "seq_gone", env=dict(os.environ))
     assert missing.returncode == 1 and missing.stderr.count("\n") == 1, missing.stderr
     assert "seq_gone.zip: the server has no such file (HTTP 404), nothing was downloaded" in missing.stderr
-    with socket.socket() as probe:  # a port nothing listens on
-        probe.bind(("127.0.0.1", 0))
-        port = probe.getsockname()[1]
-    monkeypatch.setenv("EAS_VO_DATA_URL", f"http://127.0.0.1:{port}/")
+    monkeypatch.setenv("EAS_VO_DATA_URL", closed_port_url())
     down = run_eas_vo("fetch", "seq_a", env=dict(os.environ))
     assert down.returncode == 1 and down.stderr.count("\n") == 1, down.stderr
     assert "cannot reach the server, nothing was downloaded; offline: copy seq_a.zip into " in down.stderr
@@ -191,10 +188,7 @@ def test_offline_a_local_zip_that_is_not_the_published_one_says_so_and_is_kept(s
     data, md5s, _, _ = site
     data.mkdir()
     (data / "seq_a.zip").write_bytes(b"a partial download")
-    with socket.socket() as probe:
-        probe.bind(("127.0.0.1", 0))
-        port = probe.getsockname()[1]
-    monkeypatch.setenv("EAS_VO_DATA_URL", f"http://127.0.0.1:{port}/")
+    monkeypatch.setenv("EAS_VO_DATA_URL", closed_port_url())
     done = run_eas_vo("fetch", "seq_a", env=dict(os.environ))
     assert done.returncode == 1 and done.stderr.count("\n") == 1, done.stderr
     assert f"{data / 'seq_a.zip'}: does not match its MD5 {md5s['seq_a']} (found " in done.stderr

@@ -143,6 +143,15 @@ def run_eas_vo(*argv: str, env: dict | None = None):
         )
 
 
+def closed_port_url() -> str:
+    """http://127.0.0.1:PORT/ for a loopback port nothing listens on (a server that is down)."""
+    import socket
+
+    with socket.socket() as probe:
+        probe.bind(("127.0.0.1", 0))
+        return f"http://127.0.0.1:{probe.getsockname()[1]}/"
+
+
 def one_line_failure(argv, capsys, usage: bool = False) -> str:
     """Run the CLI in-process; it must fail with exactly one line on stderr and status 1 (an
     error in the data or the configuration) or, for a `usage` error in the options, 2."""

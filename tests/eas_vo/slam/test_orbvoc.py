@@ -7,7 +7,7 @@ import tarfile
 
 from eas_vo.cli.main import main
 from eas_vo.slam.orbvoc import NAME, fetch_orb_vocabulary
-from helpers import one_line_failure
+from helpers import closed_port_url, one_line_failure
 
 TEXT = "10 6 0 0\n0 1 " + "7 " * 32 + "0.5"
 
@@ -57,12 +57,7 @@ def test_fetch_names_the_vocabulary_beside_sequences(data_server, tmp_path, caps
 
 def test_offline_the_error_names_the_ways_out(tmp_path, capsys, monkeypatch):
     """No server: one line naming where to copy ORBvoc.txt, the mirror variable and --vocabulary."""
-    import socket
-
-    with socket.socket() as probe:
-        probe.bind(("127.0.0.1", 0))
-        port = probe.getsockname()[1]
-    monkeypatch.setenv("EAS_VO_ORB_VOCABULARY_URL", f"http://127.0.0.1:{port}/{NAME}.tar.gz")
+    monkeypatch.setenv("EAS_VO_ORB_VOCABULARY_URL", f"{closed_port_url()}{NAME}.tar.gz")
     folder = tmp_path / "data"
     assert main(["fetch", "orb-vocabulary", "--dir", str(folder)]) == 1
     err = capsys.readouterr().err.splitlines()[-1]
