@@ -1,8 +1,13 @@
-"""The bundled configurations' trajectories, byte for byte, against the ones recorded in
+"""The bundled configurations' trajectories against the ones recorded in
 tests/support/trajectories/: on the embedded default sequence and on the real
 `shapes_rotation` excerpt, 2 s each, through `eas-vo run`. A regression record: a change meant
 to keep behaviour (a move, a refactoring) must leave them as they are; a change meant to move
-them records them again with EAS_VO_RECORD_TRAJECTORIES=1 and says why in its commit."""
+them records them again with EAS_VO_RECORD_TRAJECTORIES=1 and says why in its commit.
+
+"As they are" is the same timestamps and every rotation within SAME_RAD of its record: the
+pose graph's last digits follow the processor's vector instructions and the numpy/gtsam
+release (seen: 2e-12 rad between two x86-64 machines on the same wheels), while a change
+of behaviour moves a 2-s trajectory by 1e-6 rad or more."""
 
 import os
 
@@ -15,6 +20,8 @@ from eas_vo.io.tum import parse_tum
 from helpers import REPOSITORY, SHAPES_ROTATION, require
 
 RECORDED = REPOSITORY / "tests" / "support" / "trajectories"
+#: How far [rad] a rotation may lie from its record and still be the same trajectory.
+SAME_RAD = 1e-9
 REAL = ["--dataset", str(SHAPES_ROTATION), "--frontend", "histeq", "--time-offset", "0.01"]
 CASES = {
     "paper_synthetic": ["--config", "paper"],
@@ -35,14 +42,9 @@ def test_a_bundled_configuration_gives_its_recorded_trajectory(name, tmp_path):
     recorded = RECORDED / f"{name}.tum"
     if os.environ.get("EAS_VO_RECORD_TRAJECTORIES"):
         recorded.write_bytes(got)
-    if got != recorded.read_bytes():
-        a, b = parse_tum(got, "now", ordered=False), parse_tum(recorded.read_bytes(), str(recorded), ordered=False)
-        apart = (
-            geodesic_angle(matrices_from_quats(a.q_w_c), matrices_from_quats(b.q_w_c)).max()
-            if len(a.t) == len(b.t)
-            else np.inf
-        )
-        pytest.fail(
-            f"{name}: the trajectory differs from {recorded.name} ({len(a.t)} against {len(b.t)} poses, "
-            f"up to {apart:.3g} rad apart)"
-        )
+    if got == recorded.read_bytes():
+        return
+    a, b = parse_tum(got, "now", ordered=False), parse_tum(recorded.read_bytes(), str(recorded), ordered=False)
+    assert np.array_equal(a.t, b.t), f"{name}: other timestamps than {recorded.name} ({len(a.t)} against {len(b.t)})"
+    apart = geodesic_angle(matrices_from_quats(a.q_w_c), matrices_from_quats(b.q_w_c)).max()
+    assert apart <= SAME_RAD, f"{name}: the trajectory lies up to {apart:.3g} rad from {recorded.name}"
