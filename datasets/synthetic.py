@@ -156,11 +156,27 @@ def sequence_folder(name: str, config: SyntheticConfig | None = None, progress: 
         shutil.rmtree(tmp, ignore_errors=True)
         try:
             simulate(config, tmp, progress=progress)
-            shutil.rmtree(folder, ignore_errors=True)
-            os.replace(tmp, folder)
+            _put_in_place(tmp, folder)
         finally:
             shutil.rmtree(tmp, ignore_errors=True)
     return folder
+
+
+def _put_in_place(simulated: Path, folder: Path) -> None:
+    """Rename the finished simulation to `folder`, unless another process (a second run, a
+    parallel test) put the same simulation there meanwhile: a complete folder is never removed
+    under its readers; an incomplete one (no images.txt) is renamed aside and removed first."""
+    if (folder / "images.txt").exists():
+        return
+    if folder.exists():
+        aside = folder.with_name(f".{folder.name}.{os.getpid()}.old")
+        os.replace(folder, aside)
+        shutil.rmtree(aside, ignore_errors=True)
+    try:
+        os.replace(simulated, folder)
+    except OSError:
+        if not (folder / "images.txt").exists():
+            raise
 
 
 def _label_value(value) -> str:

@@ -50,13 +50,18 @@ def isolated_cache(tmp_path_factory):
 
     The cache lives in pytest's base temporary folder, so it goes with it: at once after a
     passing session (tmp_path_retention_policy = "failed"), and after a failed or killed one
-    when later sessions prune all but the newest few (about 0.6 GB each).
+    when later sessions prune all but the newest few (about 3 GB each). Parallel workers
+    (pytest-xdist) share one, in the base folder of the whole session, so each sequence is
+    simulated and each event cache built once (both are written whole, then renamed).
     """
     if "EAS_VO_CACHE_DIR" in os.environ:
         yield
         return
+    base = tmp_path_factory.getbasetemp()
+    cache = (base.parent if os.environ.get("PYTEST_XDIST_WORKER") else base) / "cache"
+    cache.mkdir(exist_ok=True)
     with pytest.MonkeyPatch.context() as patch:
-        patch.setenv("EAS_VO_CACHE_DIR", str(tmp_path_factory.mktemp("cache")))
+        patch.setenv("EAS_VO_CACHE_DIR", str(cache))
         yield
 
 

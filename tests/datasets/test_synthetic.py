@@ -1,6 +1,7 @@
 """The synthetic dataset's camera: presets, any sensor size (same field of view), any lens."""
 
 import math
+from pathlib import Path
 
 import pytest
 
@@ -73,3 +74,33 @@ def test_light_speed_and_translation_scale_the_presets_own():
     dim = SyntheticConfig(illumination=0.01, translation_scale=0.5, speed=2.0).applied_to(PRESETS["walk"])
     assert (dim.illumination, dim.translation_scale, dim.speed) == (pytest.approx(1.0), 5.0, 2.0)
     assert SyntheticConfig().applied_to(PRESETS["default"]).fingerprint() == PRESETS["default"].fingerprint()
+
+
+def test_a_simulation_finished_second_leaves_the_first_in_place_and_replaces_a_half_folder(tmp_path):
+    """Two processes simulating the same sequence (two runs, two test workers) into one cache:
+    the one that finishes second must not remove the folder the first put there, which the
+    first may already be reading; a folder without images.txt (a crash's) is replaced."""
+    from eas_vo.datasets.synthetic import _put_in_place
+
+    def simulated(name: str, complete: bool = True) -> Path:
+        folder = tmp_path / name
+        folder.mkdir()
+        (folder / "events.txt").write_text(name)
+        if complete:
+            (folder / "images.txt").write_text(name)
+        return folder
+
+    folder = tmp_path / "default-abc"
+    _put_in_place(simulated("first"), folder)
+    reading = (folder / "events.txt").open()
+    second = simulated("second")
+    _put_in_place(second, folder)
+    assert reading.read() == "first" and (folder / "events.txt").read_text() == "first"
+    reading.close()
+    assert second.exists()  # the caller removes its own copy
+
+    half = tmp_path / "default-def"
+    simulated("crashed", complete=False).rename(half)
+    _put_in_place(simulated("third"), half)
+    assert (half / "images.txt").read_text() == "third"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["default-abc", "default-def", "second"]
