@@ -5,7 +5,8 @@ and backend, the frontend's images computed once beforehand, as for ORB-SLAM3).
 
 Prints frames/s of each and the real-time factor (sequence duration / processing time).
 
-    python benchmarks/bench_slam.py [--dataset synthetic:walk] [--frontend original] [--vocabulary FILE] [--repeat 3]
+    python benchmarks/bench_slam.py [--dataset synthetic:walk] [--frontend original] [--vocabulary FILE]
+        [--set SECTION.KEY=VALUE ...] [--repeat 3]
 
 Without --vocabulary, one is trained on the sequence's images first (eas-vo vocabulary's
 defaults, k=10, L=4; not timed).
@@ -58,6 +59,9 @@ def main() -> None:
     parser.add_argument("--dataset", default="synthetic:walk")
     parser.add_argument("--frontend", default="original")
     parser.add_argument("--vocabulary", type=Path)
+    parser.add_argument(
+        "--set", action="append", default=[], metavar="SECTION.KEY=VALUE", help="a config override, as eas-vo run --set"
+    )
     parser.add_argument("--repeat", type=int, default=3)
     args = parser.parse_args()
 
@@ -67,21 +71,21 @@ def main() -> None:
 
     require_extra()
     base = {"dataset": args.dataset, "frontend": args.frontend}
-    images, times = frontend_images(config.resolve("paper", base, []))
+    images, times = frontend_images(config.resolve("paper", base, args.set))
     span = float(times[-1] - times[0])
     with tempfile.TemporaryDirectory() as tmp:
         folder = Path(tmp)
         vocabulary = args.vocabulary
         if vocabulary is None:
             vocabulary = folder / "bench.voc.txt"
-            train_vocabulary(config.resolve("paper", base, []), vocabulary, 10, 4)
+            train_vocabulary(config.resolve("paper", base, args.set), vocabulary, 10, 4)
         vocabulary = find_vocabulary(str(vocabulary))
-        parts = pipeline.open_pipeline(config.resolve("paper", base, []))
+        parts = pipeline.open_pipeline(config.resolve("paper", base, args.set))
         settings = folder / "settings.yaml"
         settings.write_text(settings_yaml(parts.dataset.camera, (len(times) - 1) / span))
         runs = {"ORB-SLAM3 (monocular)": lambda: orbslam3_seconds(images, times, vocabulary, settings, folder)}
         for name in ("paper", "best"):
-            cfg = config.resolve(name, base, [])
+            cfg = config.resolve(name, base, args.set)
             runs[f"eas-vo --config {name} ({cfg.run.tracker}+{cfg.run.backend})"] = lambda cfg=cfg: eas_vo_seconds(
                 cfg, images, times
             )

@@ -26,7 +26,7 @@ import subprocess
 import sys
 from pathlib import Path
 
-from study import SMOKE_S, add_real, add_smoke, first, real_folder, window
+from study import SMOKE_S, add_real, add_smoke, first, real_folder, simulated_for, window
 
 from eas_vo import config, pipeline
 from eas_vo.config import parse_set
@@ -123,12 +123,11 @@ def main() -> None:
     seeds = [str(seed_folder(n, smoke=args.smoke)) for n in first(args.selection_seeds, args.smoke)]
     runs = 1 if args.smoke else 3
     real_window = dict(zip(("start_s", "duration_s"), window(0.0, 20.0, args.smoke)))
-    default_window = {"duration_s": SMOKE_S} if args.smoke else {}
     rows = []
     for values in first(itertools.product(*candidates.values()), args.smoke):
         assignments = [f"{k}={v}" for k, v in zip(candidates, values)]
         ape_real, rtf_real = measure(real, "histeq", {**real_window, "time_offset_s": 0.01}, assignments, runs)
-        ape_default, rtf_syn = measure("synthetic:default", "eas", default_window, assignments, runs)
+        ape_default, rtf_syn = measure("synthetic:default", "eas", {}, assignments + simulated_for(args.smoke), runs)
         apes_syn = [ape_default] + [measure(folder, "eas", {}, assignments, runs=1)[0] for folder in seeds]
         ape_syn = geometric_mean(apes_syn)
         rows.append(

@@ -43,6 +43,12 @@ def add_smoke(parser: argparse.ArgumentParser) -> None:
     )
 
 
+def simulated_for(smoke: bool) -> list[str]:
+    """`--set` assignments for an embedded synthetic sequence: under --smoke simulated for
+    SMOKE_S seconds only (not its whole length, then cut)."""
+    return [f"dataset.duration_s={SMOKE_S:g}"] if smoke else []
+
+
 def first(items, smoke: bool) -> list:
     """`items` as a list, only its first under --smoke."""
     items = list(items)

@@ -37,8 +37,9 @@ NOT_OURS = re.compile(r"^(python3? -m venv|\S*pip |\S*ruff |\S*python -m pytest|
 MAX_DURATION_S = 1.5
 #: The length [s] the embedded synthetic sequences are simulated for (`--set dataset.duration_s`).
 SIMULATED_S = 1.0
-#: The commands that take `--set dataset.KEY=VALUE`.
+#: The commands and benchmarks that take `--set dataset.KEY=VALUE`.
 TAKE_SET = ("run", "compare", "export", "slam", "vocabulary", "render", "info", "convert")
+BENCHMARKS_TAKING_SET = ("bench_pipeline.py", "bench_slam.py")
 #: Event Camera Dataset names a page may fetch: stand-in zips in the data folder.
 ECD_NAMES = ("hdr_boxes", "hdr_poster", "shapes_rotation", "poster_rotation", "boxes_rotation", "dynamic_rotation")
 #: Benchmarks that simulate and run a research protocol of their own: run with --smoke.
@@ -82,7 +83,8 @@ def stood_in(words: list[str]) -> list[str]:
         key, _, values = words[k].partition("=")
         words[k] = f"{key}={','.join(values.split(',')[:2])}"
     dataset = words[words.index("--dataset") + 1] if "--dataset" in words else "synthetic:default"
-    if command in TAKE_SET and dataset.startswith("synthetic:"):
+    takes_set = command in TAKE_SET or (command is None and Path(words[1]).name in BENCHMARKS_TAKING_SET)
+    if takes_set and dataset.startswith("synthetic:"):
         words += ["--set", f"dataset.duration_s={SIMULATED_S}"]
     if command in ("compare", "reproduce"):
         words += ["--quiet"]

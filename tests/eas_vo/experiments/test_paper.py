@@ -329,18 +329,12 @@ def test_an_out_that_is_not_reproduces_own_is_refused_before_any_download(
 
 @pytest.fixture
 def walk_site(data_server, tmp_path, monkeypatch):
-    """Two translating walks served as hdr_boxes (synthetic:walk_short) and hdr_poster (the
-    same preset with another seed: another path through another room)."""
-    import dataclasses
+    """The translating walk (synthetic:walk_short, which ORB-SLAM3 initialises on) served as
+    both hdr_boxes and hdr_poster: the table's cells, not the scenes, are under test."""
+    from eas_vo.datasets.synthetic import sequence_folder
 
-    from eas_vo.datasets.simulator import simulate
-    from eas_vo.datasets.synthetic import PRESETS, sequence_folder
-
-    other = tmp_path / "walk_seed3"
-    simulate(dataclasses.replace(PRESETS["walk_short"], seed=3), other)
-    return serve_as_paper_sequences(
-        data_server, sequence_folder("walk_short", progress=False), other, tmp_path, monkeypatch
-    )
+    walk = sequence_folder("walk_short", progress=False)
+    return serve_as_paper_sequences(data_server, walk, walk, tmp_path, monkeypatch)
 
 
 def test_table2_runs_orbslam3_on_each_cell_beside_the_papers(walk_site, walk_vocabulary, tmp_path):

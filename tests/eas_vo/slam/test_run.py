@@ -26,6 +26,8 @@ from eas_vo.slam import process, scores  # noqa: E402
 from eas_vo.slam import run as slam_run  # noqa: E402
 
 WALK = "synthetic:walk_short"
+#: Seconds of the walk run beside busy processes.
+BUSY_S = 3.0
 
 
 @pytest.fixture(scope="module")
@@ -290,23 +292,27 @@ def _burners(n):
 def test_a_run_beside_busy_processes_tracks_as_a_quiet_one(walk, tmp_path):
     """ORB-SLAM3 gets each frame once its mapping threads are idle, so CPU-burning processes
     beside it (two, as many as this machine's cores, on top of whatever else runs) change no
-    frame's tracking state: the walk's frames, quiet (the module's first run) and busy, give the
-    same states frame by frame, an `ok` status by the stated rule, and trajectories `evaluate`
-    takes. ORB-SLAM3 is not bit-deterministic even so (paced runs' poses differ by up to
-    centimetres, docs/slam.md), so the runs are compared state by state, not pose by pose."""
+    frame's tracking state: the walk's first BUSY_S seconds, busy, give the states the quiet
+    run (the module's first) gave them, frame by frame, an `ok` status by the stated rule, and
+    a trajectory `evaluate` takes (the busy run is the walk's start, after ORB-SLAM3's first
+    initialisation at about 1.3 s, to keep its slowed run short). ORB-SLAM3 is not
+    bit-deterministic even so (paced runs' poses differ by up to centimetres, docs/slam.md),
+    so the runs are compared state by state, not pose by pose."""
     vocabulary, out = walk
     quiet = out / "run_1"
     burners = _burners(2)
     try:
         argv = ["slam", "--dataset", WALK, "--frontend", "original", "--vocabulary", str(vocabulary)]
-        assert main([*argv, "--runs", "1", "--quiet", "--out", str(tmp_path / "busy")]) == 0
+        busy_argv = [*argv, "--duration", str(BUSY_S), "--runs", "1", "--quiet", "--out", str(tmp_path / "busy")]
+        assert main(busy_argv) == 0
         busy = tmp_path / "busy" / "run_1"
     finally:
         for p in burners:
             p.kill()
             p.wait()
-    states = [[r["state"] for r in read_frames(folder / "frames.csv")] for folder in (quiet, busy)]
-    assert states[0] == states[1]
+    states = {folder: [r["state"] for r in read_frames(folder / "frames.csv")] for folder in (quiet, busy)}
+    assert len(states[busy]) >= 0.5 * len(states[quiet])
+    assert states[busy] == states[quiet][: len(states[busy])]
     for folder in (quiet, busy):
         metrics = json.loads((folder / "metrics.json").read_text())
         assert metrics["tracked_fraction_after_init"] >= 0.9 and metrics["status"] == "ok", metrics
@@ -314,7 +320,8 @@ def test_a_run_beside_busy_processes_tracks_as_a_quiet_one(walk, tmp_path):
             main(["evaluate", "--dataset", WALK, "--estimate", str(folder / "trajectory.tum"), "--align", "origin"])
             == 0
         )
-        assert len((folder / "trajectory.tum").read_text().splitlines()) == sum(s in scores.TRACKED for s in states[0])
+        tracked = sum(s in scores.TRACKED for s in states[folder])
+        assert len((folder / "trajectory.tum").read_text().splitlines()) == tracked
 
 
 def test_the_summary_is_over_the_runs_that_tracked():
