@@ -51,7 +51,10 @@ def rotation_figure(result, title: str = ""):
     t0 = result.t[0]
     errors = result.errors
     covariance = result.covariance if result.covariance is not None else result.chain_covariance
-    fig = _figure(figsize=(8, 10), layout="constrained")
+    # Fixed margins, not a layout engine: drawn once per run, a constrained layout (which draws
+    # the figure twice) doubled a short run's time; the margins fit the longest labels drawn.
+    fig = _figure(figsize=(8, 10))
+    fig.subplots_adjust(left=0.1, right=0.97, top=0.925, bottom=0.05, hspace=0.14)
     axes = fig.subplots(6, 1, sharex=True, height_ratios=(1, 1, 1, 1, 0.8, 0.16))
     _draw_angular_velocity(axes[3], result, t0)
     axes = [*axes[:3], *axes[4:]]  # below: roll, pitch, yaw 0-2, the tracking panel 3, the status row 4
