@@ -71,21 +71,21 @@ def main() -> None:
 
     require_extra()
     base = {"dataset": args.dataset, "frontend": args.frontend}
-    images, times = frontend_images(config.resolve("paper", base, args.set))
+    configs = {name: config.resolve(name, base, args.set) for name in ("paper", "best")}
+    images, times = frontend_images(configs["paper"])
     span = float(times[-1] - times[0])
     with tempfile.TemporaryDirectory() as tmp:
         folder = Path(tmp)
         vocabulary = args.vocabulary
         if vocabulary is None:
             vocabulary = folder / "bench.voc.txt"
-            train_vocabulary(config.resolve("paper", base, args.set), vocabulary, 10, 4)
+            train_vocabulary(configs["paper"], vocabulary, 10, 4)
         vocabulary = find_vocabulary(str(vocabulary))
-        parts = pipeline.open_pipeline(config.resolve("paper", base, args.set))
+        parts = pipeline.open_pipeline(configs["paper"])
         settings = folder / "settings.yaml"
         settings.write_text(settings_yaml(parts.dataset.camera, (len(times) - 1) / span))
         runs = {"ORB-SLAM3 (monocular)": lambda: orbslam3_seconds(images, times, vocabulary, settings, folder)}
-        for name in ("paper", "best"):
-            cfg = config.resolve(name, base, args.set)
+        for name, cfg in configs.items():
             runs[f"eas-vo --config {name} ({cfg.run.tracker}+{cfg.run.backend})"] = lambda cfg=cfg: eas_vo_seconds(
                 cfg, images, times
             )

@@ -116,12 +116,12 @@ def main() -> None:
         print(f"| {name} | " + " | ".join(cells) + " |", flush=True)
     if args.no_speed:
         return
-    speed = {"synthetic:default": ("synthetic:default", "eas", {})}
+    # {label: (column, --set assignments)}
+    speed = {"synthetic:default": (("synthetic:default", "eas", {}), args.set + simulated_for(smoke))}
     if "real 0-30 s" in columns:
-        speed["real 0-30 s"] = columns["real 0-30 s"]
-    for label, column in speed.items():
+        speed["real 0-30 s"] = (columns["real 0-30 s"], args.set)
+    for label, (column, sets) in speed.items():
         runs = 1 if smoke else 3
-        sets = args.set + (simulated_for(smoke) if column[0] == "synthetic:default" else [])
         m = max((run("best.toml", *column, sets) for _ in range(runs)), key=lambda m: m["realtime_factor"])
         print(
             f"best.toml on {label} (best of 3): {m['frames_per_s']:.0f} frames/s, {m['realtime_factor']:.1f}x real time"

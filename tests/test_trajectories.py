@@ -42,8 +42,6 @@ def test_a_bundled_configuration_gives_its_recorded_trajectory(name, tmp_path):
     recorded = RECORDED / f"{name}.tum"
     if os.environ.get("EAS_VO_RECORD_TRAJECTORIES"):
         recorded.write_bytes(got)
-    if got == recorded.read_bytes():
-        return
     a, b = parse_tum(got, "now", ordered=False), parse_tum(recorded.read_bytes(), str(recorded), ordered=False)
     assert np.array_equal(a.t, b.t), f"{name}: other timestamps than {recorded.name} ({len(a.t)} against {len(b.t)})"
     apart = geodesic_angle(matrices_from_quats(a.q_w_c), matrices_from_quats(b.q_w_c)).max()
